@@ -1,0 +1,882 @@
+//! Robot descriptions: URDF -> a tree of links and joints, in depth-first order.
+//!
+//! Links and joints are stored depth-first from the root link, children in the order the file
+//! lists their joints. Movable joints (revolute, continuous, prismatic) are numbered in that same
+//! order: that numbering is the order of every joint vector `q` in Avatarm.
+//!
+//! Mesh URIs may be relative to the URDF file, `file://` absolute paths, or `package://NAME/...`,
+//! resolved through a [`PackagePath`] the way ROS resolves them through `ROS_PACKAGE_PATH`.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use nalgebra::{DVector, Isometry3, Rotation3, Translation3, Unit, UnitQuaternion, Vector3};
+
+use crate::error::{Error, Result};
+
+/// Index of a link in [`RobotModel::links`].
+pub type LinkId = usize;
+/// Index of a joint in [`RobotModel::joints`].
+pub type JointId = usize;
+
+/// The joint types Avatarm models.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JointKind {
+    /// Rotation about the axis, within limits.
+    Revolute,
+    /// Rotation about the axis, unlimited.
+    Continuous,
+    /// Translation along the axis, within limits.
+    Prismatic,
+    /// No motion.
+    Fixed,
+}
+
+impl JointKind {
+    /// Whether the joint has a degree of freedom.
+    pub fn is_movable(self) -> bool {
+        !matches!(self, JointKind::Fixed)
+    }
+
+    /// The URDF spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JointKind::Revolute => "revolute",
+            JointKind::Continuous => "continuous",
+            JointKind::Prismatic => "prismatic",
+            JointKind::Fixed => "fixed",
+        }
+    }
+}
+
+/// Position, velocity and effort limits of a joint. Unlimited values are infinite.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointLimits {
+    /// Lowest position (rad or m).
+    pub lower: f64,
+    /// Highest position (rad or m).
+    pub upper: f64,
+    /// Largest speed (rad/s or m/s).
+    pub velocity: f64,
+    /// Largest effort (N·m or N).
+    pub effort: f64,
+}
+
+impl JointLimits {
+    /// No limits at all.
+    pub const UNLIMITED: JointLimits = JointLimits {
+        lower: f64::NEG_INFINITY,
+        upper: f64::INFINITY,
+        velocity: f64::INFINITY,
+        effort: f64::INFINITY,
+    };
+
+    /// Clamps a position into `[lower, upper]`.
+    pub fn clamp_position(&self, q: f64) -> f64 {
+        q.clamp(self.lower, self.upper)
+    }
+}
+
+/// A joint between a parent and a child link.
+#[derive(Debug, Clone)]
+pub struct Joint {
+    /// Name, as in the URDF.
+    pub name: String,
+    /// Type.
+    pub kind: JointKind,
+    /// Parent link.
+    pub parent: LinkId,
+    /// Child link.
+    pub child: LinkId,
+    /// Pose of the joint frame in the parent link frame.
+    pub origin: Isometry3<f64>,
+    /// Unit axis in the joint frame.
+    pub axis: Unit<Vector3<f64>>,
+    /// Limits.
+    pub limits: JointLimits,
+    /// Index into joint vectors, for movable joints.
+    pub dof: Option<usize>,
+}
+
+impl Joint {
+    /// The child link frame relative to the parent link frame at joint position `q`.
+    pub fn transform(&self, q: f64) -> Isometry3<f64> {
+        match self.kind {
+            JointKind::Fixed => self.origin,
+            JointKind::Revolute | JointKind::Continuous => {
+                self.origin * UnitQuaternion::from_axis_angle(&self.axis, q)
+            }
+            JointKind::Prismatic => self.origin * Translation3::from(self.axis.into_inner() * q),
+        }
+    }
+}
+
+/// A geometric primitive or mesh of a link.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Shape {
+    /// Box with full side lengths.
+    Box {
+        /// Side lengths along x, y, z (m).
+        size: Vector3<f64>,
+    },
+    /// Cylinder along the local z axis, centred on the origin.
+    Cylinder {
+        /// Radius (m).
+        radius: f64,
+        /// Length along z (m).
+        length: f64,
+    },
+    /// Capsule along the local z axis (URDF 1.1).
+    Capsule {
+        /// Radius (m).
+        radius: f64,
+        /// Length of the cylindrical part (m).
+        length: f64,
+    },
+    /// Sphere.
+    Sphere {
+        /// Radius (m).
+        radius: f64,
+    },
+    /// Triangle mesh from a file.
+    Mesh {
+        /// The URI as written in the URDF.
+        uri: String,
+        /// The resolved file.
+        path: PathBuf,
+        /// Scale along x, y, z.
+        scale: Vector3<f64>,
+    },
+}
+
+/// One `<visual>` or `<collision>` element.
+#[derive(Debug, Clone)]
+pub struct Geometry {
+    /// Optional element name.
+    pub name: Option<String>,
+    /// Pose in the link frame.
+    pub origin: Isometry3<f64>,
+    /// The shape.
+    pub shape: Shape,
+    /// Colour from the element's material or a named robot-level material (linear-ish sRGB, 0..1).
+    pub rgba: Option<[f32; 4]>,
+}
+
+/// A link of the robot.
+#[derive(Debug, Clone)]
+pub struct Link {
+    /// Name, as in the URDF.
+    pub name: String,
+    /// The joint whose child this link is (`None` for the root).
+    pub parent_joint: Option<JointId>,
+    /// Joints whose parent this link is, in file order.
+    pub child_joints: Vec<JointId>,
+    /// Visual geometry.
+    pub visuals: Vec<Geometry>,
+    /// Collision geometry.
+    pub collisions: Vec<Geometry>,
+}
+
+/// Folders searched for `package://NAME/...` mesh URIs, in order.
+///
+/// For each folder `D`, `package://NAME/rest` resolves to `D/NAME/rest`, or to `D/rest` when `D`
+/// itself is named `NAME`.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct PackagePath(pub Vec<PathBuf>);
+
+impl PackagePath {
+    /// Adds the entries of a `ROS_PACKAGE_PATH`-style list (`:`-separated).
+    pub fn extend_from_env_list(&mut self, list: &str) {
+        self.0.extend(
+            list.split(':')
+                .filter(|s| !s.is_empty())
+                .map(PathBuf::from),
+        );
+    }
+
+    fn find_package(&self, package: &str) -> Option<PathBuf> {
+        self.0.iter().find_map(|dir| {
+            let nested = dir.join(package);
+            if nested.is_dir() {
+                Some(nested)
+            } else if dir.file_name().is_some_and(|n| n == package) && dir.is_dir() {
+                Some(dir.clone())
+            } else {
+                None
+            }
+        })
+    }
+}
+
+/// A robot: links and joints in depth-first order from the root link (index 0).
+#[derive(Debug, Clone)]
+pub struct RobotModel {
+    /// The robot's name.
+    pub name: String,
+    /// Links, depth-first; `links[0]` is the root.
+    pub links: Vec<Link>,
+    /// Joints, depth-first (joint `i` is visited before the subtree of its child).
+    pub joints: Vec<Joint>,
+    /// Movable joints in joint-vector order.
+    pub dofs: Vec<JointId>,
+    /// Where it was loaded from (a path or `<string>`), for messages.
+    pub origin: String,
+}
+
+struct Raw<'a> {
+    origin: &'a str,
+    base_dir: Option<&'a Path>,
+    packages: &'a PackagePath,
+}
+
+impl RobotModel {
+    /// Loads a URDF file; relative mesh paths are relative to the file's folder.
+    pub fn from_urdf_file(path: &Path, packages: &PackagePath) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let origin = path.display().to_string();
+        Self::parse(
+            &text,
+            &Raw {
+                origin: &origin,
+                base_dir: path.parent(),
+                packages,
+            },
+        )
+    }
+
+    /// Parses URDF text. Relative mesh paths resolve against `base_dir` when given.
+    pub fn from_urdf_str(
+        text: &str,
+        base_dir: Option<&Path>,
+        packages: &PackagePath,
+    ) -> Result<Self> {
+        Self::parse(
+            text,
+            &Raw {
+                origin: "<string>",
+                base_dir,
+                packages,
+            },
+        )
+    }
+
+    fn parse(text: &str, raw: &Raw<'_>) -> Result<Self> {
+        validate_xml(text, raw.origin)?;
+        let urdf = urdf_rs::read_from_string(text).map_err(|e| Error::MalformedUrdf {
+            origin: raw.origin.to_owned(),
+            message: e.to_string(),
+        })?;
+        build(urdf, raw)
+    }
+
+    /// Number of movable joints.
+    pub fn dof(&self) -> usize {
+        self.dofs.len()
+    }
+
+    /// Finds a link by name.
+    pub fn link_id(&self, name: &str) -> Result<LinkId> {
+        self.links
+            .iter()
+            .position(|l| l.name == name)
+            .ok_or_else(|| Error::UnknownLinkName {
+                name: name.to_owned(),
+            })
+    }
+
+    /// Finds a movable joint's index in joint vectors by name.
+    pub fn dof_index(&self, name: &str) -> Result<usize> {
+        self.dofs
+            .iter()
+            .position(|&j| self.joints[j].name == name)
+            .ok_or_else(|| Error::UnknownJoint {
+                name: name.to_owned(),
+                known: self.dof_names().join(", "),
+            })
+    }
+
+    /// Names of the movable joints, in joint-vector order.
+    pub fn dof_names(&self) -> Vec<&str> {
+        self.dofs
+            .iter()
+            .map(|&j| self.joints[j].name.as_str())
+            .collect()
+    }
+
+    /// Limits of the movable joints, in joint-vector order.
+    pub fn dof_limits(&self) -> Vec<JointLimits> {
+        self.dofs.iter().map(|&j| self.joints[j].limits).collect()
+    }
+
+    /// The last link of the longest chain from the root: the tip of a serial arm.
+    pub fn tip_link(&self) -> LinkId {
+        let depth = |mut l: LinkId| {
+            let mut d = 0;
+            while let Some(j) = self.links[l].parent_joint {
+                d += 1;
+                l = self.joints[j].parent;
+            }
+            d
+        };
+        (0..self.links.len())
+            .max_by_key(|&l| (depth(l), std::cmp::Reverse(l)))
+            .unwrap_or(0)
+    }
+
+    /// Parses a joint vector: `v1,v2,...` in joint-vector order (missing trailing values are 0)
+    /// or `name=value,...` (unnamed joints are 0). Empty text gives all zeros.
+    pub fn parse_q(&self, text: &str) -> Result<DVector<f64>> {
+        let mut q = DVector::zeros(self.dof());
+        let items: Vec<&str> = text
+            .split(',')
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .collect();
+        if items.iter().any(|s| s.contains('=')) {
+            for item in items {
+                let (name, value) = item.split_once('=').ok_or_else(|| Error::NotANumber {
+                    what: "joint vector (mixing name=value and plain values)".into(),
+                    text: item.to_owned(),
+                })?;
+                let i = self.dof_index(name.trim())?;
+                q[i] = parse_finite(value.trim(), &format!("joint '{}'", name.trim()))?;
+            }
+        } else {
+            if items.len() > self.dof() {
+                return Err(Error::JointCount {
+                    expected: self.dof(),
+                    got: items.len(),
+                });
+            }
+            for (i, item) in items.iter().enumerate() {
+                q[i] = parse_finite(item, &format!("joint '{}'", self.dof_names()[i]))?;
+            }
+        }
+        Ok(q)
+    }
+
+    /// Checks a joint vector's length and that every value is finite.
+    pub fn check_q(&self, q: &DVector<f64>) -> Result<()> {
+        if q.len() != self.dof() {
+            return Err(Error::JointCount {
+                expected: self.dof(),
+                got: q.len(),
+            });
+        }
+        for (i, v) in q.iter().enumerate() {
+            if !v.is_finite() {
+                return Err(Error::NonFinite {
+                    what: format!("joint '{}'", self.dof_names()[i]),
+                    value: *v,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+fn parse_finite(text: &str, what: &str) -> Result<f64> {
+    let v: f64 = text.parse().map_err(|_| Error::NotANumber {
+        what: what.to_owned(),
+        text: text.to_owned(),
+    })?;
+    if !v.is_finite() {
+        return Err(Error::NonFinite {
+            what: what.to_owned(),
+            value: v,
+        });
+    }
+    Ok(v)
+}
+
+/// Checks well-formedness and joint types with line numbers, which urdf-rs does not report.
+fn validate_xml(text: &str, origin: &str) -> Result<()> {
+    let doc = roxmltree::Document::parse(text).map_err(|e| Error::MalformedUrdf {
+        origin: origin.to_owned(),
+        message: e.to_string(),
+    })?;
+    let root = doc.root_element();
+    if root.tag_name().name() != "robot" {
+        return Err(Error::MalformedUrdf {
+            origin: origin.to_owned(),
+            message: format!(
+                "the root element is <{}>, expected <robot>",
+                root.tag_name().name()
+            ),
+        });
+    }
+    for joint in root.children().filter(|n| n.has_tag_name("joint")) {
+        let kind = joint.attribute("type").unwrap_or("");
+        if !matches!(kind, "revolute" | "continuous" | "prismatic" | "fixed") {
+            let line = doc.text_pos_at(joint.range().start).row;
+            return Err(Error::UnknownJointType {
+                origin: origin.to_owned(),
+                line,
+                joint: joint.attribute("name").unwrap_or("?").to_owned(),
+                kind: kind.to_owned(),
+            });
+        }
+    }
+    Ok(())
+}
+
+fn pose(p: &urdf_rs::Pose) -> Isometry3<f64> {
+    let [x, y, z] = p.xyz.0;
+    let [r, pi, ya] = p.rpy.0;
+    Isometry3::from_parts(
+        Translation3::new(x, y, z),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_euler_angles(r, pi, ya)),
+    )
+}
+
+fn build(urdf: urdf_rs::Robot, raw: &Raw<'_>) -> Result<RobotModel> {
+    let origin = raw.origin.to_owned();
+    if urdf.links.is_empty() {
+        return Err(Error::NoLinks { origin });
+    }
+    let mut link_index: HashMap<&str, usize> = HashMap::new();
+    for (i, l) in urdf.links.iter().enumerate() {
+        if link_index.insert(l.name.as_str(), i).is_some() {
+            return Err(Error::DuplicateName {
+                origin,
+                element: "link",
+                name: l.name.clone(),
+            });
+        }
+    }
+    let mut seen_joints: HashMap<&str, ()> = HashMap::new();
+    // parent_of[link] = joint (file index) whose child it is.
+    let mut parent_of: Vec<Option<usize>> = vec![None; urdf.links.len()];
+    let mut children_of: Vec<Vec<usize>> = vec![Vec::new(); urdf.links.len()];
+    for (ji, j) in urdf.joints.iter().enumerate() {
+        if seen_joints.insert(j.name.as_str(), ()).is_some() {
+            return Err(Error::DuplicateName {
+                origin,
+                element: "joint",
+                name: j.name.clone(),
+            });
+        }
+        let find = |name: &str, role| {
+            link_index
+                .get(name)
+                .copied()
+                .ok_or_else(|| Error::UnknownLink {
+                    origin: origin.clone(),
+                    joint: j.name.clone(),
+                    role,
+                    link: name.to_owned(),
+                })
+        };
+        let p = find(&j.parent.link, "parent")?;
+        let c = find(&j.child.link, "child")?;
+        if let Some(prev) = parent_of[c] {
+            return Err(Error::Loop {
+                origin,
+                link: j.child.link.clone(),
+                detail: format!(
+                    "it is the child of both '{}' and '{}'",
+                    urdf.joints[prev].name, j.name
+                ),
+            });
+        }
+        parent_of[c] = Some(ji);
+        children_of[p].push(ji);
+    }
+    let roots: Vec<usize> = (0..urdf.links.len())
+        .filter(|&l| parent_of[l].is_none())
+        .collect();
+    if roots.len() > 1 {
+        return Err(Error::SeveralRoots {
+            origin,
+            count: roots.len(),
+            roots: roots
+                .iter()
+                .map(|&l| urdf.links[l].name.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+        });
+    }
+    let Some(&root) = roots.first() else {
+        return Err(Error::Loop {
+            origin,
+            link: urdf.links[0].name.clone(),
+            detail: "every link is some joint's child, so there is no root".into(),
+        });
+    };
+
+    // Depth-first order: links, and joints in the order their child is visited.
+    let mut link_order = Vec::with_capacity(urdf.links.len());
+    let mut joint_order = Vec::with_capacity(urdf.joints.len());
+    let mut stack = vec![root];
+    while let Some(l) = stack.pop() {
+        link_order.push(l);
+        for &ji in children_of[l].iter().rev() {
+            stack.push(link_index[urdf.joints[ji].child.link.as_str()]);
+        }
+        // Record this link's parent joint in visit order.
+        if let Some(ji) = parent_of[l] {
+            joint_order.push(ji);
+        }
+    }
+    if link_order.len() != urdf.links.len() {
+        let stray = (0..urdf.links.len())
+            .find(|l| !link_order.contains(l))
+            .unwrap_or(0);
+        return Err(Error::Loop {
+            origin,
+            link: urdf.links[stray].name.clone(),
+            detail: "it is on a cycle of joints not connected to the root".into(),
+        });
+    }
+    let new_link: HashMap<usize, usize> = link_order
+        .iter()
+        .enumerate()
+        .map(|(new, &old)| (old, new))
+        .collect();
+    let new_joint: HashMap<usize, usize> = joint_order
+        .iter()
+        .enumerate()
+        .map(|(new, &old)| (old, new))
+        .collect();
+
+    let materials: HashMap<&str, [f32; 4]> = urdf
+        .materials
+        .iter()
+        .filter_map(|m| m.color.as_ref().map(|c| (m.name.as_str(), rgba(&c.rgba))))
+        .collect();
+
+    let mut joints = Vec::with_capacity(joint_order.len());
+    let mut dofs = Vec::new();
+    for &old in &joint_order {
+        let j = &urdf.joints[old];
+        let kind = match &j.joint_type {
+            urdf_rs::JointType::Revolute => JointKind::Revolute,
+            urdf_rs::JointType::Continuous => JointKind::Continuous,
+            urdf_rs::JointType::Prismatic => JointKind::Prismatic,
+            urdf_rs::JointType::Fixed => JointKind::Fixed,
+            other => {
+                return Err(Error::BadJoint {
+                    origin,
+                    joint: j.name.clone(),
+                    message: format!("type {other:?} is not supported"),
+                });
+            }
+        };
+        let bad = |message: String| Error::BadJoint {
+            origin: origin.clone(),
+            joint: j.name.clone(),
+            message,
+        };
+        let numbers = j.origin.xyz.0.iter().chain(j.origin.rpy.0.iter());
+        if numbers.clone().any(|v| !v.is_finite()) {
+            return Err(bad("<origin> has a value that is not finite".into()));
+        }
+        let axis = Vector3::from(j.axis.xyz.0);
+        let axis = if kind.is_movable() {
+            Unit::try_new(axis, 1e-9)
+                .filter(|a| a.iter().all(|v| v.is_finite()))
+                .ok_or_else(|| bad(format!("<axis xyz> {axis:?} has no direction")))?
+        } else {
+            Unit::try_new(axis, 1e-9).unwrap_or(Vector3::z_axis())
+        };
+        let l = &j.limit;
+        let unlimited_if_zero = |v: f64| if v > 0.0 { v } else { f64::INFINITY };
+        let limits = match kind {
+            JointKind::Revolute | JointKind::Prismatic => {
+                if !(l.lower.is_finite() && l.upper.is_finite()) || l.lower > l.upper {
+                    return Err(bad(format!(
+                        "<limit> lower {} and upper {} must be finite with lower <= upper",
+                        l.lower, l.upper
+                    )));
+                }
+                JointLimits {
+                    lower: l.lower,
+                    upper: l.upper,
+                    velocity: unlimited_if_zero(l.velocity),
+                    effort: unlimited_if_zero(l.effort),
+                }
+            }
+            JointKind::Continuous => JointLimits {
+                velocity: unlimited_if_zero(l.velocity),
+                effort: unlimited_if_zero(l.effort),
+                ..JointLimits::UNLIMITED
+            },
+            JointKind::Fixed => JointLimits::UNLIMITED,
+        };
+        let dof = kind.is_movable().then(|| {
+            dofs.push(joints.len());
+            dofs.len() - 1
+        });
+        joints.push(Joint {
+            name: j.name.clone(),
+            kind,
+            parent: new_link[&link_index[j.parent.link.as_str()]],
+            child: new_link[&link_index[j.child.link.as_str()]],
+            origin: pose(&j.origin),
+            axis,
+            limits,
+            dof,
+        });
+    }
+
+    let mut links = Vec::with_capacity(link_order.len());
+    for &old in &link_order {
+        let l = &urdf.links[old];
+        let geometry = |g: &urdf_rs::Geometry,
+                        o: &urdf_rs::Pose,
+                        name: &Option<String>,
+                        material: Option<&urdf_rs::Material>| {
+            let shape = shape(g, &l.name, raw)?;
+            let rgba = material.and_then(|m| {
+                m.color
+                    .as_ref()
+                    .map(|c| rgba(&c.rgba))
+                    .or_else(|| materials.get(m.name.as_str()).copied())
+            });
+            Ok::<_, Error>(Geometry {
+                name: name.clone(),
+                origin: pose(o),
+                shape,
+                rgba,
+            })
+        };
+        let visuals = l
+            .visual
+            .iter()
+            .map(|v| geometry(&v.geometry, &v.origin, &v.name, v.material.as_ref()))
+            .collect::<Result<Vec<_>>>()?;
+        let collisions = l
+            .collision
+            .iter()
+            .map(|c| geometry(&c.geometry, &c.origin, &c.name, None))
+            .collect::<Result<Vec<_>>>()?;
+        links.push(Link {
+            name: l.name.clone(),
+            parent_joint: parent_of[old].map(|ji| new_joint[&ji]),
+            child_joints: children_of[old].iter().map(|ji| new_joint[ji]).collect(),
+            visuals,
+            collisions,
+        });
+    }
+    Ok(RobotModel {
+        name: urdf.name,
+        links,
+        joints,
+        dofs,
+        origin,
+    })
+}
+
+fn rgba(v: &urdf_rs::Vec4) -> [f32; 4] {
+    v.0.map(|c| c as f32)
+}
+
+fn shape(g: &urdf_rs::Geometry, link: &str, raw: &Raw<'_>) -> Result<Shape> {
+    Ok(match g {
+        urdf_rs::Geometry::Box { size } => Shape::Box {
+            size: Vector3::from(size.0),
+        },
+        urdf_rs::Geometry::Cylinder { radius, length } => Shape::Cylinder {
+            radius: *radius,
+            length: *length,
+        },
+        urdf_rs::Geometry::Capsule { radius, length } => Shape::Capsule {
+            radius: *radius,
+            length: *length,
+        },
+        urdf_rs::Geometry::Sphere { radius } => Shape::Sphere { radius: *radius },
+        urdf_rs::Geometry::Mesh { filename, scale } => Shape::Mesh {
+            uri: filename.clone(),
+            path: resolve_mesh_uri(filename, link, raw)?,
+            scale: scale
+                .as_ref()
+                .map_or(Vector3::repeat(1.0), |s| Vector3::from(s.0)),
+        },
+    })
+}
+
+fn resolve_mesh_uri(uri: &str, link: &str, raw: &Raw<'_>) -> Result<PathBuf> {
+    let path = if let Some(rest) = uri.strip_prefix("package://") {
+        let (package, file) = rest.split_once('/').unwrap_or((rest, ""));
+        let dir = raw
+            .packages
+            .find_package(package)
+            .ok_or_else(|| Error::UnknownPackage {
+                origin: raw.origin.to_owned(),
+                link: link.to_owned(),
+                uri: uri.to_owned(),
+                package: package.to_owned(),
+                searched: raw
+                    .packages
+                    .0
+                    .iter()
+                    .map(|p| p.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            })?;
+        dir.join(file)
+    } else if let Some(rest) = uri.strip_prefix("file://") {
+        PathBuf::from(rest)
+    } else if uri.contains("://") {
+        return Err(Error::UnsupportedUri {
+            origin: raw.origin.to_owned(),
+            link: link.to_owned(),
+            uri: uri.to_owned(),
+        });
+    } else {
+        let p = PathBuf::from(uri);
+        match raw.base_dir {
+            Some(base) if p.is_relative() => base.join(p),
+            _ => p,
+        }
+    };
+    if !path.is_file() {
+        return Err(Error::MissingMesh {
+            origin: raw.origin.to_owned(),
+            link: link.to_owned(),
+            uri: uri.to_owned(),
+            resolved: path,
+        });
+    }
+    Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TREE: &str = r#"<robot name="t">
+  <link name="base"/>
+  <link name="a"/>
+  <link name="b"/>
+  <link name="a2"/>
+  <joint name="j_b" type="prismatic">
+    <parent link="base"/><child link="b"/><axis xyz="0 0 2"/>
+    <limit lower="0" upper="0.5" velocity="0.1" effort="10"/>
+  </joint>
+  <joint name="j_a" type="revolute">
+    <parent link="base"/><child link="a"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" velocity="2" effort="5"/>
+  </joint>
+  <joint name="j_a2" type="continuous">
+    <parent link="a"/><child link="a2"/><axis xyz="1 0 0"/>
+  </joint>
+</robot>"#;
+
+    fn load(text: &str) -> Result<RobotModel> {
+        RobotModel::from_urdf_str(text, None, &PackagePath::default())
+    }
+
+    #[test]
+    fn depth_first_in_file_order() {
+        let r = load(TREE).unwrap();
+        let names: Vec<_> = r.links.iter().map(|l| l.name.as_str()).collect();
+        assert_eq!(names, ["base", "b", "a", "a2"]);
+        assert_eq!(r.dof_names(), ["j_b", "j_a", "j_a2"]);
+        let jb = &r.joints[r.dofs[0]];
+        assert_eq!(jb.kind, JointKind::Prismatic);
+        assert!((jb.axis.norm() - 1.0).abs() < 1e-12);
+        let ja2 = &r.joints[r.dofs[2]];
+        assert_eq!(ja2.limits.lower, f64::NEG_INFINITY);
+        assert_eq!(ja2.limits.velocity, f64::INFINITY);
+        assert_eq!(r.tip_link(), r.link_id("a2").unwrap());
+    }
+
+    #[test]
+    fn parses_joint_vectors() {
+        let r = load(TREE).unwrap();
+        assert_eq!(r.parse_q("0.1, 0.2").unwrap().as_slice(), &[0.1, 0.2, 0.0]);
+        assert_eq!(r.parse_q("j_a2=3").unwrap().as_slice(), &[0.0, 0.0, 3.0]);
+        assert!(matches!(r.parse_q("1,2,3,4"), Err(Error::JointCount { .. })));
+        assert!(matches!(r.parse_q("x=1"), Err(Error::UnknownJoint { .. })));
+        assert!(matches!(r.parse_q("NaN"), Err(Error::NonFinite { .. })));
+        assert!(matches!(r.parse_q("abc"), Err(Error::NotANumber { .. })));
+    }
+
+    #[test]
+    fn rejects_bad_descriptions_naming_the_element() {
+        let unknown = TREE.replace(r#"type="continuous""#, r#"type="floating""#);
+        let e = load(&unknown).unwrap_err().to_string();
+        assert!(e.contains("j_a2") && e.contains("floating") && e.contains(":14:"), "{e}");
+
+        let e = load("<robot><link name='a'></robot>").unwrap_err();
+        assert!(matches!(e, Error::MalformedUrdf { .. }), "{e}");
+
+        let two_roots = r#"<robot name="t"><link name="a"/><link name="b"/></robot>"#;
+        assert!(matches!(load(two_roots), Err(Error::SeveralRoots { count: 2, .. })));
+
+        let looped = r#"<robot name="t"><link name="a"/><link name="b"/>
+          <joint name="x" type="fixed"><parent link="a"/><child link="b"/></joint>
+          <joint name="y" type="fixed"><parent link="b"/><child link="a"/></joint></robot>"#;
+        let e = load(looped).unwrap_err();
+        assert!(matches!(e, Error::Loop { .. }), "{e}");
+
+        let two_parents = r#"<robot name="t"><link name="a"/><link name="b"/><link name="c"/>
+          <joint name="x" type="fixed"><parent link="a"/><child link="c"/></joint>
+          <joint name="y" type="fixed"><parent link="b"/><child link="c"/></joint></robot>"#;
+        let e = load(two_parents).unwrap_err().to_string();
+        assert!(e.contains("'x'") && e.contains("'y'"), "{e}");
+
+        let missing = r#"<robot name="t"><link name="a"/>
+          <joint name="x" type="fixed"><parent link="a"/><child link="ghost"/></joint></robot>"#;
+        let e = load(missing).unwrap_err().to_string();
+        assert!(e.contains("ghost") && e.contains("'x'"), "{e}");
+
+        let bad_limits = TREE.replace(r#"lower="-1" upper="1""#, r#"lower="1" upper="-1""#);
+        assert!(matches!(load(&bad_limits), Err(Error::BadJoint { .. })));
+
+        let zero_axis = TREE.replace(r#"<axis xyz="1 0 0"/>"#, r#"<axis xyz="0 0 0"/>"#);
+        let e = load(&zero_axis).unwrap_err().to_string();
+        assert!(e.contains("j_a2") && e.contains("axis"), "{e}");
+    }
+
+    #[test]
+    fn resolves_mesh_uris() {
+        let dir = std::env::temp_dir().join(format!("avatarm_uri_{}", std::process::id()));
+        let pkg = dir.join("share").join("my_robot").join("meshes");
+        std::fs::create_dir_all(&pkg).unwrap();
+        std::fs::write(pkg.join("a.stl"), b"solid a\nendsolid a\n").unwrap();
+        let urdf = |uri: &str| {
+            format!(
+                r#"<robot name="m"><link name="l"><visual><geometry><mesh filename="{uri}" scale="2 2 2"/></geometry></visual></link></robot>"#
+            )
+        };
+        let packages = PackagePath(vec![dir.join("share")]);
+        let r = RobotModel::from_urdf_str(
+            &urdf("package://my_robot/meshes/a.stl"),
+            None,
+            &packages,
+        )
+        .unwrap();
+        let Shape::Mesh { path, scale, .. } = &r.links[0].visuals[0].shape else {
+            panic!("not a mesh")
+        };
+        assert_eq!(path, &pkg.join("a.stl"));
+        assert_eq!(scale.x, 2.0);
+
+        // The package folder itself on the path.
+        let itself = PackagePath(vec![dir.join("share").join("my_robot")]);
+        assert!(
+            RobotModel::from_urdf_str(&urdf("package://my_robot/meshes/a.stl"), None, &itself)
+                .is_ok()
+        );
+        // Relative to the base folder, and file://.
+        assert!(RobotModel::from_urdf_str(&urdf("meshes/a.stl"), Some(&pkg.join("..")), &packages).is_ok());
+        let file_uri = format!("file://{}", pkg.join("a.stl").display());
+        assert!(RobotModel::from_urdf_str(&urdf(&file_uri), None, &packages).is_ok());
+
+        let e = RobotModel::from_urdf_str(&urdf("package://other/a.stl"), None, &packages)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("'other'") && e.contains("link 'l'"), "{e}");
+        let e = RobotModel::from_urdf_str(&urdf("package://my_robot/b.stl"), None, &packages)
+            .unwrap_err();
+        assert!(matches!(e, Error::MissingMesh { .. }), "{e}");
+        let e = RobotModel::from_urdf_str(&urdf("http://x/a.stl"), None, &packages).unwrap_err();
+        assert!(matches!(e, Error::UnsupportedUri { .. }), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

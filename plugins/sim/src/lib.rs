@@ -1,0 +1,445 @@
+//! The simulated room plugin: Alice's desk with a robot, a camera and ground truth.
+//!
+//! Add [`SimRoomPlugin`] with a [`SimRoomConfig`] resource. The room spawns at startup; the robot
+//! steps in `FixedUpdate` at the control rate; joint states are sent, with their latency, to the
+//! twin named by [`SimRoomConfig::twin`] as [`JointStateMessage`]s.
+
+use std::sync::Arc;
+
+use avatarm_core::camera::PinholeCamera;
+use avatarm_core::robot::RobotModel;
+use avatarm_core::sim::{JointCommand, SimRobot, SimRobotParams};
+use avatarm_core::trajectory::JointTrajectory;
+use avatarm_twin::camera::{PinholeProjection, camera_transform};
+use avatarm_twin::prelude::*;
+use avatarm_twin::{TwinEntities, TwinMeshCache, layers};
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::RenderTarget;
+use bevy::camera::visibility::RenderLayers;
+use bevy::core_pipeline::tonemapping::Tonemapping;
+use bevy::prelude::*;
+use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat, TextureUsages};
+use bevy::render::view::Msaa;
+use nalgebra::{DVector, Isometry3};
+use serde::{Deserialize, Serialize};
+
+/// What most users need.
+pub mod prelude {
+    pub use crate::{
+        Prop, PropShape, SimCameras, SimRobotState, SimRoomConfig, SimRoomPlugin, SimRoomSystems,
+        SimTwins,
+    };
+}
+
+/// The room's system sets.
+#[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SimRoomSystems {
+    /// Scripted commands, robot step, joint-state delivery (`FixedUpdate`).
+    Step,
+    /// Poses the simulated robot's visuals at its true joint positions (`PostUpdate`).
+    PoseRobot,
+}
+
+/// A prop's shape (z up; the pose puts the shape's base centre on the table).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "shape", rename_all = "snake_case", deny_unknown_fields)]
+pub enum PropShape {
+    /// A box, sizes along x, y, z (m), resting on its base.
+    Box {
+        /// Sizes.
+        size: [f64; 3],
+    },
+    /// An upright cylinder.
+    Cylinder {
+        /// Radius (m).
+        radius: f64,
+        /// Height (m).
+        height: f64,
+    },
+    /// A bottle: a cylinder body and a narrower neck.
+    Bottle {
+        /// Body radius (m).
+        radius: f64,
+        /// Total height (m).
+        height: f64,
+    },
+    /// A sphere resting on the table.
+    Sphere {
+        /// Radius (m).
+        radius: f64,
+    },
+}
+
+/// An object in the room.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Prop {
+    /// Name (unique in the scene).
+    pub name: String,
+    /// Shape.
+    pub shape: PropShape,
+    /// Pose of the base centre in the world.
+    pub pose: Isometry3<f64>,
+    /// Colour (sRGB, alpha).
+    pub rgba: [f32; 4],
+}
+
+/// Everything the room needs to know. Insert it before the app starts.
+#[derive(Resource, Debug, Clone)]
+pub struct SimRoomConfig {
+    /// The robot.
+    pub model: Arc<RobotModel>,
+    /// Pose of the robot's root link in the world.
+    pub robot_base: Isometry3<f64>,
+    /// Robot timing and response.
+    pub robot: SimRobotParams,
+    /// Initial joint positions.
+    pub q0: DVector<f64>,
+    /// Scripted motion (position commands at the control rate); empty = none.
+    pub trajectory: JointTrajectory,
+    /// Control / simulation step rate (Hz).
+    pub control_rate_hz: f64,
+    /// The real camera at its true pose.
+    pub camera: PinholeCamera,
+    /// Props, including the real objects.
+    pub props: Vec<Prop>,
+    /// Render the ground-truth views (robot silhouette, room without robot).
+    pub ground_truth: bool,
+    /// The app's twin to send joint states to.
+    pub twin: Option<Entity>,
+}
+
+/// The simulated robot (ground truth of its joints lives here).
+#[derive(Resource, Debug, Clone)]
+pub struct SimRobotState(pub SimRobot);
+
+/// The room's render targets.
+#[derive(Resource, Debug, Clone)]
+pub struct SimCameras {
+    /// What the real camera sees.
+    pub real: Handle<Image>,
+    /// The same view without the robot (ground truth).
+    pub no_robot: Option<Handle<Image>>,
+    /// The robot's visible silhouette: white robot, black elsewhere (ground truth).
+    pub silhouette: Option<Handle<Image>>,
+}
+
+/// The simulated robot's visual twins.
+#[derive(Resource, Debug, Clone)]
+pub struct SimTwins {
+    /// Real appearance, seen by the real camera.
+    pub real: Entity,
+    /// White silhouette for ground truth.
+    pub silhouette: Option<Entity>,
+}
+
+/// Adds the room. Needs [`RobotTwinPlugin`] and a [`SimRoomConfig`] resource.
+#[derive(Default)]
+pub struct SimRoomPlugin;
+
+impl Plugin for SimRoomPlugin {
+    fn build(&self, app: &mut App) {
+        let rate = app
+            .world()
+            .get_resource::<SimRoomConfig>()
+            .map_or(100.0, |c| c.control_rate_hz);
+        app.insert_resource(Time::<Fixed>::from_hz(rate))
+            .configure_sets(FixedUpdate, SimRoomSystems::Step)
+            .configure_sets(
+                PostUpdate,
+                SimRoomSystems::PoseRobot.in_set(RobotTwinSystems::ApplyJointStates),
+            )
+            .add_systems(PreStartup, setup_room)
+            .add_systems(
+                FixedUpdate,
+                (send_scripted_commands, step_robot, deliver_joint_states)
+                    .chain()
+                    .in_set(SimRoomSystems::Step),
+            )
+            .add_systems(
+                PostUpdate,
+                pose_sim_robot
+                    .in_set(SimRoomSystems::PoseRobot)
+                    .after(avatarm_twin::apply_joint_states),
+            );
+    }
+}
+
+/// A render target image of the camera's size.
+pub fn target_image(width: u32, height: u32) -> Image {
+    let mut image = Image::new_fill(
+        Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        TextureDimension::D2,
+        &[0, 0, 0, 255],
+        TextureFormat::Rgba8UnormSrgb,
+        RenderAssetUsages::default(),
+    );
+    image.texture_descriptor.usage = TextureUsages::TEXTURE_BINDING
+        | TextureUsages::COPY_SRC
+        | TextureUsages::COPY_DST
+        | TextureUsages::RENDER_ATTACHMENT;
+    image
+}
+
+/// Spawns a camera that renders `layers` of the world through `camera` into `target`.
+pub fn spawn_pinhole_camera(
+    commands: &mut Commands,
+    camera: &PinholeCamera,
+    target: Handle<Image>,
+    layers: RenderLayers,
+    clear: Color,
+    order: isize,
+    name: &str,
+) -> Entity {
+    commands
+        .spawn((
+            Name::new(name.to_owned()),
+            Camera3d::default(),
+            Camera {
+                order,
+                clear_color: ClearColorConfig::Custom(clear),
+                ..default()
+            },
+            RenderTarget::Image(target.into()),
+            Projection::custom(PinholeProjection::new(*camera)),
+            camera_transform(camera),
+            Tonemapping::None,
+            Msaa::Off,
+            layers,
+        ))
+        .id()
+}
+
+fn setup_room(
+    mut commands: Commands,
+    config: Res<SimRoomConfig>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    mut images: ResMut<Assets<Image>>,
+    mut cache: ResMut<TwinMeshCache>,
+) {
+    let black = materials.add(StandardMaterial {
+        base_color: Color::BLACK,
+        unlit: true,
+        ..default()
+    });
+    for prop in &config.props {
+        let lit = materials.add(StandardMaterial {
+            base_color: Color::srgba(prop.rgba[0], prop.rgba[1], prop.rgba[2], prop.rgba[3]),
+            perceptual_roughness: 0.7,
+            ..default()
+        });
+        for (part, local) in prop_parts(&prop.shape) {
+            let mesh = meshes.add(part);
+            let transform = iso_to_transform(&prop.pose) * local;
+            commands.spawn((
+                Name::new(prop.name.clone()),
+                Mesh3d(mesh.clone()),
+                MeshMaterial3d(lit.clone()),
+                transform,
+                RenderLayers::layer(layers::ROOM),
+            ));
+            if config.ground_truth {
+                commands.spawn((
+                    Mesh3d(mesh),
+                    MeshMaterial3d(black.clone()),
+                    transform,
+                    RenderLayers::layer(layers::SIM_SILHOUETTE),
+                ));
+            }
+        }
+    }
+    commands.spawn((
+        DirectionalLight {
+            illuminance: 6000.0,
+            shadow_maps_enabled: false,
+            ..default()
+        },
+        Transform::from_xyz(1.0, 1.5, 3.0).looking_at(Vec3::ZERO, Vec3::Z),
+        RenderLayers::from_layers(&[layers::ROOM, layers::SIM_ROBOT, layers::TWIN]),
+    ));
+    commands.insert_resource(GlobalAmbientLight {
+        color: Color::WHITE,
+        brightness: 400.0,
+        ..default()
+    });
+
+    let spawn_robot = |commands: &mut Commands,
+                       cache: &mut TwinMeshCache,
+                       meshes: &mut Assets<Mesh>,
+                       materials: &mut Assets<StandardMaterial>,
+                       appearance,
+                       layer| {
+        let twin: TwinEntities = spawn_twin(commands, config.model.clone(), &config.robot_base);
+        if let Err(e) = attach_visuals(
+            commands,
+            meshes,
+            materials,
+            cache,
+            &config.model,
+            &twin,
+            appearance,
+            GeometrySource::Visual,
+            &RenderLayers::layer(layer),
+        ) {
+            error!("simulated room: {e}");
+        }
+        twin.root
+    };
+    let real = spawn_robot(
+        &mut commands,
+        &mut cache,
+        &mut meshes,
+        &mut materials,
+        TwinAppearance::Urdf,
+        layers::SIM_ROBOT,
+    );
+    let silhouette = config.ground_truth.then(|| {
+        spawn_robot(
+            &mut commands,
+            &mut cache,
+            &mut meshes,
+            &mut materials,
+            TwinAppearance::Unlit(Color::WHITE),
+            layers::SIM_SILHOUETTE,
+        )
+    });
+    commands.insert_resource(SimTwins { real, silhouette });
+
+    let k = &config.camera.intrinsics;
+    let background = Color::srgb(0.78, 0.80, 0.83);
+    let real_image = images.add(target_image(k.width, k.height));
+    spawn_pinhole_camera(
+        &mut commands,
+        &config.camera,
+        real_image.clone(),
+        RenderLayers::from_layers(&[layers::ROOM, layers::SIM_ROBOT]),
+        background,
+        -30,
+        "real camera",
+    );
+    let (mut no_robot, mut silhouette_image) = (None, None);
+    if config.ground_truth {
+        let image = images.add(target_image(k.width, k.height));
+        spawn_pinhole_camera(
+            &mut commands,
+            &config.camera,
+            image.clone(),
+            RenderLayers::layer(layers::ROOM),
+            background,
+            -29,
+            "ground truth: no robot",
+        );
+        no_robot = Some(image);
+        let image = images.add(target_image(k.width, k.height));
+        spawn_pinhole_camera(
+            &mut commands,
+            &config.camera,
+            image.clone(),
+            RenderLayers::layer(layers::SIM_SILHOUETTE),
+            Color::BLACK,
+            -28,
+            "ground truth: robot silhouette",
+        );
+        silhouette_image = Some(image);
+    }
+    commands.insert_resource(SimCameras {
+        real: real_image,
+        no_robot,
+        silhouette: silhouette_image,
+    });
+    commands.insert_resource(SimRobotState(SimRobot::new(
+        config.robot,
+        config.model.dof_limits(),
+        config.q0.clone(),
+    )));
+}
+
+/// Meshes of a prop's parts with their transforms relative to the prop's base pose.
+fn prop_parts(shape: &PropShape) -> Vec<(Mesh, Transform)> {
+    let upright = |z: f64| {
+        Transform::from_xyz(0.0, 0.0, z as f32)
+            .with_rotation(Quat::from_rotation_x(std::f32::consts::FRAC_PI_2))
+    };
+    match *shape {
+        PropShape::Box { size } => vec![(
+            Cuboid::new(size[0] as f32, size[1] as f32, size[2] as f32).into(),
+            Transform::from_xyz(0.0, 0.0, (size[2] / 2.0) as f32),
+        )],
+        PropShape::Cylinder { radius, height } => vec![(
+            Cylinder::new(radius as f32, height as f32).into(),
+            upright(height / 2.0),
+        )],
+        PropShape::Bottle { radius, height } => {
+            let body = height * 0.68;
+            let neck = height - body;
+            vec![
+                (
+                    Cylinder::new(radius as f32, body as f32).into(),
+                    upright(body / 2.0),
+                ),
+                (
+                    Cylinder::new((radius * 0.38) as f32, neck as f32).into(),
+                    upright(body + neck / 2.0),
+                ),
+            ]
+        }
+        PropShape::Sphere { radius } => vec![(
+            Sphere::new(radius as f32).into(),
+            Transform::from_xyz(0.0, 0.0, radius as f32),
+        )],
+    }
+}
+
+fn send_scripted_commands(
+    config: Res<SimRoomConfig>,
+    mut robot: ResMut<SimRobotState>,
+    time: Res<Time<Fixed>>,
+) {
+    let t = time.elapsed_secs_f64();
+    if let Some(q) = config.trajectory.sample(t)
+        && let Err(e) = robot.0.send(JointCommand::Position(q))
+    {
+        warn!("scripted trajectory at t={t:.3}s: command refused: {e}");
+    }
+}
+
+fn step_robot(mut robot: ResMut<SimRobotState>, time: Res<Time<Fixed>>) {
+    robot.0.step(time.delta_secs_f64());
+}
+
+fn deliver_joint_states(
+    config: Res<SimRoomConfig>,
+    mut robot: ResMut<SimRobotState>,
+    mut out: MessageWriter<JointStateMessage>,
+) {
+    let states = robot.0.receive();
+    let Some(twin) = config.twin else { return };
+    for s in states {
+        out.write(JointStateMessage::full(
+            twin,
+            &config.model,
+            &s.positions,
+            &s.velocities,
+            s.stamp_s,
+        ));
+    }
+}
+
+fn pose_sim_robot(
+    robot: Res<SimRobotState>,
+    sim_twins: Res<SimTwins>,
+    mut twins: Query<&mut RobotTwin>,
+) {
+    let t = robot.0.time_s();
+    for entity in std::iter::once(sim_twins.real).chain(sim_twins.silhouette) {
+        if let Ok(mut twin) = twins.get_mut(entity) {
+            twin.positions.clone_from(robot.0.true_positions());
+            twin.velocities.clone_from(robot.0.true_velocities());
+            twin.stamp_s = Some(t);
+        }
+    }
+}

@@ -1,0 +1,82 @@
+//! A Bevy camera projection built from pinhole intrinsics.
+
+use avatarm_core::camera::PinholeCamera;
+use bevy::camera::{CameraProjection, SubCameraView};
+use bevy::math::Vec3A;
+use bevy::prelude::*;
+
+use crate::iso_to_transform;
+
+/// Projects like [`PinholeCamera::project`]: off-centre principal point, fx ≠ fy allowed.
+///
+/// Use it with [`Projection::custom`] and a render target of the intrinsics' size; the camera's
+/// transform comes from [`camera_transform`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PinholeProjection {
+    /// The camera (its intrinsics are used; its pose goes in the transform).
+    pub camera: PinholeCamera,
+    /// Near plane (m).
+    pub near: f32,
+    /// Far plane for culling (m); depth itself is reverse-Z, infinite.
+    pub far: f32,
+}
+
+impl PinholeProjection {
+    /// A projection with a 1 cm near plane and a 50 m culling distance.
+    pub fn new(camera: PinholeCamera) -> Self {
+        Self {
+            camera,
+            near: 0.01,
+            far: 50.0,
+        }
+    }
+}
+
+/// The Bevy transform of a pinhole camera (view frame: x right, y up, looking along −z).
+pub fn camera_transform(camera: &PinholeCamera) -> Transform {
+    iso_to_transform(&camera.world_from_view())
+}
+
+impl CameraProjection for PinholeProjection {
+    fn get_clip_from_view(&self) -> Mat4 {
+        let m = self.camera.clip_from_view(f64::from(self.near));
+        Mat4::from_cols_array(&std::array::from_fn(|i| m.as_slice()[i] as f32))
+    }
+
+    fn get_clip_from_view_for_sub(&self, _sub_view: &SubCameraView) -> Mat4 {
+        self.get_clip_from_view()
+    }
+
+    fn update(&mut self, _width: f32, _height: f32) {
+        // The intrinsics fix the projection; the target is sized to them.
+    }
+
+    fn far(&self) -> f32 {
+        self.far
+    }
+
+    fn get_frustum_corners(&self, z_near: f32, z_far: f32) -> [Vec3A; 8] {
+        let k = &self.camera.intrinsics;
+        let (w, h) = (k.width as f32, k.height as f32);
+        let corner = |u: f32, v: f32, z: f32| {
+            let d = z.abs();
+            Vec3A::new(
+                (u - 0.5 - k.cx as f32) / k.fx as f32 * d,
+                -(v - 0.5 - k.cy as f32) / k.fy as f32 * d,
+                z,
+            )
+        };
+        // Raster corners: (0,0) is the top-left corner of the image.
+        let ring = |z| {
+            [
+                corner(w, h, z),
+                corner(w, 0.0, z),
+                corner(0.0, 0.0, z),
+                corner(0.0, h, z),
+            ]
+        };
+        let [a, b, c, d] = ring(z_near);
+        let [e, f, g, hh] = ring(z_far);
+        [a, b, c, d, e, f, g, hh]
+    }
+}

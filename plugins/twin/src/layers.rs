@@ -1,0 +1,12 @@
+//! Render layers shared by every Avatarm plugin.
+
+/// The simulated room's props and objects, seen by the "real" camera.
+pub const ROOM: usize = 0;
+/// The app's robot twin: the mask camera renders this layer alone.
+pub const TWIN: usize = 1;
+/// The simulated room's robot, as the real camera sees it.
+pub const SIM_ROBOT: usize = 2;
+/// Ground truth: the simulated robot in white and everything that can hide it in black.
+pub const SIM_SILHOUETTE: usize = 3;
+/// Panels and overlays of the desktop preview and XR view.
+pub const INTERACTION: usize = 4;

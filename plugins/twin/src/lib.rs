@@ -1,0 +1,307 @@
+//! The robot twin plugin: a URDF robot as Bevy entities, driven by joint states.
+//!
+//! - [`spawn_twin`] builds a root entity with one child entity per link ([`TwinLink`]); the
+//!   joints stay data in the root's [`RobotTwin`] component. [`attach_visuals`] adds the link
+//!   geometry as meshes on chosen [`RenderLayers`](bevy::camera::visibility::RenderLayers).
+//! - [`JointStateMessage`]s update a twin; bad ones are refused and the last good state kept.
+//! - [`camera::PinholeProjection`] matches a Bevy camera to pinhole intrinsics.
+//!
+//! Frames: Avatarm's world is the robot's world, z up, metres; link transforms are FK poses.
+
+pub mod camera;
+pub mod layers;
+mod spawn;
+
+use std::sync::Arc;
+
+use avatarm_core::robot::RobotModel;
+use bevy::prelude::*;
+use bevy::transform::TransformSystems;
+use nalgebra::{DVector, Isometry3};
+
+pub use spawn::{
+    GeometrySource, TwinAppearance, TwinEntities, TwinMeshCache, attach_visuals, spawn_twin, to_bevy_mesh,
+};
+
+/// What most users of the twin need.
+pub mod prelude {
+    pub use crate::camera::PinholeProjection;
+    pub use crate::{
+        GeometrySource, JointStateMessage, RobotTwin, RobotTwinPlugin, RobotTwinSystems,
+        TwinAppearance, TwinLink, attach_visuals, iso_to_transform, spawn_twin,
+    };
+}
+
+/// Errors of the twin.
+#[derive(Debug, thiserror::Error)]
+pub enum TwinError {
+    /// A link's mesh could not be loaded.
+    #[error("robot '{robot}', link '{link}': {source}")]
+    Mesh {
+        /// The robot.
+        robot: String,
+        /// The link.
+        link: String,
+        /// Why.
+        source: avatarm_core::Error,
+    },
+}
+
+/// The twin's system sets, in `PostUpdate` before transform propagation, in this order.
+#[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum RobotTwinSystems {
+    /// Reads [`JointStateMessage`]s into [`RobotTwin`] (`PostUpdate`).
+    ApplyJointStates,
+    /// Sets link transforms from forward kinematics (`PostUpdate`).
+    PoseLinks,
+}
+
+/// Adds the twin's messages and systems.
+#[derive(Default)]
+pub struct RobotTwinPlugin;
+
+impl Plugin for RobotTwinPlugin {
+    fn build(&self, app: &mut App) {
+        app.add_message::<JointStateMessage>()
+            .init_resource::<TwinMeshCache>()
+            .configure_sets(
+                PostUpdate,
+                (
+                    RobotTwinSystems::ApplyJointStates,
+                    RobotTwinSystems::PoseLinks,
+                )
+                    .chain()
+                    .before(TransformSystems::Propagate),
+            )
+            .add_systems(
+                PostUpdate,
+                (
+                    apply_joint_states.in_set(RobotTwinSystems::ApplyJointStates),
+                    pose_links.in_set(RobotTwinSystems::PoseLinks),
+                ),
+            );
+    }
+}
+
+/// A robot twin: the model, the last good joint state, and its link entities.
+#[derive(Component, Debug, Clone)]
+pub struct RobotTwin {
+    /// The robot.
+    pub model: Arc<RobotModel>,
+    /// Joint positions of the last good state (joint-vector order).
+    pub positions: DVector<f64>,
+    /// Joint velocities of the last good state (zeros when not reported).
+    pub velocities: DVector<f64>,
+    /// Timestamp of the last good state (s); `None` before the first.
+    pub stamp_s: Option<f64>,
+    /// Link entities, indexed like `model.links`.
+    pub links: Vec<Entity>,
+    /// Messages refused so far.
+    pub rejected: u64,
+    /// Treat joint names the robot does not have as an error (default) or skip them.
+    pub strict_names: bool,
+}
+
+/// Marks a link entity of a twin.
+#[derive(Component, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TwinLink {
+    /// The twin's root entity.
+    pub twin: Entity,
+    /// Index into the model's links.
+    pub index: usize,
+}
+
+/// A joint state for one twin: names and positions (velocities optional), with a timestamp.
+#[derive(Message, Debug, Clone, PartialEq)]
+pub struct JointStateMessage {
+    /// The twin's root entity.
+    pub twin: Entity,
+    /// Joint names (any subset of the movable joints).
+    pub names: Vec<String>,
+    /// Positions, one per name.
+    pub positions: Vec<f64>,
+    /// Velocities, one per name, or empty.
+    pub velocities: Vec<f64>,
+    /// When the state was sampled (s).
+    pub stamp_s: f64,
+}
+
+impl JointStateMessage {
+    /// A message naming every movable joint of `model`, in joint-vector order.
+    pub fn full(
+        twin: Entity,
+        model: &RobotModel,
+        positions: &DVector<f64>,
+        velocities: &DVector<f64>,
+        stamp_s: f64,
+    ) -> Self {
+        Self {
+            twin,
+            names: model.dof_names().iter().map(|s| s.to_string()).collect(),
+            positions: positions.iter().copied().collect(),
+            velocities: velocities.iter().copied().collect(),
+            stamp_s,
+        }
+    }
+}
+
+impl RobotTwin {
+    /// Applies a joint state, or says why it was refused (nothing changes then).
+    pub fn apply(&mut self, msg: &JointStateMessage) -> Result<(), String> {
+        if msg.names.len() != msg.positions.len()
+            || (!msg.velocities.is_empty() && msg.velocities.len() != msg.names.len())
+        {
+            return Err(format!(
+                "{} names, {} positions and {} velocities do not match",
+                msg.names.len(),
+                msg.positions.len(),
+                msg.velocities.len()
+            ));
+        }
+        if !msg.stamp_s.is_finite() {
+            return Err(format!("timestamp {} is not finite", msg.stamp_s));
+        }
+        let mut positions = self.positions.clone();
+        let mut velocities = self.velocities.clone();
+        for (k, name) in msg.names.iter().enumerate() {
+            let index = match self.model.dof_index(name) {
+                Ok(i) => i,
+                Err(_) if !self.strict_names => continue,
+                Err(e) => return Err(e.to_string()),
+            };
+            let p = msg.positions[k];
+            let v = msg.velocities.get(k).copied().unwrap_or(0.0);
+            if !p.is_finite() || !v.is_finite() {
+                return Err(format!(
+                    "joint '{name}': position {p} / velocity {v} is not finite"
+                ));
+            }
+            positions[index] = p;
+            velocities[index] = v;
+        }
+        self.positions = positions;
+        self.velocities = velocities;
+        self.stamp_s = Some(msg.stamp_s);
+        Ok(())
+    }
+}
+
+/// Converts a pose to a Bevy transform (f64 -> f32).
+pub fn iso_to_transform(iso: &Isometry3<f64>) -> Transform {
+    let t = iso.translation.vector;
+    let q = iso.rotation.quaternion();
+    Transform {
+        translation: Vec3::new(t.x as f32, t.y as f32, t.z as f32),
+        rotation: Quat::from_xyzw(q.i as f32, q.j as f32, q.k as f32, q.w as f32).normalize(),
+        scale: Vec3::ONE,
+    }
+}
+
+/// Reads joint states into their twins; refused messages are logged and counted.
+pub fn apply_joint_states(
+    mut messages: MessageReader<JointStateMessage>,
+    mut twins: Query<&mut RobotTwin>,
+) {
+    for msg in messages.read() {
+        let Ok(mut twin) = twins.get_mut(msg.twin) else {
+            warn!("joint state for {:?}, which is not a robot twin", msg.twin);
+            continue;
+        };
+        if let Err(why) = twin.apply(msg) {
+            twin.rejected += 1;
+            // One line per refused message would flood the log at 100 Hz: log the first and
+            // then every 100th.
+            if twin.rejected % 100 == 1 {
+                warn!(
+                    "robot '{}': joint state at t={:.3}s refused ({} so far), keeping the last good state: {why}",
+                    twin.model.name, msg.stamp_s, twin.rejected
+                );
+            }
+        }
+    }
+}
+
+/// Poses every link of changed twins by forward kinematics.
+pub fn pose_links(
+    twins: Query<&RobotTwin, Changed<RobotTwin>>,
+    mut links: Query<&mut Transform, With<TwinLink>>,
+) {
+    for twin in &twins {
+        let q: Vec<f64> = twin.positions.iter().copied().collect();
+        let poses = twin.model.forward_kinematics(&Isometry3::identity(), &q);
+        for (entity, pose) in twin.links.iter().zip(&poses) {
+            if let Ok(mut t) = links.get_mut(*entity) {
+                *t = iso_to_transform(pose);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use avatarm_core::robot::PackagePath;
+
+    fn app_with_twin() -> (App, Entity, Arc<RobotModel>) {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../assets/robots/sawyer_lite/sawyer_lite.urdf");
+        let model = Arc::new(RobotModel::from_urdf_file(&path, &PackagePath::default()).unwrap());
+        let mut app = App::new();
+        app.add_plugins((MinimalPlugins, TransformPlugin, RobotTwinPlugin));
+        let base = Isometry3::translation(0.0, 0.0, 0.75);
+        let twin = spawn_twin(&mut app.world_mut().commands(), model.clone(), &base).root;
+        app.update();
+        (app, twin, model)
+    }
+
+    fn send(app: &mut App, msg: JointStateMessage) {
+        app.world_mut().write_message(msg);
+        app.update();
+    }
+
+    #[test]
+    fn joint_states_pose_the_links_by_fk() {
+        let (mut app, twin, model) = app_with_twin();
+        let q = DVector::from_vec(vec![0.3, -0.9, 0.1, 1.6, -0.2, 0.7, 1.1, 0.01, 0.01]);
+        send(&mut app, JointStateMessage::full(twin, &model, &q, &DVector::zeros(9), 1.0));
+        let tip = model.link_id("right_gripper_tip").unwrap();
+        let entity = app.world().get::<RobotTwin>(twin).unwrap().links[tip];
+        let global = app.world().get::<GlobalTransform>(entity).unwrap();
+        let qv: Vec<f64> = q.iter().copied().collect();
+        let expected = model.forward_kinematics(&Isometry3::translation(0.0, 0.0, 0.75), &qv)[tip];
+        let got = global.translation();
+        let e = expected.translation.vector;
+        assert!((got - Vec3::new(e.x as f32, e.y as f32, e.z as f32)).length() < 1e-5);
+    }
+
+    #[test]
+    fn bad_states_are_refused_and_the_last_good_one_kept() {
+        let (mut app, twin, model) = app_with_twin();
+        let good = DVector::from_vec(vec![0.2; 9]);
+        send(&mut app, JointStateMessage::full(twin, &model, &good, &DVector::zeros(9), 1.0));
+        let mut nan = JointStateMessage::full(twin, &model, &good, &DVector::zeros(9), 2.0);
+        nan.positions[3] = f64::NAN;
+        send(&mut app, nan);
+        let unknown = JointStateMessage {
+            twin,
+            names: vec!["head_pan".into()],
+            positions: vec![1.0],
+            velocities: vec![],
+            stamp_s: 3.0,
+        };
+        send(&mut app, unknown.clone());
+        let state = app.world().get::<RobotTwin>(twin).unwrap();
+        assert_eq!(state.positions, good);
+        assert_eq!(state.stamp_s, Some(1.0));
+        assert_eq!(state.rejected, 2);
+        // With strict names off, unknown joints are skipped and the rest applies.
+        app.world_mut().get_mut::<RobotTwin>(twin).unwrap().strict_names = false;
+        let mut partial = unknown;
+        partial.names.push("right_j0".into());
+        partial.positions.push(-0.5);
+        send(&mut app, partial);
+        let state = app.world().get::<RobotTwin>(twin).unwrap();
+        assert_eq!(state.positions[0], -0.5);
+        assert_eq!(state.positions[1], 0.2);
+    }
+}

@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# Installs the Debian/Ubuntu packages Avatarm builds and renders with. Idempotent: packages
+# already present are not reinstalled, and apt is not touched when nothing is missing.
+set -euo pipefail
+packages=(
+  pkg-config libudev-dev libwayland-dev libxkbcommon-dev libx11-dev libxcursor-dev libxrandr-dev libxi-dev
+  mesa-vulkan-drivers libvulkan1 xvfb xauth libopenxr-loader1 libclang-dev libv4l-dev mold
+)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "installing: ${missing[*]}"
+  sudo=""
+  [ "$(id -u)" -eq 0 ] || sudo="sudo"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+command -v cargo >/dev/null || {
+  echo "error: cargo not found; install Rust 1.95 or newer (https://rustup.rs)" >&2
+  exit 1
+}

@@ -1,0 +1,153 @@
+//! Avatarm: manipulate real objects through a robot arm that is hidden from view.
+//!
+//! This crate is the application: scene files ([`scene`]), the app assembled from the plugins
+//! ([`build_app`]), the desktop preview ([`preview`]), headless scene replay with its report
+//! ([`replay`]) and the `avatarm robot` description check ([`robot_info`]). The binary
+//! `avatarm` is a thin command line over these.
+
+pub mod preview;
+pub mod replay;
+pub mod robot_info;
+pub mod scene;
+
+use std::time::Duration;
+
+use avatarm_sim::{SimRoomConfig, SimRoomPlugin};
+use avatarm_twin::prelude::*;
+use avatarm_twin::{TwinMeshCache, layers};
+use bevy::app::ScheduleRunnerPlugin;
+use bevy::camera::visibility::RenderLayers;
+use bevy::prelude::*;
+use bevy::render::RenderPlugin;
+use bevy::time::TimeUpdateStrategy;
+use bevy::window::ExitCondition;
+use bevy::winit::WinitPlugin;
+
+use crate::scene::Scene;
+
+/// How the app runs.
+#[derive(Debug, Clone)]
+pub enum Mode {
+    /// A window with the camera feed and the twin.
+    Preview(preview::PreviewOptions),
+    /// No window: replay the scene on a fixed timestep and write frames and a report.
+    Headless(replay::ReplayOptions),
+}
+
+/// The app's own twin of the robot (what the app believes, from received joint states).
+#[derive(Resource, Debug, Clone, Copy)]
+pub struct AppTwin(pub Entity);
+
+/// The scene being run.
+#[derive(Resource, Debug, Clone)]
+pub struct SceneResource(pub Scene);
+
+/// Builds the app for a scene; shared by `main` and the tests.
+pub fn build_app(scene: &Scene, mode: &Mode) -> App {
+    let mut app = App::new();
+    let frame_dt = Duration::from_secs_f64(1.0 / scene.file.camera.fps);
+    match mode {
+        Mode::Headless(_) => {
+            app.add_plugins((
+                DefaultPlugins
+                    .set(WindowPlugin {
+                        primary_window: None,
+                        exit_condition: ExitCondition::DontExit,
+                        ..default()
+                    })
+                    .set(RenderPlugin {
+                        synchronous_pipeline_compilation: true,
+                        ..default()
+                    })
+                    .disable::<WinitPlugin>(),
+                ScheduleRunnerPlugin::run_loop(Duration::ZERO),
+            ))
+            .insert_resource(TimeUpdateStrategy::ManualDuration(frame_dt));
+        }
+        Mode::Preview(options) => {
+            let window = Window {
+                title: format!("Avatarm — {}", scene.file.name),
+                resolution: (1280u32, 720u32).into(),
+                ..default()
+            };
+            let plugins = DefaultPlugins.set(WindowPlugin {
+                primary_window: Some(window),
+                ..default()
+            });
+            add_window_plugins(&mut app, plugins, options.xr);
+            if options.fixed_timestep {
+                app.insert_resource(TimeUpdateStrategy::ManualDuration(frame_dt));
+            }
+        }
+    }
+    app.insert_resource(SceneResource(scene.clone()))
+        .insert_resource(SimRoomConfig {
+            model: scene.model.clone(),
+            robot_base: scene.robot_base(),
+            robot: scene.file.robot.sim,
+            q0: scene.q0.clone(),
+            trajectory: scene.trajectory.clone(),
+            control_rate_hz: scene.file.control_rate_hz,
+            camera: scene.true_camera,
+            props: scene.props.clone(),
+            ground_truth: matches!(mode, Mode::Headless(_)),
+            twin: None,
+        })
+        .add_plugins((RobotTwinPlugin, SimRoomPlugin))
+        .add_systems(PreStartup, spawn_app_twin);
+    match mode {
+        Mode::Headless(options) => {
+            app.add_plugins(replay::ReplayPlugin(options.clone()));
+        }
+        Mode::Preview(options) => {
+            app.add_plugins(preview::PreviewPlugin(options.clone()));
+        }
+    }
+    app
+}
+
+#[cfg(feature = "xr")]
+fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupBuilder, xr: bool) {
+    if xr {
+        // Falls back to the flat renderer, with a log line, when no OpenXR runtime is present.
+        app.add_plugins(bevy_mod_openxr::add_xr_plugins(plugins));
+    } else {
+        app.add_plugins(plugins);
+    }
+}
+
+#[cfg(not(feature = "xr"))]
+fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupBuilder, xr: bool) {
+    if xr {
+        warn!("--xr: this build has no OpenXR support (feature `xr`); using the desktop preview");
+    }
+    app.add_plugins(plugins);
+}
+
+/// Spawns the app's twin on the twin layer and points the simulated room's joint states at it.
+fn spawn_app_twin(
+    mut commands: Commands,
+    mut config: ResMut<SimRoomConfig>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    mut cache: ResMut<TwinMeshCache>,
+    mut exit: MessageWriter<AppExit>,
+) {
+    let twin = spawn_twin(&mut commands, config.model.clone(), &config.robot_base);
+    if let Err(e) = attach_visuals(
+        &mut commands,
+        &mut meshes,
+        &mut materials,
+        &mut cache,
+        &config.model,
+        &twin,
+        TwinAppearance::Urdf,
+        GeometrySource::Visual,
+        &RenderLayers::layer(layers::TWIN),
+    ) {
+        error!("{e}");
+        exit.write(AppExit::error());
+    }
+    config.twin = Some(twin.root);
+    commands.insert_resource(AppTwin(twin.root));
+}

@@ -1,0 +1,182 @@
+//! The desktop preview: the simulated camera feed beside a 3-D view of the robot twin.
+
+use std::path::PathBuf;
+
+use avatarm_sim::SimCameras;
+use avatarm_twin::layers;
+use bevy::camera::visibility::RenderLayers;
+use bevy::prelude::*;
+use bevy::render::view::screenshot::{Screenshot, save_to_disk};
+
+use crate::SceneResource;
+
+/// Options of the preview.
+#[derive(Debug, Clone, Default)]
+pub struct PreviewOptions {
+    /// Quit after this many frames.
+    pub frames: Option<u32>,
+    /// Save a screenshot of the window at the last frame (needs `frames`; default 120).
+    pub screenshot: Option<PathBuf>,
+    /// Start an OpenXR session (falls back to the window without a runtime).
+    pub xr: bool,
+    /// Advance time by exactly one camera frame per rendered frame (scripted runs).
+    pub fixed_timestep: bool,
+}
+
+/// The preview's cameras, panels and keys.
+pub struct PreviewPlugin(pub PreviewOptions);
+
+#[derive(Resource)]
+struct PreviewState {
+    options: PreviewOptions,
+    frame: u32,
+    shots: u32,
+}
+
+#[derive(Component)]
+struct StatusText;
+
+impl Plugin for PreviewPlugin {
+    fn build(&self, app: &mut App) {
+        app.insert_resource(PreviewState {
+            options: self.0.clone(),
+            frame: 0,
+            shots: 0,
+        })
+        .add_systems(Startup, setup_preview)
+        .add_systems(Update, (update_status, handle_keys, count_frames));
+    }
+}
+
+fn setup_preview(mut commands: Commands, cameras: Res<SimCameras>, scene: Res<SceneResource>) {
+    let base = scene.0.robot_base().translation.vector;
+    let focus = Vec3::new(base.x as f32 + 0.45, base.y as f32, base.z as f32 + 0.25);
+    commands.spawn((
+        Name::new("preview camera"),
+        Camera3d::default(),
+        Transform::from_translation(focus + Vec3::new(0.9, -1.7, 0.8)).looking_at(focus, Vec3::Z),
+        RenderLayers::from_layers(&[layers::ROOM, layers::TWIN]),
+    ));
+    let k = &scene.0.true_camera.intrinsics;
+    let panel_w = 560.0;
+    let panel_h = panel_w * k.height as f32 / k.width as f32;
+    commands
+        .spawn((
+            Node {
+                position_type: PositionType::Absolute,
+                left: Val::Px(12.0),
+                top: Val::Px(12.0),
+                flex_direction: FlexDirection::Column,
+                row_gap: Val::Px(6.0),
+                ..default()
+            },
+            BackgroundColor(Color::srgba(0.05, 0.05, 0.07, 0.8)),
+        ))
+        .with_children(|panel| {
+            panel.spawn((
+                Text::new("Camera feed (simulated room)"),
+                TextFont {
+                    font_size: FontSize::Px(18.0),
+                    ..default()
+                },
+                TextColor(Color::WHITE),
+            ));
+            panel.spawn((
+                ImageNode::new(cameras.real.clone()),
+                Node {
+                    width: Val::Px(panel_w),
+                    height: Val::Px(panel_h),
+                    ..default()
+                },
+            ));
+            panel.spawn((
+                StatusText,
+                Text::new(""),
+                TextFont {
+                    font_size: FontSize::Px(15.0),
+                    ..default()
+                },
+                TextColor(Color::srgb(0.85, 0.9, 0.95)),
+            ));
+        });
+    commands.spawn((
+        Text::new("Robot twin (from joint states)   Esc: quit   F12: screenshot"),
+        TextFont {
+            font_size: FontSize::Px(16.0),
+            ..default()
+        },
+        TextColor(Color::WHITE),
+        Node {
+            position_type: PositionType::Absolute,
+            right: Val::Px(12.0),
+            bottom: Val::Px(10.0),
+            ..default()
+        },
+    ));
+}
+
+fn update_status(
+    mut text: Query<&mut Text, With<StatusText>>,
+    robot: Option<Res<avatarm_sim::SimRobotState>>,
+    twin: Option<Res<crate::AppTwin>>,
+    twins: Query<&avatarm_twin::RobotTwin>,
+    time: Res<Time>,
+) {
+    let (Some(robot), Some(twin)) = (robot, twin) else {
+        return;
+    };
+    let Ok(twin) = twins.get(twin.0) else { return };
+    let t = robot.0.time_s();
+    let age_ms = twin.stamp_s.map_or(f64::NAN, |s| (t - s) * 1e3);
+    for mut line in &mut text {
+        **line = format!(
+            "sim {t:6.2} s   frame {:5.1} ms   joint state age {age_ms:5.1} ms   refused {}",
+            time.delta_secs_f64() * 1e3,
+            twin.rejected
+        );
+    }
+}
+
+fn handle_keys(
+    keys: Res<ButtonInput<KeyCode>>,
+    mut commands: Commands,
+    mut state: ResMut<PreviewState>,
+    mut exit: MessageWriter<AppExit>,
+) {
+    if keys.just_pressed(KeyCode::Escape) {
+        exit.write(AppExit::Success);
+    }
+    if keys.just_pressed(KeyCode::F12) {
+        state.shots += 1;
+        let path = format!("avatarm_screenshot_{:03}.png", state.shots);
+        info!("screenshot: {path}");
+        commands
+            .spawn(Screenshot::primary_window())
+            .observe(save_to_disk(path));
+    }
+}
+
+fn count_frames(
+    mut commands: Commands,
+    mut state: ResMut<PreviewState>,
+    mut exit: MessageWriter<AppExit>,
+) {
+    state.frame += 1;
+    let last = match (state.options.frames, &state.options.screenshot) {
+        (Some(n), _) => n,
+        (None, Some(_)) => 120,
+        (None, None) => return,
+    };
+    if state.frame == last
+        && let Some(path) = state.options.screenshot.clone()
+    {
+        commands
+            .spawn(Screenshot::primary_window())
+            .observe(save_to_disk(path));
+    }
+    // Leave a few frames for the screenshot to be read back and written.
+    let grace = if state.options.screenshot.is_some() { 10 } else { 0 };
+    if state.frame >= last + grace {
+        exit.write(AppExit::Success);
+    }
+}
