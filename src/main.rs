@@ -108,8 +108,8 @@ fn run(cli: Cli) -> Result<(), String> {
             q,
             json,
         } => {
-            let model =
-                RobotModel::from_urdf_file(&urdf, &packages(package_path)).map_err(|e| e.to_string())?;
+            let model = RobotModel::from_urdf_file(&urdf, &packages(package_path))
+                .map_err(|e| e.to_string())?;
             let meshes = robot_info::check_meshes(&model).map_err(|e| e.to_string())?;
             let q = model
                 .parse_q(q.as_deref().unwrap_or(""))

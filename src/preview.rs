@@ -175,7 +175,11 @@ fn count_frames(
             .observe(save_to_disk(path));
     }
     // Leave a few frames for the screenshot to be read back and written.
-    let grace = if state.options.screenshot.is_some() { 10 } else { 0 };
+    let grace = if state.options.screenshot.is_some() {
+        10
+    } else {
+        0
+    };
     if state.frame >= last + grace {
         exit.write(AppExit::Success);
     }

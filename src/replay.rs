@@ -97,7 +97,9 @@ enum Capture {
 impl Plugin for ReplayPlugin {
     fn build(&self, app: &mut App) {
         let scene = &app.world().resource::<SceneResource>().0;
-        let total_frames = (scene.file.duration_s * scene.file.camera.fps).round().max(1.0) as u64;
+        let total_frames = (scene.file.duration_s * scene.file.camera.fps)
+            .round()
+            .max(1.0) as u64;
         let bar = if self.0.progress {
             let bar = ProgressBar::new(total_frames);
             bar.set_style(
@@ -134,7 +136,10 @@ impl Plugin for ReplayPlugin {
 fn pause_for_warmup(mut time: ResMut<Time<Virtual>>, replay: Res<Replay>) {
     time.pause();
     if let Err(e) = std::fs::create_dir_all(&replay.options.out) {
-        error!("{}: cannot create output folder: {e}", replay.options.out.display());
+        error!(
+            "{}: cannot create output folder: {e}",
+            replay.options.out.display()
+        );
     }
 }
 
@@ -164,7 +169,7 @@ fn drive_replay(
     }
     if !replay.stepping_done {
         let k = replay.frame;
-        if k % u64::from(replay.options.frames_every.max(1)) == 0 {
+        if k.is_multiple_of(u64::from(replay.options.frames_every.max(1))) {
             let t = robot.0.time_s();
             let twin = twins.get(app_twin.0).ok();
             replay.records.push(FrameRecord {
@@ -255,7 +260,10 @@ fn save_capture(
             for p in gray.pixels_mut() {
                 p.0[0] = if p.0[0] > 127 { 255 } else { 0 };
             }
-            (format!("gt_silhouette_{k:05}.png"), image::DynamicImage::ImageLuma8(gray))
+            (
+                format!("gt_silhouette_{k:05}.png"),
+                image::DynamicImage::ImageLuma8(gray),
+            )
         }
     };
     let path = replay.options.out.join(name);
@@ -317,7 +325,8 @@ fn finish(
     let write = |name: &str, value: &serde_json::Value| {
         let path = replay.options.out.join(name);
         let text = serde_json::to_string_pretty(value).map_err(|e| e.to_string())?;
-        std::fs::write(&path, text + "\n").map_err(|e| format!("{}: cannot write: {e}", path.display()))
+        std::fs::write(&path, text + "\n")
+            .map_err(|e| format!("{}: cannot write: {e}", path.display()))
     };
     write("frames.json", &json!(replay.records))?;
     write("report.json", &report)?;
@@ -325,14 +334,15 @@ fn finish(
 }
 
 /// Runs a replay to the end and returns its report.
-pub fn run(scene: &crate::scene::Scene, options: ReplayOptions) -> Result<serde_json::Value, String> {
+pub fn run(
+    scene: &crate::scene::Scene,
+    options: ReplayOptions,
+) -> Result<serde_json::Value, String> {
     let slot = options.result.clone();
     let mut app = crate::build_app(scene, &crate::Mode::Headless(options));
     let exit = app.run();
-    let outcome = slot
-        .lock()
+    slot.lock()
         .ok()
         .and_then(|mut s| s.take())
-        .unwrap_or_else(|| Err(format!("the replay stopped before finishing ({exit:?})")));
-    outcome
+        .unwrap_or_else(|| Err(format!("the replay stopped before finishing ({exit:?})")))
 }

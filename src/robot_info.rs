@@ -38,7 +38,11 @@ pub fn tree_text(model: &RobotModel) -> String {
         model.joints.len(),
         model.dof()
     );
-    let _ = writeln!(out, "movable joints in q order: {}", model.dof_names().join(", "));
+    let _ = writeln!(
+        out,
+        "movable joints in q order: {}",
+        model.dof_names().join(", ")
+    );
     fn walk(model: &RobotModel, link: LinkId, prefix: &str, out: &mut String) {
         let children = &model.links[link].child_joints;
         for (k, &ji) in children.iter().enumerate() {
@@ -59,7 +63,13 @@ pub fn tree_text(model: &RobotModel) -> String {
                     };
                     format!(
                         ", axis [{:.3} {:.3} {:.3}], [{}, {}] {u}, {} {v}, {} {e}",
-                        a.x, a.y, a.z, j.limits.lower, j.limits.upper, j.limits.velocity, j.limits.effort
+                        a.x,
+                        a.y,
+                        a.z,
+                        j.limits.lower,
+                        j.limits.upper,
+                        j.limits.velocity,
+                        j.limits.effort
                     )
                 }
             };

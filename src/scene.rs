@@ -51,7 +51,7 @@ pub enum SceneError {
         /// The scene file.
         path: PathBuf,
         /// Why.
-        source: avatarm_core::Error,
+        source: Box<avatarm_core::Error>,
     },
 }
 
@@ -266,7 +266,11 @@ impl Scene {
     }
 
     /// Parses scene text as if read from `path`.
-    pub fn parse(text: &str, path: &Path, extra_packages: &PackagePath) -> Result<Self, SceneError> {
+    pub fn parse(
+        text: &str,
+        path: &Path,
+        extra_packages: &PackagePath,
+    ) -> Result<Self, SceneError> {
         let file: SceneFile = toml::from_str(text).map_err(|e| SceneError::Parse {
             path: path.to_owned(),
             message: e.to_string().trim_end().to_owned(),
@@ -278,7 +282,10 @@ impl Scene {
         };
         let dir = path.parent().unwrap_or(Path::new("."));
         if !(file.duration_s.is_finite() && file.duration_s > 0.0) {
-            return Err(invalid("duration_s", format!("{} must be > 0", file.duration_s)));
+            return Err(invalid(
+                "duration_s",
+                format!("{} must be > 0", file.duration_s),
+            ));
         }
         if !(file.control_rate_hz.is_finite() && (1.0..=10_000.0).contains(&file.control_rate_hz)) {
             return Err(invalid(
@@ -288,7 +295,10 @@ impl Scene {
         }
         let c = &file.camera;
         if !(c.fps.is_finite() && (1.0..=1000.0).contains(&c.fps)) {
-            return Err(invalid("camera.fps", format!("{} must be within 1..=1000", c.fps)));
+            return Err(invalid(
+                "camera.fps",
+                format!("{} must be within 1..=1000", c.fps),
+            ));
         }
         if !(c.frame_latency_s.is_finite() && c.frame_latency_s >= 0.0) {
             return Err(invalid("camera.frame_latency_s", "must be >= 0".into()));
@@ -301,7 +311,10 @@ impl Scene {
             ("command_timeout_s", s.command_timeout_s),
         ] {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(invalid(&format!("robot.sim.{name}"), format!("{v} must be >= 0")));
+                return Err(invalid(
+                    &format!("robot.sim.{name}"),
+                    format!("{v} must be >= 0"),
+                ));
             }
         }
         if !(s.state_rate_hz.is_finite() && s.state_rate_hz > 0.0) {
@@ -312,11 +325,12 @@ impl Scene {
         packages
             .0
             .extend(file.robot.package_path.iter().map(|p| dir.join(p)));
-        let model = RobotModel::from_urdf_file(&dir.join(&file.robot.urdf), &packages)
-            .map_err(|source| SceneError::Robot {
+        let model = RobotModel::from_urdf_file(&dir.join(&file.robot.urdf), &packages).map_err(
+            |source| SceneError::Robot {
                 path: path.to_owned(),
-                source,
-            })?;
+                source: Box::new(source),
+            },
+        )?;
 
         let values = |field: &str, v: &JointValues, previous: &DVector<f64>| {
             let mut q = previous.clone();
@@ -341,7 +355,9 @@ impl Scene {
                     }
                 }
             }
-            model.check_q(&q).map_err(|e| invalid(field, e.to_string()))?;
+            model
+                .check_q(&q)
+                .map_err(|e| invalid(field, e.to_string()))?;
             Ok(q)
         };
         let q0 = match &file.robot.q0 {
@@ -353,7 +369,10 @@ impl Scene {
         for (i, k) in file.timeline.robot.iter().enumerate() {
             let field = format!("timeline.robot[{i}]");
             if !(k.t_s.is_finite() && k.t_s >= 0.0) {
-                return Err(invalid(&format!("{field}.t_s"), format!("{} must be >= 0", k.t_s)));
+                return Err(invalid(
+                    &format!("{field}.t_s"),
+                    format!("{} must be >= 0", k.t_s),
+                ));
             }
             if let Some(last) = keyframes.last().map(|k: &Keyframe| k.t_s)
                 && k.t_s <= last

@@ -76,13 +76,21 @@ impl Intrinsics {
     /// Checks that the numbers describe a real camera.
     pub fn validate(&self) -> Result<()> {
         let bad = |message: String| Err(Error::BadIntrinsics { message });
-        for (name, v) in [("fx", self.fx), ("fy", self.fy), ("cx", self.cx), ("cy", self.cy)] {
+        for (name, v) in [
+            ("fx", self.fx),
+            ("fy", self.fy),
+            ("cx", self.cx),
+            ("cy", self.cy),
+        ] {
             if !v.is_finite() {
                 return bad(format!("{name} = {v} is not finite"));
             }
         }
         if self.fx <= 0.0 || self.fy <= 0.0 {
-            return bad(format!("fx = {} and fy = {} must be positive", self.fx, self.fy));
+            return bad(format!(
+                "fx = {} and fy = {} must be positive",
+                self.fx, self.fy
+            ));
         }
         if self.width == 0 || self.height == 0 || self.width > 16384 || self.height > 16384 {
             return bad(format!(
@@ -184,10 +192,22 @@ impl PinholeCamera {
         // Raster coordinates have pixel centres at +0.5.
         let (cx, cy) = (k.cx + 0.5, k.cy + 0.5);
         Matrix4::new(
-            2.0 * k.fx / w, 0.0, 1.0 - 2.0 * cx / w, 0.0,
-            0.0, 2.0 * k.fy / h, 2.0 * cy / h - 1.0, 0.0,
-            0.0, 0.0, 0.0, near,
-            0.0, 0.0, -1.0, 0.0,
+            2.0 * k.fx / w,
+            0.0,
+            1.0 - 2.0 * cx / w,
+            0.0,
+            0.0,
+            2.0 * k.fy / h,
+            2.0 * cy / h - 1.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            near,
+            0.0,
+            0.0,
+            -1.0,
+            0.0,
         )
     }
 
@@ -266,7 +286,11 @@ mod tests {
         assert!(Intrinsics { fx: f64::NAN, ..k }.validate().is_err());
         assert!(Intrinsics { width: 0, ..k }.validate().is_err());
         assert!(k.validate().is_ok());
-        let bad = CameraPose { eye: [0.0; 3], target: [0.0, 0.0, 1.0], up: [0.0, 0.0, 1.0] };
+        let bad = CameraPose {
+            eye: [0.0; 3],
+            target: [0.0, 0.0, 1.0],
+            up: [0.0, 0.0, 1.0],
+        };
         assert!(bad.to_isometry().is_err());
     }
 }

@@ -84,7 +84,11 @@ pub fn dls_step(
         damping: 0.0,
         rejected,
     };
-    if jacobian.iter().chain(twist.iter()).chain(q.iter()).any(|v| !v.is_finite())
+    if jacobian
+        .iter()
+        .chain(twist.iter())
+        .chain(q.iter())
+        .any(|v| !v.is_finite())
         || q.len() != n
         || limits.len() != n
     {
@@ -155,18 +159,11 @@ pub fn dls_step(
     }
 }
 
-/// The velocity range of a joint that keeps it within its position limits after `dt`, and
-/// within its velocity limit. A joint already outside its range may only move back.
+/// The velocity range that keeps a joint within its position limits after `dt`. A joint already
+/// outside its range gets a range that only moves it back. Velocity limits are not applied here
+/// but by uniform scaling afterwards, which keeps the direction of motion.
 fn position_velocity_bounds(q: f64, l: &JointLimits, dt: f64) -> (f64, f64) {
-    let lo = ((l.lower - q) / dt).max(-l.velocity);
-    let hi = ((l.upper - q) / dt).min(l.velocity);
-    if lo <= hi {
-        (lo, hi)
-    } else if q < l.lower {
-        (lo.min(l.velocity), lo.min(l.velocity))
-    } else {
-        (hi.max(-l.velocity), hi.max(-l.velocity))
-    }
+    ((l.lower - q) / dt, (l.upper - q) / dt)
 }
 
 /// Joint velocities by the plain Moore–Penrose pseudoinverse, without damping or limits: the
@@ -181,7 +178,10 @@ pub fn pinv_step(jacobian: &Matrix6xX<f64>, twist: &Vector6<f64>) -> DVector<f64
 /// Smallest of the first min(6, n) singular values.
 pub fn smallest_singular_value(jacobian: &Matrix6xX<f64>) -> f64 {
     let j = DMatrix::from_column_slice(6, jacobian.ncols(), jacobian.as_slice());
-    j.singular_values().iter().copied().fold(f64::INFINITY, f64::min)
+    j.singular_values()
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min)
 }
 
 #[cfg(test)]
@@ -200,10 +200,13 @@ mod tests {
         let tip = r.link_id("right_hand").unwrap();
         let base = Isometry3::identity();
         let limits = r.dof_limits();
-        let target_q = [0.4, -0.6, 0.1, 1.2, -0.3, 0.8, 0.5];
+        let target_q = [0.4, -0.6, 0.1, 1.2, -0.3, 0.8, 0.5, 0.0, 0.0];
         let target = r.forward_kinematics(&base, &target_q)[tip];
-        let mut q = vec![0.0, -0.3, 0.0, 0.9, 0.0, 0.6, 0.0];
-        let settings = DlsSettings { dt: 0.01, ..Default::default() };
+        let mut q = vec![0.0, -0.3, 0.0, 0.9, 0.0, 0.6, 0.0, 0.0, 0.0];
+        let settings = DlsSettings {
+            dt: 0.01,
+            ..Default::default()
+        };
         for _ in 0..3000 {
             let pose = r.forward_kinematics(&base, &q)[tip];
             let err = pose_difference(&pose, &target);
@@ -228,22 +231,29 @@ mod tests {
         let base = Isometry3::identity();
         let limits = r.dof_limits();
         // Near-straight elbow and aligned wrist: a near-singular configuration.
-        let q = [0.0, 0.0, 0.0, 1e-7, 0.0, 1e-7, 0.0];
+        let q = [0.0, 0.0, 0.0, 1e-7, 0.0, 1e-7, 0.0, 0.0, 0.0];
         let jac = r.jacobian(&base, &q, tip, &Vector3::zeros(), Frame::World);
         let sigma = smallest_singular_value(&jac);
         assert!(sigma < 1e-3, "not singular: {sigma}");
         // A twist partly along the lost direction.
-        let svd = DMatrix::from_column_slice(6, 7, jac.as_slice()).svd(true, false);
-        let (k, _) = svd
-            .singular_values
-            .iter()
-            .enumerate()
-            .fold((0, f64::INFINITY), |b, (i, &s)| if s < b.1 { (i, s) } else { b });
+        let svd = DMatrix::from_column_slice(6, jac.ncols(), jac.as_slice()).svd(true, false);
+        let (k, _) =
+            svd.singular_values
+                .iter()
+                .enumerate()
+                .fold(
+                    (0, f64::INFINITY),
+                    |b, (i, &s)| if s < b.1 { (i, s) } else { b },
+                );
         let u = svd.u.as_ref().map(|u| u.column(k).into_owned());
         let dir = Vector6::from_iterator(u.unwrap_or_else(|| DVector::zeros(6)).iter().copied());
         let twist = dir * 0.05 + Vector6::new(0.02, 0.0, 0.0, 0.0, 0.0, 0.0);
         let plain = pinv_step(&jac, &twist);
-        assert!(plain.amax() > 100.0, "pseudoinverse stayed small: {}", plain.amax());
+        assert!(
+            plain.amax() > 100.0,
+            "pseudoinverse stayed small: {}",
+            plain.amax()
+        );
         let step = dls_step(&jac, &twist, &q, &limits, &DlsSettings::default());
         assert!(!step.rejected);
         for (v, l) in step.qdot.iter().zip(&limits) {
@@ -256,19 +266,51 @@ mod tests {
     fn rejects_nan_and_stops_at_position_limits() {
         let mut j = Matrix6xX::zeros(1);
         j[(0, 0)] = 1.0;
-        let lim = [JointLimits { lower: -1.0, upper: 1.0, velocity: 2.0, effort: 1.0 }];
-        let s = DlsSettings { dt: 0.1, ..Default::default() };
-        let nan = dls_step(&j, &Vector6::new(f64::NAN, 0.0, 0.0, 0.0, 0.0, 0.0), &[0.0], &lim, &s);
+        let lim = [JointLimits {
+            lower: -1.0,
+            upper: 1.0,
+            velocity: 2.0,
+            effort: 1.0,
+        }];
+        let s = DlsSettings {
+            dt: 0.1,
+            ..Default::default()
+        };
+        let nan = dls_step(
+            &j,
+            &Vector6::new(f64::NAN, 0.0, 0.0, 0.0, 0.0, 0.0),
+            &[0.0],
+            &lim,
+            &s,
+        );
         assert!(nan.rejected && nan.qdot[0] == 0.0);
         // 0.05 from the upper limit, asked to go at 1.5: stops on the limit after dt.
-        let step = dls_step(&j, &Vector6::new(1.5, 0.0, 0.0, 0.0, 0.0, 0.0), &[0.95], &lim, &s);
+        let step = dls_step(
+            &j,
+            &Vector6::new(1.5, 0.0, 0.0, 0.0, 0.0, 0.0),
+            &[0.95],
+            &lim,
+            &s,
+        );
         assert!(step.saturated[0]);
         assert!((step.qdot[0] - 0.5).abs() < 1e-12);
         // Outside the range: only moving back is allowed.
-        let back = dls_step(&j, &Vector6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0), &[1.2], &lim, &s);
+        let back = dls_step(
+            &j,
+            &Vector6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+            &[1.2],
+            &lim,
+            &s,
+        );
         assert!(back.qdot[0] <= 0.0);
         // Velocity limit scales uniformly.
-        let fast = dls_step(&j, &Vector6::new(-5.0, 0.0, 0.0, 0.0, 0.0, 0.0), &[0.0], &lim, &DlsSettings { dt: 1e-3, ..s });
+        let fast = dls_step(
+            &j,
+            &Vector6::new(-5.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+            &[0.0],
+            &lim,
+            &DlsSettings { dt: 1e-3, ..s },
+        );
         assert!((fast.qdot[0] + 2.0).abs() < 1e-12 && fast.scale < 1.0);
     }
 }

@@ -124,15 +124,14 @@ pub fn load_mesh(path: &Path, scale: &Vector3<f64>) -> Result<TriMesh> {
         }
         MeshFormat::Gltf => load_gltf(path)?,
     };
-    if mesh.indices.iter().any(|&i| i as usize >= mesh.positions.len()) {
+    if mesh
+        .indices
+        .iter()
+        .any(|&i| i as usize >= mesh.positions.len())
+    {
         return Err(bad("a triangle index is out of range".into()));
     }
-    if mesh
-        .positions
-        .iter()
-        .flatten()
-        .any(|v| !v.is_finite())
-    {
+    if mesh.positions.iter().flatten().any(|v| !v.is_finite()) {
         return Err(bad("a vertex position is not finite".into()));
     }
     let s = scale.map(|v| v as f32);
@@ -262,11 +261,18 @@ mod tests {
     fn unsupported_and_broken_files_name_the_file() {
         let dae = tmp("arm.dae");
         std::fs::write(&dae, "<COLLADA/>").unwrap();
-        let e = load_mesh(&dae, &Vector3::repeat(1.0)).unwrap_err().to_string();
-        assert!(e.contains("arm.dae") && e.contains("collision") && e.contains("glb"), "{e}");
+        let e = load_mesh(&dae, &Vector3::repeat(1.0))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("arm.dae") && e.contains("collision") && e.contains("glb"),
+            "{e}"
+        );
         let broken = tmp("broken.obj");
         std::fs::write(&broken, "f 1 2 3\n").unwrap();
-        let e = load_mesh(&broken, &Vector3::repeat(1.0)).unwrap_err().to_string();
+        let e = load_mesh(&broken, &Vector3::repeat(1.0))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("broken.obj"), "{e}");
     }
 

@@ -187,11 +187,8 @@ pub struct PackagePath(pub Vec<PathBuf>);
 impl PackagePath {
     /// Adds the entries of a `ROS_PACKAGE_PATH`-style list (`:`-separated).
     pub fn extend_from_env_list(&mut self, list: &str) {
-        self.0.extend(
-            list.split(':')
-                .filter(|s| !s.is_empty())
-                .map(PathBuf::from),
-        );
+        self.0
+            .extend(list.split(':').filter(|s| !s.is_empty()).map(PathBuf::from));
     }
 
     fn find_package(&self, package: &str) -> Option<PathBuf> {
@@ -790,7 +787,10 @@ mod tests {
         let r = load(TREE).unwrap();
         assert_eq!(r.parse_q("0.1, 0.2").unwrap().as_slice(), &[0.1, 0.2, 0.0]);
         assert_eq!(r.parse_q("j_a2=3").unwrap().as_slice(), &[0.0, 0.0, 3.0]);
-        assert!(matches!(r.parse_q("1,2,3,4"), Err(Error::JointCount { .. })));
+        assert!(matches!(
+            r.parse_q("1,2,3,4"),
+            Err(Error::JointCount { .. })
+        ));
         assert!(matches!(r.parse_q("x=1"), Err(Error::UnknownJoint { .. })));
         assert!(matches!(r.parse_q("NaN"), Err(Error::NonFinite { .. })));
         assert!(matches!(r.parse_q("abc"), Err(Error::NotANumber { .. })));
@@ -800,13 +800,19 @@ mod tests {
     fn rejects_bad_descriptions_naming_the_element() {
         let unknown = TREE.replace(r#"type="continuous""#, r#"type="floating""#);
         let e = load(&unknown).unwrap_err().to_string();
-        assert!(e.contains("j_a2") && e.contains("floating") && e.contains(":14:"), "{e}");
+        assert!(
+            e.contains("j_a2") && e.contains("floating") && e.contains(":14:"),
+            "{e}"
+        );
 
         let e = load("<robot><link name='a'></robot>").unwrap_err();
         assert!(matches!(e, Error::MalformedUrdf { .. }), "{e}");
 
         let two_roots = r#"<robot name="t"><link name="a"/><link name="b"/></robot>"#;
-        assert!(matches!(load(two_roots), Err(Error::SeveralRoots { count: 2, .. })));
+        assert!(matches!(
+            load(two_roots),
+            Err(Error::SeveralRoots { count: 2, .. })
+        ));
 
         let looped = r#"<robot name="t"><link name="a"/><link name="b"/>
           <joint name="x" type="fixed"><parent link="a"/><child link="b"/></joint>
@@ -845,12 +851,9 @@ mod tests {
             )
         };
         let packages = PackagePath(vec![dir.join("share")]);
-        let r = RobotModel::from_urdf_str(
-            &urdf("package://my_robot/meshes/a.stl"),
-            None,
-            &packages,
-        )
-        .unwrap();
+        let r =
+            RobotModel::from_urdf_str(&urdf("package://my_robot/meshes/a.stl"), None, &packages)
+                .unwrap();
         let Shape::Mesh { path, scale, .. } = &r.links[0].visuals[0].shape else {
             panic!("not a mesh")
         };
@@ -864,7 +867,10 @@ mod tests {
                 .is_ok()
         );
         // Relative to the base folder, and file://.
-        assert!(RobotModel::from_urdf_str(&urdf("meshes/a.stl"), Some(&pkg.join("..")), &packages).is_ok());
+        assert!(
+            RobotModel::from_urdf_str(&urdf("meshes/a.stl"), Some(&pkg.join("..")), &packages)
+                .is_ok()
+        );
         let file_uri = format!("file://{}", pkg.join("a.stl").display());
         assert!(RobotModel::from_urdf_str(&urdf(&file_uri), None, &packages).is_ok());
 

@@ -63,7 +63,10 @@ mod tests {
 
     #[test]
     fn gain_interpolates_and_noise_is_seeded() {
-        let s = SensorModel { noise_sigma: 2.0, exposure: vec![[0.0, 1.0], [1.0, 1.3]] };
+        let s = SensorModel {
+            noise_sigma: 2.0,
+            exposure: vec![[0.0, 1.0], [1.0, 1.3]],
+        };
         assert!((s.gain_at(0.5) - 1.15).abs() < 1e-12);
         assert_eq!(s.gain_at(9.0), 1.3);
         let mut a = vec![100u8; 64];

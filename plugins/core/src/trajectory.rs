@@ -68,7 +68,10 @@ mod tests {
 
     #[test]
     fn minimum_jerk_between_keyframes() {
-        let k = |t, v: f64| Keyframe { t_s: t, q: DVector::from_vec(vec![v]) };
+        let k = |t, v: f64| Keyframe {
+            t_s: t,
+            q: DVector::from_vec(vec![v]),
+        };
         let tr = JointTrajectory::new(vec![k(2.0, 1.0), k(0.0, 0.0)]);
         assert_eq!(tr.sample(-1.0).unwrap()[0], 0.0);
         assert!((tr.sample(1.0).unwrap()[0] - 0.5).abs() < 1e-12);

@@ -20,7 +20,8 @@ use bevy::transform::TransformSystems;
 use nalgebra::{DVector, Isometry3};
 
 pub use spawn::{
-    GeometrySource, TwinAppearance, TwinEntities, TwinMeshCache, attach_visuals, spawn_twin, to_bevy_mesh,
+    GeometrySource, TwinAppearance, TwinEntities, TwinMeshCache, attach_visuals, spawn_twin,
+    to_bevy_mesh,
 };
 
 /// What most users of the twin need.
@@ -43,7 +44,7 @@ pub enum TwinError {
         /// The link.
         link: String,
         /// Why.
-        source: avatarm_core::Error,
+        source: Box<avatarm_core::Error>,
     },
 }
 
@@ -263,7 +264,10 @@ mod tests {
     fn joint_states_pose_the_links_by_fk() {
         let (mut app, twin, model) = app_with_twin();
         let q = DVector::from_vec(vec![0.3, -0.9, 0.1, 1.6, -0.2, 0.7, 1.1, 0.01, 0.01]);
-        send(&mut app, JointStateMessage::full(twin, &model, &q, &DVector::zeros(9), 1.0));
+        send(
+            &mut app,
+            JointStateMessage::full(twin, &model, &q, &DVector::zeros(9), 1.0),
+        );
         let tip = model.link_id("right_gripper_tip").unwrap();
         let entity = app.world().get::<RobotTwin>(twin).unwrap().links[tip];
         let global = app.world().get::<GlobalTransform>(entity).unwrap();
@@ -278,7 +282,10 @@ mod tests {
     fn bad_states_are_refused_and_the_last_good_one_kept() {
         let (mut app, twin, model) = app_with_twin();
         let good = DVector::from_vec(vec![0.2; 9]);
-        send(&mut app, JointStateMessage::full(twin, &model, &good, &DVector::zeros(9), 1.0));
+        send(
+            &mut app,
+            JointStateMessage::full(twin, &model, &good, &DVector::zeros(9), 1.0),
+        );
         let mut nan = JointStateMessage::full(twin, &model, &good, &DVector::zeros(9), 2.0);
         nan.positions[3] = f64::NAN;
         send(&mut app, nan);
@@ -295,7 +302,10 @@ mod tests {
         assert_eq!(state.stamp_s, Some(1.0));
         assert_eq!(state.rejected, 2);
         // With strict names off, unknown joints are skipped and the rest applies.
-        app.world_mut().get_mut::<RobotTwin>(twin).unwrap().strict_names = false;
+        app.world_mut()
+            .get_mut::<RobotTwin>(twin)
+            .unwrap()
+            .strict_names = false;
         let mut partial = unknown;
         partial.names.push("right_j0".into());
         partial.positions.push(-0.5);

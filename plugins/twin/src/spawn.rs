@@ -119,7 +119,7 @@ pub fn attach_visuals(
                 mesh_for(meshes, cache, g).map_err(|source| TwinError::Mesh {
                     robot: model.name.clone(),
                     link: link.name.clone(),
-                    source,
+                    source: Box::new(source),
                 })?;
             let material = material_for(materials, cache, g, appearance);
             commands.spawn((
