@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use avatarm_sim::SimCameras;
 use avatarm_twin::layers;
 use bevy::camera::visibility::RenderLayers;
+use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::prelude::*;
 use bevy::render::view::screenshot::{Screenshot, save_to_disk};
 
@@ -51,10 +52,14 @@ impl Plugin for PreviewPlugin {
 fn setup_preview(mut commands: Commands, cameras: Res<SimCameras>, scene: Res<SceneResource>) {
     let base = scene.0.robot_base().translation.vector;
     let focus = Vec3::new(base.x as f32 + 0.45, base.y as f32, base.z as f32 + 0.25);
+    // Aimed a little left of the robot so that the twin shows right of the camera feed panel.
+    let eye = focus + Vec3::new(1.6, -1.6, 0.9);
+    let right = (focus - eye).cross(Vec3::Z).normalize();
     commands.spawn((
         Name::new("preview camera"),
         Camera3d::default(),
-        Transform::from_translation(focus + Vec3::new(0.9, -1.7, 0.8)).looking_at(focus, Vec3::Z),
+        Tonemapping::None,
+        Transform::from_translation(eye).looking_at(focus - 0.45 * right, Vec3::Z),
         RenderLayers::from_layers(&[layers::ROOM, layers::TWIN]),
     ));
     let k = &scene.0.true_camera.intrinsics;
