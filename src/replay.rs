@@ -190,7 +190,7 @@ fn drive_replay(
                     move |captured: On<ScreenshotCaptured>,
                           mut replay: ResMut<Replay>,
                           scene: Res<SceneResource>| {
-                        let result = save_capture(&replay, &scene, kind, k, &captured.image);
+                        let result = save_capture(&replay, &scene, kind, k, t, &captured.image);
                         replay.pending = replay.pending.saturating_sub(1);
                         if let Err(e) = result {
                             replay.errors.push(e);
@@ -237,6 +237,7 @@ fn save_capture(
     scene: &SceneResource,
     kind: Capture,
     k: u64,
+    t_s: f64,
     image: &Image,
 ) -> Result<(), String> {
     let dynamic = image
@@ -247,8 +248,8 @@ fn save_capture(
         Capture::Camera => {
             let mut rgba = dynamic.to_rgba8();
             let mut rng = Rng::stream(replay.seed, k);
-            let t = k as f64 / scene.0.file.camera.fps;
-            scene.0.file.camera.sensor.apply(&mut rgba, t, &mut rng);
+            // The same capture time as frames.json records.
+            scene.0.file.camera.sensor.apply(&mut rgba, t_s, &mut rng);
             (
                 format!("frame_{k:05}.png"),
                 image::DynamicImage::ImageRgba8(rgba).to_rgb8().into(),
