@@ -202,4 +202,20 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+    /// An image or pixel map of the wrong size or format.
+    #[error("{what}: {message}")]
+    BadImage {
+        /// Which image.
+        what: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A setting out of its range.
+    #[error("{what}: {message}")]
+    BadSetting {
+        /// Where the setting came from.
+        what: String,
+        /// What is wrong.
+        message: String,
+    },
 }

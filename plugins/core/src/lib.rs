@@ -6,6 +6,10 @@
 //! - [`ik`]: damped-least-squares velocity IK with joint position and velocity limits.
 //! - [`mesh`]: triangle meshes from STL, OBJ and glTF/GLB files.
 //! - [`camera`]: pinhole cameras (intrinsics + pose) and projection of world points to pixels.
+//! - [`dr`]: diminished reality on the CPU: mask, feathering, composite, photometric fit and
+//!   scores; the reference the GPU passes are checked against.
+//! - [`placement`]: where the object's twin goes in front of the video panel so that it covers
+//!   the real object's pixels (the paper's perspective equations, for any pinhole camera).
 //! - [`sim`]: the simulated robot (command latency, first-order response, limits, delayed joint
 //!   states) that stands in for the real arm.
 //! - [`rng`]: a small seeded generator so that every replay is reproducible.
@@ -13,10 +17,12 @@
 //! Nothing here imports Bevy; time is always an argument.
 
 pub mod camera;
+pub mod dr;
 pub mod error;
 pub mod ik;
 pub mod kinematics;
 pub mod mesh;
+pub mod placement;
 pub mod rng;
 pub mod robot;
 pub mod sensor;
