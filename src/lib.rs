@@ -9,10 +9,14 @@ pub mod preview;
 pub mod replay;
 pub mod robot_info;
 pub mod scene;
+pub mod session;
 
 use std::time::Duration;
 
-use avatarm_sim::{SimRoomConfig, SimRoomPlugin};
+use avatarm_erase::interaction::ObjectTwinSpec;
+use avatarm_erase::{EraseConfig, ErasePlugin, InteractionConfig, InteractionPlugin};
+use avatarm_sim::{SimRoomConfig, SimRoomPlugin, SimVideo};
+use avatarm_video::{LiveVideo, VideoPlugin};
 use avatarm_twin::prelude::*;
 use avatarm_twin::{TwinMeshCache, layers};
 use bevy::app::ScheduleRunnerPlugin;
@@ -90,10 +94,61 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> App {
             control_rate_hz: scene.file.control_rate_hz,
             camera: scene.true_camera,
             props: scene.props.clone(),
-            ground_truth: matches!(mode, Mode::Headless(_)),
+            // The no-robot view also gives the simulated "empty room" background.
+            ground_truth: matches!(mode, Mode::Headless(_))
+                || scene.file.background == scene::BackgroundSpec::EmptyRoom,
             twin: None,
+            video: Some(SimVideo {
+                sensor: scene.file.camera.sensor.clone(),
+                frame_latency_s: scene.file.camera.frame_latency_s,
+                seed: scene.file.seed,
+            }),
         })
-        .add_plugins((RobotTwinPlugin, SimRoomPlugin))
+        .insert_resource(LiveVideo::new(
+            "simulated camera",
+            (3.0 / scene.file.camera.fps).max(0.2) + scene.file.camera.frame_latency_s,
+        ))
+        .insert_resource(EraseConfig {
+            settings: scene.file.erase,
+            camera: scene.believed_camera,
+            model: scene.model.clone(),
+            base: scene.robot_base(),
+            source_twin: None,
+        })
+        .insert_resource(InteractionConfig {
+            camera: scene.believed_camera,
+            real_camera: scene.believed_camera,
+            panel_distance_m: scene.file.interaction.panel_distance_m,
+            object_depth_m: scene.file.interaction.object_depth_m,
+            objects: scene
+                .file
+                .props
+                .iter()
+                .zip(&scene.props)
+                .filter(|(spec, _)| spec.object)
+                .map(|(_, prop)| ObjectTwinSpec {
+                    name: prop.name.clone(),
+                    parts: avatarm_sim::prop_parts(&prop.shape),
+                    world_from_object: prop.pose,
+                    rgba: prop.rgba,
+                })
+                .collect(),
+        })
+        .add_plugins((
+            RobotTwinPlugin,
+            SimRoomPlugin,
+            VideoPlugin,
+            ErasePlugin,
+            InteractionPlugin,
+            session::BackgroundSourcePlugin {
+                // Headless rendering compiles pipelines before the first frame; a window may
+                // take several frames, so the preview photographs the room again later.
+                empty_room_updates: match mode {
+                    Mode::Headless(_) => vec![2],
+                    Mode::Preview(_) => vec![2, 30],
+                },
+            },
+        ))
         .add_systems(PreStartup, spawn_app_twin);
     match mode {
         Mode::Headless(options) => {
@@ -128,6 +183,7 @@ fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupBuilder, xr:
 fn spawn_app_twin(
     mut commands: Commands,
     mut config: ResMut<SimRoomConfig>,
+    mut erase: ResMut<EraseConfig>,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
     mut cache: ResMut<TwinMeshCache>,
@@ -149,5 +205,6 @@ fn spawn_app_twin(
         exit.write(AppExit::error());
     }
     config.twin = Some(twin.root);
+    erase.source_twin = Some(twin.root);
     commands.insert_resource(AppTwin(twin.root));
 }

@@ -2,17 +2,26 @@
 //! folder. The same scene and seed give the same frames.
 //!
 //! Each app update is one camera frame (`1 / camera.fps` of virtual time); the robot steps in
-//! `FixedUpdate` at the control rate. Every `frames_every`-th frame the real camera's image (with
-//! the sensor model applied) is saved as `frame_NNNNN.png`, with the ground truth beside it:
-//! `gt_norobot_NNNNN.png` (the room without the robot) and `gt_silhouette_NNNNN.png` (the robot's
-//! visible pixels in white). `frames.json` lists each saved frame's time and the true and believed
-//! joint positions.
+//! `FixedUpdate` at the control rate. The simulated camera's frames reach the app through the
+//! video source (sensor model, latency); the erase pipeline runs on each as it arrives.
+//!
+//! Every frame is scored against the simulated room's ground truth (captured at the frame's
+//! capture time): the erased region against the true robot silhouette, Ĩ(t) against the room
+//! without the robot inside the true robot region, and the GPU composite against the CPU
+//! reference ([`avatarm_core::dr`]) on the same inputs. Every `frames_every`-th frame is saved:
+//! `frame_NNNNN.png` (I(t) as the app received it), `erased_NNNNN.png` (Ĩ(t)), `mask_NNNNN.png`
+//! (M(t)), `gt_norobot_NNNNN.png` and `gt_silhouette_NNNNN.png`; `frames.json` lists them with
+//! times, joint states and scores, `timestamps.csv` makes the folder a recorded video source,
+//! `background.png` is H at the end and `report.json` the summary.
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use avatarm_core::rng::Rng;
+use avatarm_core::dr::{self, MaskScores, Photometric, RgbaView};
+use avatarm_erase::{EraseState, EraseTargets, PIPELINE_LAG};
+use avatarm_video::LiveVideo;
 use avatarm_sim::{SimCameras, SimRobotState};
 use avatarm_twin::RobotTwin;
 use bevy::prelude::*;
@@ -62,12 +71,60 @@ pub struct FrameRecord {
     pub t_s: f64,
     /// When the frame would arrive at the app (capture + frame latency).
     pub arrival_s: f64,
-    /// The robot's true joint positions at capture.
+    /// The robot's true joint positions at capture (empty when not recorded).
     pub q_true: Vec<f64>,
-    /// The app twin's joint positions at capture (last received joint state).
+    /// The app twin's joint positions when the frame was shown (last received joint state).
     pub q_twin: Vec<f64>,
     /// Timestamp of that joint state.
     pub twin_stamp_s: Option<f64>,
+    /// Joint time the mask twin was drawn at.
+    pub mask_stamp_s: Option<f64>,
+    /// Scores of the frame.
+    pub score: Option<FrameScore>,
+}
+
+/// Scores of one frame.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrameScore {
+    /// Capture time (s).
+    pub t_s: f64,
+    /// Erased region vs true silhouette.
+    pub mask: MaskScores,
+    /// PSNR of Ĩ(t) against the room without the robot, inside the true robot region (dB).
+    pub psnr_robot_db: Option<f64>,
+    /// Largest difference between the GPU composite and the CPU reference (8-bit levels).
+    pub gpu_cpu_max_diff: u8,
+    /// Pixels where the GPU mask and the CPU reference mask differ.
+    pub gpu_cpu_mask_mismatch_px: u64,
+    /// CPU reference threshold + dilation (ms).
+    pub cpu_mask_ms: f64,
+    /// CPU reference feathering + composite (ms).
+    pub cpu_composite_ms: f64,
+    /// Photometric model used.
+    pub photometric: Photometric,
+}
+
+/// Images and inputs of one frame, gathered from captures that arrive at different times.
+#[derive(Default)]
+struct Pending {
+    norobot: Option<Vec<u8>>,
+    silhouette: Option<Vec<u8>>,
+    raw: Option<(u32, u32, Vec<u8>)>,
+    mask: Option<Vec<u8>>,
+    composite: Option<Vec<u8>>,
+    inputs: Option<FrameInputs>,
+    q_true: Option<Vec<f64>>,
+    requested: [bool; 3],
+}
+
+#[derive(Clone)]
+struct FrameInputs {
+    index: u64,
+    t_s: f64,
+    live: Arc<Vec<u8>>,
+    background: Option<Arc<Vec<u8>>>,
+    photometric: Photometric,
+    save: bool,
 }
 
 #[derive(Resource)]
@@ -75,23 +132,34 @@ struct Replay {
     options: ReplayOptions,
     total_frames: u64,
     frame: u64,
+    published: u64,
     warmup_left: u32,
     stepping_done: bool,
     pending: usize,
     waited: u32,
     records: Vec<FrameRecord>,
+    scores: Vec<FrameScore>,
+    frames: BTreeMap<i64, Pending>,
+    save_keys: std::collections::HashSet<i64>,
+    frame_ms: Vec<f64>,
+    last_update: Option<Instant>,
     errors: Vec<String>,
     started: Option<Instant>,
     bar: ProgressBar,
-    seed: u64,
 }
 
-/// Kinds of saved image.
+/// Kinds of captured image.
 #[derive(Debug, Clone, Copy)]
 enum Capture {
-    Camera,
     NoRobot,
     Silhouette,
+    Raw,
+    Mask,
+    Composite,
+}
+
+fn key(t_s: f64) -> i64 {
+    (t_s * 1e6).round() as i64
 }
 
 impl Plugin for ReplayPlugin {
@@ -118,18 +186,23 @@ impl Plugin for ReplayPlugin {
             options: self.0.clone(),
             total_frames,
             frame: 0,
+            published: 0,
             warmup_left: 3,
             stepping_done: false,
             pending: 0,
             waited: 0,
             records: Vec::new(),
+            scores: Vec::new(),
+            frames: BTreeMap::new(),
+            save_keys: Default::default(),
+            frame_ms: Vec::new(),
+            last_update: None,
             errors: Vec::new(),
             started: None,
             bar,
-            seed: scene.file.seed,
         })
         .add_systems(Startup, pause_for_warmup)
-        .add_systems(Last, drive_replay);
+        .add_systems(Last, (drive_replay, score_ready).chain());
     }
 }
 
@@ -143,6 +216,28 @@ fn pause_for_warmup(mut time: ResMut<Time<Virtual>>, replay: Res<Replay>) {
     }
 }
 
+fn spawn_capture(commands: &mut Commands, replay: &mut Replay, handle: Handle<Image>, kind: Capture, k: i64) {
+    replay.pending += 1;
+    commands.spawn(Screenshot::image(handle)).observe(
+        move |captured: On<ScreenshotCaptured>, mut replay: ResMut<Replay>| {
+            replay.pending = replay.pending.saturating_sub(1);
+            let image = &captured.image;
+            let Some(data) = image.data.clone() else {
+                replay.errors.push(format!("capture {kind:?} at {k} us came back empty"));
+                return;
+            };
+            let entry = replay.frames.entry(k).or_default();
+            match kind {
+                Capture::NoRobot => entry.norobot = Some(data),
+                Capture::Silhouette => entry.silhouette = Some(data),
+                Capture::Raw => entry.raw = Some((image.width(), image.height(), data)),
+                Capture::Mask => entry.mask = Some(data),
+                Capture::Composite => entry.composite = Some(data),
+            }
+        },
+    );
+}
+
 #[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn drive_replay(
     mut commands: Commands,
@@ -151,11 +246,15 @@ fn drive_replay(
     cameras: Option<Res<SimCameras>>,
     robot: Option<Res<SimRobotState>>,
     app_twin: Option<Res<AppTwin>>,
+    erase: (Option<Res<EraseTargets>>, Res<EraseState>, Res<LiveVideo>),
     twins: Query<&RobotTwin>,
     scene: Res<SceneResource>,
     mut exit: MessageWriter<AppExit>,
 ) {
-    let (Some(cameras), Some(robot), Some(app_twin)) = (cameras, robot, app_twin) else {
+    let (targets, erase_state, live) = erase;
+    let (Some(cameras), Some(robot), Some(app_twin), Some(targets)) =
+        (cameras, robot, app_twin, targets)
+    else {
         return;
     };
     if replay.warmup_left > 0 {
@@ -168,37 +267,76 @@ fn drive_replay(
         return;
     }
     if !replay.stepping_done {
-        let k = replay.frame;
-        if k.is_multiple_of(u64::from(replay.options.frames_every.max(1))) {
-            let t = robot.0.time_s();
-            let twin = twins.get(app_twin.0).ok();
-            replay.records.push(FrameRecord {
-                index: k,
-                file: format!("frame_{k:05}.png"),
-                t_s: t,
-                arrival_s: t + scene.0.file.camera.frame_latency_s,
-                q_true: robot.0.true_positions().iter().copied().collect(),
-                q_twin: twin.map_or_else(Vec::new, |tw| tw.positions.iter().copied().collect()),
-                twin_stamp_s: twin.and_then(|tw| tw.stamp_s),
-            });
-            let mut targets = vec![(Capture::Camera, cameras.real.clone())];
-            targets.extend(cameras.no_robot.clone().map(|h| (Capture::NoRobot, h)));
-            targets.extend(cameras.silhouette.clone().map(|h| (Capture::Silhouette, h)));
-            for (kind, handle) in targets {
-                replay.pending += 1;
-                commands.spawn(Screenshot::image(handle)).observe(
-                    move |captured: On<ScreenshotCaptured>,
-                          mut replay: ResMut<Replay>,
-                          scene: Res<SceneResource>| {
-                        let result = save_capture(&replay, &scene, kind, k, t, &captured.image);
-                        replay.pending = replay.pending.saturating_sub(1);
-                        if let Err(e) = result {
-                            replay.errors.push(e);
-                        }
-                    },
-                );
+        let now = Instant::now();
+        if let Some(last) = replay.last_update.replace(now) {
+            replay.frame_ms.push((now - last).as_secs_f64() * 1e3);
+        }
+        // Ground truth at this update's capture time.
+        let t = robot.0.time_s();
+        let k = key(t);
+        if let (Some(norobot), Some(silhouette)) = (&cameras.no_robot, &cameras.silhouette) {
+            spawn_capture(&mut commands, &mut replay, norobot.clone(), Capture::NoRobot, k);
+            spawn_capture(&mut commands, &mut replay, silhouette.clone(), Capture::Silhouette, k);
+        }
+        // The frame the app received now.
+        if let Some(f) = live.frame.as_ref().filter(|_| live.fresh) {
+            let save = replay
+                .published
+                .is_multiple_of(u64::from(replay.options.frames_every.max(1)));
+            replay.published += 1;
+            if save {
+                let twin = twins.get(app_twin.0).ok();
+                replay.save_keys.insert(key(f.capture_s));
+                replay.records.push(FrameRecord {
+                    index: f.index,
+                    file: format!("frame_{:05}.png", f.index),
+                    t_s: f.capture_s,
+                    arrival_s: f.arrival_s,
+                    q_true: Vec::new(),
+                    q_twin: twin.map_or_else(Vec::new, |tw| tw.positions.iter().copied().collect()),
+                    twin_stamp_s: twin.and_then(|tw| tw.stamp_s),
+                    mask_stamp_s: erase_state.mask_stamp_s,
+                    score: None,
+                });
             }
         }
+        // What each stage of the pipeline works on now (see avatarm_erase::PIPELINE_LAG): the
+        // twin render for the newest frame, the mask for the one before, the composite for
+        // the one PIPELINE_LAG updates ago. Each is captured once per frame.
+        let stages = [
+            (0, Capture::Raw, targets.raw.clone()),
+            (1, Capture::Mask, targets.mask.clone()),
+            (PIPELINE_LAG, Capture::Composite, targets.composite.clone()),
+        ];
+        for (slot, (lag, kind, handle)) in stages.into_iter().enumerate() {
+            let Some(stage) = erase_state.stage(lag) else {
+                continue;
+            };
+            let Some((t_s, index, rgba)) = stage.frame.clone() else {
+                continue;
+            };
+            let fk = key(t_s);
+            let save = replay.save_keys.contains(&fk);
+            let entry = replay.frames.entry(fk).or_default();
+            if entry.requested[slot] {
+                continue;
+            }
+            entry.requested[slot] = true;
+            if matches!(kind, Capture::Composite) {
+                entry.inputs = Some(FrameInputs {
+                    index,
+                    t_s,
+                    live: rgba,
+                    background: stage.background.clone(),
+                    photometric: stage.photometric,
+                    save,
+                });
+            }
+            spawn_capture(&mut commands, &mut replay, handle, kind, fk);
+        }
+        // True joints at capture, for frames.json.
+        replay.frames.entry(k).or_default().q_true =
+            Some(robot.0.true_positions().iter().copied().collect());
         replay.frame += 1;
         let msg = format!("sim {:.2}s", robot.0.time_s());
         replay.bar.set_message(msg);
@@ -213,11 +351,14 @@ fn drive_replay(
     if replay.pending > 0 && replay.waited < 600 {
         return;
     }
-    if replay.pending > 0 {
+    if replay.pending > 0 && replay.pending != usize::MAX {
         let message = format!("{} frame captures never arrived", replay.pending);
         replay.errors.push(message);
     }
-    let outcome = finish(&replay, &scene, &robot, &twins, app_twin.0);
+    if replay.pending == usize::MAX {
+        return;
+    }
+    let outcome = finish(&replay, &scene, &robot, &twins, app_twin.0, &erase_state);
     replay.bar.finish_and_clear();
     let failed = outcome.is_err();
     if let Ok(mut slot) = replay.options.result.lock() {
@@ -232,44 +373,175 @@ fn drive_replay(
     replay.pending = usize::MAX;
 }
 
-fn save_capture(
-    replay: &Replay,
-    scene: &SceneResource,
-    kind: Capture,
-    k: u64,
-    t_s: f64,
-    image: &Image,
-) -> Result<(), String> {
-    let dynamic = image
-        .clone()
-        .try_into_dynamic()
-        .map_err(|e| format!("frame {k}: cannot convert the capture: {e:?}"))?;
-    let (name, out) = match kind {
-        Capture::Camera => {
-            let mut rgba = dynamic.to_rgba8();
-            let mut rng = Rng::stream(replay.seed, k);
-            // The same capture time as frames.json records.
-            scene.0.file.camera.sensor.apply(&mut rgba, t_s, &mut rng);
-            (
-                format!("frame_{k:05}.png"),
-                image::DynamicImage::ImageRgba8(rgba).to_rgb8().into(),
-            )
-        }
-        Capture::NoRobot => (format!("gt_norobot_{k:05}.png"), dynamic.to_rgb8().into()),
-        Capture::Silhouette => {
-            let mut gray = dynamic.to_luma8();
-            for p in gray.pixels_mut() {
-                p.0[0] = if p.0[0] > 127 { 255 } else { 0 };
+/// Scores every frame whose captures have all arrived, and saves the chosen ones.
+fn score_ready(mut replay: ResMut<Replay>, scene: Res<SceneResource>) {
+    let ready: Vec<i64> = replay
+        .frames
+        .iter()
+        .filter(|(_, p)| {
+            p.norobot.is_some()
+                && p.silhouette.is_some()
+                && p.raw.is_some()
+                && p.mask.is_some()
+                && p.composite.is_some()
+                && p.inputs.is_some()
+        })
+        .map(|(k, _)| *k)
+        .collect();
+    for k in ready {
+        let Some(mut p) = replay.frames.remove(&k) else {
+            continue;
+        };
+        let q_true = p.q_true.take().unwrap_or_default();
+        match score_frame(&replay, &scene, p) {
+            Ok(score) => {
+                if let Some(r) = replay.records.iter_mut().find(|r| key(r.t_s) == k) {
+                    r.score = Some(score.clone());
+                    r.q_true = q_true;
+                }
+                replay.scores.push(score);
             }
-            (
-                format!("gt_silhouette_{k:05}.png"),
-                image::DynamicImage::ImageLuma8(gray),
-            )
+            Err(e) => replay.errors.push(e),
         }
+    }
+    // Ground truth of frames that never reached the app (dropped, or after the end).
+    if let Some(&newest) = replay
+        .frames
+        .iter()
+        .filter(|(_, p)| p.inputs.is_some())
+        .map(|(k, _)| k)
+        .max()
+    {
+        replay
+            .frames
+            .retain(|k, p| p.inputs.is_some() || *k > newest);
+    }
+}
+
+fn score_frame(replay: &Replay, scene: &SceneResource, p: Pending) -> Result<FrameScore, String> {
+    let (Some(norobot), Some(silhouette), Some((rw, rh, raw)), Some(mask), Some(gpu), Some(inputs)) =
+        (p.norobot, p.silhouette, p.raw, p.mask, p.composite, p.inputs)
+    else {
+        return Err("incomplete frame".into());
     };
-    let path = replay.options.out.join(name);
-    out.save(&path)
-        .map_err(|e| format!("{}: cannot write: {e}", path.display()))
+    let k = &scene.0.believed_camera.intrinsics;
+    let (w, h) = (k.width, k.height);
+    let settings = scene.0.file.erase;
+    let live = RgbaView::new("live frame", w, h, &inputs.live).map_err(|e| e.to_string())?;
+    let black = vec![0u8; inputs.live.len()];
+    let bg_bytes: &[u8] = inputs.background.as_deref().map_or(&black, |b| b.as_slice());
+    let background = RgbaView::new("background", w, h, bg_bytes).map_err(|e| e.to_string())?;
+    let raw = RgbaView::new("mask twin render", rw, rh, &raw).map_err(|e| e.to_string())?;
+    // CPU reference on the same inputs.
+    let t0 = Instant::now();
+    let cpu_mask = dr::threshold_mask(&raw, w, h, &settings.ranges, settings.mask_radius());
+    let cpu_mask_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let t1 = Instant::now();
+    let alpha = dr::feather_alpha(&cpu_mask, w, h, settings.feather_px);
+    let alpha_h = if settings.enabled && inputs.background.is_some() {
+        settings.alpha_h
+    } else {
+        0.0
+    };
+    let cpu = dr::composite(&live, &background, &alpha, alpha_h, &inputs.photometric)
+        .map_err(|e| e.to_string())?;
+    let cpu_composite_ms = t1.elapsed().as_secs_f64() * 1e3;
+    let gpu_mask: Vec<u8> = mask.chunks_exact(4).map(|px| u8::from(px[0] > 127)).collect();
+    let mismatch = gpu_mask
+        .iter()
+        .zip(&cpu_mask)
+        .filter(|(a, b)| a != b)
+        .count() as u64;
+    let max_diff = gpu
+        .chunks_exact(4)
+        .zip(cpu.chunks_exact(4))
+        .flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c])))
+        .max()
+        .unwrap_or(0);
+    if std::env::var_os("AVATARM_DEBUG_DR").is_some() && mismatch > 0 {
+        let dbg = |name: &str, m: &[u8]| {
+            let img = image::GrayImage::from_raw(w, h, m.iter().map(|&v| v * 255).collect());
+            if let Some(img) = img {
+                let _ = img.save(replay.options.out.join(format!("debug_{name}_{:05}.png", inputs.index)));
+            }
+        };
+        dbg("gpu_mask", &gpu_mask);
+        dbg("cpu_mask", &cpu_mask);
+        let rawm = dr::threshold_mask(&raw, raw.width, raw.height, &settings.ranges, 0);
+        dbg("raw_mask", &rawm);
+        let ga = dr::feather_alpha(&gpu_mask, w, h, settings.feather_px);
+        if let Ok(c2) = dr::composite(&live, &background, &ga, alpha_h, &inputs.photometric) {
+            let d = gpu.chunks_exact(4).zip(c2.chunks_exact(4)).flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c]))).max();
+            eprintln!("DEBUG frame {}: composite vs CPU(gpu mask) max diff {d:?}", inputs.index);
+        }
+    }
+    // Scores against the ground truth, from what the GPU produced.
+    let gpu_alpha = dr::feather_alpha(&gpu_mask, w, h, settings.feather_px);
+    let erased: Vec<u8> = gpu_alpha
+        .iter()
+        .map(|&a| u8::from(a * alpha_h >= 0.5))
+        .collect();
+    let truth: Vec<u8> = silhouette
+        .chunks_exact(4)
+        .map(|px| u8::from(px[0] > 127))
+        .collect();
+    let scores = dr::mask_scores(&erased, &truth).ok_or("mask and truth sizes differ")?;
+    let psnr = dr::psnr_in(&gpu, &norobot, &truth);
+    if inputs.save {
+        let out = &replay.options.out;
+        let i = inputs.index;
+        let save_rgba = |name: String, data: &[u8]| -> Result<(), String> {
+            let img = image::RgbaImage::from_raw(w, h, data.to_vec())
+                .ok_or_else(|| format!("{name}: wrong size"))?;
+            let path = out.join(&name);
+            image::DynamicImage::ImageRgba8(img)
+                .to_rgb8()
+                .save(&path)
+                .map_err(|e| format!("{}: cannot write: {e}", path.display()))
+        };
+        save_rgba(format!("frame_{i:05}.png"), &inputs.live)?;
+        save_rgba(format!("erased_{i:05}.png"), &gpu)?;
+        save_rgba(format!("gt_norobot_{i:05}.png"), &norobot)?;
+        let gray = |m: &[u8], name: String| -> Result<(), String> {
+            let img = image::GrayImage::from_raw(w, h, m.iter().map(|&v| v * 255).collect())
+                .ok_or_else(|| format!("{name}: wrong size"))?;
+            let path = out.join(&name);
+            img.save(&path)
+                .map_err(|e| format!("{}: cannot write: {e}", path.display()))
+        };
+        gray(&gpu_mask, format!("mask_{i:05}.png"))?;
+        gray(&truth, format!("gt_silhouette_{i:05}.png"))?;
+    }
+    Ok(FrameScore {
+        t_s: inputs.t_s,
+        mask: scores,
+        psnr_robot_db: psnr,
+        gpu_cpu_max_diff: max_diff,
+        gpu_cpu_mask_mismatch_px: mismatch,
+        cpu_mask_ms,
+        cpu_composite_ms,
+        photometric: inputs.photometric,
+    })
+}
+
+/// Median and 95th percentile.
+fn spread(values: &[f64]) -> serde_json::Value {
+    if values.is_empty() {
+        return json!(null);
+    }
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    json!({"median": at(0.5), "p95": at(0.95)})
+}
+
+fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
+    let (mut s, mut n) = (0.0, 0usize);
+    for v in values {
+        s += v;
+        n += 1;
+    }
+    (n > 0).then(|| s / n as f64)
 }
 
 fn finish(
@@ -278,6 +550,7 @@ fn finish(
     robot: &SimRobotState,
     twins: &Query<&RobotTwin>,
     app_twin: Entity,
+    erase: &EraseState,
 ) -> Result<serde_json::Value, String> {
     if !replay.errors.is_empty() {
         return Err(replay.errors.join("; "));
@@ -287,11 +560,34 @@ fn finish(
     let twin = twins.get(app_twin).ok();
     let s = &scene.0;
     let k = &s.true_camera.intrinsics;
+    // Frames with the robot in view carry the mask scores; all frames carry the GPU check.
+    let with_robot: Vec<&FrameScore> = replay.scores.iter().filter(|f| f.mask.robot_px > 0).collect();
+    let mask = json!({
+        "iou_mean": mean(with_robot.iter().map(|f| f.mask.iou)),
+        "iou_min": with_robot.iter().map(|f| f.mask.iou).reduce(f64::min),
+        "leak_pct_mean": mean(with_robot.iter().map(|f| f.mask.leak_pct)),
+        "leak_pct_max": with_robot.iter().map(|f| f.mask.leak_pct).reduce(f64::max),
+        "overmask_pct_mean": mean(with_robot.iter().map(|f| f.mask.overmask_pct)),
+        "frames_scored": replay.scores.len(),
+        "frames_with_robot": with_robot.len(),
+    });
+    let psnrs: Vec<f64> = replay.scores.iter().filter_map(|f| f.psnr_robot_db).collect();
+    let dr_report = json!({
+        "psnr_robot_db_mean": mean(psnrs.iter().copied()),
+        "psnr_robot_db_min": psnrs.iter().copied().reduce(f64::min),
+    });
+    let gpu_cpu = json!({
+        "max_abs_diff": replay.scores.iter().map(|f| f.gpu_cpu_max_diff).max(),
+        "mask_mismatch_px_max": replay.scores.iter().map(|f| f.gpu_cpu_mask_mismatch_px).max(),
+    });
+    let cpu_mask: Vec<f64> = replay.scores.iter().map(|f| f.cpu_mask_ms).collect();
+    let cpu_comp: Vec<f64> = replay.scores.iter().map(|f| f.cpu_composite_ms).collect();
     let report = json!({
         "scene": s.file.name,
         "scene_file": s.path.display().to_string(),
         "seed": s.file.seed,
         "frames": replay.frame,
+        "frames_shown": replay.published,
         "frames_written": replay.records.len(),
         "frames_every": replay.options.frames_every,
         "sim_time_s": sim,
@@ -316,11 +612,26 @@ fn finish(
             "twin_states_rejected": twin.map_or(0, |t| t.rejected),
             "twin_last_stamp_s": twin.and_then(|t| t.stamp_s),
         },
+        "erase": s.file.erase,
+        "background": erase.background_origin,
+        "mask": mask,
+        "dr": dr_report,
+        "gpu_vs_cpu": gpu_cpu,
+        "timing_ms": {
+            "mask": spread(&cpu_mask),
+            "composite": spread(&cpu_comp),
+            "frame": spread(&replay.frame_ms),
+            "note": "mask and composite: the CPU reference on each frame (the GPU passes are not timed separately); frame: wall time per app update, all cameras included",
+        },
         "outputs": {
             "frames": "frame_NNNNN.png",
+            "erased": "erased_NNNNN.png",
+            "mask": "mask_NNNNN.png",
             "ground_truth_no_robot": "gt_norobot_NNNNN.png",
             "ground_truth_silhouette": "gt_silhouette_NNNNN.png",
             "frame_list": "frames.json",
+            "timestamps": "timestamps.csv",
+            "background": "background.png",
         },
     });
     let write = |name: &str, value: &serde_json::Value| {
@@ -329,7 +640,22 @@ fn finish(
         std::fs::write(&path, text + "\n")
             .map_err(|e| format!("{}: cannot write: {e}", path.display()))
     };
-    write("frames.json", &json!(replay.records))?;
+    let saved: Vec<&FrameRecord> = replay.records.iter().filter(|r| r.score.is_some()).collect();
+    write("frames.json", &json!(saved))?;
+    let mut csv = String::from("file,capture_s\n");
+    for r in &saved {
+        csv.push_str(&format!("{},{}\n", r.file, r.t_s));
+    }
+    let path = replay.options.out.join("timestamps.csv");
+    std::fs::write(&path, csv).map_err(|e| format!("{}: cannot write: {e}", path.display()))?;
+    if let Some(bg) = &erase.background {
+        let path = replay.options.out.join("background.png");
+        image::RgbaImage::from_raw(k.width, k.height, bg.as_ref().clone())
+            .map(|img| image::DynamicImage::ImageRgba8(img).to_rgb8())
+            .ok_or_else(|| "background: wrong size".to_string())?
+            .save(&path)
+            .map_err(|e| format!("{}: cannot write: {e}", path.display()))?;
+    }
     write("report.json", &report)?;
     Ok(report)
 }

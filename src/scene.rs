@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use avatarm_core::camera::{CameraPose, Intrinsics, PinholeCamera};
+use avatarm_core::dr::EraseSettings;
 use avatarm_core::robot::{PackagePath, RobotModel};
 use avatarm_core::sensor::SensorModel;
 use avatarm_core::sim::SimRobotParams;
@@ -231,6 +232,54 @@ pub struct SceneFile {
     /// What happens.
     #[serde(default)]
     pub timeline: Timeline,
+    /// How the robot is erased (`[erase]`).
+    #[serde(default)]
+    pub erase: EraseSettings,
+    /// Where the background H comes from (`[background]`).
+    #[serde(default)]
+    pub background: BackgroundSpec,
+    /// The interaction layer (`[interaction]`).
+    #[serde(default)]
+    pub interaction: InteractionSpec,
+}
+
+/// `[background]`: where the background image H comes from.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(tag = "source", rename_all = "snake_case", deny_unknown_fields)]
+pub enum BackgroundSpec {
+    /// The simulated room photographed with the robot out of the way, through the same sensor
+    /// model (simulated room only).
+    #[default]
+    EmptyRoom,
+    /// An image file of the camera's size (PNG or JPEG), relative to the scene.
+    File {
+        /// The image.
+        path: PathBuf,
+    },
+    /// The live frame at a time of the timeline (s), e.g. while the robot is out of view.
+    Capture {
+        /// When (s).
+        at_s: f64,
+    },
+}
+
+/// `[interaction]`: the layout of what the user sees.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InteractionSpec {
+    /// Distance of the video panel from the viewer (m).
+    pub panel_distance_m: f64,
+    /// Depth of the object twins, in front of the panel (m).
+    pub object_depth_m: f64,
+}
+
+impl Default for InteractionSpec {
+    fn default() -> Self {
+        Self {
+            panel_distance_m: 2.5,
+            object_depth_m: 1.0,
+        }
+    }
 }
 
 /// A loaded, validated scene.
@@ -252,6 +301,8 @@ pub struct Scene {
     pub believed_camera: PinholeCamera,
     /// Props in the room.
     pub props: Vec<Prop>,
+    /// The background image file, resolved (`[background] source = "file"`).
+    pub background_path: Option<PathBuf>,
 }
 
 impl Scene {
@@ -320,6 +371,40 @@ impl Scene {
         if !(s.state_rate_hz.is_finite() && s.state_rate_hz > 0.0) {
             return Err(invalid("robot.sim.state_rate_hz", "must be > 0".into()));
         }
+
+        file.erase
+            .validate("erase")
+            .map_err(|e| invalid("erase", e.to_string()))?;
+        let i = &file.interaction;
+        if !(i.panel_distance_m.is_finite()
+            && i.panel_distance_m > 0.0
+            && i.object_depth_m > 0.0
+            && i.object_depth_m < i.panel_distance_m)
+        {
+            return Err(invalid(
+                "interaction",
+                format!(
+                    "need 0 < object_depth_m ({}) < panel_distance_m ({})",
+                    i.object_depth_m, i.panel_distance_m
+                ),
+            ));
+        }
+        let background_path = match &file.background {
+            BackgroundSpec::File { path: p } => {
+                let full = dir.join(p);
+                if !full.is_file() {
+                    return Err(invalid(
+                        "background.path",
+                        format!("{} does not exist", full.display()),
+                    ));
+                }
+                Some(full)
+            }
+            BackgroundSpec::Capture { at_s } if !(at_s.is_finite() && *at_s >= 0.0) => {
+                return Err(invalid("background.at_s", format!("{at_s} must be >= 0")));
+            }
+            _ => None,
+        };
 
         let mut packages = extra_packages.clone();
         packages
@@ -438,6 +523,7 @@ impl Scene {
         }
         Ok(Scene {
             path: path.to_owned(),
+            background_path,
             model: Arc::new(model),
             q0,
             trajectory: JointTrajectory::new(keyframes),

@@ -9,17 +9,16 @@ use std::sync::Arc;
 use avatarm_core::camera::PinholeCamera;
 use avatarm_core::robot::RobotModel;
 use avatarm_core::sim::{JointCommand, SimRobot, SimRobotParams};
+use avatarm_core::rng::Rng;
+use avatarm_core::sensor::SensorModel;
 use avatarm_core::trajectory::JointTrajectory;
-use avatarm_twin::camera::{PinholeProjection, camera_transform};
+use avatarm_video::{VideoFrame, VideoInbox};
+use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
+pub use avatarm_twin::camera::{spawn_pinhole_camera, target_image};
 use avatarm_twin::prelude::*;
 use avatarm_twin::{TwinEntities, TwinMeshCache, layers};
-use bevy::asset::RenderAssetUsages;
-use bevy::camera::RenderTarget;
 use bevy::camera::visibility::RenderLayers;
-use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::prelude::*;
-use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat, TextureUsages};
-use bevy::render::view::Msaa;
 use nalgebra::{DVector, Isometry3};
 use serde::{Deserialize, Serialize};
 
@@ -106,6 +105,19 @@ pub struct SimRoomConfig {
     pub ground_truth: bool,
     /// The app's twin to send joint states to.
     pub twin: Option<Entity>,
+    /// Deliver the real camera's frames as a video source (sensor model, latency).
+    pub video: Option<SimVideo>,
+}
+
+/// The simulated camera as a video source.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimVideo {
+    /// Noise and exposure.
+    pub sensor: SensorModel,
+    /// Capture to arrival (s).
+    pub frame_latency_s: f64,
+    /// Seed of the sensor noise (frame `k` uses stream `k`).
+    pub seed: u64,
 }
 
 /// The simulated robot (ground truth of its joints lives here).
@@ -149,6 +161,7 @@ impl Plugin for SimRoomPlugin {
                 SimRoomSystems::PoseRobot.in_set(RobotTwinSystems::ApplyJointStates),
             )
             .add_systems(PreStartup, setup_room)
+            .add_systems(Last, capture_video)
             .add_systems(
                 FixedUpdate,
                 (send_scripted_commands, step_robot, deliver_joint_states)
@@ -162,55 +175,6 @@ impl Plugin for SimRoomPlugin {
                     .after(avatarm_twin::apply_joint_states),
             );
     }
-}
-
-/// A render target image of the camera's size.
-pub fn target_image(width: u32, height: u32) -> Image {
-    let mut image = Image::new_fill(
-        Extent3d {
-            width,
-            height,
-            depth_or_array_layers: 1,
-        },
-        TextureDimension::D2,
-        &[0, 0, 0, 255],
-        TextureFormat::Rgba8UnormSrgb,
-        RenderAssetUsages::default(),
-    );
-    image.texture_descriptor.usage = TextureUsages::TEXTURE_BINDING
-        | TextureUsages::COPY_SRC
-        | TextureUsages::COPY_DST
-        | TextureUsages::RENDER_ATTACHMENT;
-    image
-}
-
-/// Spawns a camera that renders `layers` of the world through `camera` into `target`.
-pub fn spawn_pinhole_camera(
-    commands: &mut Commands,
-    camera: &PinholeCamera,
-    target: Handle<Image>,
-    layers: RenderLayers,
-    clear: Color,
-    order: isize,
-    name: &str,
-) -> Entity {
-    commands
-        .spawn((
-            Name::new(name.to_owned()),
-            Camera3d::default(),
-            Camera {
-                order,
-                clear_color: ClearColorConfig::Custom(clear),
-                ..default()
-            },
-            RenderTarget::Image(target.into()),
-            Projection::custom(PinholeProjection::new(*camera)),
-            camera_transform(camera),
-            Tonemapping::None,
-            Msaa::Off,
-            layers,
-        ))
-        .id()
 }
 
 fn setup_room(
@@ -359,7 +323,7 @@ fn setup_room(
 }
 
 /// Meshes of a prop's parts with their transforms relative to the prop's base pose.
-fn prop_parts(shape: &PropShape) -> Vec<(Mesh, Transform)> {
+pub fn prop_parts(shape: &PropShape) -> Vec<(Mesh, Transform)> {
     let upright = |z: f64| {
         Transform::from_xyz(0.0, 0.0, z as f32)
             .with_rotation(Quat::from_rotation_x(std::f32::consts::FRAC_PI_2))
@@ -442,4 +406,53 @@ fn pose_sim_robot(
             twin.stamp_s = Some(t);
         }
     }
+}
+
+/// Frames captured by the simulated camera so far.
+#[derive(Resource, Debug, Default)]
+struct VideoCounter(u64);
+
+/// Each update, the real camera's image is read back (the simulated camera's "sensor"), the
+/// sensor model applied at the capture time, and the frame queued to arrive after the latency.
+fn capture_video(
+    mut commands: Commands,
+    config: Res<SimRoomConfig>,
+    cameras: Option<Res<SimCameras>>,
+    robot: Option<Res<SimRobotState>>,
+    counter: Option<ResMut<VideoCounter>>,
+) {
+    let (Some(video), Some(cameras), Some(robot)) = (config.video.clone(), cameras, robot) else {
+        return;
+    };
+    let Some(mut counter) = counter else {
+        commands.init_resource::<VideoCounter>();
+        return;
+    };
+    let index = counter.0;
+    counter.0 += 1;
+    let capture_s = robot.0.time_s();
+    commands.spawn(Screenshot::image(cameras.real.clone())).observe(
+        move |captured: On<ScreenshotCaptured>, mut inbox: ResMut<VideoInbox>| {
+            let image = &captured.image;
+            let (width, height) = (image.width(), image.height());
+            let Some(mut rgba) = image.data.clone() else {
+                error!("simulated camera: frame {index} came back without pixels");
+                return;
+            };
+            video
+                .sensor
+                .apply(&mut rgba, capture_s, &mut Rng::stream(video.seed, index));
+            let frame = VideoFrame {
+                index,
+                capture_s,
+                arrival_s: capture_s + video.frame_latency_s,
+                width,
+                height,
+                rgba: Arc::new(rgba),
+            };
+            if let Err(e) = inbox.push(frame) {
+                error!("simulated camera: {e}");
+            }
+        },
+    );
 }

@@ -3,7 +3,13 @@
 use avatarm_core::camera::PinholeCamera;
 use bevy::camera::{CameraProjection, SubCameraView};
 use bevy::math::Vec3A;
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::RenderTarget;
+use bevy::camera::visibility::RenderLayers;
+use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
 use bevy::prelude::*;
+use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat, TextureUsages};
+use bevy::render::view::Msaa;
 
 use crate::iso_to_transform;
 
@@ -35,6 +41,56 @@ impl PinholeProjection {
 /// The Bevy transform of a pinhole camera (view frame: x right, y up, looking along −z).
 pub fn camera_transform(camera: &PinholeCamera) -> Transform {
     iso_to_transform(&camera.world_from_view())
+}
+
+/// A render target image of the camera's size.
+pub fn target_image(width: u32, height: u32) -> Image {
+    let mut image = Image::new_fill(
+        Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        TextureDimension::D2,
+        &[0, 0, 0, 255],
+        TextureFormat::Rgba8UnormSrgb,
+        RenderAssetUsages::default(),
+    );
+    image.texture_descriptor.usage = TextureUsages::TEXTURE_BINDING
+        | TextureUsages::COPY_SRC
+        | TextureUsages::COPY_DST
+        | TextureUsages::RENDER_ATTACHMENT;
+    image
+}
+
+/// Spawns a camera that renders `layers` of the world through `camera` into `target`.
+pub fn spawn_pinhole_camera(
+    commands: &mut Commands,
+    camera: &PinholeCamera,
+    target: Handle<Image>,
+    layers: RenderLayers,
+    clear: Color,
+    order: isize,
+    name: &str,
+) -> Entity {
+    commands
+        .spawn((
+            Name::new(name.to_owned()),
+            Camera3d::default(),
+            Camera {
+                order,
+                clear_color: ClearColorConfig::Custom(clear),
+                ..default()
+            },
+            RenderTarget::Image(target.into()),
+            Projection::custom(PinholeProjection::new(*camera)),
+            camera_transform(camera),
+            Tonemapping::None,
+            DebandDither::Disabled,
+            Msaa::Off,
+            layers,
+        ))
+        .id()
 }
 
 impl CameraProjection for PinholeProjection {

@@ -2,7 +2,7 @@
 
 /// The simulated room's props and objects, seen by the "real" camera.
 pub const ROOM: usize = 0;
-/// The app's robot twin: the mask camera renders this layer alone.
+/// The app's robot twin in its own colours (preview, overlays).
 pub const TWIN: usize = 1;
 /// The simulated room's robot, as the real camera sees it.
 pub const SIM_ROBOT: usize = 2;
@@ -10,3 +10,10 @@ pub const SIM_ROBOT: usize = 2;
 pub const SIM_SILHOUETTE: usize = 3;
 /// Panels and overlays of the desktop preview and XR view.
 pub const INTERACTION: usize = 4;
+/// The mask twin: the robot in unlit white at the joint state of the frame being erased; the
+/// mask camera renders this layer alone.
+pub const MASK_TWIN: usize = 5;
+/// The full-screen quad of the threshold pass.
+pub const MASK_PASS: usize = 6;
+/// The full-screen quad of the composite pass.
+pub const COMPOSITE_PASS: usize = 7;

@@ -1,0 +1,169 @@
+//! The interaction layer: what the user sees. The composite Ĩ(t) on a video panel that spans
+//! the camera's frustum, and the object twins in front of it, placed by the paper's
+//! perspective equations ([`avatarm_core::placement`]) so that each covers its real object's
+//! pixels. The interaction camera renders [`layers::INTERACTION`] into
+//! [`InteractionTargets::view`]; the preview shows that image, and the XR mode the same panel.
+
+use avatarm_core::camera::PinholeCamera;
+use avatarm_core::placement::{panel_corners, place_twin};
+use avatarm_twin::camera::{spawn_pinhole_camera, target_image};
+use avatarm_twin::{iso_to_transform, layers};
+use bevy::camera::visibility::RenderLayers;
+use bevy::prelude::*;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+use crate::EraseTargets;
+
+/// An object whose digital twin is drawn in front of the panel.
+#[derive(Debug, Clone)]
+pub struct ObjectTwinSpec {
+    /// Name.
+    pub name: String,
+    /// Meshes with their transforms relative to the object's frame.
+    pub parts: Vec<(Mesh, Transform)>,
+    /// The real object's pose in the world (robot frame).
+    pub world_from_object: Isometry3<f64>,
+    /// Colour (sRGB, alpha).
+    pub rgba: [f32; 4],
+}
+
+/// The interaction layer's layout. Insert before the app starts.
+#[derive(Resource, Debug, Clone)]
+pub struct InteractionConfig {
+    /// The interaction camera: the real camera's intrinsics at the believed pose by default.
+    pub camera: PinholeCamera,
+    /// The real camera as the app believes it (for placing object twins).
+    pub real_camera: PinholeCamera,
+    /// Distance of the video panel from the interaction camera (m).
+    pub panel_distance_m: f64,
+    /// Depth of the object twins in front of the interaction camera (m); less than the panel's.
+    pub object_depth_m: f64,
+    /// The objects.
+    pub objects: Vec<ObjectTwinSpec>,
+}
+
+/// The interaction camera's image, Ĩ(t) with the object twins.
+#[derive(Resource, Debug, Clone)]
+pub struct InteractionTargets {
+    /// The view.
+    pub view: Handle<Image>,
+}
+
+/// Marks an object twin; `index` into [`InteractionConfig::objects`].
+#[derive(Component, Debug, Clone, Copy)]
+pub struct ObjectTwin {
+    /// Index of the object.
+    pub index: usize,
+    /// Uniform scale from the placement.
+    pub scale: f64,
+}
+
+/// Spawns the panel, the object twins, a light and the interaction camera. Needs
+/// [`crate::ErasePlugin`] (it shows [`EraseTargets::composite`]).
+#[derive(Default)]
+pub struct InteractionPlugin;
+
+impl Plugin for InteractionPlugin {
+    fn build(&self, app: &mut App) {
+        app.add_systems(PostStartup, setup);
+    }
+}
+
+fn setup(
+    mut commands: Commands,
+    config: Res<InteractionConfig>,
+    erase: Option<Res<EraseTargets>>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    mut images: ResMut<Assets<Image>>,
+) {
+    let Some(erase) = erase else {
+        error!("interaction layer: the erase plugin is not running; no panel");
+        return;
+    };
+    let layer = RenderLayers::layer(layers::INTERACTION);
+    let cam = &config.camera;
+    let k = cam.intrinsics;
+    // The panel spans the real camera's frustum at its distance, seen from the interaction
+    // camera's centre (same normalised coordinates, whatever the interaction focal length).
+    let d = config.panel_distance_m;
+    let c = panel_corners(&config.real_camera.intrinsics, d);
+    let centre = nalgebra::center(&c[0], &c[2]);
+    let (width, height) = ((c[1] - c[0]).norm(), (c[3] - c[0]).norm());
+    // Rectangle faces +z with +y up; the optical frame has y down, z forward.
+    let flip = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
+    let world_from_panel =
+        cam.world_from_camera * Isometry3::from_parts(Translation3::from(centre.coords), flip);
+    commands.spawn((
+        Name::new("video panel"),
+        Mesh3d(meshes.add(Rectangle::new(width as f32, height as f32))),
+        MeshMaterial3d(materials.add(StandardMaterial {
+            base_color_texture: Some(erase.composite.clone()),
+            unlit: true,
+            ..default()
+        })),
+        iso_to_transform(&world_from_panel),
+        layer.clone(),
+    ));
+    for (index, object) in config.objects.iter().enumerate() {
+        let depth = config.object_depth_m.min(0.9 * d);
+        let placement = match place_twin(&config.real_camera, &object.world_from_object, depth) {
+            Ok(p) => p,
+            Err(e) => {
+                warn!("object '{}': {e}; its twin is not drawn", object.name);
+                continue;
+            }
+        };
+        let world_from_twin = cam.world_from_camera * placement.camera_from_twin;
+        let material = materials.add(StandardMaterial {
+            base_color: Color::srgba(
+                object.rgba[0],
+                object.rgba[1],
+                object.rgba[2],
+                object.rgba[3],
+            ),
+            perceptual_roughness: 0.6,
+            ..default()
+        });
+        let root = commands
+            .spawn((
+                Name::new(format!("object twin: {}", object.name)),
+                ObjectTwin {
+                    index,
+                    scale: placement.scale,
+                },
+                iso_to_transform(&world_from_twin).with_scale(Vec3::splat(placement.scale as f32)),
+                Visibility::default(),
+            ))
+            .id();
+        for (mesh, local) in &object.parts {
+            commands.spawn((
+                Mesh3d(meshes.add(mesh.clone())),
+                MeshMaterial3d(material.clone()),
+                *local,
+                layer.clone(),
+                ChildOf(root),
+            ));
+        }
+    }
+    commands.spawn((
+        DirectionalLight {
+            illuminance: 6000.0,
+            shadow_maps_enabled: false,
+            ..default()
+        },
+        iso_to_transform(&cam.world_from_view()),
+        layer.clone(),
+    ));
+    let view = images.add(target_image(k.width, k.height));
+    spawn_pinhole_camera(
+        &mut commands,
+        cam,
+        view.clone(),
+        layer,
+        Color::BLACK,
+        -17,
+        "interaction camera",
+    );
+    commands.insert_resource(InteractionTargets { view });
+}

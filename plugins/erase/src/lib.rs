@@ -1,0 +1,747 @@
+//! Erasing the robot from the live video, on the GPU (the paper's service and interaction
+//! layers).
+//!
+//! Per camera frame:
+//! 1. **Mask twin.** A twin of the robot in unlit white on [`layers::MASK_TWIN`] is posed at
+//!    the joint state for the frame: the last received one, or with latency compensation the
+//!    state interpolated (or extrapolated from the joint velocities) at the frame's capture
+//!    time ([`JointHistory::at`]).
+//! 2. **Mask camera.** A camera with the *believed* intrinsics and pose of the real camera
+//!    renders that layer alone, white on black, into [`EraseTargets::raw`] (at
+//!    `resolution_scale` of the camera's size).
+//! 3. **Threshold pass** (`mask.wgsl`): per-channel RGBα ranges give the binary mask M(t),
+//!    dilated by `dilate_px + feather_px`, into [`EraseTargets::mask`].
+//! 4. **Composite pass** (`composite.wgsl`): the live frame with the background panel in front
+//!    at alpha `α_H · a`, `a` the feathered mask, the background after photometric compensation;
+//!    into [`EraseTargets::composite`], which is Ĩ(t) before the hand and object twin are drawn
+//!    in front ([`interaction`]).
+//!
+//! **Pipeline lag.** In Bevy 0.19 a camera's output image, read by a later camera's material,
+//! shows the previous frame's content (measured: the threshold pass reads the mask camera's
+//! render of one update earlier, the composite reads the threshold pass's of one update
+//! earlier, whatever the camera order). The pipeline is therefore aligned explicitly: the frame
+//! and photometric model of update `u` are composited at update `u + 2` ([`PIPELINE_LAG`]),
+//! with the live frames in a ring of textures, so that Ĩ always combines a frame with the mask
+//! of the same joint state. The cost is two updates of display latency.
+//!
+//! Nothing is read back to the CPU on this path. Photometric compensation fits the background
+//! to each frame on the CPU (both images are CPU data anyway) outside a conservative robot
+//! region: the links' bounding spheres projected by FK ([`avatarm_core::dr::sphere_mask`]).
+//! The CPU reference of steps 3–4 is [`avatarm_core::dr`].
+
+pub mod interaction;
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+use avatarm_core::camera::PinholeCamera;
+use avatarm_core::dr::{self, EraseSettings, LinkSphere, Photometric, RgbaView};
+use avatarm_core::robot::RobotModel;
+use avatarm_twin::camera::{spawn_pinhole_camera, target_image};
+use avatarm_twin::prelude::*;
+use avatarm_twin::{TwinMeshCache, layers};
+use avatarm_video::{LiveVideo, VideoSystems};
+use bevy::asset::{RenderAssetUsages, embedded_asset};
+use bevy::camera::RenderTarget;
+use bevy::camera::visibility::RenderLayers;
+use bevy::camera::{OrthographicProjection, ScalingMode};
+use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
+use bevy::pbr::{Material, MaterialPlugin};
+use bevy::prelude::*;
+use bevy::render::render_resource::{
+    AsBindGroup, Extent3d, ShaderType, TextureDimension, TextureFormat, TextureUsages,
+};
+use bevy::render::view::Msaa;
+use bevy::shader::ShaderRef;
+use nalgebra::{DVector, Isometry3};
+
+pub use interaction::{InteractionConfig, InteractionPlugin, InteractionTargets};
+
+/// Updates between posing the mask twin for a frame and compositing that frame.
+pub const PIPELINE_LAG: usize = 2;
+
+/// Live frame textures in the ring (more than [`PIPELINE_LAG`]).
+const RING: usize = 4;
+
+/// What the erase plugin needs to know. Insert it before the app starts.
+#[derive(Resource, Debug, Clone)]
+pub struct EraseConfig {
+    /// Mask and composite options.
+    pub settings: EraseSettings,
+    /// The camera as the app believes it is (intrinsics + calibrated pose).
+    pub camera: PinholeCamera,
+    /// The robot.
+    pub model: Arc<RobotModel>,
+    /// The robot's base pose in the world.
+    pub base: Isometry3<f64>,
+    /// The twin that receives the robot's joint states (its history drives the mask twin).
+    pub source_twin: Option<Entity>,
+}
+
+/// Images of the pipeline, all at the camera's size except `raw`.
+#[derive(Resource, Debug, Clone)]
+pub struct EraseTargets {
+    /// The mask twin rendered white on black (at `resolution_scale`).
+    pub raw: Handle<Image>,
+    /// M(t) after threshold and dilation (white = robot).
+    pub mask: Handle<Image>,
+    /// Ĩ(t): the live frame with the robot erased.
+    pub composite: Handle<Image>,
+    /// The ring of live frame textures; the composite reads the one of [`PIPELINE_LAG`]
+    /// updates ago.
+    pub live: Vec<Handle<Image>>,
+    /// The background H as uploaded (after refreshes).
+    pub background: Handle<Image>,
+}
+
+/// The mask twin's root entity.
+#[derive(Resource, Debug, Clone, Copy)]
+pub struct MaskTwin(pub Entity);
+
+/// What the pipeline is doing now.
+#[derive(Resource, Debug, Clone, Default)]
+pub struct EraseState {
+    /// Background H (RGBA8, the camera's size) once one is set.
+    pub background: Option<Arc<Vec<u8>>>,
+    /// Where it came from (file, capture time, ...).
+    pub background_origin: Option<String>,
+    /// The photometric model in use.
+    pub photometric: Photometric,
+    /// Capture time of the frame on the panel.
+    pub frame_capture_s: Option<f64>,
+    /// Joint time the mask twin is posed at.
+    pub mask_stamp_s: Option<f64>,
+    /// Frames refused (wrong size).
+    pub frames_refused: u64,
+    /// The conservative robot region used by the last fit (0/1 per pixel), for refresh and
+    /// diagnostics.
+    pub robot_region: Option<Arc<Vec<u8>>>,
+    /// Per update, newest last: what each stage works on ([`PIPELINE_LAG`] + 1 entries).
+    pub stages: VecDeque<StageInputs>,
+    /// Ring slot holding the newest frame.
+    latest_slot: Option<usize>,
+    uploads: usize,
+}
+
+/// What the pipeline used in one update: the mask camera renders the twin for `frame` now, the
+/// threshold pass one update later, the composite [`PIPELINE_LAG`] updates later.
+#[derive(Debug, Clone)]
+pub struct StageInputs {
+    /// The newest frame at that update (capture time, index, pixels).
+    pub frame: Option<(f64, u64, Arc<Vec<u8>>)>,
+    /// Ring slot of that frame.
+    pub slot: Option<usize>,
+    /// The photometric model fitted to it.
+    pub photometric: Photometric,
+    /// Background H at that update.
+    pub background: Option<Arc<Vec<u8>>>,
+}
+
+impl EraseState {
+    /// Inputs of the stage that is `lag` updates behind the mask camera (0 = the mask camera,
+    /// 1 = threshold pass, [`PIPELINE_LAG`] = composite), when the pipeline is that full.
+    pub fn stage(&self, lag: usize) -> Option<&StageInputs> {
+        self.stages.len().checked_sub(1 + lag).and_then(|i| self.stages.get(i))
+    }
+}
+
+/// Sets the background H.
+#[derive(Message, Debug, Clone)]
+pub struct SetBackground {
+    /// RGBA8 pixels.
+    pub rgba: Arc<Vec<u8>>,
+    /// Width (px).
+    pub width: u32,
+    /// Height (px).
+    pub height: u32,
+    /// Where it came from, for the log and the session.
+    pub origin: String,
+}
+
+/// Takes the frame now on the panel as the background H.
+#[derive(Message, Debug, Clone, Copy, Default)]
+pub struct CaptureBackground;
+
+/// Recent joint states of the source twin, for latency compensation.
+#[derive(Resource, Debug, Clone, Default)]
+pub struct JointHistory {
+    /// `(stamp, positions, velocities)`, oldest first, about one second.
+    pub states: VecDeque<(f64, DVector<f64>, DVector<f64>)>,
+}
+
+impl JointHistory {
+    /// Adds a state if it is newer than the last one.
+    pub fn push(&mut self, stamp: f64, q: &DVector<f64>, qd: &DVector<f64>) {
+        if self.states.back().is_some_and(|s| s.0 >= stamp) || !stamp.is_finite() {
+            return;
+        }
+        self.states.push_back((stamp, q.clone(), qd.clone()));
+        while self.states.front().is_some_and(|s| stamp - s.0 > 1.0) {
+            self.states.pop_front();
+        }
+    }
+
+    /// Joint positions at `t`: cubic Hermite between the two states around it, or the newest
+    /// state extrapolated with its velocities (at most 0.25 s ahead); the oldest before it.
+    pub fn at(&self, t: f64) -> Option<DVector<f64>> {
+        let last = self.states.back()?;
+        if t >= last.0 {
+            let dt = (t - last.0).min(0.25);
+            return Some(&last.1 + &last.2 * dt);
+        }
+        let first = self.states.front()?;
+        if t <= first.0 {
+            return Some(first.1.clone());
+        }
+        let i = self.states.partition_point(|s| s.0 <= t);
+        let (a, b) = (&self.states[i - 1], &self.states[i]);
+        let h = b.0 - a.0;
+        let s = (t - a.0) / h;
+        let (s2, s3) = (s * s, s * s * s);
+        let (h00, h10, h01, h11) = (
+            2.0 * s3 - 3.0 * s2 + 1.0,
+            s3 - 2.0 * s2 + s,
+            -2.0 * s3 + 3.0 * s2,
+            s3 - s2,
+        );
+        Some(&a.1 * h00 + &a.2 * (h10 * h) + &b.1 * h01 + &b.2 * (h11 * h))
+    }
+}
+
+/// The erase system sets (`Update`, after the video is published).
+#[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum EraseSystems {
+    /// Joint history, background, live frame upload, mask twin pose, photometric fit.
+    Prepare,
+}
+
+/// The threshold pass's material.
+#[derive(Asset, TypePath, AsBindGroup, Debug, Clone)]
+pub struct MaskMaterial {
+    /// Ranges and sizes.
+    #[uniform(0)]
+    pub params: MaskParams,
+    /// The mask twin's render.
+    #[texture(1)]
+    pub raw: Handle<Image>,
+}
+
+/// Uniforms of the threshold pass.
+#[derive(ShaderType, Debug, Clone, Copy)]
+pub struct MaskParams {
+    /// Lower bounds of the RGBα ranges (8-bit levels).
+    pub lo: Vec4,
+    /// Upper bounds.
+    pub hi: Vec4,
+    /// Size of the raw render.
+    pub raw_size: UVec2,
+    /// Size of the mask.
+    pub full_size: UVec2,
+    /// Square dilation radius (px).
+    pub radius: u32,
+}
+
+impl Material for MaskMaterial {
+    fn fragment_shader() -> ShaderRef {
+        "embedded://avatarm_erase/mask.wgsl".into()
+    }
+}
+
+/// The composite pass's material.
+#[derive(Asset, TypePath, AsBindGroup, Debug, Clone)]
+pub struct CompositeMaterial {
+    /// Photometric model, alpha, feathering.
+    #[uniform(0)]
+    pub params: CompositeParams,
+    /// I(t).
+    #[texture(1)]
+    pub live: Handle<Image>,
+    /// H.
+    #[texture(2)]
+    pub background: Handle<Image>,
+    /// M(t).
+    #[texture(3)]
+    pub mask: Handle<Image>,
+}
+
+/// Uniforms of the composite pass.
+#[derive(ShaderType, Debug, Clone, Copy)]
+pub struct CompositeParams {
+    /// Per-channel gain of the background (w unused).
+    pub gain: Vec4,
+    /// Per-channel offset (full scale; w unused).
+    pub offset: Vec4,
+    /// Frame size.
+    pub size: UVec2,
+    /// Background panel opacity; 0 while erasing is off or there is no background.
+    pub alpha_h: f32,
+    /// Feathering radius (px).
+    pub feather: u32,
+}
+
+impl Material for CompositeMaterial {
+    fn fragment_shader() -> ShaderRef {
+        "embedded://avatarm_erase/composite.wgsl".into()
+    }
+}
+
+/// Materials of the two passes.
+#[derive(Resource, Debug, Clone)]
+pub struct EraseMaterials {
+    /// Threshold pass.
+    pub mask: Handle<MaskMaterial>,
+    /// Composite pass.
+    pub composite: Handle<CompositeMaterial>,
+}
+
+/// Adds the mask twin, the mask camera, the two passes and the systems that feed them. Needs
+/// [`RobotTwinPlugin`], [`avatarm_video::VideoPlugin`] and an [`EraseConfig`].
+#[derive(Default)]
+pub struct ErasePlugin;
+
+impl Plugin for ErasePlugin {
+    fn build(&self, app: &mut App) {
+        embedded_asset!(app, "mask.wgsl");
+        embedded_asset!(app, "composite.wgsl");
+        app.add_plugins((
+            MaterialPlugin::<MaskMaterial>::default(),
+            MaterialPlugin::<CompositeMaterial>::default(),
+        ))
+        .add_message::<SetBackground>()
+        .add_message::<CaptureBackground>()
+        .init_resource::<EraseState>()
+        .init_resource::<JointHistory>()
+        .configure_sets(Update, EraseSystems::Prepare.after(VideoSystems::Publish))
+        .add_systems(Startup, setup)
+        .add_systems(
+            Update,
+            (record_history, set_background, prepare_frame)
+                .chain()
+                .in_set(EraseSystems::Prepare),
+        );
+    }
+}
+
+/// An RGBA8 image the CPU writes and the GPU samples as raw 8-bit values (not sRGB-decoded).
+pub fn upload_image(width: u32, height: u32) -> Image {
+    let mut image = Image::new_fill(
+        Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        TextureDimension::D2,
+        &[0, 0, 0, 255],
+        TextureFormat::Rgba8Unorm,
+        RenderAssetUsages::default(),
+    );
+    image.texture_descriptor.usage = TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_DST;
+    image
+}
+
+/// Spawns an orthographic camera that draws one full-target quad with `material` into
+/// `target`; the quad's fragment shader works in pixel coordinates.
+fn spawn_pass<M: Material>(
+    commands: &mut Commands,
+    meshes: &mut Assets<Mesh>,
+    material: Handle<M>,
+    target: Handle<Image>,
+    layer: usize,
+    order: isize,
+    name: &str,
+) {
+    let layers = RenderLayers::layer(layer);
+    commands.spawn((
+        Name::new(format!("{name} quad")),
+        Mesh3d(meshes.add(Rectangle::new(1.0, 1.0))),
+        MeshMaterial3d(material),
+        Transform::default(),
+        layers.clone(),
+    ));
+    commands.spawn((
+        Name::new(name.to_owned()),
+        Camera3d::default(),
+        Camera {
+            order,
+            clear_color: ClearColorConfig::Custom(Color::BLACK),
+            ..default()
+        },
+        RenderTarget::Image(target.into()),
+        Projection::Orthographic(OrthographicProjection {
+            scaling_mode: ScalingMode::Fixed {
+                width: 1.0,
+                height: 1.0,
+            },
+            near: -1.0,
+            far: 1.0,
+            ..OrthographicProjection::default_3d()
+        }),
+        Transform::default(),
+        Tonemapping::None,
+        DebandDither::Disabled,
+        Msaa::Off,
+        layers,
+    ));
+}
+
+#[expect(clippy::too_many_arguments, reason = "a startup system's inputs")]
+fn setup(
+    mut commands: Commands,
+    config: Res<EraseConfig>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut std_materials: ResMut<Assets<StandardMaterial>>,
+    mut mask_materials: ResMut<Assets<MaskMaterial>>,
+    mut composite_materials: ResMut<Assets<CompositeMaterial>>,
+    mut images: ResMut<Assets<Image>>,
+    mut cache: ResMut<TwinMeshCache>,
+) {
+    let k = config.camera.intrinsics;
+    let raw_k = k.scaled(config.settings.resolution_scale);
+    let twin = spawn_twin(&mut commands, config.model.clone(), &config.base);
+    if let Err(e) = attach_visuals(
+        &mut commands,
+        &mut meshes,
+        &mut std_materials,
+        &mut cache,
+        &config.model,
+        &twin,
+        TwinAppearance::Unlit(Color::WHITE),
+        GeometrySource::Visual,
+        &RenderLayers::layer(layers::MASK_TWIN),
+    ) {
+        error!("mask twin: {e}");
+    }
+    commands.insert_resource(MaskTwin(twin.root));
+
+    let raw = images.add(target_image(raw_k.width, raw_k.height));
+    let mask = images.add(target_image(k.width, k.height));
+    let composite = images.add(target_image(k.width, k.height));
+    let live: Vec<Handle<Image>> = (0..RING)
+        .map(|_| images.add(upload_image(k.width, k.height)))
+        .collect();
+    let background = images.add(upload_image(k.width, k.height));
+    let mask_camera = PinholeCamera {
+        intrinsics: raw_k,
+        world_from_camera: config.camera.world_from_camera,
+    };
+    spawn_pinhole_camera(
+        &mut commands,
+        &mask_camera,
+        raw.clone(),
+        RenderLayers::layer(layers::MASK_TWIN),
+        Color::BLACK,
+        -20,
+        "mask camera",
+    );
+    let s = &config.settings;
+    let mask_material = mask_materials.add(MaskMaterial {
+        params: MaskParams {
+            lo: Vec4::from_array(s.ranges.map(|r| f32::from(r[0]))),
+            hi: Vec4::from_array(s.ranges.map(|r| f32::from(r[1]))),
+            raw_size: UVec2::new(raw_k.width, raw_k.height),
+            full_size: UVec2::new(k.width, k.height),
+            radius: s.mask_radius(),
+        },
+        raw: raw.clone(),
+    });
+    let composite_material = composite_materials.add(CompositeMaterial {
+        params: composite_params(s, &Photometric::default(), false),
+        live: live[0].clone(),
+        background: background.clone(),
+        mask: mask.clone(),
+    });
+    spawn_pass(
+        &mut commands,
+        &mut meshes,
+        mask_material.clone(),
+        mask.clone(),
+        layers::MASK_PASS,
+        -19,
+        "threshold pass",
+    );
+    spawn_pass(
+        &mut commands,
+        &mut meshes,
+        composite_material.clone(),
+        composite.clone(),
+        layers::COMPOSITE_PASS,
+        -18,
+        "composite pass",
+    );
+    commands.insert_resource(EraseMaterials {
+        mask: mask_material,
+        composite: composite_material,
+    });
+    commands.insert_resource(EraseTargets {
+        raw,
+        mask,
+        composite,
+        live,
+        background,
+    });
+    let (spheres, notes) = dr::link_spheres(&config.model);
+    for n in notes {
+        warn!("photometric compensation: {n}");
+    }
+    commands.insert_resource(RobotSpheres(spheres));
+}
+
+/// Bounding spheres of the robot's links, for the conservative robot region.
+#[derive(Resource, Debug, Clone)]
+struct RobotSpheres(Vec<LinkSphere>);
+
+/// The composite uniforms for settings, a photometric model and whether H exists.
+pub fn composite_params(
+    s: &EraseSettings,
+    photometric: &Photometric,
+    have_background: bool,
+) -> CompositeParams {
+    CompositeParams {
+        gain: Vec3::from_array(photometric.gain).extend(1.0),
+        offset: Vec3::from_array(photometric.offset).extend(0.0),
+        size: UVec2::ZERO,
+        alpha_h: if s.enabled && have_background {
+            s.alpha_h
+        } else {
+            0.0
+        },
+        feather: s.feather_px,
+    }
+}
+
+fn record_history(
+    config: Res<EraseConfig>,
+    twins: Query<&RobotTwin>,
+    mut history: ResMut<JointHistory>,
+) {
+    let Some(twin) = config.source_twin.and_then(|e| twins.get(e).ok()) else {
+        return;
+    };
+    if let Some(stamp) = twin.stamp_s {
+        history.push(stamp, &twin.positions, &twin.velocities);
+    }
+}
+
+fn set_background(
+    mut set: MessageReader<SetBackground>,
+    mut capture: MessageReader<CaptureBackground>,
+    config: Res<EraseConfig>,
+    live: Res<LiveVideo>,
+    mut state: ResMut<EraseState>,
+) {
+    let k = config.camera.intrinsics;
+    let mut new: Option<(Arc<Vec<u8>>, String)> = None;
+    for msg in set.read() {
+        if (msg.width, msg.height) != (k.width, k.height)
+            || msg.rgba.len() != (k.width * k.height * 4) as usize
+        {
+            error!(
+                "background from {}: {}x{} ({} bytes) does not match the camera's {}x{}; ignored",
+                msg.origin,
+                msg.width,
+                msg.height,
+                msg.rgba.len(),
+                k.width,
+                k.height
+            );
+            continue;
+        }
+        new = Some((msg.rgba.clone(), msg.origin.clone()));
+    }
+    if capture.read().count() > 0 {
+        match &live.frame {
+            Some(f) if (f.width, f.height) == (k.width, k.height) => {
+                new = Some((
+                    f.rgba.clone(),
+                    format!("live frame captured at {:.3} s", f.capture_s),
+                ));
+            }
+            Some(_) => error!("background capture: the live frame's size does not match"),
+            None => warn!("background capture: no live frame yet"),
+        }
+    }
+    if let Some((rgba, origin)) = new {
+        info!("background H set from {origin}");
+        state.background = Some(rgba);
+        state.background_origin = Some(origin);
+    }
+}
+
+#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
+fn prepare_frame(
+    config: Res<EraseConfig>,
+    live: Res<LiveVideo>,
+    history: Res<JointHistory>,
+    targets: Option<Res<EraseTargets>>,
+    passes: Option<Res<EraseMaterials>>,
+    mask_twin: Option<Res<MaskTwin>>,
+    spheres: Option<Res<RobotSpheres>>,
+    mut state: ResMut<EraseState>,
+    mut twins: Query<&mut RobotTwin>,
+    mut images: ResMut<Assets<Image>>,
+    mut composite_materials: ResMut<Assets<CompositeMaterial>>,
+) {
+    let (Some(targets), Some(passes), Some(mask_twin), Some(spheres)) =
+        (targets, passes, mask_twin, spheres)
+    else {
+        return;
+    };
+    let s = config.settings;
+    let k = config.camera.intrinsics;
+    let frame = live.frame.as_ref().filter(|_| live.fresh);
+    if let Some(f) = frame
+        && (f.width, f.height) != (k.width, k.height)
+    {
+        state.frames_refused += 1;
+        if state.frames_refused % 100 == 1 {
+            error!(
+                "video source '{}': frame {} is {}x{} but the camera is calibrated at {}x{}; frame ignored ({} so far)",
+                live.source,
+                f.index,
+                f.width,
+                f.height,
+                k.width,
+                k.height,
+                state.frames_refused
+            );
+        }
+        return;
+    }
+    // The joint state the mask twin is drawn at.
+    let target = match (frame, s.latency_compensation) {
+        (Some(f), true) => history.at(f.capture_s).map(|q| (q, f.capture_s)),
+        (_, false) => history.states.back().map(|b| (b.1.clone(), b.0)),
+        (None, true) => None,
+    };
+    if let Some((q, stamp)) = target
+        && let Ok(mut twin) = twins.get_mut(mask_twin.0)
+        && twin.stamp_s != Some(stamp)
+    {
+        let limits = config.model.dof_limits();
+        let q = DVector::from_iterator(
+            q.len(),
+            q.iter().enumerate().map(|(i, v)| match limits.get(i) {
+                Some(l) if l.lower <= l.upper => v.clamp(l.lower, l.upper),
+                _ => *v,
+            }),
+        );
+        if q.iter().all(|v| v.is_finite()) {
+            twin.positions = q;
+            twin.stamp_s = Some(stamp);
+            state.mask_stamp_s = Some(stamp);
+        }
+    }
+    if let Some(f) = frame {
+        let slot = state.uploads % RING;
+        state.uploads += 1;
+        if let Some(mut image) = images.get_mut(&targets.live[slot]) {
+            image.data = Some(f.rgba.as_ref().clone());
+        }
+        state.latest_slot = Some(slot);
+        state.frame_capture_s = Some(f.capture_s);
+        let mut photometric = state.photometric;
+        if let Some(bg) = state.background.clone()
+            && (s.photometric || s.background_refresh > 0.0)
+        {
+            let q = twins
+                .get(mask_twin.0)
+                .map(|t| t.positions.iter().copied().collect::<Vec<_>>())
+                .unwrap_or_default();
+            let poses = config.model.forward_kinematics(&config.base, &q);
+            let margin = f64::from(s.mask_radius()) + 6.0;
+            let region = dr::sphere_mask(&config.camera, &poses, &spheres.0, margin);
+            let views = RgbaView::new("live frame", k.width, k.height, &f.rgba).and_then(|l| {
+                RgbaView::new("background", k.width, k.height, &bg).map(|b| (l, b))
+            });
+            match views {
+                Ok((l, b)) => {
+                    if s.photometric {
+                        match dr::fit_photometric(&l, &b, Some(&region), 4) {
+                            Ok(p) => photometric = p,
+                            Err(e) => warn!("photometric fit: {e}"),
+                        }
+                    }
+                    if s.background_refresh > 0.0 {
+                        let free: Vec<u8> = region.iter().map(|&r| u8::from(r == 0)).collect();
+                        let mut next = bg.as_ref().clone();
+                        dr::refresh_background(
+                            &mut next,
+                            &l,
+                            &free,
+                            s.background_refresh,
+                            &photometric,
+                        );
+                        state.background = Some(Arc::new(next));
+                    }
+                }
+                Err(e) => warn!("photometric compensation: {e}"),
+            }
+            state.robot_region = Some(Arc::new(region));
+        }
+        state.photometric = photometric;
+    }
+    // This update's inputs; the composite takes those of PIPELINE_LAG updates ago.
+    let entry = StageInputs {
+        frame: live
+            .frame
+            .as_ref()
+            .map(|f| (f.capture_s, f.index, f.rgba.clone())),
+        slot: state.latest_slot,
+        photometric: state.photometric,
+        background: state.background.clone(),
+    };
+    state.stages.push_back(entry);
+    while state.stages.len() > PIPELINE_LAG + 1 {
+        state.stages.pop_front();
+    }
+    let Some(due) = state.stage(PIPELINE_LAG).cloned() else {
+        return;
+    };
+    if let Some(bg) = &due.background
+        && let Some(mut image) = images.get_mut(&targets.background)
+        && image.data.as_deref() != Some(bg.as_slice())
+    {
+        image.data = Some(bg.as_ref().clone());
+    }
+    if let Some(mut m) = composite_materials.get_mut(&passes.composite) {
+        let mut params = composite_params(&s, &due.photometric, due.background.is_some());
+        params.size = UVec2::new(k.width, k.height);
+        m.params = params;
+        if let Some(slot) = due.slot
+            && m.live != targets.live[slot]
+        {
+            m.live = targets.live[slot].clone();
+        }
+    }
+}
+
+/// Switches erasure on or off at run time (the preview's key); returns the new state.
+pub fn toggle_erasure(config: &mut EraseConfig) -> bool {
+    config.settings.enabled = !config.settings.enabled;
+    config.settings.enabled
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn history_interpolates_and_extrapolates() {
+        let mut h = JointHistory::default();
+        let v = |x: f64| DVector::from_vec(vec![x]);
+        // q = t^2 sampled at 0, 0.1, 0.2 with exact velocities 2t.
+        for t in [0.0, 0.1, 0.2] {
+            h.push(t, &v(t * t), &v(2.0 * t));
+        }
+        h.push(0.15, &v(9.0), &v(9.0)); // out of order: ignored
+        assert_eq!(h.states.len(), 3);
+        let q = h.at(0.15).expect("inside")[0];
+        assert!((q - 0.0225).abs() < 1e-12, "Hermite is exact on a quadratic: {q}");
+        let q = h.at(0.3).expect("ahead")[0];
+        assert!((q - (0.04 + 0.4 * 0.1)).abs() < 1e-12);
+        assert_eq!(h.at(-1.0).expect("before")[0], 0.0);
+        let far = h.at(10.0).expect("ahead")[0];
+        assert!((far - (0.04 + 0.4 * 0.25)).abs() < 1e-12, "capped at 0.25 s");
+        assert!(JointHistory::default().at(0.0).is_none());
+    }
+}
