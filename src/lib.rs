@@ -16,9 +16,9 @@ use std::time::Duration;
 use avatarm_erase::interaction::ObjectTwinSpec;
 use avatarm_erase::{EraseConfig, ErasePlugin, InteractionConfig, InteractionPlugin};
 use avatarm_sim::{SimRoomConfig, SimRoomPlugin, SimVideo};
-use avatarm_video::{LiveVideo, VideoPlugin};
 use avatarm_twin::prelude::*;
 use avatarm_twin::{TwinMeshCache, layers};
+use avatarm_video::{LiveVideo, VideoPlugin};
 use bevy::app::ScheduleRunnerPlugin;
 use bevy::camera::visibility::RenderLayers;
 use bevy::prelude::*;
@@ -114,6 +114,18 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> App {
             model: scene.model.clone(),
             base: scene.robot_base(),
             source_twin: None,
+            occluders: scene
+                .file
+                .props
+                .iter()
+                .zip(&scene.props)
+                .filter(|(spec, _)| spec.occluder)
+                .flat_map(|(_, prop)| {
+                    avatarm_sim::prop_parts(&prop.shape)
+                        .into_iter()
+                        .map(|(mesh, local)| (mesh, iso_to_transform(&prop.pose) * local))
+                })
+                .collect(),
         })
         .insert_resource(InteractionConfig {
             camera: scene.believed_camera,
@@ -140,14 +152,7 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> App {
             VideoPlugin,
             ErasePlugin,
             InteractionPlugin,
-            session::BackgroundSourcePlugin {
-                // Headless rendering compiles pipelines before the first frame; a window may
-                // take several frames, so the preview photographs the room again later.
-                empty_room_updates: match mode {
-                    Mode::Headless(_) => vec![2],
-                    Mode::Preview(_) => vec![2, 30],
-                },
-            },
+            session::BackgroundSourcePlugin,
         ))
         .add_systems(PreStartup, spawn_app_twin);
     match mode {

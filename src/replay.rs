@@ -21,9 +21,9 @@ use std::time::Instant;
 
 use avatarm_core::dr::{self, MaskScores, Photometric, RgbaView};
 use avatarm_erase::{EraseState, EraseTargets, PIPELINE_LAG};
-use avatarm_video::LiveVideo;
 use avatarm_sim::{SimCameras, SimRobotState};
 use avatarm_twin::RobotTwin;
+use avatarm_video::LiveVideo;
 use bevy::prelude::*;
 use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -134,6 +134,7 @@ struct Replay {
     frame: u64,
     published: u64,
     warmup_left: u32,
+    warmup_updates: u32,
     stepping_done: bool,
     pending: usize,
     waited: u32,
@@ -188,6 +189,7 @@ impl Plugin for ReplayPlugin {
             frame: 0,
             published: 0,
             warmup_left: 3,
+            warmup_updates: 0,
             stepping_done: false,
             pending: 0,
             waited: 0,
@@ -206,6 +208,9 @@ impl Plugin for ReplayPlugin {
     }
 }
 
+/// Updates the replay waits for its background before it gives up.
+const MAX_WARMUP_UPDATES: u32 = 300;
+
 fn pause_for_warmup(mut time: ResMut<Time<Virtual>>, replay: Res<Replay>) {
     time.pause();
     if let Err(e) = std::fs::create_dir_all(&replay.options.out) {
@@ -216,14 +221,22 @@ fn pause_for_warmup(mut time: ResMut<Time<Virtual>>, replay: Res<Replay>) {
     }
 }
 
-fn spawn_capture(commands: &mut Commands, replay: &mut Replay, handle: Handle<Image>, kind: Capture, k: i64) {
+fn spawn_capture(
+    commands: &mut Commands,
+    replay: &mut Replay,
+    handle: Handle<Image>,
+    kind: Capture,
+    k: i64,
+) {
     replay.pending += 1;
     commands.spawn(Screenshot::image(handle)).observe(
         move |captured: On<ScreenshotCaptured>, mut replay: ResMut<Replay>| {
             replay.pending = replay.pending.saturating_sub(1);
             let image = &captured.image;
             let Some(data) = image.data.clone() else {
-                replay.errors.push(format!("capture {kind:?} at {k} us came back empty"));
+                replay
+                    .errors
+                    .push(format!("capture {kind:?} at {k} us came back empty"));
                 return;
             };
             let entry = replay.frames.entry(k).or_default();
@@ -258,8 +271,21 @@ fn drive_replay(
         return;
     };
     if replay.warmup_left > 0 {
-        // A few frames for render targets and pipelines to exist before time starts.
-        replay.warmup_left -= 1;
+        // A few frames for render targets and pipelines to exist before time starts, and the
+        // empty room's photograph when it is the background (it waits for a settled render).
+        let waiting_for_room = scene.0.file.background == crate::scene::BackgroundSpec::EmptyRoom
+            && erase_state.background.is_none();
+        replay.warmup_left = replay.warmup_left.saturating_sub(1);
+        replay.warmup_updates += 1;
+        if waiting_for_room && replay.warmup_updates < MAX_WARMUP_UPDATES {
+            replay.warmup_left = replay.warmup_left.max(1);
+            return;
+        }
+        if waiting_for_room {
+            replay.errors.push(format!(
+                "background: the empty room was not photographed within {MAX_WARMUP_UPDATES} updates"
+            ));
+        }
         if replay.warmup_left == 0 {
             time.unpause();
             replay.started = Some(Instant::now());
@@ -275,8 +301,20 @@ fn drive_replay(
         let t = robot.0.time_s();
         let k = key(t);
         if let (Some(norobot), Some(silhouette)) = (&cameras.no_robot, &cameras.silhouette) {
-            spawn_capture(&mut commands, &mut replay, norobot.clone(), Capture::NoRobot, k);
-            spawn_capture(&mut commands, &mut replay, silhouette.clone(), Capture::Silhouette, k);
+            spawn_capture(
+                &mut commands,
+                &mut replay,
+                norobot.clone(),
+                Capture::NoRobot,
+                k,
+            );
+            spawn_capture(
+                &mut commands,
+                &mut replay,
+                silhouette.clone(),
+                Capture::Silhouette,
+                k,
+            );
         }
         // The frame the app received now.
         if let Some(f) = live.frame.as_ref().filter(|_| live.fresh) {
@@ -419,17 +457,40 @@ fn score_ready(mut replay: ResMut<Replay>, scene: Res<SceneResource>) {
 }
 
 fn score_frame(replay: &Replay, scene: &SceneResource, p: Pending) -> Result<FrameScore, String> {
-    let (Some(norobot), Some(silhouette), Some((rw, rh, raw)), Some(mask), Some(gpu), Some(inputs)) =
-        (p.norobot, p.silhouette, p.raw, p.mask, p.composite, p.inputs)
+    let (
+        Some(mut norobot),
+        Some(silhouette),
+        Some((rw, rh, raw)),
+        Some(mask),
+        Some(gpu),
+        Some(inputs),
+    ) = (
+        p.norobot,
+        p.silhouette,
+        p.raw,
+        p.mask,
+        p.composite,
+        p.inputs,
+    )
     else {
         return Err("incomplete frame".into());
     };
+    // The robot-free truth as the camera would have exposed it at capture (noise-free).
+    scene
+        .0
+        .file
+        .camera
+        .sensor
+        .apply_gain(&mut norobot, inputs.t_s);
     let k = &scene.0.believed_camera.intrinsics;
     let (w, h) = (k.width, k.height);
     let settings = scene.0.file.erase;
     let live = RgbaView::new("live frame", w, h, &inputs.live).map_err(|e| e.to_string())?;
     let black = vec![0u8; inputs.live.len()];
-    let bg_bytes: &[u8] = inputs.background.as_deref().map_or(&black, |b| b.as_slice());
+    let bg_bytes: &[u8] = inputs
+        .background
+        .as_deref()
+        .map_or(&black, |b| b.as_slice());
     let background = RgbaView::new("background", w, h, bg_bytes).map_err(|e| e.to_string())?;
     let raw = RgbaView::new("mask twin render", rw, rh, &raw).map_err(|e| e.to_string())?;
     // CPU reference on the same inputs.
@@ -446,7 +507,10 @@ fn score_frame(replay: &Replay, scene: &SceneResource, p: Pending) -> Result<Fra
     let cpu = dr::composite(&live, &background, &alpha, alpha_h, &inputs.photometric)
         .map_err(|e| e.to_string())?;
     let cpu_composite_ms = t1.elapsed().as_secs_f64() * 1e3;
-    let gpu_mask: Vec<u8> = mask.chunks_exact(4).map(|px| u8::from(px[0] > 127)).collect();
+    let gpu_mask: Vec<u8> = mask
+        .chunks_exact(4)
+        .map(|px| u8::from(px[0] > 127))
+        .collect();
     let mismatch = gpu_mask
         .iter()
         .zip(&cpu_mask)
@@ -458,23 +522,6 @@ fn score_frame(replay: &Replay, scene: &SceneResource, p: Pending) -> Result<Fra
         .flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c])))
         .max()
         .unwrap_or(0);
-    if std::env::var_os("AVATARM_DEBUG_DR").is_some() && mismatch > 0 {
-        let dbg = |name: &str, m: &[u8]| {
-            let img = image::GrayImage::from_raw(w, h, m.iter().map(|&v| v * 255).collect());
-            if let Some(img) = img {
-                let _ = img.save(replay.options.out.join(format!("debug_{name}_{:05}.png", inputs.index)));
-            }
-        };
-        dbg("gpu_mask", &gpu_mask);
-        dbg("cpu_mask", &cpu_mask);
-        let rawm = dr::threshold_mask(&raw, raw.width, raw.height, &settings.ranges, 0);
-        dbg("raw_mask", &rawm);
-        let ga = dr::feather_alpha(&gpu_mask, w, h, settings.feather_px);
-        if let Ok(c2) = dr::composite(&live, &background, &ga, alpha_h, &inputs.photometric) {
-            let d = gpu.chunks_exact(4).zip(c2.chunks_exact(4)).flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c]))).max();
-            eprintln!("DEBUG frame {}: composite vs CPU(gpu mask) max diff {d:?}", inputs.index);
-        }
-    }
     // Scores against the ground truth, from what the GPU produced.
     let gpu_alpha = dr::feather_alpha(&gpu_mask, w, h, settings.feather_px);
     let erased: Vec<u8> = gpu_alpha
@@ -561,7 +608,11 @@ fn finish(
     let s = &scene.0;
     let k = &s.true_camera.intrinsics;
     // Frames with the robot in view carry the mask scores; all frames carry the GPU check.
-    let with_robot: Vec<&FrameScore> = replay.scores.iter().filter(|f| f.mask.robot_px > 0).collect();
+    let with_robot: Vec<&FrameScore> = replay
+        .scores
+        .iter()
+        .filter(|f| f.mask.robot_px > 0)
+        .collect();
     let mask = json!({
         "iou_mean": mean(with_robot.iter().map(|f| f.mask.iou)),
         "iou_min": with_robot.iter().map(|f| f.mask.iou).reduce(f64::min),
@@ -571,7 +622,11 @@ fn finish(
         "frames_scored": replay.scores.len(),
         "frames_with_robot": with_robot.len(),
     });
-    let psnrs: Vec<f64> = replay.scores.iter().filter_map(|f| f.psnr_robot_db).collect();
+    let psnrs: Vec<f64> = replay
+        .scores
+        .iter()
+        .filter_map(|f| f.psnr_robot_db)
+        .collect();
     let dr_report = json!({
         "psnr_robot_db_mean": mean(psnrs.iter().copied()),
         "psnr_robot_db_min": psnrs.iter().copied().reduce(f64::min),
@@ -640,7 +695,11 @@ fn finish(
         std::fs::write(&path, text + "\n")
             .map_err(|e| format!("{}: cannot write: {e}", path.display()))
     };
-    let saved: Vec<&FrameRecord> = replay.records.iter().filter(|r| r.score.is_some()).collect();
+    let saved: Vec<&FrameRecord> = replay
+        .records
+        .iter()
+        .filter(|r| r.score.is_some())
+        .collect();
     write("frames.json", &json!(saved))?;
     let mut csv = String::from("file,capture_s\n");
     for r in &saved {

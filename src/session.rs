@@ -13,36 +13,41 @@ use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 use crate::SceneResource;
 use crate::scene::BackgroundSpec;
 
-/// Sets the background from the scene's `[background]`. `empty_room_updates` are the updates
-/// on which the simulated empty room is photographed (later ones replace earlier ones, for
-/// renderers that compile pipelines over several frames).
-pub struct BackgroundSourcePlugin {
-    /// Update numbers (1-based) of the empty-room captures.
-    pub empty_room_updates: Vec<u32>,
-}
+/// Sets the background from the scene's `[background]`. The simulated empty room is
+/// photographed once its render has settled: renderers compile pipelines over a varying number
+/// of frames, and a capture taken before that is black or misses meshes.
+pub struct BackgroundSourcePlugin;
+
+/// Identical consecutive empty-room captures needed before one is used.
+const SETTLED_CAPTURES: u32 = 3;
+/// Updates after which the newest empty-room capture is used even if it never settled.
+const EMPTY_ROOM_GIVE_UP: u32 = 240;
 
 impl Plugin for BackgroundSourcePlugin {
     fn build(&self, app: &mut App) {
-        app.insert_resource(BackgroundProgress {
-            updates: 0,
-            captured: false,
-            empty_room_updates: self.empty_room_updates.clone(),
-        })
+        app.init_resource::<BackgroundProgress>()
             .add_systems(Startup, load_file)
             .add_systems(Update, (empty_room, capture_at));
     }
 }
 
+/// How far the scene's background source has got.
 #[derive(Resource, Debug, Default)]
-struct BackgroundProgress {
+pub struct BackgroundProgress {
     updates: u32,
     captured: bool,
-    empty_room_updates: Vec<u32>,
+    in_flight: bool,
+    /// The last empty-room capture (before the sensor model) and how many in a row matched it.
+    last: Option<(u32, u32, Vec<u8>)>,
+    identical: u32,
+    /// The empty room has been set as the background (or the scene uses another source).
+    pub empty_room_done: bool,
 }
 
 /// Loads an image file as RGBA8.
 pub fn load_rgba(path: &std::path::Path) -> Result<(u32, u32, Vec<u8>), String> {
-    let img = image::open(path).map_err(|e| format!("{}: cannot read image: {e}", path.display()))?;
+    let img =
+        image::open(path).map_err(|e| format!("{}: cannot read image: {e}", path.display()))?;
     let rgba = img.to_rgba8();
     Ok((rgba.width(), rgba.height(), rgba.into_raw()))
 }
@@ -65,7 +70,8 @@ fn load_file(scene: Res<SceneResource>, mut out: MessageWriter<SetBackground>) {
 }
 
 /// The simulated room without the robot, through the camera's sensor model at t = 0 (as if
-/// photographed before the robot was installed).
+/// photographed before the robot was installed). One capture in flight at a time; the room is
+/// static, so the render has settled when consecutive captures are identical and not black.
 fn empty_room(
     mut commands: Commands,
     scene: Res<SceneResource>,
@@ -73,33 +79,76 @@ fn empty_room(
     mut progress: ResMut<BackgroundProgress>,
 ) {
     if scene.0.file.background != BackgroundSpec::EmptyRoom {
+        progress.empty_room_done = true;
+        return;
+    }
+    if progress.empty_room_done || progress.in_flight {
         return;
     }
     progress.updates += 1;
-    if !progress.empty_room_updates.contains(&progress.updates) {
+    let Some(handle) = cameras.and_then(|c| c.no_robot.clone()) else {
+        warn_once!("background: the empty room needs the simulated room's no-robot view");
+        return;
+    };
+    if progress.updates >= EMPTY_ROOM_GIVE_UP
+        && let Some((width, height, rgba)) = progress.last.take()
+    {
+        warn!(
+            "background: the empty room's render did not settle in {EMPTY_ROOM_GIVE_UP} updates; \
+             using the newest capture"
+        );
+        progress.empty_room_done = true;
+        commands.queue(move |world: &mut World| {
+            send_empty_room(world, width, height, rgba);
+        });
         return;
     }
-    let Some(handle) = cameras.and_then(|c| c.no_robot.clone()) else {
-        warn!("background: the empty room needs the simulated room's no-robot view");
+    progress.in_flight = true;
+    commands.spawn(Screenshot::image(handle)).observe(
+        |captured: On<ScreenshotCaptured>,
+         mut commands: Commands,
+         mut progress: ResMut<BackgroundProgress>| {
+            progress.in_flight = false;
+            let image = &captured.image;
+            let Some(rgba) = image.data.clone() else {
+                return;
+            };
+            // A render with no mesh drawn yet is black: not a room.
+            if rgba.chunks_exact(4).all(|px| px[..3] == [0, 0, 0]) {
+                progress.identical = 0;
+                return;
+            }
+            let same = progress
+                .last
+                .as_ref()
+                .is_some_and(|(_, _, last)| *last == rgba);
+            progress.identical = if same { progress.identical + 1 } else { 1 };
+            let (width, height) = (image.width(), image.height());
+            if progress.identical >= SETTLED_CAPTURES && !progress.empty_room_done {
+                progress.empty_room_done = true;
+                commands.queue(move |world: &mut World| {
+                    send_empty_room(world, width, height, rgba);
+                });
+            } else {
+                progress.last = Some((width, height, rgba));
+            }
+        },
+    );
+}
+
+fn send_empty_room(world: &mut World, width: u32, height: u32, mut rgba: Vec<u8>) {
+    let Some(scene) = world.get_resource::<SceneResource>() else {
         return;
     };
     let sensor = scene.0.file.camera.sensor.clone();
     let seed = scene.0.file.seed;
-    commands.spawn(Screenshot::image(handle)).observe(
-        move |captured: On<ScreenshotCaptured>, mut out: MessageWriter<SetBackground>| {
-            let image = &captured.image;
-            let Some(mut rgba) = image.data.clone() else {
-                return;
-            };
-            sensor.apply(&mut rgba, 0.0, &mut Rng::stream(seed, u64::MAX));
-            out.write(SetBackground {
-                rgba: Arc::new(rgba),
-                width: image.width(),
-                height: image.height(),
-                origin: "the simulated empty room".into(),
-            });
-        },
-    );
+    sensor.apply(&mut rgba, 0.0, &mut Rng::stream(seed, u64::MAX));
+    world.write_message(SetBackground {
+        rgba: Arc::new(rgba),
+        width,
+        height,
+        origin: "the simulated empty room".into(),
+    });
 }
 
 fn capture_at(

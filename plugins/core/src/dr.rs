@@ -565,7 +565,10 @@ pub fn link_spheres(model: &RobotModel) -> (Vec<LinkSphere>, Vec<String>) {
                 Shape::Capsule { radius, length } => (o, radius + 0.5 * length),
                 Shape::Sphere { radius } => (o, *radius),
                 Shape::Mesh { path, scale, .. } => {
-                    match crate::mesh::load_mesh(path, scale).ok().and_then(|m| m.bounds()) {
+                    match crate::mesh::load_mesh(path, scale)
+                        .ok()
+                        .and_then(|m| m.bounds())
+                    {
                         Some((lo, hi)) => {
                             let lo = nalgebra::Vector3::new(lo[0], lo[1], lo[2]).cast::<f64>();
                             let hi = nalgebra::Vector3::new(hi[0], hi[1], hi[2]).cast::<f64>();
@@ -624,7 +627,10 @@ pub fn sphere_mask(
         while y <= y1 {
             let dy = y - v;
             let half = (r * r - dy * dy).max(0.0).sqrt();
-            let (x0, x1) = ((u - half).floor().max(0.0), (u + half).ceil().min(w as f64 - 1.0));
+            let (x0, x1) = (
+                (u - half).floor().max(0.0),
+                (u + half).ceil().min(w as f64 - 1.0),
+            );
             if x0 <= x1 {
                 let row = y as usize * w;
                 mask[row + x0 as usize..=row + x1 as usize].fill(1);
@@ -754,11 +760,14 @@ mod tests {
                 exclude[i] = u8::from(i % 2 == 0);
             }
         }
-        let fit = fit_photometric(&view(w, h, &live), &view(w, h, &bg), Some(&exclude), 1)
-            .expect("fit");
+        let fit =
+            fit_photometric(&view(w, h, &live), &view(w, h, &bg), Some(&exclude), 1).expect("fit");
         for c in 0..3 {
             assert!((fit.gain[c] - 1.2).abs() < 0.02, "gain {c}: {fit:?}");
-            assert!((fit.offset[c] - 5.0 / 255.0).abs() < 0.01, "offset {c}: {fit:?}");
+            assert!(
+                (fit.offset[c] - 5.0 / 255.0).abs() < 0.01,
+                "offset {c}: {fit:?}"
+            );
         }
         // Too few usable samples: identity, not garbage.
         let flat = vec![255u8; (w * h * 4) as usize];

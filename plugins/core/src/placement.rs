@@ -109,7 +109,7 @@ pub fn place_twin(
     world_from_object: &Isometry3<f64>,
     depth_v: f64,
 ) -> Result<TwinPlacement> {
-    if !(depth_v > 0.0) {
+    if depth_v.is_nan() || depth_v <= 0.0 {
         return Err(Error::BadSetting {
             what: "object twin placement".into(),
             message: format!("twin depth {depth_v} m must be positive"),
@@ -117,7 +117,7 @@ pub fn place_twin(
     }
     let camera_from_object = real.world_from_camera.inverse() * world_from_object;
     let z = camera_from_object.translation.z;
-    if !(z > 1e-6) {
+    if z.is_nan() || z <= 1e-6 {
         return Err(Error::BadSetting {
             what: "object twin placement".into(),
             message: format!("the object is behind the real camera (depth {z:.3} m)"),
@@ -270,7 +270,8 @@ mod tests {
         let behind = Isometry3::translation(0.0, 0.0, -1.0);
         let e = place_twin(&cam, &behind, 0.5).expect_err("behind");
         assert!(e.to_string().contains("behind the real camera"));
-        let ahead = Isometry3::from_parts(Translation3::from(Vector3::z()), UnitQuaternion::identity());
+        let ahead =
+            Isometry3::from_parts(Translation3::from(Vector3::z()), UnitQuaternion::identity());
         assert!(place_twin(&cam, &ahead, f64::NAN).is_err());
     }
 }

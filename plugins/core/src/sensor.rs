@@ -37,6 +37,20 @@ impl SensorModel {
         self.noise_sigma <= 0.0 && self.exposure.iter().all(|k| k[1] == 1.0)
     }
 
+    /// Applies only the exposure gain at `t_s` (no noise): the view a noiseless camera would
+    /// give, used for ground truth under changing exposure.
+    pub fn apply_gain(&self, rgba: &mut [u8], t_s: f64) {
+        let gain = self.gain_at(t_s);
+        if gain == 1.0 {
+            return;
+        }
+        for px in rgba.chunks_exact_mut(4) {
+            for c in &mut px[..3] {
+                *c = (f64::from(*c) * gain).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+
     /// Applies gain and noise in place to RGBA8 pixels (alpha untouched); `rng` should be seeded
     /// per frame so that frames are reproducible independently.
     pub fn apply(&self, rgba: &mut [u8], t_s: f64, rng: &mut Rng) {

@@ -76,6 +76,10 @@ pub struct EraseConfig {
     pub base: Isometry3<f64>,
     /// The twin that receives the robot's joint states (its history drives the mask twin).
     pub source_twin: Option<Entity>,
+    /// Known static things that can hide the robot from the camera (the desk): drawn black in
+    /// the mask camera so that M(t) follows the robot's *visible* pixels. Meshes with their
+    /// world transforms.
+    pub occluders: Vec<(Mesh, Transform)>,
 }
 
 /// Images of the pipeline, all at the camera's size except `raw`.
@@ -141,7 +145,10 @@ impl EraseState {
     /// Inputs of the stage that is `lag` updates behind the mask camera (0 = the mask camera,
     /// 1 = threshold pass, [`PIPELINE_LAG`] = composite), when the pipeline is that full.
     pub fn stage(&self, lag: usize) -> Option<&StageInputs> {
-        self.stages.len().checked_sub(1 + lag).and_then(|i| self.stages.get(i))
+        self.stages
+            .len()
+            .checked_sub(1 + lag)
+            .and_then(|i| self.stages.get(i))
     }
 }
 
@@ -412,6 +419,20 @@ fn setup(
         error!("mask twin: {e}");
     }
     commands.insert_resource(MaskTwin(twin.root));
+    let black = std_materials.add(StandardMaterial {
+        base_color: Color::BLACK,
+        unlit: true,
+        ..default()
+    });
+    for (mesh, transform) in &config.occluders {
+        commands.spawn((
+            Name::new("mask occluder"),
+            Mesh3d(meshes.add(mesh.clone())),
+            MeshMaterial3d(black.clone()),
+            *transform,
+            RenderLayers::layer(layers::MASK_TWIN),
+        ));
+    }
 
     let raw = images.add(target_image(raw_k.width, raw_k.height));
     let mask = images.add(target_image(k.width, k.height));
@@ -596,13 +617,7 @@ fn prepare_frame(
         if state.frames_refused % 100 == 1 {
             error!(
                 "video source '{}': frame {} is {}x{} but the camera is calibrated at {}x{}; frame ignored ({} so far)",
-                live.source,
-                f.index,
-                f.width,
-                f.height,
-                k.width,
-                k.height,
-                state.frames_refused
+                live.source, f.index, f.width, f.height, k.width, k.height, state.frames_refused
             );
         }
         return;
@@ -650,9 +665,8 @@ fn prepare_frame(
             let poses = config.model.forward_kinematics(&config.base, &q);
             let margin = f64::from(s.mask_radius()) + 6.0;
             let region = dr::sphere_mask(&config.camera, &poses, &spheres.0, margin);
-            let views = RgbaView::new("live frame", k.width, k.height, &f.rgba).and_then(|l| {
-                RgbaView::new("background", k.width, k.height, &bg).map(|b| (l, b))
-            });
+            let views = RgbaView::new("live frame", k.width, k.height, &f.rgba)
+                .and_then(|l| RgbaView::new("background", k.width, k.height, &bg).map(|b| (l, b)));
             match views {
                 Ok((l, b)) => {
                     if s.photometric {
@@ -736,12 +750,18 @@ mod tests {
         h.push(0.15, &v(9.0), &v(9.0)); // out of order: ignored
         assert_eq!(h.states.len(), 3);
         let q = h.at(0.15).expect("inside")[0];
-        assert!((q - 0.0225).abs() < 1e-12, "Hermite is exact on a quadratic: {q}");
+        assert!(
+            (q - 0.0225).abs() < 1e-12,
+            "Hermite is exact on a quadratic: {q}"
+        );
         let q = h.at(0.3).expect("ahead")[0];
         assert!((q - (0.04 + 0.4 * 0.1)).abs() < 1e-12);
         assert_eq!(h.at(-1.0).expect("before")[0], 0.0);
         let far = h.at(10.0).expect("ahead")[0];
-        assert!((far - (0.04 + 0.4 * 0.25)).abs() < 1e-12, "capped at 0.25 s");
+        assert!(
+            (far - (0.04 + 0.4 * 0.25)).abs() < 1e-12,
+            "capped at 0.25 s"
+        );
         assert!(JointHistory::default().at(0.0).is_none());
     }
 }

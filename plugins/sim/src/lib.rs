@@ -7,18 +7,18 @@
 use std::sync::Arc;
 
 use avatarm_core::camera::PinholeCamera;
-use avatarm_core::robot::RobotModel;
-use avatarm_core::sim::{JointCommand, SimRobot, SimRobotParams};
 use avatarm_core::rng::Rng;
+use avatarm_core::robot::RobotModel;
 use avatarm_core::sensor::SensorModel;
+use avatarm_core::sim::{JointCommand, SimRobot, SimRobotParams};
 use avatarm_core::trajectory::JointTrajectory;
-use avatarm_video::{VideoFrame, VideoInbox};
-use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 pub use avatarm_twin::camera::{spawn_pinhole_camera, target_image};
 use avatarm_twin::prelude::*;
 use avatarm_twin::{TwinEntities, TwinMeshCache, layers};
+use avatarm_video::{VideoFrame, VideoInbox};
 use bevy::camera::visibility::RenderLayers;
 use bevy::prelude::*;
+use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 use nalgebra::{DVector, Isometry3};
 use serde::{Deserialize, Serialize};
 
@@ -431,28 +431,30 @@ fn capture_video(
     let index = counter.0;
     counter.0 += 1;
     let capture_s = robot.0.time_s();
-    commands.spawn(Screenshot::image(cameras.real.clone())).observe(
-        move |captured: On<ScreenshotCaptured>, mut inbox: ResMut<VideoInbox>| {
-            let image = &captured.image;
-            let (width, height) = (image.width(), image.height());
-            let Some(mut rgba) = image.data.clone() else {
-                error!("simulated camera: frame {index} came back without pixels");
-                return;
-            };
-            video
-                .sensor
-                .apply(&mut rgba, capture_s, &mut Rng::stream(video.seed, index));
-            let frame = VideoFrame {
-                index,
-                capture_s,
-                arrival_s: capture_s + video.frame_latency_s,
-                width,
-                height,
-                rgba: Arc::new(rgba),
-            };
-            if let Err(e) = inbox.push(frame) {
-                error!("simulated camera: {e}");
-            }
-        },
-    );
+    commands
+        .spawn(Screenshot::image(cameras.real.clone()))
+        .observe(
+            move |captured: On<ScreenshotCaptured>, mut inbox: ResMut<VideoInbox>| {
+                let image = &captured.image;
+                let (width, height) = (image.width(), image.height());
+                let Some(mut rgba) = image.data.clone() else {
+                    error!("simulated camera: frame {index} came back without pixels");
+                    return;
+                };
+                video
+                    .sensor
+                    .apply(&mut rgba, capture_s, &mut Rng::stream(video.seed, index));
+                let frame = VideoFrame {
+                    index,
+                    capture_s,
+                    arrival_s: capture_s + video.frame_latency_s,
+                    width,
+                    height,
+                    rgba: Arc::new(rgba),
+                };
+                if let Err(e) = inbox.push(frame) {
+                    error!("simulated camera: {e}");
+                }
+            },
+        );
 }

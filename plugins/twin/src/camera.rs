@@ -1,12 +1,12 @@
 //! A Bevy camera projection built from pinhole intrinsics.
 
 use avatarm_core::camera::PinholeCamera;
-use bevy::camera::{CameraProjection, SubCameraView};
-use bevy::math::Vec3A;
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::RenderTarget;
 use bevy::camera::visibility::RenderLayers;
+use bevy::camera::{CameraProjection, SubCameraView};
 use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
+use bevy::math::Vec3A;
 use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat, TextureUsages};
 use bevy::render::view::Msaa;

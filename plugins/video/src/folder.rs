@@ -69,8 +69,7 @@ impl FolderSource {
                 line: i + 1,
                 message,
             };
-            if line.is_empty() || line.starts_with('#') || (i == 0 && line.starts_with("file"))
-            {
+            if line.is_empty() || line.starts_with('#') || (i == 0 && line.starts_with("file")) {
                 continue;
             }
             let (file, t) = line
@@ -219,13 +218,26 @@ mod tests {
         image::RgbaImage::new(2, 2)
             .save(dir.join("a.png"))
             .expect("png");
-        std::fs::write(dir.join("timestamps.csv"), "file,capture_s\na.png,1\na.png,0.5\n")
-            .expect("write");
+        std::fs::write(
+            dir.join("timestamps.csv"),
+            "file,capture_s\na.png,1\na.png,0.5\n",
+        )
+        .expect("write");
         let e = FolderSource::open(&dir).expect_err("not increasing");
         assert!(e.to_string().contains(":3:"), "{e}");
         std::fs::write(dir.join("timestamps.csv"), "file,capture_s\nz.png,1\n").expect("write");
-        assert!(FolderSource::open(&dir).expect_err("missing").to_string().contains("z.png"));
+        assert!(
+            FolderSource::open(&dir)
+                .expect_err("missing")
+                .to_string()
+                .contains("z.png")
+        );
         std::fs::write(dir.join("timestamps.csv"), "file,capture_s\na.png,abc\n").expect("write");
-        assert!(FolderSource::open(&dir).expect_err("nan").to_string().contains("abc"));
+        assert!(
+            FolderSource::open(&dir)
+                .expect_err("nan")
+                .to_string()
+                .contains("abc")
+        );
     }
 }
