@@ -5,6 +5,7 @@
 //! ([`replay`]) and the `avatarm robot` description check ([`robot_info`]). The binary
 //! `avatarm` is a thin command line over these.
 
+pub mod bench;
 pub mod preview;
 pub mod replay;
 pub mod robot_info;

@@ -1,11 +1,12 @@
-//! `avatarm`: the command line (robot check, desktop preview, headless replay).
+//! `avatarm`: the command line (robot check, desktop preview, headless replay, benches).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+use avatarm::bench::{self, DrSweep};
 use avatarm::preview::PreviewOptions;
 use avatarm::replay::ReplayOptions;
-use avatarm::scene::Scene;
+use avatarm::scene::{EraseOverrides, Scene};
 use avatarm::{Mode, build_app, robot_info};
 use avatarm_core::robot::{PackagePath, RobotModel};
 use clap::{Parser, Subcommand};
@@ -52,6 +53,8 @@ enum Command {
         /// Folder searched for package:// URIs (repeatable).
         #[arg(long = "package-path", value_name = "DIR")]
         package_path: Vec<PathBuf>,
+        #[command(flatten)]
+        overrides: EraseOverrides,
     },
     /// Replay a scene without a window: frames, ground truth and report.json in --out.
     Replay {
@@ -69,7 +72,51 @@ enum Command {
         /// Folder searched for package:// URIs (repeatable).
         #[arg(long = "package-path", value_name = "DIR")]
         package_path: Vec<PathBuf>,
+        #[command(flatten)]
+        overrides: EraseOverrides,
     },
+    /// Measure speed against accuracy and chart it.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+#[derive(Subcommand, Debug)]
+enum BenchCommand {
+    /// Sweep the erase pipeline's settings on a scene (default: the pouring scene) and chart
+    /// frame cost against leak and PSNR: DIR/dr_speed_accuracy.{svg,png,csv}.
+    Dr {
+        /// The scene file.
+        scene: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long, value_name = "DIR", default_value = "out/bench_dr")]
+        out: PathBuf,
+        /// Mask resolution scales.
+        #[arg(long, value_delimiter = ',', default_values_t = [1.0, 0.5, 0.25])]
+        scales: Vec<f64>,
+        /// Dilations (px).
+        #[arg(long, value_delimiter = ',', default_values_t = [0, 4])]
+        dilate: Vec<u32>,
+        /// Feathering widths (px).
+        #[arg(long, value_delimiter = ',', default_values_t = [0, 2])]
+        feather: Vec<u32>,
+        /// Latency compensation settings (off, on).
+        #[arg(long, value_delimiter = ',', value_parser = on_off_arg, default_values_t = [false, true])]
+        latency: Vec<bool>,
+        /// Simulated seconds replayed per setting.
+        #[arg(long, value_name = "S", default_value_t = 1.5)]
+        duration: f64,
+        /// Folder searched for package:// URIs (repeatable).
+        #[arg(long = "package-path", value_name = "DIR")]
+        package_path: Vec<PathBuf>,
+    },
+}
+
+fn on_off_arg(s: &str) -> Result<bool, String> {
+    match s {
+        "on" | "true" => Ok(true),
+        "off" | "false" => Ok(false),
+        _ => Err(format!("'{s}': expected on or off")),
+    }
 }
 
 fn packages(dirs: Vec<PathBuf>) -> PackagePath {
@@ -133,9 +180,12 @@ fn run(cli: Cli) -> Result<(), String> {
             frames,
             screenshot,
             package_path,
+            overrides,
         } => {
             let path = scene.unwrap_or_else(default_scene);
-            let scene = Scene::load(&path, &packages(package_path)).map_err(|e| e.to_string())?;
+            let mut scene =
+                Scene::load(&path, &packages(package_path)).map_err(|e| e.to_string())?;
+            scene.apply_overrides(&overrides)?;
             let mode = Mode::Preview(PreviewOptions {
                 frames,
                 screenshot,
@@ -154,8 +204,11 @@ fn run(cli: Cli) -> Result<(), String> {
             out,
             frames_every,
             package_path,
+            overrides,
         } => {
-            let scene = Scene::load(&scene, &packages(package_path)).map_err(|e| e.to_string())?;
+            let mut scene =
+                Scene::load(&scene, &packages(package_path)).map_err(|e| e.to_string())?;
+            scene.apply_overrides(&overrides)?;
             let mut options = ReplayOptions::new(out.clone());
             options.frames_every = frames_every;
             options.progress = true;
@@ -168,6 +221,59 @@ fn run(cli: Cli) -> Result<(), String> {
                 report["wall_time_s"].as_f64().unwrap_or(0.0),
                 report["sim_s_per_wall_s"].as_f64().unwrap_or(0.0),
                 out.join("report.json").display()
+            );
+            Ok(())
+        }
+        Command::Bench(BenchCommand::Dr {
+            scene,
+            out,
+            scales,
+            dilate,
+            feather,
+            latency,
+            duration,
+            package_path,
+        }) => {
+            let path = scene.unwrap_or_else(default_scene);
+            let scene = Scene::load(&path, &packages(package_path)).map_err(|e| e.to_string())?;
+            let sweep = DrSweep {
+                scales,
+                dilate,
+                feather,
+                latency,
+                duration_s: duration,
+                progress: true,
+            };
+            let outputs = bench::run_dr(&scene, &sweep, &out)?;
+            let base = &outputs.points[outputs.baseline];
+            println!(
+                "{:<22} {:>9} {:>7} {:>8} {:>8} {:>8}  front",
+                "setting", "frame ms", "ratio", "leak %", "over %", "PSNR dB"
+            );
+            for p in &outputs.points {
+                let front = match (p.pareto_leak, p.pareto_psnr) {
+                    (true, true) => "leak, PSNR",
+                    (true, false) => "leak",
+                    (false, true) => "PSNR",
+                    (false, false) => "",
+                };
+                println!(
+                    "{:<22} {:>9.1} {:>7.3} {:>8.3} {:>8.2} {:>8.2}  {front}",
+                    p.label,
+                    p.frame_ms_median,
+                    p.frame_cost_ratio,
+                    p.leak_pct_mean,
+                    p.overmask_pct_mean,
+                    p.psnr_db_mean
+                );
+            }
+            println!(
+                "ratios against '{}' ({:.1} ms) of the same run; wrote {}, {}, {}",
+                base.label,
+                base.frame_ms_median,
+                outputs.csv.display(),
+                outputs.svg.display(),
+                outputs.png.display()
             );
             Ok(())
         }

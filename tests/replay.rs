@@ -493,3 +493,49 @@ fn dilation_covers_calibration_error() {
         "{table:?}"
     );
 }
+
+/// `avatarm bench dr` on a two-point sweep: table, chart and fronts, and a coarser mask that
+/// does cost accuracy.
+#[test]
+fn bench_dr_writes_the_chart_and_the_table() {
+    let out = out_dir("bench_dr");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["bench", "dr", "--out"])
+        .arg(&out)
+        .args([
+            "--scales",
+            "1,0.25",
+            "--dilate",
+            "0",
+            "--feather",
+            "0",
+            "--latency",
+            "on",
+            "--duration",
+            "0.6",
+        ])
+        .output()
+        .expect("runs avatarm");
+    let stdout = String::from_utf8_lossy(&status.stdout);
+    assert!(
+        status.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&status.stderr)
+    );
+    assert!(stdout.contains("ratios against 'x1 d0 f0 LC'"), "{stdout}");
+    let csv = std::fs::read_to_string(out.join("dr_speed_accuracy.csv")).expect("csv");
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 2, "{csv}");
+    let leak = |r: &[&str]| r[11].parse::<f64>().expect("leak");
+    assert!(leak(&rows[1]) > leak(&rows[0]) + 0.5, "{csv}");
+    // The full-resolution point is the least leaky, so it is on the leak front.
+    assert_eq!(rows[0][15], "true", "{csv}");
+    let svg = std::fs::read_to_string(out.join("dr_speed_accuracy.svg")).expect("svg");
+    assert!(svg.contains("Pareto front"));
+    let png = image::open(out.join("dr_speed_accuracy.png")).expect("png");
+    assert!(png.width() >= 800);
+}

@@ -1,0 +1,533 @@
+//! `avatarm bench dr`: the erase pipeline's cost against its accuracy. Each setting of the
+//! sweep (mask resolution scale × dilation × feathering × latency compensation) is a headless
+//! replay of the scene scored against the simulated room's ground truth; the table goes to CSV
+//! and the chart (cost against leak and against PSNR, Pareto fronts marked) to SVG and PNG.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use serde::Serialize;
+
+use crate::replay::{self, ReplayOptions};
+use crate::scene::Scene;
+
+/// What `bench dr` sweeps; every combination is one point.
+#[derive(Debug, Clone)]
+pub struct DrSweep {
+    /// Mask render resolution scales.
+    pub scales: Vec<f64>,
+    /// Dilations (px).
+    pub dilate: Vec<u32>,
+    /// Feathering widths (px).
+    pub feather: Vec<u32>,
+    /// Latency compensation off and/or on.
+    pub latency: Vec<bool>,
+    /// Simulated seconds replayed per point.
+    pub duration_s: f64,
+    /// Show a progress bar.
+    pub progress: bool,
+}
+
+impl Default for DrSweep {
+    fn default() -> Self {
+        Self {
+            scales: vec![1.0, 0.5, 0.25],
+            dilate: vec![0, 4],
+            feather: vec![0, 2],
+            latency: vec![false, true],
+            duration_s: 1.5,
+            progress: false,
+        }
+    }
+}
+
+/// One setting and what it measured.
+#[derive(Debug, Clone, Serialize)]
+pub struct DrPoint {
+    /// Short name of the setting.
+    pub label: String,
+    /// Mask resolution scale.
+    pub resolution_scale: f64,
+    /// Dilation (px).
+    pub dilate_px: u32,
+    /// Feathering (px).
+    pub feather_px: u32,
+    /// Latency compensation.
+    pub latency_compensation: bool,
+    /// Median wall time of one app update (all cameras and passes), ms.
+    pub frame_ms_median: f64,
+    /// 95th percentile of the same, ms.
+    pub frame_ms_p95: f64,
+    /// `frame_ms_median` over that of the baseline setting of the same run.
+    pub frame_cost_ratio: f64,
+    /// Median CPU reference threshold + dilation time, ms.
+    pub cpu_mask_ms: f64,
+    /// Median CPU reference feather + composite time, ms.
+    pub cpu_composite_ms: f64,
+    /// Mean IoU of the mask with the true silhouette.
+    pub iou_mean: f64,
+    /// Mean leak, % of robot pixels.
+    pub leak_pct_mean: f64,
+    /// Worst leak, % of robot pixels.
+    pub leak_pct_max: f64,
+    /// Mean over-masking, % of robot pixels.
+    pub overmask_pct_mean: f64,
+    /// Mean PSNR in the true robot region, dB.
+    pub psnr_db_mean: f64,
+    /// On the cost/leak Pareto front.
+    pub pareto_leak: bool,
+    /// On the cost/PSNR Pareto front.
+    pub pareto_psnr: bool,
+}
+
+/// What the sweep wrote.
+#[derive(Debug, Clone)]
+pub struct DrOutputs {
+    /// The points, in sweep order.
+    pub points: Vec<DrPoint>,
+    /// Index of the baseline point (full resolution, no dilation, no feathering, no
+    /// compensation: the paper's setting) when swept, else the first.
+    pub baseline: usize,
+    /// The raw table.
+    pub csv: PathBuf,
+    /// The chart.
+    pub svg: PathBuf,
+    /// The chart as an image.
+    pub png: PathBuf,
+}
+
+/// Runs the sweep on `scene`, writing into `out` (one replay folder per point under `runs/`).
+pub fn run_dr(scene: &Scene, sweep: &DrSweep, out: &Path) -> Result<DrOutputs, String> {
+    if !(sweep.duration_s.is_finite() && sweep.duration_s > 0.0) {
+        return Err(format!("--duration {} must be > 0", sweep.duration_s));
+    }
+    let settings: Vec<(f64, u32, u32, bool)> = sweep
+        .scales
+        .iter()
+        .flat_map(|&s| {
+            sweep.dilate.iter().flat_map(move |&d| {
+                sweep
+                    .feather
+                    .iter()
+                    .flat_map(move |&f| sweep.latency.iter().map(move |&l| (s, d, f, l)))
+            })
+        })
+        .collect();
+    if settings.is_empty() {
+        return Err("the sweep is empty: every axis needs at least one value".into());
+    }
+    // Fail on a bad value before minutes of replays.
+    for &(s, d, f, l) in &settings {
+        let mut e = scene.file.erase;
+        (
+            e.resolution_scale,
+            e.dilate_px,
+            e.feather_px,
+            e.latency_compensation,
+        ) = (s, d, f, l);
+        e.validate("bench dr").map_err(|e| e.to_string())?;
+    }
+    // Fonts before the replays, for the same reason.
+    register_font()?;
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
+    let bar = if sweep.progress {
+        let bar = ProgressBar::new(settings.len() as u64);
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} eta {eta} {msg}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        bar.set_prefix(format!("bench dr {}", scene.file.name));
+        bar
+    } else {
+        ProgressBar::hidden()
+    };
+    let mut points = Vec::with_capacity(settings.len());
+    for (s, d, f, l) in settings {
+        let label = format!("x{s} d{d} f{f} {}", if l { "LC" } else { "noLC" });
+        bar.set_message(label.clone());
+        let mut run = scene.clone();
+        run.file.duration_s = sweep.duration_s;
+        let e = &mut run.file.erase;
+        (
+            e.resolution_scale,
+            e.dilate_px,
+            e.feather_px,
+            e.latency_compensation,
+        ) = (s, d, f, l);
+        let dir = out
+            .join("runs")
+            .join(label.replace(' ', "_").replace('.', "p"));
+        let mut options = ReplayOptions::new(dir);
+        options.frames_every = u32::MAX;
+        let report = replay::run(&run, options).map_err(|e| format!("{label}: {e}"))?;
+        let num = |path: &str| -> Result<f64, String> {
+            path.split('.')
+                .fold(&report, |v, k| &v[k])
+                .as_f64()
+                .ok_or_else(|| format!("{label}: the replay's report has no {path}"))
+        };
+        points.push(DrPoint {
+            label: label.clone(),
+            resolution_scale: s,
+            dilate_px: d,
+            feather_px: f,
+            latency_compensation: l,
+            frame_ms_median: num("timing_ms.frame.median")?,
+            frame_ms_p95: num("timing_ms.frame.p95")?,
+            frame_cost_ratio: 1.0,
+            cpu_mask_ms: num("timing_ms.mask.median")?,
+            cpu_composite_ms: num("timing_ms.composite.median")?,
+            iou_mean: num("mask.iou_mean")?,
+            leak_pct_mean: num("mask.leak_pct_mean")?,
+            leak_pct_max: num("mask.leak_pct_max")?,
+            overmask_pct_mean: num("mask.overmask_pct_mean")?,
+            psnr_db_mean: num("dr.psnr_robot_db_mean")?,
+            pareto_leak: false,
+            pareto_psnr: false,
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let baseline = points
+        .iter()
+        .position(|p| {
+            p.resolution_scale == 1.0
+                && p.dilate_px == 0
+                && p.feather_px == 0
+                && !p.latency_compensation
+        })
+        .unwrap_or(0);
+    let base_ms = points[baseline].frame_ms_median;
+    for p in &mut points {
+        p.frame_cost_ratio = p.frame_ms_median / base_ms;
+    }
+    let cost: Vec<f64> = points.iter().map(|p| p.frame_ms_median).collect();
+    let leak: Vec<f64> = points.iter().map(|p| p.leak_pct_mean).collect();
+    let psnr: Vec<f64> = points.iter().map(|p| -p.psnr_db_mean).collect();
+    let (front_leak, front_psnr) = (pareto_front(&cost, &leak), pareto_front(&cost, &psnr));
+    for (i, p) in points.iter_mut().enumerate() {
+        p.pareto_leak = front_leak[i];
+        p.pareto_psnr = front_psnr[i];
+    }
+    let csv = out.join("dr_speed_accuracy.csv");
+    write_csv(&csv, &points)?;
+    let svg = out.join("dr_speed_accuracy.svg");
+    let png = out.join("dr_speed_accuracy.png");
+    let title = format!(
+        "Erase pipeline: cost against accuracy ({}, {} s per setting)",
+        scene.file.name, sweep.duration_s
+    );
+    plot(&points, &title, &svg, &png)?;
+    Ok(DrOutputs {
+        points,
+        baseline,
+        csv,
+        svg,
+        png,
+    })
+}
+
+/// Marks the points no other point beats on both axes (lower is better on each): no other
+/// point is at most as costly and at most as bad with one of the two strictly lower.
+/// Non-finite points are never on the front.
+pub fn pareto_front(cost: &[f64], bad: &[f64]) -> Vec<bool> {
+    let ok = |i: usize| cost[i].is_finite() && bad[i].is_finite();
+    (0..cost.len())
+        .map(|i| {
+            ok(i)
+                && !(0..cost.len()).any(|j| {
+                    j != i
+                        && ok(j)
+                        && cost[j] <= cost[i]
+                        && bad[j] <= bad[i]
+                        && (cost[j] < cost[i] || bad[j] < bad[i])
+                })
+        })
+        .collect()
+}
+
+const CSV_HEADER: &str = "label,resolution_scale,dilate_px,feather_px,latency_compensation,\
+frame_ms_median,frame_ms_p95,frame_cost_ratio,cpu_mask_ms,cpu_composite_ms,iou_mean,\
+leak_pct_mean,leak_pct_max,overmask_pct_mean,psnr_db_mean,pareto_leak,pareto_psnr";
+
+fn write_csv(path: &Path, points: &[DrPoint]) -> Result<(), String> {
+    let mut text = String::from(CSV_HEADER);
+    text.push('\n');
+    for p in points {
+        text.push_str(&format!(
+            "{},{},{},{},{},{:.3},{:.3},{:.4},{:.4},{:.4},{:.5},{:.5},{:.5},{:.5},{:.3},{},{}\n",
+            p.label,
+            p.resolution_scale,
+            p.dilate_px,
+            p.feather_px,
+            p.latency_compensation,
+            p.frame_ms_median,
+            p.frame_ms_p95,
+            p.frame_cost_ratio,
+            p.cpu_mask_ms,
+            p.cpu_composite_ms,
+            p.iou_mean,
+            p.leak_pct_mean,
+            p.leak_pct_max,
+            p.overmask_pct_mean,
+            p.psnr_db_mean,
+            p.pareto_leak,
+            p.pareto_psnr
+        ));
+    }
+    std::fs::write(path, text).map_err(|e| format!("{}: cannot write: {e}", path.display()))
+}
+
+/// Font files tried for chart text, first found wins; `AVATARM_FONT` goes first.
+const FONT_FILES: [&str; 3] = [
+    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/TTF/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+];
+
+/// Registers a system font as plotters' "sans-serif" (once per process).
+fn register_font() -> Result<(), String> {
+    static DONE: OnceLock<Result<(), String>> = OnceLock::new();
+    DONE.get_or_init(|| {
+        let env = std::env::var_os("AVATARM_FONT").map(PathBuf::from);
+        let candidates = env.into_iter().chain(FONT_FILES.iter().map(PathBuf::from));
+        for path in candidates {
+            let Ok(bytes) = std::fs::read(&path) else {
+                continue;
+            };
+            let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+            return plotters::style::register_font("sans-serif", FontStyle::Normal, bytes)
+                .map_err(|_| format!("{}: not a usable TrueType font", path.display()));
+        }
+        Err(format!(
+            "no font for the chart's text: install fonts-dejavu-core (looked for {}) or set \
+             AVATARM_FONT to a .ttf file",
+            FONT_FILES.join(", ")
+        ))
+    })
+    .clone()
+}
+
+const CHART_SIZE: (u32, u32) = (1400, 620);
+
+/// Draws the chart to `svg` and `png`.
+pub fn plot(points: &[DrPoint], title: &str, svg: &Path, png: &Path) -> Result<(), String> {
+    register_font()?;
+    draw(
+        SVGBackend::new(svg, CHART_SIZE).into_drawing_area(),
+        points,
+        title,
+    )
+    .map_err(|e| format!("{}: {e}", svg.display()))?;
+    let (w, h) = CHART_SIZE;
+    let mut buf = vec![0u8; (w * h * 3) as usize];
+    draw(
+        BitMapBackend::with_buffer(&mut buf, CHART_SIZE).into_drawing_area(),
+        points,
+        title,
+    )
+    .map_err(|e| format!("{}: {e}", png.display()))?;
+    image::RgbImage::from_raw(w, h, buf)
+        .ok_or_else(|| "chart buffer has the wrong size".to_string())?
+        .save(png)
+        .map_err(|e| format!("{}: cannot write: {e}", png.display()))
+}
+
+fn draw<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    points: &[DrPoint],
+    title: &str,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    root.fill(&WHITE).map_err(err)?;
+    let root = root.titled(title, ("sans-serif", 24)).map_err(err)?;
+    let (left, right) = root.split_horizontally(CHART_SIZE.0 / 2);
+    panel(
+        &left,
+        points,
+        "leak, % of robot pixels (lower is better)",
+        |p| p.leak_pct_mean,
+        |p| p.pareto_leak,
+        SeriesLabelPosition::UpperRight,
+    )?;
+    panel(
+        &right,
+        points,
+        "PSNR in the robot region, dB (higher is better)",
+        |p| p.psnr_db_mean,
+        |p| p.pareto_psnr,
+        SeriesLabelPosition::LowerRight,
+    )?;
+    root.present().map_err(err)
+}
+
+fn panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    points: &[DrPoint],
+    y_desc: &str,
+    y: impl Fn(&DrPoint) -> f64,
+    front: impl Fn(&DrPoint) -> bool,
+    legend: SeriesLabelPosition,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let finite: Vec<&DrPoint> = points
+        .iter()
+        .filter(|p| p.frame_ms_median.is_finite() && y(p).is_finite())
+        .collect();
+    let range = |v: &mut dyn Iterator<Item = f64>| {
+        let (lo, hi) = v.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+            (a.min(x), b.max(x))
+        });
+        if !lo.is_finite() {
+            return (0.0, 1.0);
+        }
+        let pad = ((hi - lo) * 0.12).max(hi.abs() * 0.02).max(1e-3);
+        (lo - pad, hi + pad)
+    };
+    let (x0, x1) = range(&mut finite.iter().map(|p| p.frame_ms_median));
+    let (y0, y1) = range(&mut finite.iter().map(|p| y(p)));
+    let mut chart = ChartBuilder::on(area)
+        .margin(18)
+        .x_label_area_size(48)
+        .y_label_area_size(64)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("frame cost, ms (median wall time per update)")
+        .y_desc(y_desc)
+        .label_style(("sans-serif", 14))
+        .axis_desc_style(("sans-serif", 16))
+        .draw()
+        .map_err(err)?;
+    let mut on_front: Vec<&DrPoint> = finite.iter().copied().filter(|p| front(p)).collect();
+    on_front.sort_by(|a, b| a.frame_ms_median.total_cmp(&b.frame_ms_median));
+    chart
+        .draw_series(LineSeries::new(
+            on_front.iter().map(|p| (p.frame_ms_median, y(p))),
+            RED.stroke_width(2),
+        ))
+        .map_err(err)?
+        .label("Pareto front")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], RED.stroke_width(2)));
+    for (on, color, name) in [
+        (false, RGBColor(230, 130, 20), "latency compensation off"),
+        (true, RGBColor(30, 90, 200), "latency compensation on"),
+    ] {
+        chart
+            .draw_series(
+                finite
+                    .iter()
+                    .filter(|p| p.latency_compensation == on)
+                    .map(|p| Circle::new((p.frame_ms_median, y(p)), 5, color.filled())),
+            )
+            .map_err(err)?
+            .label(name)
+            .legend(move |(x, y)| Circle::new((x + 9, y), 5, color.filled()));
+    }
+    chart
+        .draw_series(
+            on_front
+                .iter()
+                .map(|p| Circle::new((p.frame_ms_median, y(p)), 9, RED.stroke_width(2))),
+        )
+        .map_err(err)?;
+    chart
+        .draw_series(on_front.iter().map(|p| {
+            EmptyElement::at((p.frame_ms_median, y(p)))
+                + Text::new(
+                    p.label.clone(),
+                    (10, -18),
+                    ("sans-serif", 13).into_font().color(&BLACK),
+                )
+        }))
+        .map_err(err)?;
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 14))
+        .position(legend)
+        .draw()
+        .map_err(err)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pareto_front_keeps_the_undominated_points() {
+        let cost = [1.0, 2.0, 3.0, 2.0, 4.0, f64::NAN];
+        let bad = [5.0, 3.0, 1.0, 4.0, 1.0, 0.0];
+        // (2, 4) is beaten by (2, 3); (4, 1) by (3, 1); NaN never counts.
+        assert_eq!(
+            pareto_front(&cost, &bad),
+            [true, true, true, false, false, false]
+        );
+        // Equal points do not dominate each other.
+        assert_eq!(pareto_front(&[1.0, 1.0], &[2.0, 2.0]), [true, true]);
+    }
+
+    fn point(label: &str, ms: f64, leak: f64, psnr: f64, lc: bool) -> DrPoint {
+        DrPoint {
+            label: label.into(),
+            resolution_scale: 1.0,
+            dilate_px: 0,
+            feather_px: 0,
+            latency_compensation: lc,
+            frame_ms_median: ms,
+            frame_ms_p95: ms,
+            frame_cost_ratio: 1.0,
+            cpu_mask_ms: 0.1,
+            cpu_composite_ms: 1.0,
+            iou_mean: 0.99,
+            leak_pct_mean: leak,
+            leak_pct_max: leak,
+            overmask_pct_mean: 0.1,
+            psnr_db_mean: psnr,
+            pareto_leak: true,
+            pareto_psnr: lc,
+        }
+    }
+
+    #[test]
+    fn chart_and_table_are_written() {
+        let dir = std::env::temp_dir().join(format!("avatarm_chart_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let points = [
+            point("a", 100.0, 2.0, 30.0, false),
+            point("b", 120.0, 0.5, 40.0, true),
+            point("c", 90.0, f64::NAN, 20.0, true),
+        ];
+        let (svg, png) = (dir.join("c.svg"), dir.join("c.png"));
+        plot(&points, "test chart", &svg, &png).expect("plot");
+        let text = std::fs::read_to_string(&svg).expect("svg");
+        assert!(
+            text.contains("<svg") && text.contains("Pareto front"),
+            "{text}"
+        );
+        let img = image::open(&png).expect("png").to_rgb8();
+        assert_eq!(img.dimensions(), CHART_SIZE);
+        // Not blank: the points and the front are drawn in colour.
+        assert!(img.pixels().any(|p| p.0 == [255, 0, 0]));
+        let csv = dir.join("t.csv");
+        write_csv(&csv, &points).expect("csv");
+        let table = std::fs::read_to_string(&csv).expect("csv");
+        assert_eq!(table.lines().count(), 4);
+        assert_eq!(table.lines().next().map(|l| l.split(',').count()), Some(17));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
