@@ -37,7 +37,9 @@ enum Command {
     },
     /// Open the desktop preview of a scene (default: assets/scenes/default.toml).
     ///
-    /// Keys: Esc quits, F12 saves a screenshot.
+    /// Keys: V cycles the panel (interaction view, camera feed, mask), E switches erasure on
+    /// and off, B captures the background from the live frame, F12 saves a screenshot, Esc
+    /// quits.
     Run {
         /// The scene file.
         scene: Option<PathBuf>,

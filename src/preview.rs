@@ -1,9 +1,18 @@
-//! The desktop preview: the simulated camera feed beside a 3-D view of the robot twin.
+//! The desktop preview: what the remote user sees (the interaction view Ĩ(t) with the robot
+//! erased and the object twins in front), or the raw camera feed, or the mask, beside a 3-D
+//! view of the robot twin.
+//!
+//! Keys: V cycles the panel (interaction view, camera feed, mask), E switches erasure on and
+//! off, B captures the background H from the live frame, F12 saves a screenshot, Esc quits.
 
 use std::path::PathBuf;
 
+use avatarm_erase::{
+    CaptureBackground, EraseConfig, EraseState, EraseTargets, InteractionTargets, toggle_erasure,
+};
 use avatarm_sim::SimCameras;
 use avatarm_twin::layers;
+use avatarm_video::LiveVideo;
 use bevy::camera::visibility::RenderLayers;
 use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::prelude::*;
@@ -27,15 +36,55 @@ pub struct PreviewOptions {
 /// The preview's cameras, panels and keys.
 pub struct PreviewPlugin(pub PreviewOptions);
 
+/// The keys, as listed in `--help` and the README.
+pub const KEYS: &str = "V: panel (view / feed / mask)   E: erase on/off   B: capture background   F12: screenshot   Esc: quit";
+
+/// What the preview's panel shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PanelView {
+    /// The interaction camera's image: Ĩ(t) with the object twins.
+    #[default]
+    Interaction,
+    /// The live camera frame I(t) as received.
+    Feed,
+    /// The mask M(t).
+    Mask,
+}
+
+impl PanelView {
+    fn next(self) -> Self {
+        match self {
+            Self::Interaction => Self::Feed,
+            Self::Feed => Self::Mask,
+            Self::Mask => Self::Interaction,
+        }
+    }
+
+    fn title(self) -> &'static str {
+        match self {
+            Self::Interaction => "Interaction view: robot erased, object twins in front",
+            Self::Feed => "Camera feed I(t), as received",
+            Self::Mask => "Mask M(t) from the twin",
+        }
+    }
+}
+
 #[derive(Resource)]
 struct PreviewState {
     options: PreviewOptions,
     frame: u32,
     shots: u32,
+    view: PanelView,
 }
 
 #[derive(Component)]
 struct StatusText;
+
+#[derive(Component)]
+struct PanelTitle;
+
+#[derive(Component)]
+struct PanelImage;
 
 impl Plugin for PreviewPlugin {
     fn build(&self, app: &mut App) {
@@ -43,9 +92,13 @@ impl Plugin for PreviewPlugin {
             options: self.0.clone(),
             frame: 0,
             shots: 0,
+            view: PanelView::default(),
         })
         .add_systems(Startup, setup_preview)
-        .add_systems(Update, (update_status, handle_keys, count_frames));
+        .add_systems(
+            Update,
+            (handle_keys, show_panel, update_status, count_frames).chain(),
+        );
     }
 }
 
@@ -71,6 +124,7 @@ fn setup_preview(mut commands: Commands, cameras: Res<SimCameras>, scene: Res<Sc
                 position_type: PositionType::Absolute,
                 left: Val::Px(12.0),
                 top: Val::Px(12.0),
+                width: Val::Px(panel_w),
                 flex_direction: FlexDirection::Column,
                 row_gap: Val::Px(6.0),
                 ..default()
@@ -79,7 +133,8 @@ fn setup_preview(mut commands: Commands, cameras: Res<SimCameras>, scene: Res<Sc
         ))
         .with_children(|panel| {
             panel.spawn((
-                Text::new("Camera feed (simulated room)"),
+                PanelTitle,
+                Text::new(PanelView::default().title()),
                 TextFont {
                     font_size: FontSize::Px(18.0),
                     ..default()
@@ -87,6 +142,7 @@ fn setup_preview(mut commands: Commands, cameras: Res<SimCameras>, scene: Res<Sc
                 TextColor(Color::WHITE),
             ));
             panel.spawn((
+                PanelImage,
                 ImageNode::new(cameras.real.clone()),
                 Node {
                     width: Val::Px(panel_w),
@@ -105,7 +161,7 @@ fn setup_preview(mut commands: Commands, cameras: Res<SimCameras>, scene: Res<Sc
             ));
         });
     commands.spawn((
-        Text::new("Robot twin (from joint states)   Esc: quit   F12: screenshot"),
+        Text::new(format!("Robot twin (from joint states)\n{KEYS}")),
         TextFont {
             font_size: FontSize::Px(16.0),
             ..default()
@@ -120,22 +176,60 @@ fn setup_preview(mut commands: Commands, cameras: Res<SimCameras>, scene: Res<Sc
     ));
 }
 
+fn show_panel(
+    state: Res<PreviewState>,
+    cameras: Res<SimCameras>,
+    interaction: Option<Res<InteractionTargets>>,
+    erase: Option<Res<EraseTargets>>,
+    mut image: Query<&mut ImageNode, With<PanelImage>>,
+    mut title: Query<&mut Text, With<PanelTitle>>,
+) {
+    let handle = match state.view {
+        PanelView::Interaction => interaction.map(|t| t.view.clone()),
+        PanelView::Feed => Some(cameras.real.clone()),
+        PanelView::Mask => erase.map(|t| t.mask.clone()),
+    };
+    if let Some(handle) = handle {
+        for mut node in &mut image {
+            if node.image != handle {
+                node.image = handle.clone();
+            }
+        }
+    }
+    for mut text in &mut title {
+        if text.0 != state.view.title() {
+            text.0 = state.view.title().to_owned();
+        }
+    }
+}
+
 fn update_status(
     mut text: Query<&mut Text, With<StatusText>>,
     robot: Option<Res<avatarm_sim::SimRobotState>>,
     twin: Option<Res<crate::AppTwin>>,
     twins: Query<&avatarm_twin::RobotTwin>,
+    erase: (Res<EraseConfig>, Res<EraseState>, Res<LiveVideo>),
     time: Res<Time>,
 ) {
+    let (config, erase_state, live) = erase;
     let (Some(robot), Some(twin)) = (robot, twin) else {
         return;
     };
     let Ok(twin) = twins.get(twin.0) else { return };
     let t = robot.0.time_s();
     let age_ms = twin.stamp_s.map_or(f64::NAN, |s| (t - s) * 1e3);
+    let frame_age_ms = erase_state
+        .frame_capture_s
+        .map_or(f64::NAN, |s| (t - s) * 1e3);
+    let erasing = match (config.settings.enabled, &erase_state.background_origin) {
+        (false, _) => "erase off".to_owned(),
+        (true, None) => "erase on, no background yet (B captures one)".to_owned(),
+        (true, Some(origin)) => format!("erase on; background: {origin}"),
+    };
+    let stale = if live.stale { "   CAMERA STALE" } else { "" };
     for mut line in &mut text {
         **line = format!(
-            "sim {t:6.2} s   frame {:5.1} ms   joint state age {age_ms:5.1} ms   refused {}",
+            "sim {t:6.2} s   frame {:5.1} ms   refused joint states {}{stale}\ncamera frame age {frame_age_ms:5.1} ms   joint state age {age_ms:5.1} ms\n{erasing}",
             time.delta_secs_f64() * 1e3,
             twin.rejected
         );
@@ -146,10 +240,24 @@ fn handle_keys(
     keys: Res<ButtonInput<KeyCode>>,
     mut commands: Commands,
     mut state: ResMut<PreviewState>,
+    mut config: ResMut<EraseConfig>,
+    mut capture: MessageWriter<CaptureBackground>,
     mut exit: MessageWriter<AppExit>,
 ) {
     if keys.just_pressed(KeyCode::Escape) {
         exit.write(AppExit::Success);
+    }
+    if keys.just_pressed(KeyCode::KeyV) {
+        state.view = state.view.next();
+        info!("panel: {}", state.view.title());
+    }
+    if keys.just_pressed(KeyCode::KeyE) {
+        let on = toggle_erasure(&mut config);
+        info!("robot erasure {}", if on { "on" } else { "off" });
+    }
+    if keys.just_pressed(KeyCode::KeyB) {
+        info!("capturing the background from the live frame");
+        capture.write(CaptureBackground);
     }
     if keys.just_pressed(KeyCode::F12) {
         state.shots += 1;
