@@ -85,6 +85,23 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> App {
             }
         }
     }
+    let webcam = match mode {
+        Mode::Preview(options) => options.webcam,
+        Mode::Headless(_) => None,
+    };
+    #[cfg(feature = "webcam")]
+    if let Some(index) = webcam {
+        let k = &scene.true_camera.intrinsics;
+        app.add_plugins(avatarm_video::webcam::WebcamPlugin(
+            avatarm_video::webcam::WebcamConfig {
+                index,
+                width: k.width,
+                height: k.height,
+                fps: scene.file.camera.fps.round().max(1.0) as u32,
+                latency_s: scene.file.camera.frame_latency_s,
+            },
+        ));
+    }
     app.insert_resource(SceneResource(scene.clone()))
         .insert_resource(SimRoomConfig {
             model: scene.model.clone(),
@@ -99,14 +116,17 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> App {
             ground_truth: matches!(mode, Mode::Headless(_))
                 || scene.file.background == scene::BackgroundSpec::EmptyRoom,
             twin: None,
-            video: Some(SimVideo {
+            video: webcam.is_none().then(|| SimVideo {
                 sensor: scene.file.camera.sensor.clone(),
                 frame_latency_s: scene.file.camera.frame_latency_s,
                 seed: scene.file.seed,
             }),
         })
         .insert_resource(LiveVideo::new(
-            "simulated camera",
+            match webcam {
+                Some(i) => format!("webcam {i}"),
+                None => "simulated camera".to_owned(),
+            },
             (3.0 / scene.file.camera.fps).max(0.2) + scene.file.camera.frame_latency_s,
         ))
         .insert_resource(EraseConfig {

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use avatarm::bench::{self, DrSweep};
 use avatarm::preview::PreviewOptions;
 use avatarm::replay::ReplayOptions;
-use avatarm::scene::{EraseOverrides, Scene};
+use avatarm::scene::{BackgroundSpec, EraseOverrides, Scene};
 use avatarm::{Mode, build_app, robot_info};
 use avatarm_core::robot::{PackagePath, RobotModel};
 use clap::{Parser, Subcommand};
@@ -55,6 +55,9 @@ enum Command {
         /// Folder searched for package:// URIs (repeatable).
         #[arg(long = "package-path", value_name = "DIR")]
         package_path: Vec<PathBuf>,
+        /// Take the camera feed from webcam N (feature `webcam`) instead of the simulated room.
+        #[arg(long, value_name = "N")]
+        webcam: Option<u32>,
         #[command(flatten)]
         overrides: EraseOverrides,
     },
@@ -182,17 +185,33 @@ fn run(cli: Cli) -> Result<(), String> {
             frames,
             screenshot,
             package_path,
+            webcam,
             overrides,
         } => {
+            if webcam.is_some() && !cfg!(feature = "webcam") {
+                return Err(
+                    "--webcam: this avatarm was built without the webcam feature; \
+                            rebuild with `cargo build --features webcam`"
+                        .into(),
+                );
+            }
             let path = scene.unwrap_or_else(default_scene);
             let mut scene =
                 Scene::load(&path, &packages(package_path)).map_err(|e| e.to_string())?;
             scene.apply_overrides(&overrides)?;
+            if webcam.is_some() && scene.file.background == BackgroundSpec::EmptyRoom {
+                eprintln!(
+                    "webcam: the simulated empty room is no background for it; press B with the \
+                     robot out of view to capture one (or pass --background PATH)"
+                );
+                scene.file.background = BackgroundSpec::None;
+            }
             let mode = Mode::Preview(PreviewOptions {
                 frames,
                 screenshot,
                 xr,
                 fixed_timestep: frames.is_some(),
+                webcam,
             });
             let exit = build_app(&scene, &mode).run();
             if exit.is_error() {

@@ -31,6 +31,9 @@ pub struct PreviewOptions {
     pub xr: bool,
     /// Advance time by exactly one camera frame per rendered frame (scripted runs).
     pub fixed_timestep: bool,
+    /// Take the camera feed from this webcam instead of the simulated room's camera (needs
+    /// the `webcam` feature).
+    pub webcam: Option<u32>,
 }
 
 /// The preview's cameras, panels and keys.

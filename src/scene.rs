@@ -265,6 +265,8 @@ pub enum BackgroundSpec {
         /// When (s).
         at_s: f64,
     },
+    /// None until one is captured on command (the preview's B key).
+    None,
 }
 
 /// `[interaction]`: the layout of what the user sees.

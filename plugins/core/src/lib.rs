@@ -19,12 +19,15 @@
 pub mod camera;
 pub mod dr;
 pub mod error;
+pub mod grasp;
+pub mod hand;
 pub mod ik;
 pub mod kinematics;
 pub mod mesh;
 pub mod placement;
 pub mod rng;
 pub mod robot;
+pub mod safety;
 pub mod sensor;
 pub mod sim;
 pub mod trajectory;

@@ -13,6 +13,9 @@
 //! clock of joint states (the simulated robot steps in `FixedUpdate`).
 
 pub mod folder;
+pub mod pixels;
+#[cfg(feature = "webcam")]
+pub mod webcam;
 
 use std::sync::Arc;
 
