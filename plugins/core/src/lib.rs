@@ -23,6 +23,7 @@ pub mod grasp;
 pub mod hand;
 pub mod ik;
 pub mod kinematics;
+pub mod mapping;
 pub mod mesh;
 pub mod placement;
 pub mod rng;

@@ -1,0 +1,543 @@
+//! From the virtual grasp to the robot: the paper's motion mapping, one control tick at a time.
+//!
+//! 1. The object twin's twist in the virtual scene, from the hand's contact twists through the
+//!    grasp matrix (`ν = (Gᵀ)⁺ ν_c`, [`crate::grasp`]), and the squeezing force σ.
+//! 2. Scaled to the real object ([`VirtualToReal`]: the twin is the real object scaled by `k`
+//!    about the camera centre, see [`crate::placement`]): `v_r = Rᵀ v_v / k`, `ω_r = Rᵀ ω_v`.
+//! 3. `paper` mode sends that twist open loop; `closed_loop` adds `K · (target ⊖ measured)`, the
+//!    pose error between the scaled twin and the real object as the robot's measured joint
+//!    states place it through forward kinematics and the grasp offset.
+//! 4. The object twist is moved to the gripper's tool point (the robot holds the object rigidly
+//!    with its m = 2 fingers), then to joint velocities by damped least squares
+//!    ([`crate::ik::dls_step`]); the gripper closes when σ passes a threshold (with hysteresis)
+//!    and its force follows σ. Joint torques for the object wrench are `Jᵀ w`.
+//!
+//! The [`crate::safety::SafetyLimiter`] comes after this, always.
+
+use nalgebra::{DVector, Isometry3, Translation3, UnitQuaternion, Vector3, Vector6};
+
+use crate::grasp::{self, Contact, ContactModel};
+use crate::ik::{DlsSettings, dls_step};
+use crate::kinematics::{Frame, pose_difference};
+use crate::robot::{LinkId, RobotModel};
+
+/// How the mapped twist drives the robot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MappingMode {
+    /// Open-loop velocity mapping, as published.
+    Paper,
+    /// Velocity mapping plus a correction toward the scaled twin pose from measured joints.
+    ClosedLoop,
+}
+
+/// The virtual scene to the real one: the object twin is the real object scaled by `k` about
+/// the camera centre (virtual = `c_v + R (real − c_r) k`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VirtualToReal {
+    /// Scale `k` of the twin relative to the real object (`z_v / z_r`).
+    pub k: f64,
+    /// Rotation from the real world to the virtual scene.
+    pub rotation: UnitQuaternion<f64>,
+    /// Real camera centre (real world).
+    pub real_centre: Vector3<f64>,
+    /// Virtual camera centre (virtual scene).
+    pub virtual_centre: Vector3<f64>,
+}
+
+impl VirtualToReal {
+    /// The identity map (virtual scene = real world).
+    pub fn identity() -> Self {
+        Self {
+            k: 1.0,
+            rotation: UnitQuaternion::identity(),
+            real_centre: Vector3::zeros(),
+            virtual_centre: Vector3::zeros(),
+        }
+    }
+
+    /// A virtual point in the real world.
+    pub fn point(&self, v: &Vector3<f64>) -> Vector3<f64> {
+        self.real_centre + self.rotation.inverse() * (v - self.virtual_centre) / self.k
+    }
+
+    /// A virtual pose in the real world (orientation rotated, position scaled).
+    pub fn pose(&self, v: &Isometry3<f64>) -> Isometry3<f64> {
+        Isometry3::from_parts(
+            Translation3::from(self.point(&v.translation.vector)),
+            self.rotation.inverse() * v.rotation,
+        )
+    }
+
+    /// A virtual twist (taken at a virtual point) as the real twist at the mapped point.
+    pub fn twist(&self, v: &Vector6<f64>) -> Vector6<f64> {
+        let r = self.rotation.inverse();
+        let lin = r * v.fixed_rows::<3>(0).into_owned() / self.k;
+        let ang = r * v.fixed_rows::<3>(3).into_owned();
+        Vector6::new(lin.x, lin.y, lin.z, ang.x, ang.y, ang.z)
+    }
+}
+
+/// Settings of the mapping.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MappingSettings {
+    /// Open or closed loop.
+    pub mode: MappingMode,
+    /// Closed-loop gain on the pose error (1/s).
+    pub gain: f64,
+
+    /// σ above which the gripper closes (N).
+    pub close_at_n: f64,
+    /// σ below which it opens again (N); less than `close_at_n`.
+    pub open_at_n: f64,
+    /// Largest gripper force (N).
+    pub max_grip_n: f64,
+    /// Damped least squares.
+    pub dls: DlsSettings,
+}
+
+impl Default for MappingSettings {
+    fn default() -> Self {
+        Self {
+            mode: MappingMode::ClosedLoop,
+            gain: 10.0,
+            close_at_n: 1.0,
+            open_at_n: 0.3,
+            max_grip_n: 40.0,
+            dls: DlsSettings::default(),
+        }
+    }
+}
+
+/// The robot side of the mapping.
+#[derive(Debug, Clone)]
+pub struct RobotSide<'a> {
+    /// The robot.
+    pub model: &'a RobotModel,
+    /// Its base in the real world.
+    pub base: Isometry3<f64>,
+    /// The tool link (between the gripper's fingers).
+    pub tcp: LinkId,
+    /// Arm joints driven by the mapping (joint-vector indices); the others (the fingers) get
+    /// zero velocity here and follow the gripper command.
+    pub arm: &'a [usize],
+    /// Pose of the real object in the tool frame while grasped.
+    pub tcp_from_object: Isometry3<f64>,
+}
+
+/// One tick's inputs.
+#[derive(Debug, Clone)]
+pub struct TickInputs<'a> {
+    /// Contacts of the hand on the object twin (virtual scene).
+    pub contacts: &'a [Contact],
+    /// Velocities of the contact points (the hand's, virtual scene, m/s).
+    pub contact_velocities: &'a [Vector3<f64>],
+    /// The object twin's pose (virtual scene).
+    pub twin_pose: Isometry3<f64>,
+    /// Measured joint positions.
+    pub q: &'a [f64],
+}
+
+/// The gripper command.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct GripperCommand {
+    /// Closed.
+    pub closed: bool,
+    /// Force (N) while closed.
+    pub force_n: f64,
+}
+
+/// One tick's outputs, before the safety limiter.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TickOutput {
+    /// Joint velocities (all joints; zero for non-arm joints).
+    pub qdot: DVector<f64>,
+    /// The twin's twist (virtual scene, at its origin).
+    pub twin_twist: Vector6<f64>,
+    /// The real object's commanded twist (real world, at its origin).
+    pub object_twist: Vector6<f64>,
+    /// The real object's target pose (the scaled twin).
+    pub target: Isometry3<f64>,
+    /// The real object's pose from measured joints.
+    pub measured: Isometry3<f64>,
+    /// Squeezing force σ (N, virtual).
+    pub squeeze_n: f64,
+    /// Grasp matrix rank.
+    pub rank: usize,
+    /// The gripper.
+    pub gripper: GripperCommand,
+    /// Smallest singular value of the arm Jacobian.
+    pub sigma_min: f64,
+}
+
+/// The mapping's state between ticks (the gripper's hysteresis).
+#[derive(Debug, Clone)]
+pub struct Mapper {
+    settings: MappingSettings,
+    closed: bool,
+}
+
+impl Mapper {
+    /// A mapper, gripper open.
+    pub fn new(settings: MappingSettings) -> Self {
+        Self {
+            settings,
+            closed: false,
+        }
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &MappingSettings {
+        &self.settings
+    }
+
+    /// The real object's pose as the measured joints place it.
+    pub fn measured_object(robot: &RobotSide, q: &[f64]) -> Isometry3<f64> {
+        robot.model.forward_kinematics(&robot.base, q)[robot.tcp] * robot.tcp_from_object
+    }
+
+    /// One tick. Errors name the bad input; the caller stops the robot on an error.
+    pub fn tick(
+        &mut self,
+        input: &TickInputs,
+        v2r: &VirtualToReal,
+        robot: &RobotSide,
+    ) -> Result<TickOutput, String> {
+        let n = robot.model.dof();
+        if input.q.len() != n || input.q.iter().any(|v| !v.is_finite()) {
+            return Err(format!("joint state: {} finite values needed", n));
+        }
+        if input.contact_velocities.len() != input.contacts.len() {
+            return Err(format!(
+                "{} contact velocities for {} contacts",
+                input.contact_velocities.len(),
+                input.contacts.len()
+            ));
+        }
+        let origin = input.twin_pose.translation.vector;
+        let (twin_twist, squeeze_n, rank) = if input.contacts.is_empty() {
+            (Vector6::zeros(), 0.0, 0)
+        } else {
+            let a = grasp::analyse(&origin, input.contacts, ContactModel::HardFinger)
+                .map_err(|e| format!("grasp: {e}"))?;
+            let vc = DVector::from_iterator(
+                3 * input.contacts.len(),
+                input
+                    .contact_velocities
+                    .iter()
+                    .flat_map(|v| v.iter().copied()),
+            );
+            let nu = grasp::object_twist(&a.g, &vc).map_err(|e| format!("grasp: {e}"))?;
+            (nu, a.squeeze, a.rank)
+        };
+        // Gripper from σ, with hysteresis.
+        let s = &self.settings;
+        if !self.closed && squeeze_n >= s.close_at_n {
+            self.closed = true;
+        } else if self.closed && squeeze_n < s.open_at_n {
+            self.closed = false;
+        }
+        let gripper = GripperCommand {
+            closed: self.closed,
+            force_n: if self.closed {
+                squeeze_n.clamp(0.0, s.max_grip_n)
+            } else {
+                0.0
+            },
+        };
+        let target = v2r.pose(&input.twin_pose);
+        let measured = Self::measured_object(robot, input.q);
+        let mut object_twist = v2r.twist(&twin_twist);
+        if s.mode == MappingMode::ClosedLoop {
+            object_twist += pose_difference(&measured, &target) * s.gain;
+        }
+        // Move the object twist to the tool point, then to the arm's joints.
+        let poses = robot.model.forward_kinematics(&robot.base, input.q);
+        let tcp = poses[robot.tcp].translation.vector;
+        let tcp_twist = grasp::transport_twist(&object_twist, &measured.translation.vector, &tcp);
+        let j_full =
+            robot
+                .model
+                .jacobian_from_poses(&poses, robot.tcp, &Vector3::zeros(), Frame::World);
+        let j = nalgebra::Matrix6xX::from_fn(robot.arm.len(), |r, c| j_full[(r, robot.arm[c])]);
+        let q_arm: Vec<f64> = robot.arm.iter().map(|&i| input.q[i]).collect();
+        let limits = robot.model.dof_limits();
+        let lim_arm: Vec<_> = robot.arm.iter().map(|&i| limits[i]).collect();
+        let step = dls_step(&j, &tcp_twist, &q_arm, &lim_arm, &s.dls);
+        if step.rejected {
+            return Err("the arm Jacobian or the twist is not finite".into());
+        }
+        let mut qdot = DVector::zeros(n);
+        for (k, &i) in robot.arm.iter().enumerate() {
+            qdot[i] = step.qdot[k];
+        }
+        Ok(TickOutput {
+            qdot,
+            twin_twist,
+            object_twist,
+            target,
+            measured,
+            squeeze_n,
+            rank,
+            gripper,
+            sigma_min: step.sigma_min,
+        })
+    }
+}
+
+/// Errors of a trial's pose track, the paper's measure: position RMSE (m) and roll/pitch/yaw
+/// RMSE (degrees) of `actual` against `target`, each orientation error as the roll-pitch-yaw
+/// of `target⁻¹ · actual`.
+pub fn pose_rmse(target: &[Isometry3<f64>], actual: &[Isometry3<f64>]) -> Option<[f64; 4]> {
+    if target.len() != actual.len() || target.is_empty() {
+        return None;
+    }
+    let mut sum = [0.0; 4];
+    for (t, a) in target.iter().zip(actual) {
+        sum[0] += (a.translation.vector - t.translation.vector).norm_squared();
+        let (r, p, y) = (t.rotation.inverse() * a.rotation).euler_angles();
+        sum[1] += r * r;
+        sum[2] += p * p;
+        sum[3] += y * y;
+    }
+    let n = target.len() as f64;
+    Some([
+        (sum[0] / n).sqrt(),
+        (sum[1] / n).sqrt().to_degrees(),
+        (sum[2] / n).sqrt().to_degrees(),
+        (sum[3] / n).sqrt().to_degrees(),
+    ])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kinematics::tests::sawyer;
+    use crate::sim::{JointCommand, SimRobot, SimRobotParams};
+
+    /// Four fingertips around a bottle of radius 3.5 cm, squeezing 3 N each.
+    fn grasp_contacts(
+        pose: &Isometry3<f64>,
+        twist: &Vector6<f64>,
+    ) -> (Vec<Contact>, Vec<Vector3<f64>>) {
+        let local = [
+            Vector3::new(0.035, 0.0, 0.10),
+            Vector3::new(-0.035, 0.0, 0.10),
+            Vector3::new(0.0, 0.035, 0.12),
+            Vector3::new(0.0, -0.035, 0.08),
+        ];
+        let o = pose.translation.vector;
+        let mut contacts = Vec::new();
+        let mut vel = Vec::new();
+        for l in local {
+            let p = pose * nalgebra::Point3::from(l);
+            let radial = pose.rotation * Vector3::new(l.x, l.y, 0.0);
+            let normal = -radial.normalize();
+            contacts.push(Contact {
+                point: p.coords,
+                normal,
+                force: normal * 3.0,
+                moment: Vector3::zeros(),
+            });
+            vel.push(
+                grasp::transport_twist(twist, &o, &p.coords)
+                    .fixed_rows::<3>(0)
+                    .into_owned(),
+            );
+        }
+        (contacts, vel)
+    }
+
+    #[test]
+    fn a_rigid_grasp_maps_to_the_twins_velocity_scaled() {
+        let pose = Isometry3::translation(0.6, -0.1, 0.9);
+        let nu = Vector6::new(0.02, -0.01, 0.05, 0.1, 0.0, 0.3);
+        let (contacts, vel) = grasp_contacts(&pose, &nu);
+        let model = sawyer();
+        let tcp = model.link_id("right_gripper_tip").expect("tcp");
+        let arm: Vec<usize> = (0..7).collect();
+        let robot = RobotSide {
+            model: &model,
+            base: Isometry3::translation(0.0, 0.0, 0.75),
+            tcp,
+            arm: &arm,
+            tcp_from_object: Isometry3::identity(),
+        };
+        let v2r = VirtualToReal {
+            k: 0.5,
+            ..VirtualToReal::identity()
+        };
+        let mut m = Mapper::new(MappingSettings {
+            mode: MappingMode::Paper,
+            ..MappingSettings::default()
+        });
+        let q = [0.0, -1.18, 0.0, 2.18, 0.0, 0.57, 3.3161, 0.02, 0.02];
+        let out = m
+            .tick(
+                &TickInputs {
+                    contacts: &contacts,
+                    contact_velocities: &vel,
+                    twin_pose: pose,
+                    q: &q,
+                },
+                &v2r,
+                &robot,
+            )
+            .expect("tick");
+        assert!(
+            (out.twin_twist - nu).norm() < 1e-9,
+            "{} vs {nu}",
+            out.twin_twist
+        );
+        let want = Vector6::new(0.04, -0.02, 0.10, 0.1, 0.0, 0.3);
+        assert!(
+            (out.object_twist - want).norm() < 1e-9,
+            "{}",
+            out.object_twist
+        );
+        assert_eq!(out.rank, 6);
+        assert!(
+            out.squeeze_n > 2.0 && out.gripper.closed,
+            "{}",
+            out.squeeze_n
+        );
+        // Fingers are not driven by the arm mapping.
+        assert_eq!((out.qdot[7], out.qdot[8]), (0.0, 0.0));
+    }
+
+    #[test]
+    fn virtual_to_real_round_trips_points_and_poses() {
+        let v2r = VirtualToReal {
+            k: 0.4,
+            rotation: UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3),
+            real_centre: Vector3::new(1.85, 0.0, 1.3),
+            virtual_centre: Vector3::new(0.0, 0.0, 0.0),
+        };
+        let real = Vector3::new(0.6, -0.16, 0.8);
+        let virt = v2r.virtual_centre + v2r.rotation * (real - v2r.real_centre) * v2r.k;
+        assert!((v2r.point(&virt) - real).norm() < 1e-12);
+    }
+
+    /// The twin moves the object 10 cm up and back at ~0.1 m/s; the simulated robot (latency,
+    /// lag) carries the real object. Closed loop tracks the scaled twin far better than the
+    /// open-loop paper mode, whose errors integrate.
+    #[test]
+    fn closed_loop_tracks_the_twin_better_than_open_loop() {
+        let model = sawyer();
+        let tcp = model.link_id("right_gripper_tip").expect("tcp");
+        let arm: Vec<usize> = (0..7).collect();
+        let base = Isometry3::translation(0.0, 0.0, 0.75);
+        let q0 = DVector::from_row_slice(&[0.0, -1.18, 0.0, 2.18, 0.0, 0.57, 3.3161, 0.02, 0.02]);
+        let robot = RobotSide {
+            model: &model,
+            base,
+            tcp,
+            arm: &arm,
+            tcp_from_object: Isometry3::identity(),
+        };
+        let start = Mapper::measured_object(&robot, q0.as_slice());
+        let v2r = VirtualToReal {
+            k: 0.5,
+            rotation: UnitQuaternion::identity(),
+            real_centre: Vector3::zeros(),
+            virtual_centre: Vector3::zeros(),
+        };
+        // The twin's path in the virtual scene (scaled by k), minimum jerk up 10 cm and back.
+        let twin_at = |t: f64| -> (Isometry3<f64>, Vector6<f64>) {
+            let (s, ds) = if t < 1.0 {
+                (
+                    crate::hand::min_jerk(t),
+                    30.0 * t * t * (1.0 - t) * (1.0 - t),
+                )
+            } else if t < 2.0 {
+                let u = t - 1.0;
+                (
+                    1.0 - crate::hand::min_jerk(u),
+                    -30.0 * u * u * (1.0 - u) * (1.0 - u),
+                )
+            } else {
+                (0.0, 0.0)
+            };
+            let z = 0.1 * s * v2r.k;
+            let p = start.translation.vector * v2r.k + Vector3::new(0.0, 0.0, z);
+            (
+                Isometry3::from_parts(Translation3::from(p), start.rotation),
+                Vector6::new(0.0, 0.0, 0.1 * ds * v2r.k, 0.0, 0.0, 0.0),
+            )
+        };
+        let run_with = |mode: MappingMode, gain: f64| -> [f64; 4] {
+            let mut sim = SimRobot::new(SimRobotParams::default(), model.dof_limits(), q0.clone());
+            let mut m = Mapper::new(MappingSettings {
+                mode,
+                gain,
+                ..MappingSettings::default()
+            });
+            let mut q_meas = q0.clone();
+            let (mut targets, mut actual) = (Vec::new(), Vec::new());
+            let dt = 0.01;
+            for k in 0..250 {
+                let t = f64::from(k) * dt;
+                let (pose, twist) = twin_at(t);
+                let (contacts, vel) = grasp_contacts(&pose, &twist);
+                for s in sim.receive() {
+                    q_meas = s.positions;
+                }
+                let out = m
+                    .tick(
+                        &TickInputs {
+                            contacts: &contacts,
+                            contact_velocities: &vel,
+                            twin_pose: pose,
+                            q: q_meas.as_slice(),
+                        },
+                        &v2r,
+                        &robot,
+                    )
+                    .expect("tick");
+                sim.send(JointCommand::Velocity(out.qdot)).expect("finite");
+                sim.step(dt);
+                targets.push(v2r.pose(&pose));
+                let q_true: Vec<f64> = sim.true_positions().iter().copied().collect();
+                actual.push(Mapper::measured_object(&robot, &q_true));
+            }
+            pose_rmse(&targets, &actual).expect("same length")
+        };
+        // Gain against accuracy, as the docs report it (the default is 10 /s).
+        let sweep: Vec<(f64, f64)> = [2.0, 5.0, 10.0, 20.0]
+            .into_iter()
+            .map(|g| (g, run_with(MappingMode::ClosedLoop, g)[0]))
+            .collect();
+        eprintln!("closed-loop gain (1/s) -> position RMSE (m): {sweep:?}");
+        assert!(sweep.windows(2).all(|w| w[1].1 < w[0].1), "{sweep:?}");
+        let run = |mode| run_with(mode, MappingSettings::default().gain);
+        let open = run(MappingMode::Paper);
+        let closed = run(MappingMode::ClosedLoop);
+        assert!(
+            closed[0] < 0.005,
+            "closed loop position RMSE {} m",
+            closed[0]
+        );
+        assert!(
+            closed[1..].iter().all(|&d| d < 1.0),
+            "closed loop angles {closed:?}"
+        );
+        eprintln!("position, roll, pitch, yaw RMSE: paper {open:?}, closed loop {closed:?}");
+        assert!(closed[0] < open[0], "closed {closed:?} vs open {open:?}");
+    }
+
+    #[test]
+    fn rmse_of_a_known_offset() {
+        let t = vec![Isometry3::identity(); 3];
+        let a = vec![
+            Isometry3::from_parts(
+                Translation3::new(0.003, 0.004, 0.0),
+                UnitQuaternion::from_euler_angles(0.0, 0.0, 2f64.to_radians()),
+            );
+            3
+        ];
+        let r = pose_rmse(&t, &a).expect("sizes");
+        assert!((r[0] - 0.005).abs() < 1e-12);
+        assert!((r[3] - 2.0).abs() < 1e-9 && r[1].abs() < 1e-9);
+        assert!(pose_rmse(&t, &a[..2]).is_none());
+    }
+}
