@@ -1,0 +1,463 @@
+//! The Avatarm hand: a tracked hand as Rapier bodies that touch the object twin, and the
+//! contacts they make, every physics step.
+//!
+//! - Sources ([`HandSource`]): anything that yields timestamped 26-joint
+//!   [`HandFrame`](avatarm_core::hand::HandFrame)s: a scripted hand ([`ScriptedHand`]), a
+//!   recorded `.hand.jsonl` file ([`RecordedHand`]); Leap Motion, the desktop mouse hand and
+//!   OpenXR hand tracking implement the same trait.
+//! - Bodies: one capsule per phalanx (thumb 2, fingers 3 each) and a box for the palm, no more
+//!   than a grasp needs. Each is a dynamic body without gravity, driven toward its tracked pose
+//!   by a velocity clamped to `max_speed` (and `max_spin`), with continuous collision detection.
+//!   Contact forces therefore stay bounded (a finger tracked deep inside the object pushes with
+//!   at most its drive, it does not teleport into it) and nothing tunnels.
+//! - Contacts ([`ObjectContacts`]): after each step, every contact between a hand body and a
+//!   body marked [`GraspTarget`]: world point, inward normal, normal force (impulse / step) and
+//!   the hand's velocity at that point, ready for [`avatarm_core::grasp`].
+
+use std::path::Path;
+
+use avatarm_core::grasp::Contact;
+use avatarm_core::hand::{HandFrame, HandScript, JOINT_NAMES, PALM, WRIST, parse_frames};
+use bevy::prelude::*;
+use bevy_rapier3d::prelude::*;
+use nalgebra::{Isometry3, Vector3};
+
+/// A source of hand frames.
+pub trait HandSource: Send + Sync + 'static {
+    /// Name, for messages.
+    fn name(&self) -> &str;
+    /// The newest frame captured at or before `now_s`, if any.
+    fn poll(&mut self, now_s: f64) -> Option<HandFrame>;
+}
+
+/// A scripted hand ([`HandScript`]) sampled at `rate_hz` (tracker rate).
+pub struct ScriptedHand {
+    script: HandScript,
+    period_s: f64,
+}
+
+impl ScriptedHand {
+    /// A script sampled at `rate_hz`.
+    pub fn new(script: HandScript, rate_hz: f64) -> Self {
+        Self {
+            script,
+            period_s: 1.0 / rate_hz.max(1.0),
+        }
+    }
+}
+
+impl HandSource for ScriptedHand {
+    fn name(&self) -> &str {
+        "scripted hand"
+    }
+
+    fn poll(&mut self, now_s: f64) -> Option<HandFrame> {
+        let t = (now_s / self.period_s).floor() * self.period_s;
+        Some(self.script.frame_at(t))
+    }
+}
+
+/// Frames from a `.hand.jsonl` file (docs/hand.md), replayed on their timestamps.
+pub struct RecordedHand {
+    name: String,
+    frames: Vec<HandFrame>,
+    next: usize,
+}
+
+impl RecordedHand {
+    /// Loads a file; errors name the file and line.
+    pub fn open(path: &Path) -> Result<Self, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+        let frames = parse_frames(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        if frames.is_empty() {
+            return Err(format!("{}: no hand frames", path.display()));
+        }
+        Ok(Self {
+            name: path.display().to_string(),
+            frames,
+            next: 0,
+        })
+    }
+}
+
+impl HandSource for RecordedHand {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn poll(&mut self, now_s: f64) -> Option<HandFrame> {
+        let mut out = None;
+        while self.next < self.frames.len() && self.frames[self.next].t_s <= now_s {
+            out = Some(self.frames[self.next].clone());
+            self.next += 1;
+        }
+        out
+    }
+}
+
+/// The active hand source and its newest frame.
+#[derive(Resource)]
+pub struct ActiveHand {
+    source: Box<dyn HandSource>,
+    /// The newest frame received.
+    pub latest: Option<HandFrame>,
+    /// Frames refused (bad numbers), for the status line.
+    pub refused: u64,
+}
+
+impl ActiveHand {
+    /// A hand fed by `source`.
+    pub fn new(source: impl HandSource) -> Self {
+        Self {
+            source: Box::new(source),
+            latest: None,
+            refused: 0,
+        }
+    }
+
+    /// The source's name.
+    pub fn name(&self) -> &str {
+        self.source.name()
+    }
+}
+
+/// How the hand bodies follow the tracked joints.
+#[derive(Resource, Debug, Clone, Copy)]
+pub struct HandDrive {
+    /// Largest linear speed of a hand body (m/s).
+    pub max_speed: f32,
+    /// Largest angular speed (rad/s).
+    pub max_spin: f32,
+    /// Density of the hand bodies (kg/m³), which sets how hard they can push.
+    pub density: f32,
+    /// Friction of the hand's surfaces.
+    pub friction: f32,
+}
+
+impl Default for HandDrive {
+    fn default() -> Self {
+        Self {
+            max_speed: 1.0,
+            max_spin: 20.0,
+            density: 5000.0,
+            friction: 1.0,
+        }
+    }
+}
+
+/// One hand body: which joints it spans.
+#[derive(Component, Debug, Clone, Copy)]
+pub struct HandPart {
+    /// Joint at the start of the bone (index into the 26).
+    pub from: usize,
+    /// Joint at its end.
+    pub to: usize,
+}
+
+/// Marks the dynamic body whose contacts are reported (the object twin).
+#[derive(Component, Debug, Clone, Copy, Default)]
+pub struct GraspTarget;
+
+/// Contacts of the hand on the grasp target, after the last physics step (world frame).
+#[derive(Resource, Debug, Clone, Default)]
+pub struct ObjectContacts {
+    /// Time of the step (s, `Time<Fixed>`).
+    pub t_s: f64,
+    /// The contacts: point, inward normal, normal force as `force`.
+    pub contacts: Vec<Contact>,
+    /// The hand's velocity at each contact point (m/s).
+    pub velocities: Vec<Vector3<f64>>,
+    /// Largest normal force in this step (N).
+    pub max_force_n: f64,
+}
+
+/// The hand's system sets (`FixedUpdate`).
+#[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
+pub enum HandSystems {
+    /// Poll the source and drive the bodies (before the physics step).
+    Drive,
+    /// Read the contacts (after the physics step).
+    Contacts,
+}
+
+/// The bones that get a body: thumb proximal→distal→tip, and each finger's proximal,
+/// intermediate and distal phalanx.
+pub const BONES: [(usize, usize); 14] = [
+    (3, 4),
+    (4, 5),
+    (7, 8),
+    (8, 9),
+    (9, 10),
+    (12, 13),
+    (13, 14),
+    (14, 15),
+    (17, 18),
+    (18, 19),
+    (19, 20),
+    (22, 23),
+    (23, 24),
+    (24, 25),
+];
+
+/// Collision group of the hand (hand bodies do not touch each other).
+pub const HAND_GROUP: Group = Group::GROUP_2;
+
+/// Adds the hand: sources are polled in `FixedUpdate`, bodies driven before Rapier's step and
+/// contacts read after it. Needs `RapierPhysicsPlugin` in `FixedUpdate` and an [`ActiveHand`].
+pub struct HandPlugin;
+
+impl Plugin for HandPlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<HandDrive>()
+            .init_resource::<ObjectContacts>()
+            .configure_sets(
+                FixedUpdate,
+                (
+                    HandSystems::Drive.before(PhysicsSet::SyncBackend),
+                    HandSystems::Contacts.after(PhysicsSet::Writeback),
+                ),
+            )
+            .add_systems(Startup, spawn_hand)
+            .add_systems(
+                FixedUpdate,
+                (z_up_gravity, drive_hand)
+                    .chain()
+                    .in_set(HandSystems::Drive),
+            )
+            .add_systems(FixedUpdate, read_contacts.in_set(HandSystems::Contacts));
+    }
+}
+
+/// Standard gravity along −z: Avatarm's world is z-up (ROS, URDF), Rapier's default is y-up.
+pub const GRAVITY: Vec3 = Vec3::new(0.0, 0.0, -9.81);
+
+fn z_up_gravity(mut configs: Query<&mut RapierConfiguration>) {
+    for mut c in &mut configs {
+        if c.gravity != GRAVITY {
+            c.gravity = GRAVITY;
+        }
+    }
+}
+
+fn to_vec3(v: &Vector3<f64>) -> Vec3 {
+    Vec3::new(v.x as f32, v.y as f32, v.z as f32)
+}
+
+fn to_quat(q: &nalgebra::UnitQuaternion<f64>) -> Quat {
+    Quat::from_xyzw(q.i as f32, q.j as f32, q.k as f32, q.w as f32).normalize()
+}
+
+/// Where a body should be for a frame: bones centred between their joints with the capsule
+/// axis (local y) along the bone; the palm box between the wrist and the middle knuckle.
+fn part_target(frame: &HandFrame, part: &HandPart) -> Option<(Transform, f32, f32)> {
+    let a = frame.joints.get(part.from)?;
+    let b = frame.joints.get(part.to)?;
+    let pa = to_vec3(&a.pose.translation.vector);
+    let pb = to_vec3(&b.pose.translation.vector);
+    let axis = pb - pa;
+    let len = axis.length();
+    if !len.is_finite() || len < 1e-4 {
+        return None;
+    }
+    if part.from == WRIST {
+        // The palm: oriented like the palm joint.
+        let rot = to_quat(&frame.joints[PALM].pose.rotation);
+        return Some((
+            Transform::from_translation((pa + pb) / 2.0).with_rotation(rot),
+            len,
+            a.radius as f32,
+        ));
+    }
+    let rot = Quat::from_rotation_arc(Vec3::Y, axis / len);
+    Some((
+        Transform::from_translation((pa + pb) / 2.0).with_rotation(rot),
+        len,
+        ((a.radius + b.radius) / 2.0) as f32,
+    ))
+}
+
+fn spawn_hand(mut commands: Commands, drive: Res<HandDrive>) {
+    let groups = CollisionGroups::new(HAND_GROUP, Group::ALL ^ HAND_GROUP);
+    let common = (
+        RigidBody::Dynamic,
+        GravityScale(0.0),
+        Ccd::enabled(),
+        Velocity::zero(),
+        Damping {
+            linear_damping: 0.0,
+            angular_damping: 0.0,
+        },
+        ColliderMassProperties::Density(drive.density),
+        Friction::coefficient(drive.friction),
+        groups,
+        // Parked far away until the first tracked frame.
+        Transform::from_xyz(0.0, 0.0, -100.0),
+    );
+    for (from, to) in BONES {
+        let len = 0.03;
+        commands.spawn((
+            Name::new(format!("hand {}", JOINT_NAMES[from])),
+            HandPart { from, to },
+            Collider::capsule_y(len / 2.0, 0.008),
+            common,
+        ));
+    }
+    // Palm: wrist to the middle finger's metacarpal end (its proximal joint).
+    commands.spawn((
+        Name::new("hand palm"),
+        HandPart {
+            from: WRIST,
+            to: 12,
+        },
+        Collider::cuboid(0.04, 0.035, 0.012),
+        common,
+    ));
+}
+
+/// Polls the source and sets each hand body's velocity to reach its target pose in one step,
+/// clamped. Capsule sizes follow the tracked bone lengths.
+fn drive_hand(
+    time: Res<Time<Fixed>>,
+    hand: Option<ResMut<ActiveHand>>,
+    drive: Res<HandDrive>,
+    mut parts: Query<(&HandPart, &mut Transform, &mut Velocity, &mut Collider)>,
+) {
+    let Some(mut hand) = hand else { return };
+    let now = time.elapsed_secs_f64();
+    if let Some(frame) = hand.source.poll(now) {
+        match frame.validate() {
+            Ok(()) => hand.latest = Some(frame),
+            Err(e) => {
+                hand.refused += 1;
+                if hand.refused % 100 == 1 {
+                    warn!(
+                        "hand '{}': frame refused ({} so far): {e}",
+                        hand.name(),
+                        hand.refused
+                    );
+                }
+            }
+        }
+    }
+    let dt = time.timestep().as_secs_f32().max(1e-4);
+    let tracked = hand.latest.as_ref().filter(|f| f.tracked);
+    for (part, mut transform, mut velocity, mut collider) in &mut parts {
+        let Some((target, len, radius)) = tracked.and_then(|f| part_target(f, part)) else {
+            // Untracked: hold still where it is (no contact forces come from a lost hand).
+            *velocity = Velocity::zero();
+            continue;
+        };
+        if transform.translation.z < -50.0 {
+            // First tracked frame: appear at the target.
+            *transform = target;
+        }
+        let want = if part.from == WRIST {
+            Collider::cuboid(len / 2.0, 0.035, radius.clamp(0.008, 0.02))
+        } else {
+            Collider::capsule_y((len / 2.0).max(1e-3), radius.clamp(0.004, 0.012))
+        };
+        let resize = match (collider.as_capsule(), want.as_capsule()) {
+            (Some(a), Some(b)) => (a.half_height() - b.half_height()).abs() > 1e-3,
+            _ => false,
+        };
+        if resize {
+            *collider = want;
+        }
+        let mut lin = (target.translation - transform.translation) / dt;
+        if lin.length() > drive.max_speed {
+            lin = lin.normalize() * drive.max_speed;
+        }
+        let (axis, angle) = (target.rotation * transform.rotation.inverse()).to_axis_angle();
+        let angle = if angle > std::f32::consts::PI {
+            angle - std::f32::consts::TAU
+        } else {
+            angle
+        };
+        let mut ang = axis * angle / dt;
+        if !ang.is_finite() {
+            ang = Vec3::ZERO;
+        }
+        if ang.length() > drive.max_spin {
+            ang = ang.normalize() * drive.max_spin;
+        }
+        *velocity = Velocity {
+            linear: lin,
+            angular: ang,
+        };
+    }
+}
+
+/// Reads the contacts between hand bodies and the grasp target after the step.
+fn read_contacts(
+    time: Res<Time<Fixed>>,
+    context: ReadRapierContext,
+    targets: Query<Entity, (With<GraspTarget>, With<Collider>)>,
+    parts: Query<(&Velocity, &Transform), With<HandPart>>,
+    mut out: ResMut<ObjectContacts>,
+) {
+    out.t_s = time.elapsed_secs_f64();
+    out.contacts.clear();
+    out.velocities.clear();
+    out.max_force_n = 0.0;
+    let Ok(context) = context.single() else {
+        return;
+    };
+    let dt = f64::from(time.timestep().as_secs_f32()).max(1e-6);
+    for target in &targets {
+        for pair in context.contact_pairs_with(target) {
+            let (Some(c1), Some(c2)) = (pair.collider1(), pair.collider2()) else {
+                continue;
+            };
+            let (hand_entity, sign) = if c1 == target { (c2, -1.0) } else { (c1, 1.0) };
+            let Ok((velocity, transform)) = parts.get(hand_entity) else {
+                continue;
+            };
+            for manifold in pair.manifolds() {
+                // The manifold normal points from collider 1 to collider 2: into the object
+                // when the hand is collider 1.
+                let n = manifold.normal() * sign;
+                let normal = Vector3::new(f64::from(n.x), f64::from(n.y), f64::from(n.z));
+                let impulses: Vec<f32> = manifold.points().map(|p| p.impulse()).collect();
+                for (k, sc) in manifold.solver_contacts().enumerate() {
+                    let p = sc.point();
+                    let point = Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z));
+                    let impulse = impulses.get(k).copied().unwrap_or(0.0);
+                    let force = f64::from(impulse.max(0.0)) / dt;
+                    let r = p - transform.translation;
+                    let v = velocity.linear + velocity.angular.cross(r);
+                    out.max_force_n = out.max_force_n.max(force);
+                    out.contacts.push(Contact {
+                        point,
+                        normal,
+                        force: normal * force,
+                        moment: Vector3::zeros(),
+                    });
+                    out.velocities.push(Vector3::new(
+                        f64::from(v.x),
+                        f64::from(v.y),
+                        f64::from(v.z),
+                    ));
+                }
+            }
+        }
+    }
+}
+
+/// The pose of an entity's transform as an isometry.
+pub fn transform_to_iso(t: &Transform) -> Isometry3<f64> {
+    let p = t.translation;
+    let q = t.rotation;
+    Isometry3::from_parts(
+        nalgebra::Translation3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z)),
+        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            f64::from(q.w),
+            f64::from(q.x),
+            f64::from(q.y),
+            f64::from(q.z),
+        )),
+    )
+}
+
+#[cfg(test)]
+mod tests;
