@@ -79,8 +79,18 @@ pub fn grasp_matrix(
     g
 }
 
-/// Moore–Penrose pseudoinverse with singular values below `1e-9 · σ_max` treated as zero.
+/// Singular values below `RANK_TOL · σ_max` count as zero: a grasp that is rank-deficient in
+/// exact arithmetic (two contacts, collinear contacts) keeps a "zero" singular value of
+/// rounding size, which must not be inverted.
+pub const RANK_TOL: f64 = 1e-7;
+
+/// Moore–Penrose pseudoinverse with singular values below `RANK_TOL · σ_max` treated as zero.
 /// `None` only for non-finite input.
+///
+/// Computed from the symmetric eigendecomposition of the smaller Gram matrix (`A⁺ = Aᵀ(AAᵀ)⁺`
+/// for wide `A`, `(AᵀA)⁺Aᵀ` for tall): nalgebra's general SVD left residuals of 1e-5 on
+/// rank-deficient grasp matrices with clustered singular values (found by the property test),
+/// the symmetric solver does not.
 pub fn pinv(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
     if m.iter().any(|v| !v.is_finite()) {
         return None;
@@ -88,10 +98,25 @@ pub fn pinv(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
     if m.is_empty() {
         return Some(DMatrix::zeros(m.ncols(), m.nrows()));
     }
-    let svd = m.clone().svd(true, true);
-    let max = svd.singular_values.iter().copied().fold(0.0, f64::max);
-    let tol = (max * 1e-9).max(f64::MIN_POSITIVE);
-    svd.pseudo_inverse(tol).ok()
+    let wide = m.nrows() <= m.ncols();
+    let gram = if wide {
+        m * m.transpose()
+    } else {
+        m.transpose() * m
+    };
+    let eig = gram.symmetric_eigen();
+    let max = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
+    let tol = (max * RANK_TOL * RANK_TOL).max(f64::MIN_POSITIVE);
+    let inv = DMatrix::from_diagonal(
+        &eig.eigenvalues
+            .map(|mu| if mu > tol { 1.0 / mu } else { 0.0 }),
+    );
+    let gram_pinv = &eig.eigenvectors * inv * eig.eigenvectors.transpose();
+    Some(if wide {
+        m.transpose() * gram_pinv
+    } else {
+        gram_pinv * m.transpose()
+    })
 }
 
 /// Rank of `m` at the same tolerance as [`pinv`].
@@ -99,9 +124,16 @@ pub fn rank(m: &DMatrix<f64>) -> usize {
     if m.is_empty() || m.iter().any(|v| !v.is_finite()) {
         return 0;
     }
-    let sv = m.clone().singular_values();
-    let max = sv.iter().copied().fold(0.0, f64::max);
-    sv.iter().filter(|&&s| s > max * 1e-9 && s > 0.0).count()
+    let gram = if m.nrows() <= m.ncols() {
+        m * m.transpose()
+    } else {
+        m.transpose() * m
+    };
+    let mu = gram.symmetric_eigenvalues();
+    let max = mu.iter().copied().fold(0.0, f64::max);
+    mu.iter()
+        .filter(|&&v| v > max * RANK_TOL * RANK_TOL && v > 0.0)
+        .count()
 }
 
 /// Stacked contact forces `λ` (d·n) in the contact model's layout.
@@ -277,12 +309,15 @@ mod tests {
                 ..contact(*p, *f * 10.0)
             }).collect();
             let a = analyse(&Vector3::zeros(), &contacts, model).expect("finite");
-            let net = &a.g * &a.internal;
-            prop_assert!(net.norm() <= 1e-8 * (1.0 + a.wrench.norm()), "net {net}");
-            // And the rest of λ carries the whole wrench.
+            // Zero up to rounding: near-collinear contacts make G badly conditioned, so the
+            // bound scales with the forces (a wrong projector leaves residuals of their order).
             let lambda = stack_forces(&contacts, model);
+            let tol = 1e-7 * (1.0 + lambda.norm());
+            let net = &a.g * &a.internal;
+            prop_assert!(net.norm() <= tol, "net {net}");
+            // And the rest of λ carries the whole wrench.
             let external = &lambda - &a.internal;
-            prop_assert!((&a.g * external - &a.g * &lambda).norm() < 1e-8);
+            prop_assert!((&a.g * external - &a.g * &lambda).norm() <= tol);
         }
 
         /// A rigid-body twist mapped to the contacts and back is recovered (G full row rank).
