@@ -200,6 +200,9 @@ pub const BONES: [(usize, usize); 14] = [
     (24, 25),
 ];
 
+/// Contact points farther apart than this (m) without an impulse are predictions, not contacts.
+const CONTACT_SLOP: f32 = 0.001;
+
 /// Collision group of the hand (hand bodies do not touch each other).
 pub const HAND_GROUP: Group = Group::GROUP_2;
 
@@ -413,22 +416,30 @@ fn read_contacts(
             let Ok((velocity, transform)) = parts.get(hand_entity) else {
                 continue;
             };
+            let hand_is_first = c1 == hand_entity;
             for manifold in pair.manifolds() {
-                // The manifold normal points from collider 1 to collider 2: into the object
-                // when the hand is collider 1.
+                // The world normal points from collider 1 to collider 2: into the object when
+                // the hand is collider 1.
                 let n = manifold.normal() * sign;
                 let normal = Vector3::new(f64::from(n.x), f64::from(n.y), f64::from(n.z));
-                let impulses: Vec<f32> = manifold.points().map(|p| p.impulse()).collect();
-                for (k, sc) in manifold.solver_contacts().enumerate() {
-                    let p = sc.point();
-                    let point = Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z));
-                    let impulse = impulses.get(k).copied().unwrap_or(0.0);
-                    let force = f64::from(impulse.max(0.0)) / dt;
+                for point in manifold.points() {
+                    let impulse = point.impulse().abs();
+                    // Predicted contacts that are not touching and carry no force.
+                    if point.dist() > CONTACT_SLOP && impulse == 0.0 {
+                        continue;
+                    }
+                    let local = if hand_is_first {
+                        point.local_p1()
+                    } else {
+                        point.local_p2()
+                    };
+                    let p = transform.transform_point(local);
+                    let force = f64::from(impulse) / dt;
                     let r = p - transform.translation;
                     let v = velocity.linear + velocity.angular.cross(r);
                     out.max_force_n = out.max_force_n.max(force);
                     out.contacts.push(Contact {
-                        point,
+                        point: Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z)),
                         normal,
                         force: normal * force,
                         moment: Vector3::zeros(),

@@ -105,6 +105,20 @@ fn a_closing_hand_touches_and_squeezes_the_bottle_with_bounded_forces() {
                     .iter()
                     .all(|k| k.force.iter().all(|v| v.is_finite()))
             );
+            // Contact points lie on the bottle's surface (radius 3.5 cm about its axis).
+            let mut q = app
+                .world_mut()
+                .query_filtered::<&Transform, With<GraspTarget>>();
+            let t = *q.single(app.world()).expect("one bottle");
+            for k in &c.contacts {
+                let p = Vec3::new(k.point.x as f32, k.point.y as f32, k.point.z as f32);
+                let local = t.rotation.inverse() * (p - t.translation);
+                let radial = Vec2::new(local.x, local.z).length();
+                assert!(
+                    (radial - 0.035).abs() < 0.01 && local.y.abs() < 0.135,
+                    "contact off the surface: {local}"
+                );
+            }
         }
         let (p, v) = bottle(&mut app);
         assert!(p.is_finite() && v.is_finite());
