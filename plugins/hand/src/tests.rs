@@ -72,7 +72,7 @@ fn bottle(app: &mut App) -> (Vec3, Vec3) {
 }
 
 #[test]
-fn a_closing_hand_touches_and_squeezes_the_bottle_with_bounded_forces() {
+fn a_closing_hand_touches_the_bottle_on_its_surface_with_bounded_forces() {
     // Wrist beside the bottle, fingers across its front, then closing.
     let keys = vec![
         key(0.0, [0.48, -0.10, 0.90], 0.0),
