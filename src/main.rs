@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use avatarm::bench::{self, DrSweep};
 use avatarm::preview::PreviewOptions;
 use avatarm::replay::ReplayOptions;
-use avatarm::scene::{BackgroundSpec, EraseOverrides, Scene};
+use avatarm::scene::{BackgroundSpec, EraseOverrides, Scene, on_off};
 use avatarm::{Mode, build_app, robot_info};
 use avatarm_core::robot::{PackagePath, RobotModel};
 use clap::{Parser, Subcommand};
@@ -105,7 +105,7 @@ enum BenchCommand {
         #[arg(long, value_delimiter = ',', default_values_t = [0, 2])]
         feather: Vec<u32>,
         /// Latency compensation settings (off, on).
-        #[arg(long, value_delimiter = ',', value_parser = on_off_arg, default_values_t = [false, true])]
+        #[arg(long, value_delimiter = ',', value_parser = on_off, default_values_t = [false, true])]
         latency: Vec<bool>,
         /// Simulated seconds replayed per setting.
         #[arg(long, value_name = "S", default_value_t = 1.5)]
@@ -114,14 +114,6 @@ enum BenchCommand {
         #[arg(long = "package-path", value_name = "DIR")]
         package_path: Vec<PathBuf>,
     },
-}
-
-fn on_off_arg(s: &str) -> Result<bool, String> {
-    match s {
-        "on" | "true" => Ok(true),
-        "off" | "false" => Ok(false),
-        _ => Err(format!("'{s}': expected on or off")),
-    }
 }
 
 fn packages(dirs: Vec<PathBuf>) -> PackagePath {

@@ -579,7 +579,8 @@ pub struct EraseOverrides {
     pub capture_background_at: Option<f64>,
 }
 
-fn on_off(s: &str) -> Result<bool, String> {
+/// Parses `on`/`off` (also `true`/`false`, `1`/`0`) for command-line switches.
+pub fn on_off(s: &str) -> Result<bool, String> {
     match s {
         "on" | "true" | "1" => Ok(true),
         "off" | "false" | "0" => Ok(false),

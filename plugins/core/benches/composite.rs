@@ -103,7 +103,7 @@ fn benches(c: &mut Criterion) {
     group.finish();
 }
 
-/// Median of `runs` timings of `f`, interleaved with the others by the caller.
+/// The median of some timings.
 fn median(mut v: Vec<Duration>) -> Duration {
     v.sort();
     v[v.len() / 2]

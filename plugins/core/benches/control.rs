@@ -82,8 +82,6 @@ fn benches(c: &mut Criterion) {
                         &robot,
                     )
                     .expect("tick");
-                let poses = model.forward_kinematics(&base, &q);
-                let j = model.jacobian_from_poses(&poses, tcp, &Vector3::zeros(), Frame::World);
                 let limited = limiter.tick(
                     &safety::TickInputs {
                         now_s: now,
@@ -92,7 +90,7 @@ fn benches(c: &mut Criterion) {
                         joints_stamp_s: Some(now),
                         hand_stamp_s: Some(now),
                         hand_tracked: true,
-                        jacobian: &j,
+                        jacobian: &out.tcp_jacobian,
                     },
                     0.01,
                 );

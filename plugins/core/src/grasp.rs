@@ -92,11 +92,21 @@ pub const RANK_TOL: f64 = 1e-7;
 /// rank-deficient grasp matrices with clustered singular values (found by the property test),
 /// the symmetric solver does not.
 pub fn pinv(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    pinv_rank(m).map(|(p, _)| p)
+}
+
+/// Rank of `m` at the same tolerance as [`pinv`].
+pub fn rank(m: &DMatrix<f64>) -> usize {
+    pinv_rank(m).map_or(0, |(_, r)| r)
+}
+
+/// [`pinv`] and [`rank`] from one decomposition.
+fn pinv_rank(m: &DMatrix<f64>) -> Option<(DMatrix<f64>, usize)> {
     if m.iter().any(|v| !v.is_finite()) {
         return None;
     }
     if m.is_empty() {
-        return Some(DMatrix::zeros(m.ncols(), m.nrows()));
+        return Some((DMatrix::zeros(m.ncols(), m.nrows()), 0));
     }
     let wide = m.nrows() <= m.ncols();
     let gram = if wide {
@@ -107,33 +117,18 @@ pub fn pinv(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
     let eig = gram.symmetric_eigen();
     let max = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
     let tol = (max * RANK_TOL * RANK_TOL).max(f64::MIN_POSITIVE);
+    let rank = eig.eigenvalues.iter().filter(|&&mu| mu > tol).count();
     let inv = DMatrix::from_diagonal(
         &eig.eigenvalues
             .map(|mu| if mu > tol { 1.0 / mu } else { 0.0 }),
     );
     let gram_pinv = &eig.eigenvectors * inv * eig.eigenvectors.transpose();
-    Some(if wide {
+    let p = if wide {
         m.transpose() * gram_pinv
     } else {
         gram_pinv * m.transpose()
-    })
-}
-
-/// Rank of `m` at the same tolerance as [`pinv`].
-pub fn rank(m: &DMatrix<f64>) -> usize {
-    if m.is_empty() || m.iter().any(|v| !v.is_finite()) {
-        return 0;
-    }
-    let gram = if m.nrows() <= m.ncols() {
-        m * m.transpose()
-    } else {
-        m.transpose() * m
     };
-    let mu = gram.symmetric_eigenvalues();
-    let max = mu.iter().copied().fold(0.0, f64::max);
-    mu.iter()
-        .filter(|&&v| v > max * RANK_TOL * RANK_TOL && v > 0.0)
-        .count()
+    Some((p, rank))
 }
 
 /// Stacked contact forces `λ` (d·n) in the contact model's layout.
@@ -154,6 +149,8 @@ pub fn stack_forces(contacts: &[Contact], model: ContactModel) -> DVector<f64> {
 pub struct GraspAnalysis {
     /// The grasp matrix.
     pub g: DMatrix<f64>,
+    /// Its pseudoinverse `G⁺` (so `(Gᵀ)⁺ = (G⁺)ᵀ` needs no second decomposition).
+    pub g_pinv: DMatrix<f64>,
     /// Its rank (6 for a grasp that can resist any wrench's direction).
     pub rank: usize,
     /// Net wrench on the object, `G λ`.
@@ -211,7 +208,7 @@ pub fn analyse(
     let points: Vec<Vector3<f64>> = contacts.iter().map(|c| c.point).collect();
     let g = grasp_matrix(origin, &points, model);
     let lambda = stack_forces(contacts, model);
-    let g_pinv = pinv(&g).ok_or(GraspError::NotFinite("grasp matrix"))?;
+    let (g_pinv, rank) = pinv_rank(&g).ok_or(GraspError::NotFinite("grasp matrix"))?;
     let internal = &lambda - &g_pinv * (&g * &lambda);
     let w = &g * &lambda;
     let d = model.dim();
@@ -225,7 +222,8 @@ pub fn analyse(
         .sum::<f64>()
         / contacts.len() as f64;
     Ok(GraspAnalysis {
-        rank: rank(&g),
+        rank,
+        g_pinv,
         wrench: Vector6::from_iterator(w.iter().copied()),
         internal,
         g,
@@ -244,18 +242,27 @@ pub fn object_twist(
     g: &DMatrix<f64>,
     contact_twists: &DVector<f64>,
 ) -> Result<Vector6<f64>, GraspError> {
-    if contact_twists.len() != g.ncols() {
+    let g_pinv = pinv(g).ok_or(GraspError::NotFinite("grasp matrix"))?;
+    object_twist_from_pinv(&g_pinv, contact_twists)
+}
+
+/// As [`object_twist`], with `G⁺` already known (e.g. [`GraspAnalysis::g_pinv`]):
+/// `(Gᵀ)⁺ = (G⁺)ᵀ`.
+pub fn object_twist_from_pinv(
+    g_pinv: &DMatrix<f64>,
+    contact_twists: &DVector<f64>,
+) -> Result<Vector6<f64>, GraspError> {
+    if contact_twists.len() != g_pinv.nrows() {
         return Err(GraspError::Size {
             what: "contact twists",
-            expected: g.ncols(),
+            expected: g_pinv.nrows(),
             got: contact_twists.len(),
         });
     }
     if contact_twists.iter().any(|v| !v.is_finite()) {
         return Err(GraspError::NotFinite("contact twists"));
     }
-    let gt_pinv = pinv(&g.transpose()).ok_or(GraspError::NotFinite("grasp matrix"))?;
-    let v = gt_pinv * contact_twists;
+    let v = g_pinv.transpose() * contact_twists;
     Ok(Vector6::from_iterator(v.iter().copied()))
 }
 

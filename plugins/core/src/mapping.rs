@@ -168,6 +168,9 @@ pub struct TickOutput {
     pub gripper: GripperCommand,
     /// Smallest singular value of the arm Jacobian.
     pub sigma_min: f64,
+    /// Jacobian of the tool point at the measured joints (6 × dof, world frame), for the
+    /// safety limiter's TCP speed.
+    pub tcp_jacobian: nalgebra::Matrix6xX<f64>,
 }
 
 /// The mapping's state between ticks (the gripper's hysteresis).
@@ -227,7 +230,8 @@ impl Mapper {
                     .iter()
                     .flat_map(|v| v.iter().copied()),
             );
-            let nu = grasp::object_twist(&a.g, &vc).map_err(|e| format!("grasp: {e}"))?;
+            let nu =
+                grasp::object_twist_from_pinv(&a.g_pinv, &vc).map_err(|e| format!("grasp: {e}"))?;
             (nu, a.squeeze, a.rank)
         };
         // Gripper from σ, with hysteresis.
@@ -246,13 +250,14 @@ impl Mapper {
             },
         };
         let target = v2r.pose(&input.twin_pose);
-        let measured = Self::measured_object(robot, input.q);
+        // One FK for the measured object pose, the tool point and its Jacobian.
+        let poses = robot.model.forward_kinematics(&robot.base, input.q);
+        let measured = poses[robot.tcp] * robot.tcp_from_object;
         let mut object_twist = v2r.twist(&twin_twist);
         if s.mode == MappingMode::ClosedLoop {
             object_twist += pose_difference(&measured, &target) * s.gain;
         }
         // Move the object twist to the tool point, then to the arm's joints.
-        let poses = robot.model.forward_kinematics(&robot.base, input.q);
         let tcp = poses[robot.tcp].translation.vector;
         let tcp_twist = grasp::transport_twist(&object_twist, &measured.translation.vector, &tcp);
         let j_full =
@@ -281,6 +286,7 @@ impl Mapper {
             rank,
             gripper,
             sigma_min: step.sigma_min,
+            tcp_jacobian: j_full,
         })
     }
 }

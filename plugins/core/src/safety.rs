@@ -149,7 +149,12 @@ impl SafetyLimiter {
     /// Limits one command. `dt` is the control period (s) used for the position look-ahead.
     pub fn tick(&mut self, input: &TickInputs, dt: f64) -> Limited {
         let n = self.limits.len();
-        let mut why = Vec::new();
+        let mut why: Vec<Intervention> = Vec::new();
+        let note = |why: &mut Vec<Intervention>, i: Intervention| {
+            if !why.contains(&i) {
+                why.push(i);
+            }
+        };
         let finite = input.now_s.is_finite()
             && dt.is_finite()
             && dt > 0.0
@@ -163,18 +168,18 @@ impl SafetyLimiter {
                 .chain(input.jacobian.iter())
                 .all(|v| v.is_finite());
         if !finite {
-            why.push(Intervention::NotFinite);
+            note(&mut why, Intervention::NotFinite);
         }
         let age_ok = |stamp: Option<f64>| {
             stamp.is_some_and(|s| s.is_finite() && input.now_s - s <= self.settings.timeout_s)
         };
         if !age_ok(input.joints_stamp_s) {
-            why.push(Intervention::JointsStale);
+            note(&mut why, Intervention::JointsStale);
         }
         if !input.hand_tracked {
-            why.push(Intervention::HandLost);
+            note(&mut why, Intervention::HandLost);
         } else if !age_ok(input.hand_stamp_s) {
-            why.push(Intervention::HandStale);
+            note(&mut why, Intervention::HandStale);
         }
         let stopping = !why.is_empty();
         let mut qdot = if stopping {
@@ -191,10 +196,10 @@ impl SafetyLimiter {
                 let next = input.q[i] + qdot[i] * dt;
                 if next > l.upper && qdot[i] > 0.0 {
                     qdot[i] = ((l.upper - input.q[i]) / dt).max(0.0);
-                    why.push(Intervention::PositionLimit);
+                    note(&mut why, Intervention::PositionLimit);
                 } else if next < l.lower && qdot[i] < 0.0 {
                     qdot[i] = ((l.lower - input.q[i]) / dt).min(0.0);
-                    why.push(Intervention::PositionLimit);
+                    note(&mut why, Intervention::PositionLimit);
                 }
             }
             // Joint velocity limits, direction kept.
@@ -213,13 +218,13 @@ impl SafetyLimiter {
                 .fold(1.0, f64::min);
             if scale < 1.0 {
                 qdot *= scale;
-                why.push(Intervention::VelocityLimit);
+                note(&mut why, Intervention::VelocityLimit);
             }
             // TCP speed.
             let speed = tcp_speed(input.jacobian, &qdot);
             if speed > self.settings.max_tcp_speed {
                 qdot *= self.settings.max_tcp_speed / speed;
-                why.push(Intervention::TcpSpeed);
+                note(&mut why, Intervention::TcpSpeed);
             }
         }
         // Acceleration: slew from the last command (also when stopping: a ramp, not a jump).
@@ -244,14 +249,14 @@ impl SafetyLimiter {
             qdot[i] = last + delta;
         }
         if slewed {
-            why.push(Intervention::Acceleration);
+            note(&mut why, Intervention::Acceleration);
             // Slewing toward a new command can only raise the TCP speed if the old one was
             // faster; keep the cap as the last word (when the inputs can be trusted).
             if finite {
                 let speed = tcp_speed(input.jacobian, &qdot);
                 if speed > self.settings.max_tcp_speed {
                     qdot *= self.settings.max_tcp_speed / speed;
-                    why.push(Intervention::TcpSpeed);
+                    note(&mut why, Intervention::TcpSpeed);
                 }
             }
         }
@@ -276,7 +281,6 @@ impl SafetyLimiter {
         } else {
             0.0
         };
-        why.dedup();
         Limited {
             command,
             interventions: why,
@@ -358,6 +362,11 @@ mod tests {
         let o = out.expect("ran");
         assert!((o.tcp_speed - 0.25).abs() < 1e-9, "{}", o.tcp_speed);
         assert!(o.interventions.contains(&Intervention::TcpSpeed));
+        // Each reason once, even when the cap is applied before and after the ramp.
+        let mut seen = o.interventions.clone();
+        seen.sort_by_key(|i| format!("{i:?}"));
+        seen.dedup();
+        assert_eq!(seen.len(), o.interventions.len(), "{:?}", o.interventions);
         // Direction kept.
         let c = o.command.expect("sending");
         assert!((c[0] - c[1]).abs() < 1e-12);

@@ -20,7 +20,7 @@ use avatarm_core::grasp::Contact;
 use avatarm_core::hand::{HandFrame, HandScript, JOINT_NAMES, PALM, WRIST, parse_frames};
 use bevy::prelude::*;
 use bevy_rapier3d::prelude::*;
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::Vector3;
 
 /// A source of hand frames.
 pub trait HandSource: Send + Sync + 'static {
@@ -355,17 +355,12 @@ fn drive_hand(
             // First tracked frame: appear at the target.
             *transform = target;
         }
-        let want = if part.from == WRIST {
-            Collider::cuboid(len / 2.0, 0.035, radius.clamp(0.008, 0.02))
-        } else {
-            Collider::capsule_y((len / 2.0).max(1e-3), radius.clamp(0.004, 0.012))
-        };
-        let resize = match (collider.as_capsule(), want.as_capsule()) {
-            (Some(a), Some(b)) => (a.half_height() - b.half_height()).abs() > 1e-3,
-            _ => false,
-        };
-        if resize {
-            *collider = want;
+        // Capsules follow the tracked bone length (rebuilt only when it changes by > 1 mm).
+        if part.from != WRIST
+            && let Some(half) = collider.as_capsule().map(|c| c.half_height())
+            && (half - len / 2.0).abs() > 1e-3
+        {
+            *collider = Collider::capsule_y((len / 2.0).max(1e-3), radius.clamp(0.004, 0.012));
         }
         let mut lin = (target.translation - transform.translation) / dt;
         if lin.length() > drive.max_speed {
@@ -453,21 +448,6 @@ fn read_contacts(
             }
         }
     }
-}
-
-/// The pose of an entity's transform as an isometry.
-pub fn transform_to_iso(t: &Transform) -> Isometry3<f64> {
-    let p = t.translation;
-    let q = t.rotation;
-    Isometry3::from_parts(
-        nalgebra::Translation3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z)),
-        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
-            f64::from(q.w),
-            f64::from(q.x),
-            f64::from(q.y),
-            f64::from(q.z),
-        )),
-    )
 }
 
 #[cfg(test)]
