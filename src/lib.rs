@@ -11,6 +11,7 @@ pub mod replay;
 pub mod robot_info;
 pub mod scene;
 pub mod session;
+pub mod task;
 
 use std::time::Duration;
 

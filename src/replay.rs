@@ -725,10 +725,21 @@ pub fn run(
     options: ReplayOptions,
 ) -> Result<serde_json::Value, String> {
     let slot = options.result.clone();
+    let out = options.out.clone();
     let mut app = crate::build_app(scene, &crate::Mode::Headless(options));
     let exit = app.run();
-    slot.lock()
+    let mut report = slot
+        .lock()
         .ok()
         .and_then(|mut s| s.take())
-        .unwrap_or_else(|| Err(format!("the replay stopped before finishing ({exit:?})")))
+        .unwrap_or_else(|| Err(format!("the replay stopped before finishing ({exit:?})")))?;
+    if let Some(task) = &scene.file.task {
+        // The task's trials run headless (physics and mapping, no video) after the replay.
+        report["object"] = crate::task::object_report(scene, task)?;
+        let path = out.join("report.json");
+        let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
+        std::fs::write(&path, text + "\n")
+            .map_err(|e| format!("{}: cannot write: {e}", path.display()))?;
+    }
+    Ok(report)
 }

@@ -245,6 +245,9 @@ pub struct SceneFile {
     /// The interaction layer (`[interaction]`).
     #[serde(default)]
     pub interaction: InteractionSpec,
+    /// The teleoperation task measured on every replay (`[task]`), e.g. the paper's pouring.
+    #[serde(default)]
+    pub task: Option<avatarm_mapping::pouring::PouringTask>,
 }
 
 /// `[background]`: where the background image H comes from.

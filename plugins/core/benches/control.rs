@@ -77,6 +77,7 @@ fn benches(c: &mut Criterion) {
                             contact_velocities: &vs,
                             twin_pose: twin,
                             q: &q,
+                            held: true,
                         },
                         &v2r,
                         &robot,

@@ -69,6 +69,18 @@ impl VirtualToReal {
         )
     }
 
+    /// A real pose in the virtual scene: the inverse of [`Self::pose`], where the twin of an
+    /// object at `real` is placed.
+    pub fn virtual_pose(&self, real: &Isometry3<f64>) -> Isometry3<f64> {
+        Isometry3::from_parts(
+            Translation3::from(
+                self.virtual_centre
+                    + self.rotation * (real.translation.vector - self.real_centre) * self.k,
+            ),
+            self.rotation * real.rotation,
+        )
+    }
+
     /// A virtual twist (taken at a virtual point) as the real twist at the mapped point.
     pub fn twist(&self, v: &Vector6<f64>) -> Vector6<f64> {
         let r = self.rotation.inverse();
@@ -136,6 +148,9 @@ pub struct TickInputs<'a> {
     pub twin_pose: Isometry3<f64>,
     /// Measured joint positions.
     pub q: &'a [f64],
+    /// The hand holds the twin (its grasp state, e.g. the hand plugin's grasp assist): the
+    /// gripper closes on this as well as on σ.
+    pub held: bool,
 }
 
 /// The gripper command.
@@ -234,11 +249,11 @@ impl Mapper {
                 grasp::object_twist_from_pinv(&a.g_pinv, &vc).map_err(|e| format!("grasp: {e}"))?;
             (nu, a.squeeze, a.rank)
         };
-        // Gripper from σ, with hysteresis.
+        // Gripper from σ (with hysteresis) or the hand's grasp state.
         let s = &self.settings;
-        if !self.closed && squeeze_n >= s.close_at_n {
+        if !self.closed && (squeeze_n >= s.close_at_n || input.held) {
             self.closed = true;
-        } else if self.closed && squeeze_n < s.open_at_n {
+        } else if self.closed && squeeze_n < s.open_at_n && !input.held {
             self.closed = false;
         }
         let gripper = GripperCommand {
@@ -256,6 +271,10 @@ impl Mapper {
         let mut object_twist = v2r.twist(&twin_twist);
         if s.mode == MappingMode::ClosedLoop {
             object_twist += pose_difference(&measured, &target) * s.gain;
+        }
+        if !self.closed {
+            // An open gripper cannot move the object: the arm holds still around it.
+            object_twist = Vector6::zeros();
         }
         // Move the object twist to the tool point, then to the arm's joints.
         let tcp = poses[robot.tcp].translation.vector;
@@ -385,6 +404,7 @@ mod tests {
                     contact_velocities: &vel,
                     twin_pose: pose,
                     q: &q,
+                    held: true,
                 },
                 &v2r,
                 &robot,
@@ -422,6 +442,13 @@ mod tests {
         let real = Vector3::new(0.6, -0.16, 0.8);
         let virt = v2r.virtual_centre + v2r.rotation * (real - v2r.real_centre) * v2r.k;
         assert!((v2r.point(&virt) - real).norm() < 1e-12);
+        let pose = Isometry3::from_parts(
+            Translation3::from(real),
+            UnitQuaternion::from_euler_angles(0.3, 0.0, -1.0),
+        );
+        let back = v2r.pose(&v2r.virtual_pose(&pose));
+        assert!((back.translation.vector - real).norm() < 1e-12);
+        assert!(back.rotation.angle_to(&pose.rotation) < 1e-12);
     }
 
     /// The twin moves the object 10 cm up and back at ~0.1 m/s; the simulated robot (latency,
@@ -495,6 +522,7 @@ mod tests {
                             contact_velocities: &vel,
                             twin_pose: pose,
                             q: q_meas.as_slice(),
+                            held: true,
                         },
                         &v2r,
                         &robot,

@@ -133,6 +133,14 @@ pub struct HandDrive {
     pub density: f32,
     /// Friction of the hand's surfaces.
     pub friction: f32,
+    /// Largest speed of the finger bodies while the hand holds an object (m/s): they rest on
+    /// it instead of pushing the tracked fingers' depth into it, which would shake the object
+    /// against the palm's hold.
+    pub held_finger_speed: f32,
+    /// Time constant of the low-pass filter on the tracked joint positions (s; 0: off).
+    /// Trackers jitter by about a millimetre per frame; unfiltered, the hand bodies pass that
+    /// jitter to a held object at up to `max_speed`.
+    pub smoothing_s: f32,
 }
 
 impl Default for HandDrive {
@@ -142,6 +150,8 @@ impl Default for HandDrive {
             max_spin: 20.0,
             density: 5000.0,
             friction: 1.0,
+            held_finger_speed: 0.05,
+            smoothing_s: 0.03,
         }
     }
 }
@@ -170,6 +180,72 @@ pub struct ObjectContacts {
     pub velocities: Vec<Vector3<f64>>,
     /// Largest normal force in this step (N).
     pub max_force_n: f64,
+    /// The hand body that makes each contact.
+    pub parts: Vec<Entity>,
+    /// The object's own velocity at each contact point (m/s): the material point under the
+    /// contact, from the object's pose over the last step. For a grasp that holds (no slip)
+    /// it equals the hand's velocity there without the tracking jitter of the finger bodies,
+    /// and it is what the paper differentiates: the contact points' positions over time.
+    pub object_velocities: Vec<Vector3<f64>>,
+}
+
+/// Holding the object once the hand closes around it.
+///
+/// Tracked fingers cannot squeeze a virtual object the way real ones squeeze a real one (there
+/// is nothing to stop them, and the scripted or tracked skeleton rarely wraps an object so that
+/// friction alone carries its weight). Like most physics hands in VR, the hand therefore takes
+/// the object when two of its bodies touch it from opposing sides (contact normals more than
+/// `opposition` apart), by a fixed joint between the palm and the object at their pose of that
+/// moment, and lets go when the tracked hand opens by `release_opening_m` from its closure at
+/// the grasp. The contacts, their forces and velocities are read as before, so the grasp
+/// matrix and the mapping see the hand, not the joint.
+#[derive(Resource, Debug, Clone, Copy, PartialEq)]
+pub struct GraspAssist {
+    /// On (default) or off (contacts and friction only).
+    pub enabled: bool,
+    /// Two contact normals oppose when their dot product is below this.
+    pub opposition: f32,
+    /// The hand lets go when its closure opens by this much (m, mean fingertip distance to
+    /// the palm).
+    pub release_opening_m: f64,
+}
+
+impl Default for GraspAssist {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            opposition: 0.0,
+            release_opening_m: 0.015,
+        }
+    }
+}
+
+/// The object the hand holds, if any.
+#[derive(Resource, Debug, Clone, Copy, Default, PartialEq)]
+pub struct HeldObject {
+    /// The held body and the hand's closure when it was taken.
+    pub held: Option<(Entity, f64)>,
+    /// Grasps so far.
+    pub grasps: u32,
+    /// Releases so far.
+    pub releases: u32,
+}
+
+/// How closed a hand is: the mean distance of its five fingertips to the palm joint (m).
+pub fn closure(frame: &HandFrame) -> Option<f64> {
+    let palm = frame.joints.get(PALM)?.pose.translation.vector;
+    let tips = avatarm_core::hand::TIPS;
+    let sum: f64 = tips
+        .iter()
+        .map(|&t| {
+            frame
+                .joints
+                .get(t)
+                .map_or(f64::NAN, |j| (j.pose.translation.vector - palm).norm())
+        })
+        .sum();
+    let c = sum / tips.len() as f64;
+    c.is_finite().then_some(c)
 }
 
 /// The hand's system sets (`FixedUpdate`).
@@ -214,6 +290,8 @@ impl Plugin for HandPlugin {
     fn build(&self, app: &mut App) {
         app.init_resource::<HandDrive>()
             .init_resource::<ObjectContacts>()
+            .init_resource::<GraspAssist>()
+            .init_resource::<HeldObject>()
             .configure_sets(
                 FixedUpdate,
                 (
@@ -228,7 +306,12 @@ impl Plugin for HandPlugin {
                     .chain()
                     .in_set(HandSystems::Drive),
             )
-            .add_systems(FixedUpdate, read_contacts.in_set(HandSystems::Contacts));
+            .add_systems(
+                FixedUpdate,
+                (read_contacts, assist_grasp)
+                    .chain()
+                    .in_set(HandSystems::Contacts),
+            );
     }
 }
 
@@ -324,13 +407,30 @@ fn drive_hand(
     time: Res<Time<Fixed>>,
     hand: Option<ResMut<ActiveHand>>,
     drive: Res<HandDrive>,
+    held: Res<HeldObject>,
     mut parts: Query<(&HandPart, &mut Transform, &mut Velocity, &mut Collider)>,
 ) {
     let Some(mut hand) = hand else { return };
     let now = time.elapsed_secs_f64();
-    if let Some(frame) = hand.source.poll(now) {
+    if let Some(mut frame) = hand.source.poll(now) {
         match frame.validate() {
-            Ok(()) => hand.latest = Some(frame),
+            Ok(()) => {
+                // Exponential smoothing of the joint positions over the time between frames.
+                if drive.smoothing_s > 0.0
+                    && let Some(prev) = hand.latest.as_ref().filter(|p| {
+                        p.tracked && frame.tracked && p.joints.len() == frame.joints.len()
+                    })
+                {
+                    let gap = (frame.t_s - prev.t_s).max(0.0);
+                    let a = 1.0 - (-gap / f64::from(drive.smoothing_s)).exp();
+                    for (j, p) in frame.joints.iter_mut().zip(&prev.joints) {
+                        let v = p.pose.translation.vector
+                            + (j.pose.translation.vector - p.pose.translation.vector) * a;
+                        j.pose.translation.vector = v;
+                    }
+                }
+                hand.latest = Some(frame);
+            }
             Err(e) => {
                 hand.refused += 1;
                 if hand.refused % 100 == 1 {
@@ -363,8 +463,13 @@ fn drive_hand(
             *collider = Collider::capsule_y((len / 2.0).max(1e-3), radius.clamp(0.004, 0.012));
         }
         let mut lin = (target.translation - transform.translation) / dt;
-        if lin.length() > drive.max_speed {
-            lin = lin.normalize() * drive.max_speed;
+        let max_speed = if held.held.is_some() && part.from != WRIST {
+            drive.held_finger_speed
+        } else {
+            drive.max_speed
+        };
+        if lin.length() > max_speed {
+            lin = lin.normalize() * max_speed;
         }
         let (axis, angle) = (target.rotation * transform.rotation.inverse()).to_axis_angle();
         let angle = if angle > std::f32::consts::PI {
@@ -386,23 +491,40 @@ fn drive_hand(
     }
 }
 
+/// The grasp target's pose at the previous step.
+type PreviousPose = Option<(Entity, Transform)>;
+
+/// Grasp targets with a collider, and their poses.
+type Targets<'w, 's> =
+    Query<'w, 's, (Entity, &'static Transform), (With<GraspTarget>, With<Collider>)>;
+
 /// Reads the contacts between hand bodies and the grasp target after the step.
 fn read_contacts(
     time: Res<Time<Fixed>>,
     context: ReadRapierContext,
-    targets: Query<Entity, (With<GraspTarget>, With<Collider>)>,
+    targets: Targets,
+    mut previous: Local<PreviousPose>,
     parts: Query<(&Velocity, &Transform), With<HandPart>>,
     mut out: ResMut<ObjectContacts>,
 ) {
     out.t_s = time.elapsed_secs_f64();
     out.contacts.clear();
     out.velocities.clear();
+    out.parts.clear();
+    out.object_velocities.clear();
     out.max_force_n = 0.0;
     let Ok(context) = context.single() else {
         return;
     };
     let dt = f64::from(time.timestep().as_secs_f32()).max(1e-6);
-    for target in &targets {
+    for (target, now) in &targets {
+        // The object's motion over the step: a point p now was at `back(p)` before it.
+        let before = match *previous {
+            Some((e, t)) if e == target => t,
+            _ => *now,
+        };
+        *previous = Some((target, *now));
+        let back = |p: Vec3| before.transform_point(now.rotation.inverse() * (p - now.translation));
         for pair in context.contact_pairs_with(target) {
             let (Some(c1), Some(c2)) = (pair.collider1(), pair.collider2()) else {
                 continue;
@@ -444,10 +566,81 @@ fn read_contacts(
                         f64::from(v.y),
                         f64::from(v.z),
                     ));
+                    out.parts.push(hand_entity);
+                    let w = (p - back(p)) / dt as f32;
+                    out.object_velocities.push(Vector3::new(
+                        f64::from(w.x),
+                        f64::from(w.y),
+                        f64::from(w.z),
+                    ));
                 }
             }
         }
     }
+}
+
+/// Takes the object when two hand bodies press on it from opposing sides; lets it go when the
+/// tracked hand opens ([`GraspAssist`]).
+fn assist_grasp(
+    mut commands: Commands,
+    assist: Res<GraspAssist>,
+    hand: Option<Res<ActiveHand>>,
+    contacts: Res<ObjectContacts>,
+    mut held: ResMut<HeldObject>,
+    parts: Query<(Entity, &HandPart, &Transform)>,
+    targets: Query<(Entity, &Transform), With<GraspTarget>>,
+) {
+    let tracked = hand
+        .as_ref()
+        .and_then(|h| h.latest.as_ref())
+        .filter(|f| f.tracked);
+    let now_closure = tracked.and_then(closure);
+    if let Some((target, at_grasp)) = held.held {
+        let opened = now_closure.is_some_and(|c| c > at_grasp + assist.release_opening_m);
+        if opened || !assist.enabled || targets.get(target).is_err() {
+            if let Ok(mut e) = commands.get_entity(target) {
+                e.remove::<ImpulseJoint>();
+            }
+            held.held = None;
+            held.releases += 1;
+        }
+        return;
+    }
+    let Some(closure_now) = now_closure else {
+        return;
+    };
+    if !assist.enabled || contacts.contacts.is_empty() {
+        return;
+    }
+    let n = contacts.contacts.len();
+    let opposed = (0..n).any(|i| {
+        (i + 1..n).any(|j| {
+            contacts.parts[i] != contacts.parts[j]
+                && contacts.contacts[i]
+                    .normal
+                    .dot(&contacts.contacts[j].normal)
+                    < f64::from(assist.opposition)
+        })
+    });
+    if !opposed {
+        return;
+    }
+    let Some((palm, _, palm_t)) = parts.iter().find(|(_, p, _)| p.from == WRIST) else {
+        return;
+    };
+    let Some((target, target_t)) = targets.iter().next() else {
+        return;
+    };
+    // The object's pose in the palm's frame, now.
+    let inv = palm_t.rotation.inverse();
+    let joint = FixedJointBuilder::new()
+        .local_anchor1(inv * (target_t.translation - palm_t.translation))
+        .local_basis1(inv * target_t.rotation);
+    commands
+        .entity(target)
+        .insert(ImpulseJoint::new(palm, joint));
+    held.held = Some((target, closure_now));
+    held.grasps += 1;
 }
 
 #[cfg(test)]

@@ -1,0 +1,332 @@
+//! Avatarm's grasp-to-robot mapping as a Bevy plugin.
+//!
+//! Every physics step, after the hand's contacts are read ([`avatarm_hand::HandSystems`]):
+//! joint states from the robot → [`Mapper::tick`] (grasp matrix, twin twist, scaling to the
+//! real object, paper or closed-loop mode, damped least squares, gripper from σ) →
+//! [`SafetyLimiter`] (always) → the robot through [`RobotInterface`]. A mapping error (bad
+//! joint state, non-finite contact) becomes a non-finite command, which the limiter turns into
+//! a ramped stop; the gripper keeps its state while the robot is being stopped, so a lost hand
+//! does not drop the real object.
+//!
+//! [`pouring`] is the paper's experiment on top of it: a scripted hand grasps the bottle's
+//! twin, lifts, pours and raises it, and the simulated arm carries the real bottle; the error
+//! between them is the paper's measure.
+
+pub mod pouring;
+pub mod robot;
+
+use std::sync::Arc;
+
+use avatarm_core::mapping::{Mapper, MappingSettings, RobotSide, TickInputs, VirtualToReal};
+use avatarm_core::robot::{LinkId, RobotModel};
+use avatarm_core::safety::{self, Intervention, SafetyLimiter};
+use avatarm_core::sim::JointState;
+use avatarm_hand::{ActiveHand, GraspTarget, HandSystems, HeldObject, ObjectContacts};
+use bevy::prelude::*;
+use nalgebra::{DVector, Isometry3, Matrix6xX, Translation3, UnitQuaternion};
+
+pub use robot::{CarriedObject, RobotInterface, SimArm};
+
+/// Adds the control tick. Needs the [`avatarm_hand::HandPlugin`] and a [`Teleop`] resource.
+pub struct MappingPlugin;
+
+impl Plugin for MappingPlugin {
+    fn build(&self, app: &mut App) {
+        app.add_systems(FixedUpdate, teleop_tick.after(HandSystems::Contacts));
+    }
+}
+
+/// One control tick, as recorded.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TeleopSample {
+    /// App time (s).
+    pub t_s: f64,
+    /// The real object's target: the twin mapped into the real world.
+    pub target: Isometry3<f64>,
+    /// The real object as the measured joint states place it (while the tool holds it).
+    pub measured: Isometry3<f64>,
+    /// The real object's true pose, where the robot backend knows it (simulation).
+    pub truth: Option<Isometry3<f64>>,
+    /// Gripper commanded closed.
+    pub gripper_closed: bool,
+    /// Commanded tool-point speed (m/s).
+    pub tcp_speed: f64,
+    /// Largest commanded joint speed (rad/s).
+    pub max_joint_speed: f64,
+    /// The limiter is stopping the robot.
+    pub stopping: bool,
+    /// Contacts on the twin.
+    pub contacts: usize,
+    /// Squeezing force σ (N).
+    pub squeeze_n: f64,
+    /// The twin's twist from the contacts (virtual scene, at the twin's origin).
+    pub twin_twist: nalgebra::Vector6<f64>,
+}
+
+/// Counters for the status line and the report.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TeleopStatus {
+    /// Control ticks run.
+    pub ticks: u64,
+    /// Ticks the mapping refused (with the last reason).
+    pub errors: u64,
+    /// The last mapping or robot error.
+    pub last_error: Option<String>,
+    /// Joint states refused (wrong size, NaN).
+    pub bad_joint_states: u64,
+    /// Ticks on which each intervention of the limiter happened.
+    pub interventions: Vec<(Intervention, u64)>,
+    /// Largest commanded tool-point speed (m/s).
+    pub max_tcp_speed: f64,
+}
+
+/// The teleoperation loop's state: the robot, the mapping and the limiter.
+#[derive(Resource)]
+pub struct Teleop {
+    model: Arc<RobotModel>,
+    base: Isometry3<f64>,
+    tcp: LinkId,
+    arm: Vec<usize>,
+    tcp_from_object: Isometry3<f64>,
+    v2r: VirtualToReal,
+    mapper: Mapper,
+    limiter: SafetyLimiter,
+    robot: Box<dyn RobotInterface>,
+    joints: Option<JointState>,
+    /// Counters.
+    pub status: TeleopStatus,
+    /// Record every tick into [`Teleop::log`].
+    pub record: bool,
+    /// The recorded ticks.
+    pub log: Vec<TeleopSample>,
+}
+
+/// What the teleoperation loop is made of.
+pub struct TeleopConfig {
+    /// The robot.
+    pub model: Arc<RobotModel>,
+    /// Its root link in the real world.
+    pub base: Isometry3<f64>,
+    /// The tool link (between the gripper's fingers).
+    pub tcp: LinkId,
+    /// Arm joints the mapping drives (the others get zero velocity).
+    pub arm: Vec<usize>,
+    /// The real object in the tool frame while grasped.
+    pub tcp_from_object: Isometry3<f64>,
+    /// The virtual scene to the real one.
+    pub v2r: VirtualToReal,
+    /// The mapping.
+    pub mapping: MappingSettings,
+    /// The limiter.
+    pub safety: safety::SafetySettings,
+}
+
+impl Teleop {
+    /// The loop for `robot`. Errors when the settings are invalid.
+    pub fn new(config: TeleopConfig, robot: impl RobotInterface) -> Result<Self, String> {
+        config.safety.validate()?;
+        let n = config.model.dof();
+        if let Some(&bad) = config.arm.iter().find(|&&i| i >= n) {
+            return Err(format!("arm joint index {bad} out of range ({n} joints)"));
+        }
+        let limits = config.model.dof_limits();
+        Ok(Self {
+            limiter: SafetyLimiter::new(config.safety, limits),
+            mapper: Mapper::new(config.mapping),
+            model: config.model,
+            base: config.base,
+            tcp: config.tcp,
+            arm: config.arm,
+            tcp_from_object: config.tcp_from_object,
+            v2r: config.v2r,
+            robot: Box::new(robot),
+            joints: None,
+            status: TeleopStatus::default(),
+            record: false,
+            log: Vec::new(),
+        })
+    }
+
+    /// The robot backend's name.
+    pub fn robot_name(&self) -> &str {
+        self.robot.name()
+    }
+
+    /// The newest accepted joint state.
+    pub fn joints(&self) -> Option<&JointState> {
+        self.joints.as_ref()
+    }
+
+    fn count(&mut self, what: Intervention) {
+        match self
+            .status
+            .interventions
+            .iter_mut()
+            .find(|(i, _)| *i == what)
+        {
+            Some((_, n)) => *n += 1,
+            None => self.status.interventions.push((what, 1)),
+        }
+    }
+
+    fn fail(&mut self, message: String) {
+        self.status.errors += 1;
+        if self.status.errors % 100 == 1 {
+            warn!(
+                "mapping: {message} ({} refused ticks so far); stopping the robot",
+                self.status.errors
+            );
+        }
+        self.status.last_error = Some(message);
+    }
+}
+
+/// A Bevy transform as an isometry (scale ignored).
+pub fn isometry(t: &Transform) -> Isometry3<f64> {
+    let p = t.translation.as_dvec3();
+    let q = t.rotation.as_dquat();
+    Isometry3::from_parts(
+        Translation3::new(p.x, p.y, p.z),
+        UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z)),
+    )
+}
+
+fn teleop_tick(
+    time: Res<Time<Fixed>>,
+    contacts: Res<ObjectContacts>,
+    hand: Option<Res<ActiveHand>>,
+    held: Option<Res<HeldObject>>,
+    twin: Query<&Transform, With<GraspTarget>>,
+    teleop: Option<ResMut<Teleop>>,
+) {
+    let Some(mut teleop) = teleop else { return };
+    let t = &mut *teleop;
+    let now = time.elapsed_secs_f64();
+    let dt = time.timestep().as_secs_f64().max(1e-6);
+    t.robot.advance(now);
+    let n = t.model.dof();
+    for s in t.robot.receive() {
+        let ok = s.positions.len() == n
+            && s.positions.iter().all(|v| v.is_finite())
+            && s.stamp_s.is_finite();
+        if ok {
+            t.joints = Some(s);
+        } else {
+            t.status.bad_joint_states += 1;
+        }
+    }
+    t.status.ticks += 1;
+    let (hand_stamp, hand_tracked) = match hand.as_ref().and_then(|h| h.latest.as_ref()) {
+        Some(f) => (Some(f.t_s), f.tracked),
+        None => (None, false),
+    };
+    let twin_pose = twin.single().ok().map(isometry);
+    let q: Vec<f64> = t
+        .joints
+        .as_ref()
+        .map(|s| s.positions.iter().copied().collect())
+        .unwrap_or_else(|| vec![f64::NAN; n]);
+    let side = RobotSide {
+        model: &t.model,
+        base: t.base,
+        tcp: t.tcp,
+        arm: &t.arm,
+        tcp_from_object: t.tcp_from_object,
+    };
+    let mapped = match (twin_pose, &t.joints) {
+        (None, _) => Err("no object twin (GraspTarget) in the scene".to_string()),
+        (_, None) => Err("no joint state received yet".to_string()),
+        (Some(pose), Some(_)) => t.mapper.tick(
+            &TickInputs {
+                contacts: &contacts.contacts,
+                contact_velocities: &contacts.object_velocities,
+                twin_pose: pose,
+                q: &q,
+                held: held.as_ref().is_some_and(|h| h.held.is_some()),
+            },
+            &t.v2r,
+            &side,
+        ),
+    };
+    let (qdot, jacobian, out) = match mapped {
+        Ok(out) => (out.qdot.clone(), out.tcp_jacobian.clone(), Some(out)),
+        Err(e) => {
+            if t.joints.is_some() {
+                t.fail(e);
+            }
+            (
+                DVector::from_element(n, f64::NAN),
+                Matrix6xX::zeros(n),
+                None,
+            )
+        }
+    };
+    let limited = t.limiter.tick(
+        &safety::TickInputs {
+            now_s: now,
+            qdot: &qdot,
+            q: &q,
+            joints_stamp_s: t.joints.as_ref().map(|s| s.stamp_s),
+            hand_stamp_s: hand_stamp,
+            hand_tracked,
+            jacobian: &jacobian,
+        },
+        dt,
+    );
+    for &i in &limited.interventions {
+        t.count(i);
+    }
+    t.status.max_tcp_speed = t.status.max_tcp_speed.max(limited.tcp_speed);
+    if let Some(cmd) = &limited.command
+        && let Err(e) = t.robot.send(cmd)
+    {
+        t.fail(format!("{}: {e}", t.robot.name()));
+    }
+    // The gripper follows σ only while the hand drives the robot: a lost hand or a refused
+    // tick keeps it as it is (never drops the real object).
+    if let Some(out) = &out
+        && !limited.stopping
+        && let Err(e) = t.robot.gripper(&out.gripper)
+    {
+        t.fail(format!("{}: {e}", t.robot.name()));
+    }
+    if t.record {
+        let nan = Isometry3::from_parts(
+            Translation3::new(f64::NAN, f64::NAN, f64::NAN),
+            UnitQuaternion::identity(),
+        );
+        let (target, measured, gripper_closed, squeeze_n, twin_twist) = match &out {
+            Some(o) => (
+                o.target,
+                o.measured,
+                o.gripper.closed,
+                o.squeeze_n,
+                o.twin_twist,
+            ),
+            None => (
+                twin_pose.map_or(nan, |p| t.v2r.pose(&p)),
+                nan,
+                false,
+                0.0,
+                nalgebra::Vector6::zeros(),
+            ),
+        };
+        let sample = TeleopSample {
+            t_s: now,
+            target,
+            measured,
+            truth: t.robot.true_object_pose(),
+            gripper_closed,
+            tcp_speed: limited.tcp_speed,
+            max_joint_speed: limited.command.as_ref().map_or(0.0, |c| c.amax()),
+            stopping: limited.stopping,
+            contacts: contacts.contacts.len(),
+            squeeze_n,
+            twin_twist,
+        };
+        t.log.push(sample);
+    }
+}
+
+#[cfg(test)]
+mod tests;

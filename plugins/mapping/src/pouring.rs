@@ -1,0 +1,651 @@
+//! The paper's experiment: pour from a bottle through the Avatarm, measured.
+//!
+//! A scripted hand (minimum-jerk keyframes with seeded tremor and tracking noise, and a seeded
+//! start pose) grasps the bottle's twin in physics, lifts it about 5 cm, pours, puts it upright
+//! and raises it 9 cm more. The mapping drives the simulated arm, which starts with its open
+//! gripper around the real bottle (the paper's robot did not pre-grasp either: the grasp
+//! happens when the hand squeezes the twin). Each trial records the twin mapped into the real
+//! world and the real bottle's true pose; the error between them from the moment the gripper
+//! closes is the paper's measure: position RMSE and roll/pitch/yaw RMSE.
+//!
+//! Headless and without rendering: the object metrics do not depend on the video.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use avatarm_core::hand::{HandKeyframe, HandNoise, HandScript, Handedness};
+use avatarm_core::ik::solve_pose;
+use avatarm_core::mapping::{MappingMode, MappingSettings, VirtualToReal, pose_rmse};
+use avatarm_core::rng::Rng;
+use avatarm_core::robot::{LinkId, RobotModel};
+use avatarm_core::safety::SafetySettings;
+use avatarm_core::sim::{SimRobot, SimRobotParams};
+use avatarm_hand::{ActiveHand, GraspTarget, HandPlugin, ObjectContacts, ScriptedHand};
+use bevy::prelude::*;
+use bevy::time::TimeUpdateStrategy;
+use bevy_rapier3d::prelude::*;
+use nalgebra::{DVector, Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::{CarriedObject, MappingPlugin, SimArm, Teleop, TeleopConfig, TeleopSample};
+
+/// The task as a scene describes it (`[task]`, docs/scene-format.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PouringTask {
+    /// The scene prop that is the bottle (a `bottle` or `cylinder` prop).
+    pub object: String,
+    /// The robot's tool link, between the gripper's fingers.
+    pub tcp_link: String,
+    /// Joints the mapping drives; empty: every movable joint whose name does not contain
+    /// "finger" (the gripper's).
+    pub arm_joints: Vec<String>,
+    /// Trials per mode.
+    pub trials: u32,
+    /// Seed of trial 0 (trial `i` uses `seed + i` for its noise and start pose).
+    pub seed: u64,
+    /// Length of a trial (s).
+    pub duration_s: f64,
+    /// The modes to run.
+    pub modes: Vec<MappingMode>,
+    /// Mass of the bottle's twin (kg).
+    pub mass_kg: f64,
+    /// Friction of the twin's surface.
+    pub friction: f64,
+    /// Start pose of the hand: uniform offset in each axis, ± this (m).
+    pub start_jitter_m: f64,
+    /// Height of the grasp on the bottle: uniform offset, ± this (m).
+    pub grasp_jitter_m: f64,
+    /// Hand tracker rate (Hz).
+    pub hand_rate_hz: f64,
+    /// Tremor and tracking noise (the seed is set per trial).
+    pub noise: HandNoise,
+    /// Closed-loop gain (1/s).
+    pub gain: f64,
+    /// TCP speed cap (m/s), the paper's ISO 10218 figure by default.
+    pub max_tcp_speed: f64,
+    /// Scale of the twin relative to the real bottle (`k`).
+    pub k: f64,
+    /// The virtual scene's yaw about the bottle (degrees) and its offset (m): where the twin
+    /// stands in front of the user, relative to the real bottle.
+    pub virtual_yaw_deg: f64,
+    /// See `virtual_yaw_deg`.
+    pub virtual_offset: [f64; 3],
+    /// The hand's keyframes, positions relative to the twin's centre (virtual scene axes).
+    pub hand: Vec<HandKeyframe>,
+}
+
+impl Default for PouringTask {
+    fn default() -> Self {
+        let roll = std::f64::consts::FRAC_PI_2;
+        let pour: f64 = 1.0;
+        let key = |t_s: f64, xyz: [f64; 3], roll: f64, grip: f64| HandKeyframe {
+            t_s,
+            xyz,
+            rpy: [roll, 0.0, 0.0],
+            grip,
+            tracked: true,
+        };
+        // Palm on the bottle's −y side, fingers along +x wrapping around it; the pour turns
+        // the hand about the bottle's centre (the wrist moves on that arc).
+        let (px, py, gg): (f64, f64, f64) = (-0.05, -0.040, 0.7);
+        let (wy, wz) = (py * pour.cos(), -py * pour.sin());
+        Self {
+            object: "bottle".into(),
+            tcp_link: "right_gripper_tip".into(),
+            arm_joints: Vec::new(),
+            trials: 10,
+            seed: 1,
+            duration_s: 10.0,
+            modes: vec![MappingMode::Paper, MappingMode::ClosedLoop],
+            mass_kg: 0.5,
+            friction: 1.0,
+            start_jitter_m: 0.02,
+            grasp_jitter_m: 0.01,
+            hand_rate_hz: 90.0,
+            noise: HandNoise::default(),
+            gain: MappingSettings::default().gain,
+            max_tcp_speed: SafetySettings::default().max_tcp_speed,
+            k: 1.0,
+            virtual_yaw_deg: 0.0,
+            virtual_offset: [0.0; 3],
+            hand: vec![
+                key(0.0, [px, -0.14, 0.0], roll, 0.0),
+                key(1.0, [px, py, 0.0], roll, 0.0),
+                key(1.8, [px, py, 0.0], roll, gg),
+                key(2.2, [px, py, 0.0], roll, gg),
+                key(3.7, [px, py, 0.05], roll, gg),
+                key(5.2, [px, wy, 0.05 + wz], roll - pour, gg),
+                key(5.7, [px, wy, 0.05 + wz], roll - pour, gg),
+                key(7.2, [px, py, 0.05], roll, gg),
+                key(8.7, [px, py, 0.14], roll, gg),
+            ],
+        }
+    }
+}
+
+impl PouringTask {
+    /// Checks the numbers; errors name the field.
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = [
+            ("duration_s", self.duration_s),
+            ("mass_kg", self.mass_kg),
+            ("hand_rate_hz", self.hand_rate_hz),
+            ("max_tcp_speed", self.max_tcp_speed),
+            ("k", self.k),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("task.{name} = {v}: must be a positive number"));
+            }
+        }
+        let non_negative = [
+            ("friction", self.friction),
+            ("start_jitter_m", self.start_jitter_m),
+            ("grasp_jitter_m", self.grasp_jitter_m),
+            ("gain", self.gain),
+        ];
+        for (name, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("task.{name} = {v}: must be a number >= 0"));
+            }
+        }
+        if self.trials == 0 || self.modes.is_empty() {
+            return Err("task: at least one trial and one mode".into());
+        }
+        if !self.virtual_yaw_deg.is_finite() || self.virtual_offset.iter().any(|v| !v.is_finite()) {
+            return Err("task.virtual_yaw_deg / virtual_offset must be finite".into());
+        }
+        HandScript::new(Handedness::Right, self.hand.clone(), self.noise)
+            .map(|_| ())
+            .map_err(|e| format!("task.hand: {e}"))
+    }
+
+    /// The virtual scene relative to the real one, for a bottle whose centre is at `centre`.
+    pub fn virtual_to_real(&self, centre: &Vector3<f64>) -> VirtualToReal {
+        VirtualToReal {
+            k: self.k,
+            rotation: UnitQuaternion::from_euler_angles(
+                0.0,
+                0.0,
+                self.virtual_yaw_deg.to_radians(),
+            ),
+            real_centre: *centre,
+            virtual_centre: centre + Vector3::from(self.virtual_offset),
+        }
+    }
+}
+
+/// The real side of a trial: the robot and the bottle, from the scene.
+#[derive(Debug, Clone)]
+pub struct TrialSetup {
+    /// The robot.
+    pub model: Arc<RobotModel>,
+    /// Its root link in the world.
+    pub base: Isometry3<f64>,
+    /// Joint positions before the arm is moved to the bottle (IK starts here).
+    pub q_start: DVector<f64>,
+    /// The tool link.
+    pub tcp: LinkId,
+    /// Arm joints.
+    pub arm: Vec<usize>,
+    /// Simulated robot timing.
+    pub sim: SimRobotParams,
+    /// Control and physics rate (Hz).
+    pub control_rate_hz: f64,
+    /// Where the bottle's base centre stands on the table (world).
+    pub bottle_base: Isometry3<f64>,
+    /// Bottle body radius and total height (m); the body is the lower 68 %, as the scene's
+    /// bottle prop.
+    pub bottle_radius_m: f64,
+    /// See `bottle_radius_m`.
+    pub bottle_height_m: f64,
+}
+
+impl TrialSetup {
+    /// Height of the bottle's body (the part the hand and the gripper hold).
+    pub fn body_height_m(&self) -> f64 {
+        self.bottle_height_m * 0.68
+    }
+
+    /// The bottle's reference frame: the centre of its body, z up.
+    pub fn bottle_centre(&self) -> Isometry3<f64> {
+        self.bottle_base * Translation3::new(0.0, 0.0, self.body_height_m() / 2.0)
+    }
+
+    /// The arm with its open gripper around the bottle: a side grasp at the body's centre,
+    /// approaching horizontally from the robot's base, fingers closing horizontally.
+    pub fn grasp_configuration(&self) -> Result<(DVector<f64>, Isometry3<f64>), String> {
+        let c = self.bottle_centre();
+        let p = c.translation.vector;
+        let b = self.base.translation.vector;
+        let approach = Vector3::new(p.x - b.x, p.y - b.y, 0.0)
+            .try_normalize(1e-9)
+            .unwrap_or_else(Vector3::x);
+        let fingers = Vector3::new(-approach.y, approach.x, 0.0);
+        let down = fingers.cross(&approach);
+        let rot = UnitQuaternion::from_matrix(&Matrix3::from_columns(&[down, fingers, approach]));
+        let tool = Isometry3::from_parts(Translation3::from(p), rot);
+        // Several starts; keep the solution farthest from its joint limits, so the arm has room
+        // to lift and pour (the first solution found is often at a wrist limit).
+        let limits = self.model.dof_limits();
+        let margin = |q: &DVector<f64>| {
+            self.arm
+                .iter()
+                .map(|&i| {
+                    let l = &limits[i];
+                    ((q[i] - l.lower).min(l.upper - q[i]) / (l.upper - l.lower)).max(0.0)
+                })
+                .fold(f64::INFINITY, f64::min)
+        };
+        let yaw = (p.y - b.y).atan2(p.x - b.x);
+        let mut best: Option<DVector<f64>> = None;
+        let mut last_err = String::new();
+        for j0 in [self.q_start[self.arm[0]], yaw] {
+            for wrist in [-1.5, 0.0, 1.5, 3.0] {
+                let mut start = self.q_start.clone();
+                if self.arm.len() == 7 {
+                    start[self.arm[0]] = j0;
+                    start[self.arm[4]] = 0.0;
+                    start[self.arm[6]] = wrist;
+                }
+                match solve_pose(&self.model, &self.base, self.tcp, &self.arm, &start, &tool) {
+                    Ok(q) => {
+                        if best.as_ref().is_none_or(|b| margin(&q) > margin(b)) {
+                            best = Some(q);
+                        }
+                    }
+                    Err(e) => last_err = e,
+                }
+            }
+        }
+        let q = best.ok_or_else(|| format!("placing the gripper around the bottle: {last_err}"))?;
+        let reached = self.model.forward_kinematics(&self.base, q.as_slice())[self.tcp];
+        Ok((q, reached.inverse() * c))
+    }
+}
+
+/// One trial's result.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TrialResult {
+    /// Trial index.
+    pub trial: u32,
+    /// Its seed.
+    pub seed: u64,
+    /// Mode.
+    pub mode: MappingMode,
+    /// Position RMSE (m) between the real bottle and the mapped twin, from the grasp on.
+    pub pos_rmse_m: f64,
+    /// Roll RMSE (degrees).
+    pub roll_rmse_deg: f64,
+    /// Pitch RMSE (degrees).
+    pub pitch_rmse_deg: f64,
+    /// Yaw RMSE (degrees).
+    pub yaw_rmse_deg: f64,
+    /// When the gripper closed (s); `None`: it never did and the errors cover the whole trial.
+    pub grasp_at_s: Option<f64>,
+    /// Largest height gain of the twin (m, virtual scene) and of the real bottle (m).
+    pub twin_lift_m: f64,
+    /// See `twin_lift_m`.
+    pub real_lift_m: f64,
+    /// Largest position error during the trial (m).
+    pub max_pos_error_m: f64,
+    /// Largest commanded TCP speed (m/s).
+    pub max_tcp_speed: f64,
+    /// Ticks on which the limiter was stopping the robot.
+    pub stop_ticks: u64,
+    /// Largest contact force of the hand on the twin (N).
+    pub max_contact_n: f64,
+}
+
+/// Mean and standard deviation (sample, n − 1) over trials.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct MeanStd {
+    /// Mean.
+    pub mean: f64,
+    /// Standard deviation.
+    pub std: f64,
+}
+
+impl MeanStd {
+    /// Of a list of values (std 0 for one value).
+    pub fn of(values: &[f64]) -> Self {
+        let n = values.len().max(1) as f64;
+        let mean = values.iter().sum::<f64>() / n;
+        let var = if values.len() > 1 {
+            values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)
+        } else {
+            0.0
+        };
+        Self {
+            mean,
+            std: var.sqrt(),
+        }
+    }
+}
+
+/// One mode over all trials: the report's `object.<mode>`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ModeSummary {
+    /// Position RMSE (m).
+    pub pos_rmse_m: MeanStd,
+    /// Roll RMSE (degrees).
+    pub roll_rmse_deg: MeanStd,
+    /// Pitch RMSE (degrees).
+    pub pitch_rmse_deg: MeanStd,
+    /// Yaw RMSE (degrees).
+    pub yaw_rmse_deg: MeanStd,
+    /// Trials in which the gripper closed.
+    pub grasped: u32,
+    /// Largest commanded TCP speed over all trials (m/s).
+    pub max_tcp_speed: f64,
+    /// Every trial.
+    pub trials: Vec<TrialResult>,
+}
+
+impl ModeSummary {
+    /// Summarises trials of one mode.
+    pub fn of(trials: Vec<TrialResult>) -> Self {
+        let col =
+            |f: fn(&TrialResult) -> f64| MeanStd::of(&trials.iter().map(f).collect::<Vec<_>>());
+        Self {
+            pos_rmse_m: col(|t| t.pos_rmse_m),
+            roll_rmse_deg: col(|t| t.roll_rmse_deg),
+            pitch_rmse_deg: col(|t| t.pitch_rmse_deg),
+            yaw_rmse_deg: col(|t| t.yaw_rmse_deg),
+            grasped: trials.iter().filter(|t| t.grasp_at_s.is_some()).count() as u32,
+            max_tcp_speed: trials.iter().map(|t| t.max_tcp_speed).fold(0.0, f64::max),
+            trials,
+        }
+    }
+}
+
+/// The paper's figures (ICRA 2023, 10 trials): position 0.0173 ± 0.0132 m, roll 1.81 ± 1.80°,
+/// pitch 2.08 ± 2.49°, yaw 3.99 ± 5.27°.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PaperFigures {
+    /// Position RMSE (m).
+    pub pos_rmse_m: MeanStd,
+    /// Roll RMSE (degrees).
+    pub roll_rmse_deg: MeanStd,
+    /// Pitch RMSE (degrees).
+    pub pitch_rmse_deg: MeanStd,
+    /// Yaw RMSE (degrees).
+    pub yaw_rmse_deg: MeanStd,
+}
+
+/// The published figures.
+pub const PUBLISHED: PaperFigures = PaperFigures {
+    pos_rmse_m: MeanStd {
+        mean: 0.0173,
+        std: 0.0132,
+    },
+    roll_rmse_deg: MeanStd {
+        mean: 1.81,
+        std: 1.80,
+    },
+    pitch_rmse_deg: MeanStd {
+        mean: 2.08,
+        std: 2.49,
+    },
+    yaw_rmse_deg: MeanStd {
+        mean: 3.99,
+        std: 5.27,
+    },
+};
+
+/// A trial's full record, for tests and plots.
+#[derive(Debug, Clone)]
+pub struct TrialRecord {
+    /// The result.
+    pub result: TrialResult,
+    /// Every control tick.
+    pub samples: Vec<TeleopSample>,
+    /// The twin's pose every tick (virtual scene).
+    pub twin: Vec<Isometry3<f64>>,
+}
+
+/// The hand script of trial `trial`: the task's keyframes placed at the twin, with the
+/// trial's start pose, grasp height and noise seed.
+pub fn trial_script(
+    task: &PouringTask,
+    twin_centre: &Vector3<f64>,
+    trial: u32,
+) -> Result<HandScript, String> {
+    let seed = task.seed.wrapping_add(u64::from(trial));
+    let mut rng = Rng::stream(seed, 0x504f_5552);
+    let mut sym = |a: f64| (2.0 * rng.uniform() - 1.0) * a;
+    let start = Vector3::new(
+        sym(task.start_jitter_m),
+        sym(task.start_jitter_m),
+        sym(task.start_jitter_m),
+    );
+    let grasp_dz = sym(task.grasp_jitter_m);
+    let keys = task
+        .hand
+        .iter()
+        .enumerate()
+        .map(|(i, k)| {
+            let offset = if i == 0 {
+                start + Vector3::new(0.0, 0.0, grasp_dz)
+            } else {
+                Vector3::new(0.0, 0.0, grasp_dz)
+            };
+            let p = twin_centre + Vector3::from(k.xyz) + offset;
+            HandKeyframe {
+                xyz: [p.x, p.y, p.z],
+                ..*k
+            }
+        })
+        .collect();
+    HandScript::new(Handedness::Right, keys, HandNoise { seed, ..task.noise })
+}
+
+/// The twin's collider: the body cylinder about the origin and the neck above (z up).
+fn bottle_collider(radius: f32, body: f32, height: f32) -> Collider {
+    let neck = height - body;
+    let up = Quat::from_rotation_x(std::f32::consts::FRAC_PI_2);
+    Collider::compound(vec![
+        (Vec3::ZERO, up, Collider::cylinder(body / 2.0, radius)),
+        (
+            Vec3::new(0.0, 0.0, body / 2.0 + neck / 2.0),
+            up,
+            Collider::cylinder(neck / 2.0, radius * 0.38),
+        ),
+    ])
+}
+
+fn to_transform(p: &Isometry3<f64>) -> Transform {
+    let t = p.translation.vector;
+    let q = p.rotation;
+    Transform::from_xyz(t.x as f32, t.y as f32, t.z as f32)
+        .with_rotation(Quat::from_xyzw(q.i as f32, q.j as f32, q.k as f32, q.w as f32).normalize())
+}
+
+/// Runs one trial in `mode`. Errors when the set-up is impossible (the gripper cannot reach
+/// the bottle, bad settings).
+pub fn run_trial(
+    task: &PouringTask,
+    setup: &TrialSetup,
+    mode: MappingMode,
+    trial: u32,
+) -> Result<TrialRecord, String> {
+    task.validate()?;
+    if !(setup.control_rate_hz.is_finite() && setup.control_rate_hz >= 10.0) {
+        return Err(format!(
+            "control rate {} Hz: at least 10 Hz",
+            setup.control_rate_hz
+        ));
+    }
+    let (q0, tcp_from_object) = setup.grasp_configuration()?;
+    let centre = setup.bottle_centre();
+    let v2r = task.virtual_to_real(&centre.translation.vector);
+    let twin_start = v2r.virtual_pose(&centre);
+    let script = trial_script(task, &twin_start.translation.vector, trial)?;
+    let period = Duration::from_secs_f64(1.0 / setup.control_rate_hz);
+    let dt = period.as_secs_f64();
+    let robot = SimRobot::new(setup.sim, setup.model.dof_limits(), q0.clone());
+    let arm = SimArm::new(
+        robot,
+        setup.model.clone(),
+        setup.base,
+        setup.tcp,
+        CarriedObject {
+            pose: centre,
+            rest_z: centre.translation.z,
+            grasp_radius_m: 0.02,
+            held: None,
+        },
+    );
+    let mut teleop = Teleop::new(
+        TeleopConfig {
+            model: setup.model.clone(),
+            base: setup.base,
+            tcp: setup.tcp,
+            arm: setup.arm.clone(),
+            tcp_from_object,
+            v2r,
+            mapping: MappingSettings {
+                mode,
+                gain: task.gain,
+                dls: avatarm_core::ik::DlsSettings {
+                    dt,
+                    ..Default::default()
+                },
+                ..MappingSettings::default()
+            },
+            safety: SafetySettings {
+                max_tcp_speed: task.max_tcp_speed,
+                ..SafetySettings::default()
+            },
+        },
+        arm,
+    )?;
+    teleop.record = true;
+
+    let k = task.k as f32;
+    let radius = setup.bottle_radius_m as f32 * k;
+    let body = setup.body_height_m() as f32 * k;
+    let height = setup.bottle_height_m as f32 * k;
+    let twin_transform = to_transform(&twin_start);
+    let table_top = twin_transform.translation.z - body / 2.0;
+    let (mass, friction) = (task.mass_kg as f32, task.friction as f32);
+    let mut app = App::new();
+    app.add_plugins((
+        MinimalPlugins,
+        TransformPlugin,
+        RapierPhysicsPlugin::<NoUserData>::default().in_fixed_schedule(),
+        HandPlugin,
+        MappingPlugin,
+    ))
+    .insert_resource(Time::<Fixed>::from_duration(period))
+    .insert_resource(TimeUpdateStrategy::ManualDuration(period))
+    .insert_resource(ActiveHand::new(ScriptedHand::new(
+        script,
+        task.hand_rate_hz,
+    )))
+    .insert_resource(teleop);
+    app.add_systems(Startup, move |mut commands: Commands| {
+        let at = twin_transform.translation;
+        commands.spawn((
+            Name::new("virtual table"),
+            RigidBody::Fixed,
+            Collider::cuboid(0.6, 0.6, 0.05),
+            Friction::coefficient(0.6),
+            Transform::from_xyz(at.x, at.y, table_top - 0.05),
+        ));
+        commands.spawn((
+            Name::new("bottle twin"),
+            GraspTarget,
+            RigidBody::Dynamic,
+            bottle_collider(radius, body, height),
+            ColliderMassProperties::Mass(mass),
+            Friction::coefficient(friction),
+            Ccd::enabled(),
+            Velocity::zero(),
+            twin_transform,
+        ));
+    });
+    let steps = (task.duration_s / dt).round() as usize;
+    let mut twin = Vec::with_capacity(steps);
+    let mut max_contact: f64 = 0.0;
+    for _ in 0..steps {
+        app.update();
+        let mut q = app
+            .world_mut()
+            .query_filtered::<&Transform, With<GraspTarget>>();
+        let pose = q
+            .single(app.world())
+            .map(crate::isometry)
+            .map_err(|e| format!("the twin is gone: {e}"))?;
+        twin.push(pose);
+        max_contact = max_contact.max(app.world().resource::<ObjectContacts>().max_force_n);
+    }
+    let teleop = app
+        .world_mut()
+        .remove_resource::<Teleop>()
+        .ok_or("the teleoperation state is gone")?;
+    let samples = teleop.log;
+    let grasp = samples.iter().position(|s| s.gripper_closed);
+    let from = grasp.unwrap_or(0);
+    let window: Vec<&TeleopSample> = samples[from..]
+        .iter()
+        .filter(|s| s.truth.is_some() && s.target.translation.vector.iter().all(|v| v.is_finite()))
+        .collect();
+    let targets: Vec<Isometry3<f64>> = window.iter().map(|s| s.target).collect();
+    let truths: Vec<Isometry3<f64>> = window.iter().filter_map(|s| s.truth).collect();
+    let rmse = pose_rmse(&targets, &truths).ok_or("no samples to measure")?;
+    let max_pos_error_m = targets
+        .iter()
+        .zip(&truths)
+        .map(|(a, b)| (a.translation.vector - b.translation.vector).norm())
+        .fold(0.0, f64::max);
+    let z0 = twin_start.translation.z;
+    let twin_lift_m = twin
+        .iter()
+        .map(|p| p.translation.z - z0)
+        .fold(0.0, f64::max);
+    let real_lift_m = samples
+        .iter()
+        .filter_map(|s| s.truth)
+        .map(|p| p.translation.z - centre.translation.z)
+        .fold(0.0, f64::max);
+    Ok(TrialRecord {
+        result: TrialResult {
+            trial,
+            seed: task.seed.wrapping_add(u64::from(trial)),
+            mode,
+            pos_rmse_m: rmse[0],
+            roll_rmse_deg: rmse[1],
+            pitch_rmse_deg: rmse[2],
+            yaw_rmse_deg: rmse[3],
+            grasp_at_s: grasp.map(|i| samples[i].t_s),
+            twin_lift_m,
+            real_lift_m,
+            max_pos_error_m,
+            max_tcp_speed: teleop.status.max_tcp_speed,
+            stop_ticks: samples.iter().filter(|s| s.stopping).count() as u64,
+            max_contact_n: max_contact,
+        },
+        samples,
+        twin,
+    })
+}
+
+/// Every trial of every mode of the task, summarised per mode (the report's `object`).
+pub fn run_trials(
+    task: &PouringTask,
+    setup: &TrialSetup,
+    mut progress: impl FnMut(MappingMode, u32),
+) -> Result<Vec<(MappingMode, ModeSummary)>, String> {
+    let mut out = Vec::new();
+    for &mode in &task.modes {
+        let mut trials = Vec::new();
+        for i in 0..task.trials {
+            progress(mode, i);
+            trials.push(run_trial(task, setup, mode, i)?.result);
+        }
+        out.push((mode, ModeSummary::of(trials)));
+    }
+    Ok(out)
+}
