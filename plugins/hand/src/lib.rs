@@ -182,6 +182,8 @@ pub struct ObjectContacts {
     pub max_force_n: f64,
     /// The hand body that makes each contact.
     pub parts: Vec<Entity>,
+    /// The grasp target each contact is on.
+    pub objects: Vec<Entity>,
     /// The object's own velocity at each contact point (m/s): the material point under the
     /// contact, from the object's pose over the last step. For a grasp that holds (no slip)
     /// it equals the hand's velocity there without the tracking jitter of the finger bodies,
@@ -313,6 +315,22 @@ impl Plugin for HandPlugin {
                     .in_set(HandSystems::Contacts),
             );
     }
+}
+
+/// A headless physics app with the hand: minimal Bevy, Rapier in `FixedUpdate`, and one fixed
+/// step of `period` per `App::update` (virtual time). Tests and the pouring trials use it;
+/// insert an [`ActiveHand`] and spawn the scene.
+pub fn headless_app(period: std::time::Duration) -> App {
+    let mut app = App::new();
+    app.add_plugins((
+        MinimalPlugins,
+        TransformPlugin,
+        RapierPhysicsPlugin::<NoUserData>::default().in_fixed_schedule(),
+        HandPlugin,
+    ))
+    .insert_resource(Time::<Fixed>::from_duration(period))
+    .insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(period));
+    app
 }
 
 /// Standard gravity along −z: Avatarm's world is z-up (ROS, URDF), Rapier's default is y-up.
@@ -491,8 +509,8 @@ fn drive_hand(
     }
 }
 
-/// The grasp target's pose at the previous step.
-type PreviousPose = Option<(Entity, Transform)>;
+/// Each grasp target's pose at the previous step.
+type PreviousPoses = std::collections::HashMap<Entity, Transform>;
 
 /// Grasp targets with a collider, and their poses.
 type Targets<'w, 's> =
@@ -503,7 +521,7 @@ fn read_contacts(
     time: Res<Time<Fixed>>,
     context: ReadRapierContext,
     targets: Targets,
-    mut previous: Local<PreviousPose>,
+    mut previous: Local<PreviousPoses>,
     parts: Query<(&Velocity, &Transform), With<HandPart>>,
     mut out: ResMut<ObjectContacts>,
 ) {
@@ -511,6 +529,7 @@ fn read_contacts(
     out.contacts.clear();
     out.velocities.clear();
     out.parts.clear();
+    out.objects.clear();
     out.object_velocities.clear();
     out.max_force_n = 0.0;
     let Ok(context) = context.single() else {
@@ -519,11 +538,7 @@ fn read_contacts(
     let dt = f64::from(time.timestep().as_secs_f32()).max(1e-6);
     for (target, now) in &targets {
         // The object's motion over the step: a point p now was at `back(p)` before it.
-        let before = match *previous {
-            Some((e, t)) if e == target => t,
-            _ => *now,
-        };
-        *previous = Some((target, *now));
+        let before = previous.insert(target, *now).unwrap_or(*now);
         let back = |p: Vec3| before.transform_point(now.rotation.inverse() * (p - now.translation));
         for pair in context.contact_pairs_with(target) {
             let (Some(c1), Some(c2)) = (pair.collider1(), pair.collider2()) else {
@@ -567,6 +582,7 @@ fn read_contacts(
                         f64::from(v.z),
                     ));
                     out.parts.push(hand_entity);
+                    out.objects.push(target);
                     let w = (p - back(p)) / dt as f32;
                     out.object_velocities.push(Vector3::new(
                         f64::from(w.x),
@@ -612,23 +628,26 @@ fn assist_grasp(
     if !assist.enabled || contacts.contacts.is_empty() {
         return;
     }
-    let n = contacts.contacts.len();
-    let opposed = (0..n).any(|i| {
-        (i + 1..n).any(|j| {
-            contacts.parts[i] != contacts.parts[j]
-                && contacts.contacts[i]
-                    .normal
-                    .dot(&contacts.contacts[j].normal)
-                    < f64::from(assist.opposition)
-        })
+    // An object touched by two hand bodies from opposing sides.
+    let c = &*contacts;
+    let n = c.contacts.len();
+    let opposed = (0..n).find_map(|i| {
+        (i + 1..n)
+            .any(|j| {
+                c.objects[i] == c.objects[j]
+                    && c.parts[i] != c.parts[j]
+                    && c.contacts[i].normal.dot(&c.contacts[j].normal)
+                        < f64::from(assist.opposition)
+            })
+            .then_some(c.objects[i])
     });
-    if !opposed {
+    let Some(object) = opposed else {
         return;
-    }
+    };
     let Some((palm, _, palm_t)) = parts.iter().find(|(_, p, _)| p.from == WRIST) else {
         return;
     };
-    let Some((target, target_t)) = targets.iter().next() else {
+    let Ok((target, target_t)) = targets.get(object) else {
         return;
     };
     // The object's pose in the palm's frame, now.

@@ -4,11 +4,10 @@
 
 use std::time::Duration;
 
-use crate::{ActiveHand, GraspTarget, HandPlugin, ObjectContacts, ScriptedHand};
+use crate::{ActiveHand, GraspTarget, ObjectContacts, ScriptedHand};
 use avatarm_core::grasp::{ContactModel, analyse};
 use avatarm_core::hand::{HandKeyframe, HandNoise, HandScript, Handedness};
 use bevy::prelude::*;
-use bevy::time::TimeUpdateStrategy;
 use bevy_rapier3d::prelude::*;
 
 const BOTTLE: Vec3 = Vec3::new(0.6, 0.0, 0.75 + 0.125);
@@ -27,18 +26,8 @@ fn key(t_s: f64, xyz: [f64; 3], grip: f64) -> HandKeyframe {
 
 fn app(keys: Vec<HandKeyframe>) -> App {
     let script = HandScript::new(Handedness::Right, keys, HandNoise::default()).expect("script");
-    let mut app = App::new();
-    app.add_plugins((
-        MinimalPlugins,
-        TransformPlugin,
-        RapierPhysicsPlugin::<NoUserData>::default().in_fixed_schedule(),
-        HandPlugin,
-    ))
-    .insert_resource(Time::<Fixed>::from_hz(100.0))
-    .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(
-        10,
-    )))
-    .insert_resource(ActiveHand::new(ScriptedHand::new(script, 90.0)));
+    let mut app = crate::headless_app(Duration::from_millis(10));
+    app.insert_resource(ActiveHand::new(ScriptedHand::new(script, 90.0)));
     app.add_systems(Startup, |mut commands: Commands| {
         commands.spawn((
             Name::new("table"),
@@ -100,6 +89,8 @@ fn a_closing_hand_touches_the_bottle_on_its_surface_with_bounded_forces() {
                 squeeze = squeeze.max(a.squeeze);
             }
             assert_eq!(c.contacts.len(), c.velocities.len());
+            assert_eq!(c.contacts.len(), c.objects.len());
+            assert_eq!(c.contacts.len(), c.object_velocities.len());
             assert!(
                 c.contacts
                     .iter()

@@ -191,6 +191,14 @@ pub fn isometry(t: &Transform) -> Isometry3<f64> {
     )
 }
 
+/// An isometry as a Bevy transform (f32).
+pub fn transform(p: &Isometry3<f64>) -> Transform {
+    let t = p.translation.vector;
+    let q = p.rotation;
+    Transform::from_xyz(t.x as f32, t.y as f32, t.z as f32)
+        .with_rotation(Quat::from_xyzw(q.i as f32, q.j as f32, q.k as f32, q.w as f32).normalize())
+}
+
 fn teleop_tick(
     time: Res<Time<Fixed>>,
     contacts: Res<ObjectContacts>,
@@ -220,7 +228,7 @@ fn teleop_tick(
         Some(f) => (Some(f.t_s), f.tracked),
         None => (None, false),
     };
-    let twin_pose = twin.single().ok().map(isometry);
+    let twin_pose = twin.single().map(isometry);
     let q: Vec<f64> = t
         .joints
         .as_ref()
@@ -233,14 +241,16 @@ fn teleop_tick(
         arm: &t.arm,
         tcp_from_object: t.tcp_from_object,
     };
-    let mapped = match (twin_pose, &t.joints) {
-        (None, _) => Err("no object twin (GraspTarget) in the scene".to_string()),
+    let mapped = match (&twin_pose, &t.joints) {
+        (Err(e), _) => Err(format!(
+            "the mapping needs exactly one object twin (GraspTarget): {e}"
+        )),
         (_, None) => Err("no joint state received yet".to_string()),
-        (Some(pose), Some(_)) => t.mapper.tick(
+        (Ok(pose), Some(_)) => t.mapper.tick(
             &TickInputs {
                 contacts: &contacts.contacts,
                 contact_velocities: &contacts.object_velocities,
-                twin_pose: pose,
+                twin_pose: *pose,
                 q: &q,
                 held: held.as_ref().is_some_and(|h| h.held.is_some()),
             },
@@ -304,7 +314,7 @@ fn teleop_tick(
                 o.twin_twist,
             ),
             None => (
-                twin_pose.map_or(nan, |p| t.v2r.pose(&p)),
+                twin_pose.as_ref().map_or(nan, |p| t.v2r.pose(p)),
                 nan,
                 false,
                 0.0,

@@ -20,9 +20,8 @@ use avatarm_core::rng::Rng;
 use avatarm_core::robot::{LinkId, RobotModel};
 use avatarm_core::safety::SafetySettings;
 use avatarm_core::sim::{SimRobot, SimRobotParams};
-use avatarm_hand::{ActiveHand, GraspTarget, HandPlugin, ObjectContacts, ScriptedHand};
+use avatarm_hand::{ActiveHand, GraspTarget, ObjectContacts, ScriptedHand};
 use bevy::prelude::*;
-use bevy::time::TimeUpdateStrategy;
 use bevy_rapier3d::prelude::*;
 use nalgebra::{DVector, Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -455,11 +454,27 @@ fn bottle_collider(radius: f32, body: f32, height: f32) -> Collider {
     ])
 }
 
-fn to_transform(p: &Isometry3<f64>) -> Transform {
-    let t = p.translation.vector;
-    let q = p.rotation;
-    Transform::from_xyz(t.x as f32, t.y as f32, t.z as f32)
-        .with_rotation(Quat::from_xyzw(q.i as f32, q.j as f32, q.k as f32, q.w as f32).normalize())
+/// Checks the task and the set-up, and places the arm around the bottle: what every trial
+/// shares.
+fn prepare(task: &PouringTask, setup: &TrialSetup) -> Result<Prepared, String> {
+    task.validate()?;
+    if !(setup.control_rate_hz.is_finite() && setup.control_rate_hz >= 10.0) {
+        return Err(format!(
+            "control rate {} Hz: at least 10 Hz",
+            setup.control_rate_hz
+        ));
+    }
+    let (q0, tcp_from_object) = setup.grasp_configuration()?;
+    Ok(Prepared {
+        q0,
+        tcp_from_object,
+    })
+}
+
+/// The arm's start around the bottle and the bottle in the tool frame.
+struct Prepared {
+    q0: DVector<f64>,
+    tcp_from_object: Isometry3<f64>,
 }
 
 /// Runs one trial in `mode`. Errors when the set-up is impossible (the gripper cannot reach
@@ -470,14 +485,17 @@ pub fn run_trial(
     mode: MappingMode,
     trial: u32,
 ) -> Result<TrialRecord, String> {
-    task.validate()?;
-    if !(setup.control_rate_hz.is_finite() && setup.control_rate_hz >= 10.0) {
-        return Err(format!(
-            "control rate {} Hz: at least 10 Hz",
-            setup.control_rate_hz
-        ));
-    }
-    let (q0, tcp_from_object) = setup.grasp_configuration()?;
+    run_prepared(task, setup, &prepare(task, setup)?, mode, trial)
+}
+
+fn run_prepared(
+    task: &PouringTask,
+    setup: &TrialSetup,
+    prepared: &Prepared,
+    mode: MappingMode,
+    trial: u32,
+) -> Result<TrialRecord, String> {
+    let (q0, tcp_from_object) = (prepared.q0.clone(), prepared.tcp_from_object);
     let centre = setup.bottle_centre();
     let v2r = task.virtual_to_real(&centre.translation.vector);
     let twin_start = v2r.virtual_pose(&centre);
@@ -527,24 +545,16 @@ pub fn run_trial(
     let radius = setup.bottle_radius_m as f32 * k;
     let body = setup.body_height_m() as f32 * k;
     let height = setup.bottle_height_m as f32 * k;
-    let twin_transform = to_transform(&twin_start);
+    let twin_transform = crate::transform(&twin_start);
     let table_top = twin_transform.translation.z - body / 2.0;
     let (mass, friction) = (task.mass_kg as f32, task.friction as f32);
-    let mut app = App::new();
-    app.add_plugins((
-        MinimalPlugins,
-        TransformPlugin,
-        RapierPhysicsPlugin::<NoUserData>::default().in_fixed_schedule(),
-        HandPlugin,
-        MappingPlugin,
-    ))
-    .insert_resource(Time::<Fixed>::from_duration(period))
-    .insert_resource(TimeUpdateStrategy::ManualDuration(period))
-    .insert_resource(ActiveHand::new(ScriptedHand::new(
-        script,
-        task.hand_rate_hz,
-    )))
-    .insert_resource(teleop);
+    let mut app = avatarm_hand::headless_app(period);
+    app.add_plugins(MappingPlugin)
+        .insert_resource(ActiveHand::new(ScriptedHand::new(
+            script,
+            task.hand_rate_hz,
+        )))
+        .insert_resource(teleop);
     app.add_systems(Startup, move |mut commands: Commands| {
         let at = twin_transform.translation;
         commands.spawn((
@@ -638,12 +648,13 @@ pub fn run_trials(
     setup: &TrialSetup,
     mut progress: impl FnMut(MappingMode, u32),
 ) -> Result<Vec<(MappingMode, ModeSummary)>, String> {
+    let prepared = prepare(task, setup)?;
     let mut out = Vec::new();
     for &mode in &task.modes {
         let mut trials = Vec::new();
         for i in 0..task.trials {
             progress(mode, i);
-            trials.push(run_trial(task, setup, mode, i)?.result);
+            trials.push(run_prepared(task, setup, &prepared, mode, i)?.result);
         }
         out.push((mode, ModeSummary::of(trials)));
     }

@@ -140,8 +140,8 @@ impl RobotInterface for SimArm {
         if !command.force_n.is_finite() {
             return Err(format!("gripper force {} is not finite", command.force_n));
         }
+        // The object is taken or let go at the next `advance` (the next tick).
         self.closed = command.closed;
-        self.update_object();
         Ok(())
     }
 
