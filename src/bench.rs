@@ -8,6 +8,7 @@ use std::sync::OnceLock;
 
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use serde::Serialize;
 
@@ -133,25 +134,19 @@ pub fn run_dr(scene: &Scene, sweep: &DrSweep, out: &Path) -> Result<DrOutputs, S
     // Fonts before the replays, for the same reason.
     register_font()?;
     std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
-    let bar = if sweep.progress {
-        let bar = ProgressBar::new(settings.len() as u64);
-        bar.set_style(
-            ProgressStyle::with_template(
-                "{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} eta {eta} {msg}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        bar.set_prefix(format!("bench dr {}", scene.file.name));
-        bar
-    } else {
-        ProgressBar::hidden()
-    };
+    let bar = sweep_bar(
+        settings.len() as u64,
+        format!("bench dr {}", scene.file.name),
+        sweep.progress,
+    );
     let mut points = Vec::with_capacity(settings.len());
     for (s, d, f, l) in settings {
         let label = format!("x{s} d{d} f{f} {}", if l { "LC" } else { "noLC" });
         bar.set_message(label.clone());
         let mut run = scene.clone();
         run.file.duration_s = sweep.duration_s;
+        // The video pipeline only: the scene's teleoperation trials are `bench control`'s.
+        run.file.task = None;
         let e = &mut run.file.erase;
         (
             e.resolution_scale,
@@ -291,7 +286,7 @@ const FONT_FILES: [&str; 3] = [
 ];
 
 /// Registers a system font as plotters' "sans-serif" (once per process).
-fn register_font() -> Result<(), String> {
+pub(crate) fn register_font() -> Result<(), String> {
     static DONE: OnceLock<Result<(), String>> = OnceLock::new();
     DONE.get_or_init(|| {
         let env = std::env::var_os("AVATARM_FONT").map(PathBuf::from);
@@ -315,27 +310,133 @@ fn register_font() -> Result<(), String> {
 
 const CHART_SIZE: (u32, u32) = (1400, 620);
 
-/// Draws the chart to `svg` and `png`.
-pub fn plot(points: &[DrPoint], title: &str, svg: &Path, png: &Path) -> Result<(), String> {
+/// A chart drawn the same way on any plotters backend.
+pub(crate) trait Chart {
+    /// Draws onto `root`.
+    fn draw<DB: DrawingBackend>(&self, root: DrawingArea<DB, Shift>) -> Result<(), String>
+    where
+        DB::ErrorType: 'static;
+}
+
+/// Draws `chart` to `svg` and, at the same size, to `png`.
+pub(crate) fn save_chart(
+    chart: &impl Chart,
+    size: (u32, u32),
+    svg: &Path,
+    png: &Path,
+) -> Result<(), String> {
     register_font()?;
-    draw(
-        SVGBackend::new(svg, CHART_SIZE).into_drawing_area(),
-        points,
-        title,
-    )
-    .map_err(|e| format!("{}: {e}", svg.display()))?;
-    let (w, h) = CHART_SIZE;
+    chart
+        .draw(SVGBackend::new(svg, size).into_drawing_area())
+        .map_err(|e| format!("{}: {e}", svg.display()))?;
+    let (w, h) = size;
     let mut buf = vec![0u8; (w * h * 3) as usize];
-    draw(
-        BitMapBackend::with_buffer(&mut buf, CHART_SIZE).into_drawing_area(),
-        points,
-        title,
-    )
-    .map_err(|e| format!("{}: {e}", png.display()))?;
+    chart
+        .draw(BitMapBackend::with_buffer(&mut buf, size).into_drawing_area())
+        .map_err(|e| format!("{}: {e}", png.display()))?;
     image::RgbImage::from_raw(w, h, buf)
         .ok_or_else(|| "chart buffer has the wrong size".to_string())?
         .save(png)
         .map_err(|e| format!("{}: cannot write: {e}", png.display()))
+}
+
+/// A progress bar for a sweep of `len` points (hidden when `show` is false).
+pub(crate) fn sweep_bar(len: u64, prefix: String, show: bool) -> ProgressBar {
+    if !show {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(len);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} eta {eta} {msg}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_prefix(prefix);
+    bar
+}
+
+/// The axis range of some values with a margin; `(0, 1)` when none is finite.
+pub(crate) fn padded(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+            (a.min(x), b.max(x))
+        });
+    if !lo.is_finite() {
+        return (0.0, 1.0);
+    }
+    let pad = ((hi - lo) * 0.12).max(hi.abs() * 0.02).max(1e-3);
+    (lo - pad, hi + pad)
+}
+
+/// A scatter/line panel on `area` with labelled axes over `x` × `y`.
+pub(crate) type Panel<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// Builds a panel with the house style (margins, fonts, grid).
+pub(crate) fn axes<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    x: (f64, f64),
+    y: (f64, f64),
+    x_desc: &str,
+    y_desc: &str,
+) -> Result<Panel<'a, DB>, String>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let mut chart = ChartBuilder::on(area)
+        .margin(18)
+        .x_label_area_size(48)
+        .y_label_area_size(64)
+        .build_cartesian_2d(x.0..x.1, y.0..y.1)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .label_style(("sans-serif", 14))
+        .axis_desc_style(("sans-serif", 16))
+        .draw()
+        .map_err(err)?;
+    Ok(chart)
+}
+
+/// Draws the panel's legend at `position`.
+pub(crate) fn legend<'a, DB: DrawingBackend + 'a>(
+    chart: &mut Panel<'a, DB>,
+    position: SeriesLabelPosition,
+) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 14))
+        .position(position)
+        .draw()
+        .map_err(|e| e.to_string())
+}
+
+struct DrChart<'a> {
+    points: &'a [DrPoint],
+    title: &'a str,
+}
+
+impl Chart for DrChart<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: DrawingArea<DB, Shift>) -> Result<(), String>
+    where
+        DB::ErrorType: 'static,
+    {
+        draw(root, self.points, self.title)
+    }
+}
+
+/// Draws the chart to `svg` and `png`.
+pub fn plot(points: &[DrPoint], title: &str, svg: &Path, png: &Path) -> Result<(), String> {
+    save_chart(&DrChart { points, title }, CHART_SIZE, svg, png)
 }
 
 fn draw<DB: DrawingBackend>(
@@ -375,7 +476,7 @@ fn panel<DB: DrawingBackend>(
     y_desc: &str,
     y: impl Fn(&DrPoint) -> f64,
     front: impl Fn(&DrPoint) -> bool,
-    legend: SeriesLabelPosition,
+    legend_at: SeriesLabelPosition,
 ) -> Result<(), String>
 where
     DB::ErrorType: 'static,
@@ -385,32 +486,13 @@ where
         .iter()
         .filter(|p| p.frame_ms_median.is_finite() && y(p).is_finite())
         .collect();
-    let range = |v: &mut dyn Iterator<Item = f64>| {
-        let (lo, hi) = v.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
-            (a.min(x), b.max(x))
-        });
-        if !lo.is_finite() {
-            return (0.0, 1.0);
-        }
-        let pad = ((hi - lo) * 0.12).max(hi.abs() * 0.02).max(1e-3);
-        (lo - pad, hi + pad)
-    };
-    let (x0, x1) = range(&mut finite.iter().map(|p| p.frame_ms_median));
-    let (y0, y1) = range(&mut finite.iter().map(|p| y(p)));
-    let mut chart = ChartBuilder::on(area)
-        .margin(18)
-        .x_label_area_size(48)
-        .y_label_area_size(64)
-        .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("frame cost, ms (median wall time per update)")
-        .y_desc(y_desc)
-        .label_style(("sans-serif", 14))
-        .axis_desc_style(("sans-serif", 16))
-        .draw()
-        .map_err(err)?;
+    let mut chart = axes(
+        area,
+        padded(finite.iter().map(|p| p.frame_ms_median)),
+        padded(finite.iter().map(|p| y(p))),
+        "frame cost, ms (median wall time per update)",
+        y_desc,
+    )?;
     let mut on_front: Vec<&DrPoint> = finite.iter().copied().filter(|p| front(p)).collect();
     on_front.sort_by(|a, b| a.frame_ms_median.total_cmp(&b.frame_ms_median));
     chart
@@ -453,15 +535,7 @@ where
                 )
         }))
         .map_err(err)?;
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 14))
-        .position(legend)
-        .draw()
-        .map_err(err)?;
-    Ok(())
+    legend(&mut chart, legend_at)
 }
 
 #[cfg(test)]

@@ -6,6 +6,7 @@
 //! `avatarm` is a thin command line over these.
 
 pub mod bench;
+pub mod bench_control;
 pub mod preview;
 pub mod replay;
 pub mod robot_info;

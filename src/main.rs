@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use avatarm::bench::{self, DrSweep};
+use avatarm::bench_control::{self, ControlSweep};
 use avatarm::preview::PreviewOptions;
 use avatarm::replay::ReplayOptions;
 use avatarm::scene::{BackgroundSpec, EraseOverrides, Scene, on_off};
@@ -87,7 +88,8 @@ enum Command {
 
 #[derive(Subcommand, Debug)]
 enum BenchCommand {
-    /// Sweep the erase pipeline's settings on a scene (default: the pouring scene) and chart
+    /// Sweep the erase pipeline's settings on a scene (default: the default scene, whose arm
+    /// reaches, lifts and pours: the pouring scene's arm rests during its video) and chart
     /// frame cost against leak and PSNR: DIR/dr_speed_accuracy.{svg,png,csv}.
     Dr {
         /// The scene file.
@@ -114,6 +116,31 @@ enum BenchCommand {
         #[arg(long = "package-path", value_name = "DIR")]
         package_path: Vec<PathBuf>,
     },
+    /// Sweep the teleoperation loop on a scene's pouring task (default: the pouring scene):
+    /// control rate x simulated command latency x TCP speed cap, both mapping modes, and chart
+    /// object position RMSE against rate and loop cost: DIR/control_speed_accuracy.{svg,png,csv}.
+    Control {
+        /// The scene file (needs a [task]).
+        scene: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long, value_name = "DIR", default_value = "out/bench_control")]
+        out: PathBuf,
+        /// Control (and physics) rates, Hz.
+        #[arg(long, value_delimiter = ',', default_values_t = [50.0, 100.0, 200.0])]
+        rates: Vec<f64>,
+        /// Simulated command latencies, ms.
+        #[arg(long = "latency-ms", value_delimiter = ',', default_values_t = [0.0, 20.0, 50.0])]
+        latency_ms: Vec<f64>,
+        /// TCP speed caps, m/s.
+        #[arg(long, value_delimiter = ',', default_values_t = [0.1, 0.25, 0.5])]
+        caps: Vec<f64>,
+        /// Trials per setting and mode.
+        #[arg(long, value_name = "N", default_value_t = 3)]
+        trials: u32,
+        /// Folder searched for package:// URIs (repeatable).
+        #[arg(long = "package-path", value_name = "DIR")]
+        package_path: Vec<PathBuf>,
+    },
 }
 
 fn packages(dirs: Vec<PathBuf>) -> PackagePath {
@@ -124,13 +151,25 @@ fn packages(dirs: Vec<PathBuf>) -> PackagePath {
     p
 }
 
-fn default_scene() -> PathBuf {
-    let local = Path::new("assets/scenes/default.toml");
+/// A scene shipped in assets/scenes: from the working folder when run from the repository,
+/// else from the source tree this binary was built from.
+fn bundled_scene(file: &str) -> PathBuf {
+    let local = Path::new("assets/scenes").join(file);
     if local.is_file() {
-        local.to_owned()
+        local
     } else {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/scenes/default.toml")
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("assets/scenes")
+            .join(file)
     }
+}
+
+fn default_scene() -> PathBuf {
+    bundled_scene("default.toml")
+}
+
+fn pouring_scene() -> PathBuf {
+    bundled_scene("pouring.toml")
 }
 
 fn main() -> ExitCode {
@@ -284,6 +323,66 @@ fn run(cli: Cli) -> Result<(), String> {
                 "ratios against '{}' ({:.1} ms) of the same run; wrote {}, {}, {}",
                 base.label,
                 base.frame_ms_median,
+                outputs.csv.display(),
+                outputs.svg.display(),
+                outputs.png.display()
+            );
+            Ok(())
+        }
+        Command::Bench(BenchCommand::Control {
+            scene,
+            out,
+            rates,
+            latency_ms,
+            caps,
+            trials,
+            package_path,
+        }) => {
+            let path = scene.unwrap_or_else(pouring_scene);
+            let scene = Scene::load(&path, &packages(package_path)).map_err(|e| e.to_string())?;
+            let sweep = ControlSweep {
+                rates_hz: rates,
+                latencies_ms: latency_ms,
+                caps,
+                trials,
+                progress: true,
+            };
+            let outputs = bench_control::run_control(&scene, &sweep, &out)?;
+            let base = &outputs.points[outputs.baseline];
+            println!(
+                "{:<22} {:<11} {:>8} {:>7} {:>7} {:>7} {:>7} {:>8} {:>7} {:>7}  front",
+                "setting",
+                "mode",
+                "pos mm",
+                "std",
+                "roll",
+                "pitch",
+                "yaw",
+                "ms/sim s",
+                "ratio",
+                "tick us"
+            );
+            for p in &outputs.points {
+                println!(
+                    "{:<22} {:<11} {:>8.2} {:>7.2} {:>7.2} {:>7.2} {:>7.2} {:>8.1} {:>7.3} {:>7.1}  {}",
+                    p.label,
+                    p.mode.name(),
+                    p.pos_rmse_mm,
+                    p.pos_rmse_mm_std,
+                    p.roll_rmse_deg,
+                    p.pitch_rmse_deg,
+                    p.yaw_rmse_deg,
+                    p.wall_ms_per_sim_s,
+                    p.cost_ratio,
+                    p.tick_us,
+                    if p.pareto { "*" } else { "" }
+                );
+            }
+            println!(
+                "ratios against '{} {}' ({:.1} ms per simulated s) of the same run; wrote {}, {}, {}",
+                base.label,
+                base.mode.name(),
+                base.wall_ms_per_sim_s,
                 outputs.csv.display(),
                 outputs.svg.display(),
                 outputs.png.display()

@@ -76,12 +76,8 @@ pub fn object_report(scene: &Scene, task: &PouringTask) -> Result<serde_json::Va
     bar.finish_and_clear();
     let mut out = serde_json::Map::new();
     for (mode, summary) in modes {
-        let key = serde_json::to_value(mode)
-            .ok()
-            .and_then(|v| v.as_str().map(str::to_owned))
-            .unwrap_or_else(|| format!("{mode:?}"));
         out.insert(
-            key,
+            mode.name().to_owned(),
             serde_json::to_value(summary).map_err(|e| e.to_string())?,
         );
     }

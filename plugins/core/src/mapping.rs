@@ -31,6 +31,16 @@ pub enum MappingMode {
     ClosedLoop,
 }
 
+impl MappingMode {
+    /// The mode as scenes and reports spell it (`paper`, `closed_loop`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Paper => "paper",
+            Self::ClosedLoop => "closed_loop",
+        }
+    }
+}
+
 /// The virtual scene to the real one: the object twin is the real object scaled by `k` about
 /// the camera centre (virtual = `c_v + R (real − c_r) k`).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -61,6 +61,10 @@ pub struct TeleopSample {
     pub squeeze_n: f64,
     /// The twin's twist from the contacts (virtual scene, at the twin's origin).
     pub twin_twist: nalgebra::Vector6<f64>,
+    /// The measured joint positions the tick used (NaN before the first joint state).
+    pub q: DVector<f64>,
+    /// The joint velocities sent (zero when nothing was sent).
+    pub qdot: DVector<f64>,
 }
 
 /// Counters for the status line and the report.
@@ -78,6 +82,8 @@ pub struct TeleopStatus {
     pub interventions: Vec<(Intervention, u64)>,
     /// Largest commanded tool-point speed (m/s).
     pub max_tcp_speed: f64,
+    /// Wall time spent in the control ticks (s): mapping, limiter, robot interface.
+    pub tick_wall_s: f64,
 }
 
 /// The teleoperation loop's state: the robot, the mapping and the limiter.
@@ -208,6 +214,7 @@ fn teleop_tick(
     teleop: Option<ResMut<Teleop>>,
 ) {
     let Some(mut teleop) = teleop else { return };
+    let started = std::time::Instant::now();
     let t = &mut *teleop;
     let now = time.elapsed_secs_f64();
     let dt = time.timestep().as_secs_f64().max(1e-6);
@@ -300,6 +307,7 @@ fn teleop_tick(
     {
         t.fail(format!("{}: {e}", t.robot.name()));
     }
+    t.status.tick_wall_s += started.elapsed().as_secs_f64();
     if t.record {
         let nan = Isometry3::from_parts(
             Translation3::new(f64::NAN, f64::NAN, f64::NAN),
@@ -333,6 +341,8 @@ fn teleop_tick(
             contacts: contacts.contacts.len(),
             squeeze_n,
             twin_twist,
+            q: DVector::from_vec(q),
+            qdot: limited.command.clone().unwrap_or_else(|| DVector::zeros(n)),
         };
         t.log.push(sample);
     }

@@ -295,6 +295,12 @@ pub struct TrialResult {
     pub stop_ticks: u64,
     /// Largest contact force of the hand on the twin (N).
     pub max_contact_n: f64,
+    /// Wall time of the trial's loop (hand, physics, mapping, robot), s.
+    pub wall_s: f64,
+    /// Mean wall time of one control tick (mapping and limiter), µs.
+    pub tick_us_mean: f64,
+    /// Hand frames refused as invalid (non-finite joints).
+    pub hand_frames_refused: u64,
 }
 
 /// Mean and standard deviation (sample, n − 1) over trials.
@@ -485,7 +491,19 @@ pub fn run_trial(
     mode: MappingMode,
     trial: u32,
 ) -> Result<TrialRecord, String> {
-    run_prepared(task, setup, &prepare(task, setup)?, mode, trial)
+    run_trial_with(task, setup, mode, trial, ActiveHand::new)
+}
+
+/// [`run_trial`] with the trial's scripted hand passed through `hand` first: tests wrap it
+/// to inject tracking faults the script cannot describe (NaN frames).
+pub fn run_trial_with(
+    task: &PouringTask,
+    setup: &TrialSetup,
+    mode: MappingMode,
+    trial: u32,
+    hand: impl FnOnce(ScriptedHand) -> ActiveHand,
+) -> Result<TrialRecord, String> {
+    run_prepared(task, setup, &prepare(task, setup)?, mode, trial, hand)
 }
 
 fn run_prepared(
@@ -494,6 +512,7 @@ fn run_prepared(
     prepared: &Prepared,
     mode: MappingMode,
     trial: u32,
+    hand: impl FnOnce(ScriptedHand) -> ActiveHand,
 ) -> Result<TrialRecord, String> {
     let (q0, tcp_from_object) = (prepared.q0.clone(), prepared.tcp_from_object);
     let centre = setup.bottle_centre();
@@ -550,10 +569,7 @@ fn run_prepared(
     let (mass, friction) = (task.mass_kg as f32, task.friction as f32);
     let mut app = avatarm_hand::headless_app(period);
     app.add_plugins(MappingPlugin)
-        .insert_resource(ActiveHand::new(ScriptedHand::new(
-            script,
-            task.hand_rate_hz,
-        )))
+        .insert_resource(hand(ScriptedHand::new(script, task.hand_rate_hz)))
         .insert_resource(teleop);
     app.add_systems(Startup, move |mut commands: Commands| {
         let at = twin_transform.translation;
@@ -579,6 +595,7 @@ fn run_prepared(
     let steps = (task.duration_s / dt).round() as usize;
     let mut twin = Vec::with_capacity(steps);
     let mut max_contact: f64 = 0.0;
+    let started = std::time::Instant::now();
     for _ in 0..steps {
         app.update();
         let mut q = app
@@ -591,6 +608,8 @@ fn run_prepared(
         twin.push(pose);
         max_contact = max_contact.max(app.world().resource::<ObjectContacts>().max_force_n);
     }
+    let wall_s = started.elapsed().as_secs_f64();
+    let hand_frames_refused = app.world().resource::<ActiveHand>().refused;
     let teleop = app
         .world_mut()
         .remove_resource::<Teleop>()
@@ -636,6 +655,9 @@ fn run_prepared(
             max_tcp_speed: teleop.status.max_tcp_speed,
             stop_ticks: samples.iter().filter(|s| s.stopping).count() as u64,
             max_contact_n: max_contact,
+            wall_s,
+            tick_us_mean: teleop.status.tick_wall_s / teleop.status.ticks.max(1) as f64 * 1e6,
+            hand_frames_refused,
         },
         samples,
         twin,
@@ -654,7 +676,8 @@ pub fn run_trials(
         let mut trials = Vec::new();
         for i in 0..task.trials {
             progress(mode, i);
-            trials.push(run_prepared(task, setup, &prepared, mode, i)?.result);
+            let record = run_prepared(task, setup, &prepared, mode, i, ActiveHand::new)?;
+            trials.push(record.result);
         }
         out.push((mode, ModeSummary::of(trials)));
     }

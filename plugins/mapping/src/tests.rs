@@ -7,7 +7,12 @@ use avatarm_core::robot::{PackagePath, RobotModel};
 use avatarm_core::sim::SimRobotParams;
 use nalgebra::{DVector, Isometry3};
 
-use crate::pouring::{PouringTask, TrialSetup, run_trial};
+use avatarm_core::hand::{HandFrame, HandNoise};
+use avatarm_core::ik::{pinv_step, smallest_singular_value};
+use avatarm_hand::{ActiveHand, HandSource, ScriptedHand};
+use nalgebra::Vector6;
+
+use crate::pouring::{PouringTask, TrialSetup, run_trial, run_trial_with};
 
 pub(crate) fn setup() -> TrialSetup {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -164,4 +169,225 @@ fn trials_summarise_per_mode_with_the_paper_beside() {
         .validate()
         .is_err()
     );
+}
+
+/// Every tick sent finite joint velocities within the joint speed limits, and the measured
+/// joints stayed within their position limits.
+fn assert_safe(r: &crate::pouring::TrialRecord, task: &PouringTask) {
+    let limits = setup().model.dof_limits();
+    for s in &r.samples {
+        assert!(
+            s.qdot.iter().all(|v| v.is_finite()),
+            "finite command at {}",
+            s.t_s
+        );
+        for (i, l) in limits.iter().enumerate() {
+            assert!(
+                s.qdot[i].abs() <= l.velocity + 1e-9,
+                "joint {i} at {} s: {} rad/s over its limit {}",
+                s.t_s,
+                s.qdot[i],
+                l.velocity
+            );
+            if s.q[i].is_finite() {
+                assert!(
+                    s.q[i] >= l.lower - 1e-3 && s.q[i] <= l.upper + 1e-3,
+                    "joint {i} at {} s: {} outside [{}, {}]",
+                    s.t_s,
+                    s.q[i],
+                    l.lower,
+                    l.upper
+                );
+            }
+        }
+        assert!(s.tcp_speed <= task.max_tcp_speed + 1e-9, "cap at {}", s.t_s);
+    }
+}
+
+#[test]
+fn a_twin_carried_out_of_reach_meets_a_singularity_that_dls_survives_and_pinv_does_not() {
+    let mut task = PouringTask {
+        duration_s: 9.0,
+        ..PouringTask::default()
+    };
+    // After the lift, the hand carries the bottle 1.2 m away from the robot's base, far beyond
+    // the arm's reach: the arm stretches into its elbow singularity.
+    task.hand.truncate(5);
+    let mut away = task.hand[4];
+    away.t_s += 4.0;
+    away.xyz[0] += 1.2;
+    task.hand.push(away);
+    let r = pour(&task, MappingMode::ClosedLoop);
+    assert!(r.result.grasp_at_s.is_some());
+    assert_safe(&r, &task);
+    // The arm got close to singular: the tool Jacobian's smallest singular value collapsed.
+    let s = setup();
+    let arm_jacobian = |q: &DVector<f64>| {
+        let full = s.model.jacobian(
+            &s.base,
+            q.as_slice(),
+            s.tcp,
+            &nalgebra::Vector3::zeros(),
+            avatarm_core::kinematics::Frame::World,
+        );
+        nalgebra::Matrix6xX::from_fn(s.arm.len(), |r, c| full[(r, s.arm[c])])
+    };
+    let (worst, q_worst) = r
+        .samples
+        .iter()
+        .filter(|x| x.q.iter().all(|v| v.is_finite()))
+        .map(|x| (smallest_singular_value(&arm_jacobian(&x.q)), x.q.clone()))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .expect("joint states");
+    let start = smallest_singular_value(&arm_jacobian(&r.samples[200].q));
+    eprintln!("smallest singular value: {start:.3} at the grasp, {worst:.4} at the worst");
+    assert!(worst < start / 4.0, "{worst} vs {start}");
+    // There a plain pseudoinverse asks more than any joint can give for a twist of 0.25 (m/s,
+    // rad/s) along the Jacobian's weakest direction; the loop's DLS never left the limits.
+    let j = arm_jacobian(&q_worst);
+    let svd = j.clone().svd(true, false);
+    let u = svd.u.as_ref().expect("u");
+    let weakest = (0..svd.singular_values.len())
+        .min_by(|&a, &b| svd.singular_values[a].total_cmp(&svd.singular_values[b]))
+        .expect("singular values");
+    let twist: Vector6<f64> = u.column(weakest) * 0.25;
+    let pinv = pinv_step(&j, &twist).amax();
+    let dls = r.samples.iter().map(|x| x.qdot.amax()).fold(0.0, f64::max);
+    let fastest = s
+        .model
+        .dof_limits()
+        .iter()
+        .map(|l| l.velocity)
+        .fold(0.0, f64::max);
+    eprintln!("pinv {pinv:.1} rad/s, DLS loop at most {dls:.2} rad/s, fastest joint {fastest}");
+    assert!(pinv > fastest, "pinv {pinv} vs limits {fastest}");
+    assert!(dls <= fastest);
+}
+
+#[test]
+fn contacts_lost_mid_grasp_let_the_twin_fall_and_the_arm_rests_without_a_jump() {
+    let mut task = PouringTask {
+        duration_s: 7.0,
+        ..PouringTask::default()
+    };
+    // At the top of the lift the hand snaps open and away in 100 ms: every contact is lost.
+    task.hand.truncate(5);
+    let mut open = task.hand[4];
+    open.t_s += 0.5;
+    task.hand.push(open);
+    open.t_s += 0.1;
+    open.grip = 0.0;
+    open.xyz[1] -= 0.1;
+    task.hand.push(open);
+    let r = pour(&task, MappingMode::ClosedLoop);
+    assert!(r.result.grasp_at_s.is_some());
+    assert_safe(&r, &task);
+    let released = task.hand[6].t_s;
+    let after: Vec<_> = r
+        .samples
+        .iter()
+        .filter(|s| s.t_s > released + 1.0)
+        .collect();
+    assert!(after.iter().all(|s| s.contacts == 0), "no contacts after");
+    assert!(
+        after.iter().all(|s| !s.gripper_closed),
+        "the gripper opened"
+    );
+    let last = after.last().expect("samples");
+    assert!(last.tcp_speed < 1e-3, "the arm rests: {}", last.tcp_speed);
+    let twin_z = r.twin.last().expect("twin").translation.z;
+    assert!(
+        twin_z < r.twin[0].translation.z + 0.01,
+        "the twin fell back to the table: {twin_z}"
+    );
+    // The command changes smoothly: no tick jumps by more than the cap's worth.
+    for w in r.samples.windows(2) {
+        assert!((w[1].tcp_speed - w[0].tcp_speed).abs() <= task.max_tcp_speed + 1e-9);
+    }
+}
+
+/// The scripted hand with NaN joint positions from `from` to `to` (s).
+struct NanFrames {
+    inner: ScriptedHand,
+    from: f64,
+    to: f64,
+}
+
+impl HandSource for NanFrames {
+    fn name(&self) -> &str {
+        "hand with NaN frames"
+    }
+
+    fn poll(&mut self, now_s: f64) -> Option<HandFrame> {
+        let mut f = self.inner.poll(now_s)?;
+        if (self.from..self.to).contains(&f.t_s) {
+            for j in f.joints.iter_mut().step_by(3) {
+                j.pose.translation.x = f64::NAN;
+            }
+        }
+        Some(f)
+    }
+}
+
+#[test]
+fn nan_hand_frames_are_refused_and_the_watchdog_stops_the_arm_holding_the_bottle() {
+    let task = PouringTask::default();
+    let r = run_trial_with(&task, &setup(), MappingMode::ClosedLoop, 0, |inner| {
+        ActiveHand::new(NanFrames {
+            inner,
+            from: 4.0,
+            to: 4.8,
+        })
+    })
+    .expect("trial");
+    assert!(
+        r.result.hand_frames_refused >= 70,
+        "{}",
+        r.result.hand_frames_refused
+    );
+    assert_safe(&r, &task);
+    let during: Vec<_> = r
+        .samples
+        .iter()
+        .filter(|s| s.t_s > 4.2 && s.t_s < 4.8)
+        .collect();
+    assert!(
+        during.iter().all(|s| s.stopping),
+        "the watchdog stops the arm"
+    );
+    assert!(during.last().is_some_and(|s| s.tcp_speed < 1e-6));
+    let z0 = setup().bottle_centre().translation.z;
+    assert!(
+        during
+            .iter()
+            .all(|s| s.truth.is_some_and(|p| p.translation.z > z0 + 0.02)),
+        "the bottle stays in the gripper"
+    );
+    // Frames good again: the trial goes on and ends close.
+    let end = r.samples.last().expect("samples");
+    assert!(!end.stopping);
+    let err = (end.target.translation.vector - end.truth.expect("truth").translation.vector).norm();
+    assert!(err < 0.01, "{err}");
+}
+
+#[test]
+fn a_jittery_hand_still_pours_within_the_limits() {
+    // Four times the default tremor and three times the tracking noise.
+    let task = PouringTask {
+        noise: HandNoise {
+            tremor_m: 0.002,
+            tracking_sigma_m: 0.003,
+            ..HandNoise::default()
+        },
+        ..PouringTask::default()
+    };
+    let calm = pour(&PouringTask::default(), MappingMode::ClosedLoop);
+    let r = pour(&task, MappingMode::ClosedLoop);
+    eprintln!("calm {:?}\njittery {:?}", calm.result, r.result);
+    assert!(r.result.grasp_at_s.is_some() && r.result.real_lift_m > 0.10);
+    assert_safe(&r, &task);
+    assert!(r.result.pos_rmse_m < 0.015, "{:?}", r.result);
+    assert!(r.result.roll_rmse_deg < 5.0, "{:?}", r.result);
+    // The jitter costs accuracy (the test can tell them apart).
+    assert!(r.result.pos_rmse_m > calm.result.pos_rmse_m);
 }
