@@ -4,7 +4,7 @@
 set -euo pipefail
 packages=(
   pkg-config libudev-dev libwayland-dev libxkbcommon-dev libx11-dev libxcursor-dev libxrandr-dev libxi-dev
-  mesa-vulkan-drivers libvulkan1 xvfb xauth libopenxr-loader1 libclang-dev libv4l-dev mold fonts-dejavu-core
+  mesa-vulkan-drivers libvulkan1 xvfb xauth libopenxr-loader1 libopenxr-dev libclang-dev libv4l-dev mold fonts-dejavu-core
 )
 missing=()
 for p in "${packages[@]}"; do

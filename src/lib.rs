@@ -7,12 +7,16 @@
 
 pub mod bench;
 pub mod bench_control;
+pub mod live_dr;
 pub mod preview;
 pub mod replay;
 pub mod robot_info;
 pub mod scene;
 pub mod session;
 pub mod task;
+pub mod teleop;
+#[cfg(feature = "xr")]
+pub mod xr;
 
 use std::time::Duration;
 
@@ -83,7 +87,7 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> App {
             });
             add_window_plugins(&mut app, plugins, options.xr);
             if options.fixed_timestep {
-                app.insert_resource(TimeUpdateStrategy::ManualDuration(frame_dt));
+                app.insert_resource(TimeUpdateStrategy::ManualDuration(frame_dt / 2));
             }
         }
     }
@@ -122,7 +126,9 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> App {
                 sensor: scene.file.camera.sensor.clone(),
                 frame_latency_s: scene.file.camera.frame_latency_s,
                 seed: scene.file.seed,
+                fps: scene.file.camera.fps,
             }),
+            external_drive: false,
         })
         .insert_resource(LiveVideo::new(
             match webcam {
@@ -184,6 +190,21 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> App {
         }
         Mode::Preview(options) => {
             app.add_plugins(preview::PreviewPlugin(options.clone()));
+            if webcam.is_none() && scene.file.background == scene::BackgroundSpec::EmptyRoom {
+                // The room renders its ground truth anyway (the empty room is H): score
+                // two frames a second against it.
+                let every = (scene.file.camera.fps / 2.0).round().max(1.0) as u64;
+                app.add_plugins(live_dr::LiveDrPlugin { every });
+            }
+            #[cfg(feature = "xr")]
+            if options.xr {
+                app.add_plugins(xr::XrViewPlugin);
+            }
+            if let Some(choice) = &options.hand
+                && let Err(e) = teleop::add_live_teleop(&mut app, scene, choice)
+            {
+                error!("live teleoperation: {e}; the preview runs without it");
+            }
         }
     }
     app

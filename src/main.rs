@@ -8,6 +8,7 @@ use avatarm::bench_control::{self, ControlSweep};
 use avatarm::preview::PreviewOptions;
 use avatarm::replay::ReplayOptions;
 use avatarm::scene::{BackgroundSpec, EraseOverrides, Scene, on_off};
+use avatarm::teleop::HandChoice;
 use avatarm::{Mode, build_app, robot_info};
 use avatarm_core::robot::{PackagePath, RobotModel};
 use clap::{Parser, Subcommand};
@@ -39,8 +40,11 @@ enum Command {
     /// Open the desktop preview of a scene (default: assets/scenes/default.toml).
     ///
     /// Keys: V cycles the panel (interaction view, camera feed, mask), E switches erasure on
-    /// and off, B captures the background from the live frame, F12 saves a screenshot, Esc
-    /// quits.
+    /// and off, M tints the mask over the panel, W draws the twin as a wireframe, B captures
+    /// the background from the live frame, R re-centres the panel in the headset (XR), F12
+    /// saves a screenshot, Esc quits. Desktop hand (--hand desktop): arrows or left-drag move
+    /// it, PgUp/PgDn or the wheel raise and lower it, Space closes/opens it, Z/X tilt it (pour),
+    /// Home puts it back at the start.
     Run {
         /// The scene file.
         scene: Option<PathBuf>,
@@ -59,6 +63,11 @@ enum Command {
         /// Take the camera feed from webcam N (feature `webcam`) instead of the simulated room.
         #[arg(long, value_name = "N")]
         webcam: Option<u32>,
+        /// With a scene that has a [task]: teleoperate it live with this hand: scripted (the
+        /// task's trial, default), desktop (keys and mouse), xr (OpenXR hand tracking, with
+        /// --xr), leap (feature `leap`), a recorded FILE.hand.jsonl, or none.
+        #[arg(long, value_name = "SOURCE")]
+        hand: Option<String>,
         #[command(flatten)]
         overrides: EraseOverrides,
     },
@@ -172,6 +181,38 @@ fn pouring_scene() -> PathBuf {
     bundled_scene("pouring.toml")
 }
 
+/// The live hand for `avatarm run`: `--hand`, else the scene's `hand`, else the scripted hand
+/// when the scene has a `[task]`; errors name the flag.
+fn live_hand(scene: &Scene, flag: Option<&str>, xr: bool) -> Result<Option<HandChoice>, String> {
+    let (text, from) = match (flag, &scene.file.hand) {
+        (Some(f), _) => (f.to_owned(), "--hand"),
+        (None, Some(h)) => (h.clone(), "hand (scene)"),
+        (None, None) if scene.file.task.is_some() => ("scripted".to_owned(), "[task]"),
+        (None, None) => return Ok(None),
+    };
+    if text == "none" {
+        return Ok(None);
+    }
+    let choice: HandChoice = text.parse().map_err(|e| format!("{from}: {e}"))?;
+    if scene.file.task.is_none() {
+        return Err(format!(
+            "{from}: the scene '{}' has no [task] to teleoperate (try assets/scenes/pouring.toml)",
+            scene.file.name
+        ));
+    }
+    match &choice {
+        HandChoice::Xr if !xr => Err(format!("{from}: xr needs XR mode (--xr)")),
+        HandChoice::Leap if !cfg!(feature = "leap") => Err(format!(
+            "{from}: this avatarm was built without the leap feature; rebuild with \
+             `cargo build --features leap` (needs the Ultraleap SDK, docs/hardware.md)"
+        )),
+        HandChoice::File(path) if !path.is_file() => {
+            Err(format!("{from}: {} does not exist", path.display()))
+        }
+        _ => Ok(Some(choice)),
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli) {
@@ -217,6 +258,7 @@ fn run(cli: Cli) -> Result<(), String> {
             screenshot,
             package_path,
             webcam,
+            hand,
             overrides,
         } => {
             if webcam.is_some() && !cfg!(feature = "webcam") {
@@ -237,12 +279,15 @@ fn run(cli: Cli) -> Result<(), String> {
                 );
                 scene.file.background = BackgroundSpec::None;
             }
+            let xr = xr || scene.file.xr;
+            let hand = live_hand(&scene, hand.as_deref(), xr)?;
             let mode = Mode::Preview(PreviewOptions {
                 frames,
                 screenshot,
                 xr,
                 fixed_timestep: frames.is_some(),
                 webcam,
+                hand,
             });
             let exit = build_app(&scene, &mode).run();
             if exit.is_error() {

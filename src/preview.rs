@@ -2,8 +2,12 @@
 //! erased and the object twins in front), or the raw camera feed, or the mask, beside a 3-D
 //! view of the robot twin.
 //!
-//! Keys: V cycles the panel (interaction view, camera feed, mask), E switches erasure on and
-//! off, B captures the background H from the live frame, F12 saves a screenshot, Esc quits.
+//! Keys ([`KEYS`]): V cycles the panel (interaction view, camera feed, mask), E switches
+//! erasure on and off, M tints the mask over the panel, W draws the twin as a wireframe, B
+//! captures the background H from the live frame, R re-centres the panel in the headset (XR),
+//! F12 saves a screenshot, Esc quits. The status lines show the frame time, the ages of the
+//! camera frame and joint state, how often the mask was rendered per camera frame and, in the
+//! simulated room, the live erasure scores against its ground truth ([`crate::live_dr`]).
 
 use std::path::PathBuf;
 
@@ -13,12 +17,19 @@ use avatarm_erase::{
 use avatarm_sim::SimCameras;
 use avatarm_twin::layers;
 use avatarm_video::LiveVideo;
+use bevy::asset::embedded_asset;
 use bevy::camera::visibility::RenderLayers;
 use bevy::core_pipeline::tonemapping::Tonemapping;
+use bevy::pbr::wireframe::{Wireframe, WireframeColor, WireframePlugin};
 use bevy::prelude::*;
+use bevy::render::render_resource::AsBindGroup;
 use bevy::render::view::screenshot::{Screenshot, save_to_disk};
+use bevy::shader::ShaderRef;
+use bevy::ui_render::UiMaterialPlugin;
+use bevy::ui_render::ui_material::{MaterialNode, UiMaterial};
 
 use crate::SceneResource;
+use crate::live_dr::LiveDr;
 
 /// Options of the preview.
 #[derive(Debug, Clone, Default)]
@@ -29,18 +40,21 @@ pub struct PreviewOptions {
     pub screenshot: Option<PathBuf>,
     /// Start an OpenXR session (falls back to the window without a runtime).
     pub xr: bool,
-    /// Advance time by exactly one camera frame per rendered frame (scripted runs).
+    /// Advance time by exactly half a camera frame per rendered frame (scripted runs): a
+    /// display twice as fast as the camera, as a headset's is.
     pub fixed_timestep: bool,
     /// Take the camera feed from this webcam instead of the simulated room's camera (needs
     /// the `webcam` feature).
     pub webcam: Option<u32>,
+    /// Run the scene's `[task]` live with this hand ([`crate::teleop`]).
+    pub hand: Option<crate::teleop::HandChoice>,
 }
 
 /// The preview's cameras, panels and keys.
 pub struct PreviewPlugin(pub PreviewOptions);
 
 /// The keys, as listed in `--help` and the README.
-pub const KEYS: &str = "V: panel (view / feed / mask)   E: erase on/off   B: capture background   F12: screenshot   Esc: quit";
+pub const KEYS: &str = "V: panel (view / feed / mask)   E: erase on/off   M: mask overlay   W: twin wireframe\nB: capture background   R: re-centre XR panel   F12: screenshot   Esc: quit";
 
 /// What the preview's panel shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -78,7 +92,32 @@ struct PreviewState {
     frame: u32,
     shots: u32,
     view: PanelView,
+    mask_overlay: bool,
+    wireframe: bool,
 }
+
+/// The panel's image with the mask tinted over it (`mask_overlay.wgsl`); a tint of alpha 0
+/// shows the image alone.
+#[derive(Asset, TypePath, AsBindGroup, Debug, Clone)]
+struct PanelMaterial {
+    #[uniform(0)]
+    tint: Vec4,
+    #[texture(1)]
+    #[sampler(2)]
+    image: Handle<Image>,
+    #[texture(3)]
+    #[sampler(4)]
+    mask: Handle<Image>,
+}
+
+impl UiMaterial for PanelMaterial {
+    fn fragment_shader() -> ShaderRef {
+        "embedded://avatarm/mask_overlay.wgsl".into()
+    }
+}
+
+/// The mask overlay's colour and opacity.
+const MASK_TINT: Vec4 = Vec4::new(1.0, 0.1, 0.6, 0.45);
 
 #[derive(Component)]
 struct StatusText;
@@ -91,11 +130,20 @@ struct PanelImage;
 
 impl Plugin for PreviewPlugin {
     fn build(&self, app: &mut App) {
-        app.insert_resource(PreviewState {
+        embedded_asset!(app, "mask_overlay.wgsl");
+        #[cfg(feature = "xr")]
+        app.add_message::<crate::xr::RecenterXrPanel>();
+        app.add_plugins((
+            UiMaterialPlugin::<PanelMaterial>::default(),
+            WireframePlugin::default(),
+        ))
+        .insert_resource(PreviewState {
             options: self.0.clone(),
             frame: 0,
             shots: 0,
             view: PanelView::default(),
+            mask_overlay: false,
+            wireframe: false,
         })
         .add_systems(Startup, setup_preview)
         .add_systems(
@@ -105,7 +153,13 @@ impl Plugin for PreviewPlugin {
     }
 }
 
-fn setup_preview(mut commands: Commands, cameras: Res<SimCameras>, scene: Res<SceneResource>) {
+fn setup_preview(
+    mut commands: Commands,
+    cameras: Res<SimCameras>,
+    scene: Res<SceneResource>,
+    mut materials: ResMut<Assets<PanelMaterial>>,
+    desktop_hand: Option<Res<crate::teleop::DesktopHand>>,
+) {
     let base = scene.0.robot_base().translation.vector;
     let focus = Vec3::new(base.x as f32 + 0.45, base.y as f32, base.z as f32 + 0.25);
     // Aimed a little left of the robot so that the twin shows right of the camera feed panel.
@@ -146,7 +200,11 @@ fn setup_preview(mut commands: Commands, cameras: Res<SimCameras>, scene: Res<Sc
             ));
             panel.spawn((
                 PanelImage,
-                ImageNode::new(cameras.real.clone()),
+                MaterialNode(materials.add(PanelMaterial {
+                    tint: Vec4::ZERO,
+                    image: cameras.real.clone(),
+                    mask: cameras.real.clone(),
+                })),
                 Node {
                     width: Val::Px(panel_w),
                     height: Val::Px(panel_h),
@@ -163,8 +221,13 @@ fn setup_preview(mut commands: Commands, cameras: Res<SimCameras>, scene: Res<Sc
                 TextColor(Color::srgb(0.85, 0.9, 0.95)),
             ));
         });
+    let hand_keys = if desktop_hand.is_some() {
+        format!("\n{}", crate::teleop::DESKTOP_KEYS)
+    } else {
+        String::new()
+    };
     commands.spawn((
-        Text::new(format!("Robot twin (from joint states)\n{KEYS}")),
+        Text::new(format!("Robot twin (from joint states)\n{KEYS}{hand_keys}")),
         TextFont {
             font_size: FontSize::Px(16.0),
             ..default()
@@ -184,18 +247,29 @@ fn show_panel(
     cameras: Res<SimCameras>,
     interaction: Option<Res<InteractionTargets>>,
     erase: Option<Res<EraseTargets>>,
-    mut image: Query<&mut ImageNode, With<PanelImage>>,
+    image: Query<&MaterialNode<PanelMaterial>, With<PanelImage>>,
+    mut materials: ResMut<Assets<PanelMaterial>>,
     mut title: Query<&mut Text, With<PanelTitle>>,
 ) {
     let handle = match state.view {
         PanelView::Interaction => interaction.map(|t| t.view.clone()),
         PanelView::Feed => Some(cameras.real.clone()),
-        PanelView::Mask => erase.map(|t| t.mask.clone()),
+        PanelView::Mask => erase.as_ref().map(|t| t.mask.clone()),
     };
-    if let Some(handle) = handle {
-        for mut node in &mut image {
-            if node.image != handle {
-                node.image = handle.clone();
+    let tint = if state.mask_overlay && state.view != PanelView::Mask {
+        MASK_TINT
+    } else {
+        Vec4::ZERO
+    };
+    if let (Some(handle), Some(erase)) = (handle, erase) {
+        for node in &image {
+            let unchanged = materials
+                .get(&node.0)
+                .is_some_and(|m| m.image == handle && m.tint == tint && m.mask == erase.mask);
+            if !unchanged && let Some(mut m) = materials.get_mut(&node.0) {
+                m.image = handle.clone();
+                m.mask = erase.mask.clone();
+                m.tint = tint;
             }
         }
     }
@@ -206,13 +280,51 @@ fn show_panel(
     }
 }
 
+/// What the status line shows of a live teleoperation.
+#[derive(bevy::ecs::system::SystemParam)]
+struct LiveTeleopStatus<'w, 's> {
+    live: Option<Res<'w, crate::teleop::LiveTask>>,
+    teleop: Option<Res<'w, avatarm_mapping::Teleop>>,
+    contacts: Option<Res<'w, avatarm_hand::ObjectContacts>>,
+    held: Option<Res<'w, avatarm_hand::HeldObject>>,
+    twin: Query<'w, 's, &'static Transform, With<avatarm_hand::GraspTarget>>,
+}
+
+impl LiveTeleopStatus<'_, '_> {
+    /// The end-of-run summary, or nothing without a teleoperation.
+    fn summary(&self) -> Option<String> {
+        let (Some(live), Some(teleop), Some(held)) = (&self.live, &self.teleop, &self.held) else {
+            return None;
+        };
+        let twin = self.twin.single().ok().map(avatarm_mapping::isometry);
+        Some(crate::teleop::summary(live, teleop, held, twin))
+    }
+
+    /// The teleoperation's line and a line break, or nothing without one.
+    fn line(&self) -> String {
+        match (&self.live, &self.teleop, &self.contacts, &self.held) {
+            (Some(live), Some(teleop), Some(contacts), Some(held)) => {
+                let twin = self.twin.single().ok().map(avatarm_mapping::isometry);
+                format!(
+                    "{}\n",
+                    crate::teleop::status_line(live, teleop, contacts, held, twin)
+                )
+            }
+            _ => String::new(),
+        }
+    }
+}
+
+#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn update_status(
     mut text: Query<&mut Text, With<StatusText>>,
     robot: Option<Res<avatarm_sim::SimRobotState>>,
     twin: Option<Res<crate::AppTwin>>,
     twins: Query<&avatarm_twin::RobotTwin>,
     erase: (Res<EraseConfig>, Res<EraseState>, Res<LiveVideo>),
-    time: Res<Time>,
+    live_dr: Option<Res<LiveDr>>,
+    time: Res<Time<Real>>,
+    teleop: LiveTeleopStatus,
 ) {
     let (config, erase_state, live) = erase;
     let (Some(robot), Some(twin)) = (robot, twin) else {
@@ -230,15 +342,27 @@ fn update_status(
         (true, Some(origin)) => format!("erase on; background: {origin}"),
     };
     let stale = if live.stale { "   CAMERA STALE" } else { "" };
+    let per_frame = erase_state.renders[0] as f64 / erase_state.frames_in.max(1) as f64;
+    let scores = match live_dr.as_deref().and_then(LiveDr::means) {
+        Some((iou, leak, psnr)) => format!(
+            "\nlive vs truth (last {} scored): IoU {iou:.3}   leak {leak:.2} %   PSNR {}",
+            live_dr.as_ref().map_or(0, |l| l.recent.len()),
+            psnr.map_or("-".to_owned(), |p| format!("{p:.1} dB"))
+        ),
+        None if live_dr.is_some() => "\nlive vs truth: waiting for a scored frame".to_owned(),
+        None => String::new(),
+    };
+    let teleop_line = teleop.line();
     for mut line in &mut text {
         **line = format!(
-            "sim {t:6.2} s   frame {:5.1} ms   refused joint states {}{stale}\ncamera frame age {frame_age_ms:5.1} ms   joint state age {age_ms:5.1} ms\n{erasing}",
+            "{teleop_line}sim {t:6.2} s   frame {:5.1} ms   refused joint states {}{stale}\ncamera frame age {frame_age_ms:5.1} ms   joint state age {age_ms:5.1} ms\nmask renders per camera frame {per_frame:.2}\n{erasing}{scores}",
             time.delta_secs_f64() * 1e3,
             twin.rejected
         );
     }
 }
 
+#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn handle_keys(
     keys: Res<ButtonInput<KeyCode>>,
     mut commands: Commands,
@@ -246,6 +370,8 @@ fn handle_keys(
     mut config: ResMut<EraseConfig>,
     mut capture: MessageWriter<CaptureBackground>,
     mut exit: MessageWriter<AppExit>,
+    #[cfg(feature = "xr")] mut recenter: MessageWriter<crate::xr::RecenterXrPanel>,
+    twin_meshes: Query<(Entity, &RenderLayers), With<Mesh3d>>,
 ) {
     if keys.just_pressed(KeyCode::Escape) {
         exit.write(AppExit::Success);
@@ -262,6 +388,42 @@ fn handle_keys(
         info!("capturing the background from the live frame");
         capture.write(CaptureBackground);
     }
+    if keys.just_pressed(KeyCode::KeyM) {
+        state.mask_overlay = !state.mask_overlay;
+        info!(
+            "mask overlay {}",
+            if state.mask_overlay { "on" } else { "off" }
+        );
+    }
+    if keys.just_pressed(KeyCode::KeyW) {
+        state.wireframe = !state.wireframe;
+        info!(
+            "twin wireframe {}",
+            if state.wireframe { "on" } else { "off" }
+        );
+        let twin_layer = RenderLayers::layer(layers::TWIN);
+        for (e, layers) in &twin_meshes {
+            if *layers != twin_layer {
+                continue;
+            }
+            if state.wireframe {
+                commands.entity(e).insert((
+                    Wireframe,
+                    WireframeColor {
+                        color: Color::srgb(0.2, 1.0, 0.4),
+                    },
+                ));
+            } else {
+                commands.entity(e).remove::<(Wireframe, WireframeColor)>();
+            }
+        }
+    }
+    if keys.just_pressed(KeyCode::KeyR) {
+        #[cfg(feature = "xr")]
+        recenter.write_default();
+        #[cfg(not(feature = "xr"))]
+        info!("R: this build has no XR mode");
+    }
     if keys.just_pressed(KeyCode::F12) {
         state.shots += 1;
         let path = format!("avatarm_screenshot_{:03}.png", state.shots);
@@ -275,6 +437,9 @@ fn handle_keys(
 fn count_frames(
     mut commands: Commands,
     mut state: ResMut<PreviewState>,
+    erase: Res<EraseState>,
+    live_dr: Option<Res<LiveDr>>,
+    teleop: LiveTeleopStatus,
     mut exit: MessageWriter<AppExit>,
 ) {
     state.frame += 1;
@@ -296,7 +461,21 @@ fn count_frames(
     } else {
         0
     };
-    if state.frame >= last + grace {
+    if state.frame == last + grace {
+        // One line for scripted runs (and the tests that run them).
+        let scores = live_dr
+            .as_deref()
+            .and_then(|l| l.means().map(|m| (l.scored, m)))
+            .map_or(String::new(), |(n, (iou, leak, _))| {
+                format!("; {n} frames scored live, last IoU {iou:.3}, leak {leak:.2} %")
+            });
+        info!(
+            "preview: {} frames rendered, {} camera frames, mask rendered {} times, composite {} times{scores}",
+            state.frame, erase.frames_in, erase.renders[0], erase.renders[2]
+        );
+        if let Some(line) = teleop.summary() {
+            info!("{line}");
+        }
         exit.write(AppExit::Success);
     }
 }

@@ -19,7 +19,7 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use avatarm_core::dr::{self, MaskScores, Photometric, RgbaView};
+use avatarm_core::dr::{self, EraseSettings, MaskScores, Photometric, RgbaView};
 use avatarm_erase::{EraseState, EraseTargets, PIPELINE_LAG};
 use avatarm_sim::{SimCameras, SimRobotState};
 use avatarm_twin::RobotTwin;
@@ -523,17 +523,19 @@ fn score_frame(replay: &Replay, scene: &SceneResource, p: Pending) -> Result<Fra
         .max()
         .unwrap_or(0);
     // Scores against the ground truth, from what the GPU produced.
-    let gpu_alpha = dr::feather_alpha(&gpu_mask, w, h, settings.feather_px);
-    let erased: Vec<u8> = gpu_alpha
-        .iter()
-        .map(|&a| u8::from(a * alpha_h >= 0.5))
-        .collect();
-    let truth: Vec<u8> = silhouette
-        .chunks_exact(4)
-        .map(|px| u8::from(px[0] > 127))
-        .collect();
-    let scores = dr::mask_scores(&erased, &truth).ok_or("mask and truth sizes differ")?;
-    let psnr = dr::psnr_in(&gpu, &norobot, &truth);
+    let TruthScores {
+        truth,
+        mask: scores,
+        psnr_db: psnr,
+    } = score_against_truth(
+        &settings,
+        alpha_h,
+        (w, h),
+        &gpu_mask,
+        &gpu,
+        &silhouette,
+        &norobot,
+    )?;
     if inputs.save {
         let out = &replay.options.out;
         let i = inputs.index;
@@ -568,6 +570,47 @@ fn score_frame(replay: &Replay, scene: &SceneResource, p: Pending) -> Result<Fra
         cpu_mask_ms,
         cpu_composite_ms,
         photometric: inputs.photometric,
+    })
+}
+
+/// What the GPU's mask and composite score against the simulated room's ground truth.
+pub(crate) struct TruthScores {
+    /// The true robot silhouette (0/1 per pixel).
+    pub truth: Vec<u8>,
+    /// Erased region against it.
+    pub mask: MaskScores,
+    /// PSNR of Ĩ(t) against the robot-free room inside it (dB).
+    pub psnr_db: Option<f64>,
+}
+
+/// Scores a frame's GPU mask (0/1 per pixel) and composite (RGBA8) against the true
+/// silhouette and the robot-free room (RGBA8, the sensor's gain applied): the erased region
+/// is where the feathered mask times `alpha_h` reaches one half. Shared by the replay and the
+/// preview's live scores.
+pub(crate) fn score_against_truth(
+    settings: &EraseSettings,
+    alpha_h: f32,
+    (w, h): (u32, u32),
+    gpu_mask: &[u8],
+    composite: &[u8],
+    silhouette: &[u8],
+    norobot: &[u8],
+) -> Result<TruthScores, String> {
+    let gpu_alpha = dr::feather_alpha(gpu_mask, w, h, settings.feather_px);
+    let erased: Vec<u8> = gpu_alpha
+        .iter()
+        .map(|&a| u8::from(a * alpha_h >= 0.5))
+        .collect();
+    let truth: Vec<u8> = silhouette
+        .chunks_exact(4)
+        .map(|px| u8::from(px[0] > 127))
+        .collect();
+    let mask = dr::mask_scores(&erased, &truth).ok_or("mask and truth sizes differ")?;
+    let psnr_db = dr::psnr_in(composite, norobot, &truth);
+    Ok(TruthScores {
+        truth,
+        mask,
+        psnr_db,
     })
 }
 

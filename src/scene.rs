@@ -248,6 +248,40 @@ pub struct SceneFile {
     /// The teleoperation task measured on every replay (`[task]`), e.g. the paper's pouring.
     #[serde(default)]
     pub task: Option<avatarm_mapping::pouring::PouringTask>,
+    /// Start `avatarm run` in XR (an OpenXR headset), as `--xr` does.
+    #[serde(default)]
+    pub xr: bool,
+    /// The hand that teleoperates the `[task]` in `avatarm run` (as `--hand`): scripted,
+    /// desktop, xr, leap, a `.hand.jsonl` file or none.
+    #[serde(default)]
+    pub hand: Option<String>,
+    /// Where the interaction layer sits in the headset (`[xr_layout]`).
+    #[serde(default)]
+    pub xr_layout: XrLayout,
+}
+
+/// `[xr_layout]`: the interaction layer in the headset, relative to where the user's head is
+/// when the session starts (looking ahead).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct XrLayout {
+    /// Distance of the video panel in front of the eyes (m).
+    pub panel_distance_m: f64,
+    /// Height of the video panel (m); its width follows the camera's aspect ratio.
+    pub panel_height_m: f64,
+    /// How far the panel's centre is below eye level (m): a little below is easier on the
+    /// neck for a seated user.
+    pub panel_below_eye_m: f64,
+}
+
+impl Default for XrLayout {
+    fn default() -> Self {
+        Self {
+            panel_distance_m: 1.2,
+            panel_height_m: 0.7,
+            panel_below_eye_m: 0.15,
+        }
+    }
 }
 
 /// `[background]`: where the background image H comes from.
@@ -395,6 +429,29 @@ impl Scene {
                 format!(
                     "need 0 < object_depth_m ({}) < panel_distance_m ({})",
                     i.object_depth_m, i.panel_distance_m
+                ),
+            ));
+        }
+        if let Some(h) = &file.hand
+            && h != "none"
+        {
+            h.parse::<crate::teleop::HandChoice>()
+                .map_err(|e| invalid("hand", e))?;
+        }
+        let x = &file.xr_layout;
+        if !(x.panel_distance_m.is_finite()
+            && (0.2..=20.0).contains(&x.panel_distance_m)
+            && x.panel_height_m.is_finite()
+            && (0.05..=20.0).contains(&x.panel_height_m)
+            && x.panel_below_eye_m.is_finite()
+            && x.panel_below_eye_m.abs() <= 5.0)
+        {
+            return Err(invalid(
+                "xr_layout",
+                format!(
+                    "need 0.2 <= panel_distance_m ({}) <= 20, 0.05 <= panel_height_m ({}) <= 20 \
+                     and |panel_below_eye_m| ({}) <= 5",
+                    x.panel_distance_m, x.panel_height_m, x.panel_below_eye_m
                 ),
             ));
         }

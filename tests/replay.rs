@@ -248,6 +248,134 @@ fn bad_scenes_are_refused_naming_the_field() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("timeline.robot[1].t_s"), "{e}");
+
+    let e = parse(&format!("{text}\n[xr_layout]\npanel_distance_m = 0.05\n"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("xr_layout") && e.contains("0.05"), "{e}");
+    let xr = parse(&text.replace("duration_s = 10.0", "duration_s = 10.0\nxr = true"))
+        .expect("xr = true is a scene setting");
+    assert!(xr.file.xr);
+}
+
+/// Runs `avatarm run ARGS` under Xvfb; returns the log (stdout and stderr) after checking it
+/// succeeded without a panic.
+fn run_preview(args: &[&str], out: &Path) -> String {
+    let run = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1280x720x24"])
+        .arg(env!("CARGO_BIN_EXE_avatarm"))
+        .arg("run")
+        .args(args)
+        // No OpenXR runtime, even where a developer has one installed.
+        .env("XR_RUNTIME_JSON", out.join("no_runtime.json"))
+        .current_dir(root())
+        .output()
+        .expect("xvfb-run starts (scripts/setup.sh installs it)");
+    let log = format!(
+        "{}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(run.status.success(), "avatarm run {args:?} failed:\n{log}");
+    assert!(!log.contains("panicked"), "{log}");
+    log
+}
+
+/// The numbers in the first log line that contains `marker`, from the marker on.
+fn numbers_after(log: &str, marker: &str) -> Vec<f64> {
+    let (_, rest) = log
+        .lines()
+        .find_map(|l| l.split_once(marker))
+        .unwrap_or_else(|| panic!("no line with '{marker}':\n{log}"));
+    rest.split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-'))
+        .filter_map(|w| w.parse().ok())
+        .collect()
+}
+
+/// `avatarm run` on the pouring scene teleoperates its task live: the scripted hand grasps the
+/// bottle's twin, the simulated arm closes on the real bottle and lifts it after the twin, in
+/// the preview with the robot erased.
+#[test]
+fn run_teleoperates_the_pouring_task_live() {
+    let out = out_dir("run_teleop");
+    std::fs::create_dir_all(&out).unwrap();
+    let shot = out.join("teleop.png");
+    // 200 updates of half a camera frame: 3.3 s, past the grasp (1.8 s) into the lift.
+    let log = run_preview(
+        &[
+            "assets/scenes/pouring.toml",
+            "--frames",
+            "200",
+            "--screenshot",
+            shot.to_str().unwrap(),
+        ],
+        &out,
+    );
+    assert!(
+        log.contains("live teleoperation: 'pouring' with the scripted hand"),
+        "{log}"
+    );
+    let n = numbers_after(&log, "teleop: ");
+    let line = log.lines().find(|l| l.contains("teleop: ")).unwrap();
+    let (ticks, grasps, lifted_mm, off_mm) = (n[0], n[1], n[2], n[3]);
+    assert!(ticks >= 300.0, "{line}");
+    assert!(grasps >= 1.0 && line.contains(" holding"), "{line}");
+    assert!(lifted_mm > 5.0, "the real bottle is lifted: {line}");
+    assert!(off_mm < 25.0, "the real bottle follows its twin: {line}");
+    assert!(load_rgb(&shot).dimensions() == (1280, 720));
+}
+
+/// `avatarm run --xr` on a machine without an OpenXR runtime (this one): one line says so, the
+/// desktop preview renders under Xvfb and saves its screenshot, and the mask is rendered once
+/// per camera frame while the display updates twice per camera frame.
+#[test]
+fn run_with_xr_falls_back_to_the_preview_and_renders_frames() {
+    let out = out_dir("run_xr_fallback");
+    std::fs::create_dir_all(&out).unwrap();
+    let shot = out.join("preview.png");
+    let frames = 40u32;
+    let log = run_preview(
+        &[
+            "--xr",
+            "--frames",
+            &frames.to_string(),
+            "--screenshot",
+            shot.to_str().unwrap(),
+        ],
+        &out,
+    );
+    assert_eq!(
+        log.matches("XR: no OpenXR runtime or headset could be started")
+            .count(),
+        1,
+        "one fallback line:\n{log}"
+    );
+    // "preview: N frames rendered, C camera frames, mask rendered M times, composite K times"
+    let line = log.lines().find(|l| l.contains("preview: ")).unwrap();
+    let n: Vec<u64> = numbers_after(&log, "preview: ")
+        .iter()
+        .map(|&v| v as u64)
+        .collect();
+    let (rendered, camera, mask, composite) = (n[0], n[1], n[2], n[3]);
+    assert!(rendered >= u64::from(frames), "{line}");
+    assert!(
+        camera >= 5 && camera <= rendered / 2 + 2,
+        "the display runs twice as fast as the camera: {line}"
+    );
+    // Once per camera frame, plus the updates before the pipeline is full and H arrives.
+    assert!(mask <= camera + 4 && mask + 2 >= camera, "{line}");
+    assert!(composite <= camera + 4, "{line}");
+    let img = load_rgb(&shot);
+    assert_eq!(img.dimensions(), (1280, 720));
+    let mut colours = std::collections::HashSet::new();
+    for p in img.pixels() {
+        colours.insert(p.0);
+    }
+    assert!(
+        colours.len() > 500,
+        "the screenshot shows a rendered scene, not a blank window ({} colours)",
+        colours.len()
+    );
 }
 
 #[test]

@@ -52,6 +52,35 @@ pub const JOINT_NAMES: [&str; 26] = [
 
 /// Index of the palm joint.
 pub const PALM: usize = 0;
+
+/// The skeleton's bones as joint pairs (wrist to each metacarpal, then along each digit): what
+/// a drawing of the hand connects.
+pub const SKELETON: [(usize, usize); 24] = [
+    (1, 2),
+    (2, 3),
+    (3, 4),
+    (4, 5),
+    (1, 6),
+    (6, 7),
+    (7, 8),
+    (8, 9),
+    (9, 10),
+    (1, 11),
+    (11, 12),
+    (12, 13),
+    (13, 14),
+    (14, 15),
+    (1, 16),
+    (16, 17),
+    (17, 18),
+    (18, 19),
+    (19, 20),
+    (1, 21),
+    (21, 22),
+    (22, 23),
+    (23, 24),
+    (24, 25),
+];
 /// Index of the wrist joint.
 pub const WRIST: usize = 1;
 /// Indices of the five fingertips (thumb first).

@@ -65,7 +65,45 @@ pub struct InteractionPlugin;
 
 impl Plugin for InteractionPlugin {
     fn build(&self, app: &mut App) {
-        app.add_systems(PostStartup, setup);
+        app.add_systems(PostStartup, setup).add_systems(
+            Update,
+            follow_objects.run_if(resource_changed::<InteractionConfig>),
+        );
+    }
+}
+
+/// Where an object's twin is drawn (world, scale included): the paper's placement for the
+/// object's pose, in front of the interaction camera.
+pub fn twin_transform(
+    config: &InteractionConfig,
+    object: &ObjectTwinSpec,
+) -> Result<(Transform, f64), String> {
+    let depth = config.object_depth_m.min(0.9 * config.panel_distance_m);
+    let placement = place_twin(&config.real_camera, &object.world_from_object, depth)
+        .map_err(|e| e.to_string())?;
+    let world_from_twin = config.camera.world_from_camera * placement.camera_from_twin;
+    Ok((
+        iso_to_transform(&world_from_twin).with_scale(Vec3::splat(placement.scale as f32)),
+        placement.scale,
+    ))
+}
+
+/// Moves the twins when their objects move (the live teleoperation moves the twin the hand
+/// holds).
+fn follow_objects(
+    config: Res<InteractionConfig>,
+    mut twins: Query<(&mut ObjectTwin, &mut Transform)>,
+) {
+    for (mut twin, mut transform) in &mut twins {
+        let Some(object) = config.objects.get(twin.index) else {
+            continue;
+        };
+        if let Ok((t, scale)) = twin_transform(&config, object)
+            && *transform != t
+        {
+            *transform = t;
+            twin.scale = scale;
+        }
     }
 }
 
@@ -106,15 +144,13 @@ fn setup(
         layer.clone(),
     ));
     for (index, object) in config.objects.iter().enumerate() {
-        let depth = config.object_depth_m.min(0.9 * d);
-        let placement = match place_twin(&config.real_camera, &object.world_from_object, depth) {
+        let (transform, scale) = match twin_transform(&config, object) {
             Ok(p) => p,
             Err(e) => {
                 warn!("object '{}': {e}; its twin is not drawn", object.name);
                 continue;
             }
         };
-        let world_from_twin = cam.world_from_camera * placement.camera_from_twin;
         let material = materials.add(StandardMaterial {
             base_color: Color::srgba(
                 object.rgba[0],
@@ -128,11 +164,8 @@ fn setup(
         let root = commands
             .spawn((
                 Name::new(format!("object twin: {}", object.name)),
-                ObjectTwin {
-                    index,
-                    scale: placement.scale,
-                },
-                iso_to_transform(&world_from_twin).with_scale(Vec3::splat(placement.scale as f32)),
+                ObjectTwin { index, scale },
+                transform,
                 Visibility::default(),
             ))
             .id();

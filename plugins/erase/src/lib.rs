@@ -60,6 +60,9 @@ pub use interaction::{InteractionConfig, InteractionPlugin, InteractionTargets};
 /// Updates between posing the mask twin for a frame and compositing that frame.
 pub const PIPELINE_LAG: usize = 2;
 
+/// Render order of the mask camera; the passes follow it.
+const MASK_CAMERA_ORDER: isize = -20;
+
 /// Live frame textures in the ring (more than [`PIPELINE_LAG`]).
 const RING: usize = 4;
 
@@ -122,9 +125,24 @@ pub struct EraseState {
     pub robot_region: Option<Arc<Vec<u8>>>,
     /// Per update, newest last: what each stage works on ([`PIPELINE_LAG`] + 1 entries).
     pub stages: VecDeque<StageInputs>,
+    /// Renders of each pass so far: mask camera, threshold, composite. Each pass renders
+    /// once per camera frame (and when the settings or H change), however fast the display
+    /// updates: an XR headset at 72-90 Hz over a 30 fps camera does not redo the mask.
+    pub renders: [u64; 3],
+    /// Camera frames taken into the pipeline.
+    pub frames_in: u64,
     /// Ring slot holding the newest frame.
     latest_slot: Option<usize>,
     uploads: usize,
+    /// H changed since the last update.
+    background_changed: bool,
+}
+
+/// Marks a camera of the pipeline with the stage it renders ([`EraseState::stage`]).
+#[derive(Component, Debug, Clone, Copy)]
+pub struct ErasePass {
+    /// Updates behind the mask camera: 0 mask camera, 1 threshold, [`PIPELINE_LAG`] composite.
+    pub lag: usize,
 }
 
 /// What the pipeline used in one update: the mask camera renders the twin for `frame` now, the
@@ -139,6 +157,9 @@ pub struct StageInputs {
     pub photometric: Photometric,
     /// Background H at that update.
     pub background: Option<Arc<Vec<u8>>>,
+    /// Something the passes draw changed at that update (a new frame, the settings, H); the
+    /// stage that works on it renders, the others keep their last image.
+    pub dirty: bool,
 }
 
 impl EraseState {
@@ -322,7 +343,7 @@ impl Plugin for ErasePlugin {
         .add_systems(Startup, setup)
         .add_systems(
             Update,
-            (record_history, set_background, prepare_frame)
+            (record_history, set_background, prepare_frame, gate_passes)
                 .chain()
                 .in_set(EraseSystems::Prepare),
         );
@@ -347,15 +368,16 @@ pub fn upload_image(width: u32, height: u32) -> Image {
 }
 
 /// Spawns an orthographic camera that draws one full-target quad with `material` into
-/// `target`; the quad's fragment shader works in pixel coordinates.
+/// `target` for the stage `lag` updates behind the mask camera; the quad's fragment shader works
+/// in pixel coordinates.
 fn spawn_pass<M: Material>(
     commands: &mut Commands,
     meshes: &mut Assets<Mesh>,
     material: Handle<M>,
     target: Handle<Image>,
     layer: usize,
-    order: isize,
     name: &str,
+    lag: usize,
 ) {
     let layers = RenderLayers::layer(layer);
     commands.spawn((
@@ -369,7 +391,8 @@ fn spawn_pass<M: Material>(
         Name::new(name.to_owned()),
         Camera3d::default(),
         Camera {
-            order,
+            // After the mask camera (order MASK_CAMERA_ORDER), one per stage.
+            order: MASK_CAMERA_ORDER + lag as isize,
             clear_color: ClearColorConfig::Custom(Color::BLACK),
             ..default()
         },
@@ -388,6 +411,7 @@ fn spawn_pass<M: Material>(
         DebandDither::Disabled,
         Msaa::Off,
         layers,
+        ErasePass { lag },
     ));
 }
 
@@ -445,15 +469,16 @@ fn setup(
         intrinsics: raw_k,
         world_from_camera: config.camera.world_from_camera,
     };
-    spawn_pinhole_camera(
+    let mask_camera = spawn_pinhole_camera(
         &mut commands,
         &mask_camera,
         raw.clone(),
         RenderLayers::layer(layers::MASK_TWIN),
         Color::BLACK,
-        -20,
+        MASK_CAMERA_ORDER,
         "mask camera",
     );
+    commands.entity(mask_camera).insert(ErasePass { lag: 0 });
     let s = &config.settings;
     let mask_material = mask_materials.add(MaskMaterial {
         params: MaskParams {
@@ -477,8 +502,8 @@ fn setup(
         mask_material.clone(),
         mask.clone(),
         layers::MASK_PASS,
-        -19,
         "threshold pass",
+        1,
     );
     spawn_pass(
         &mut commands,
@@ -486,8 +511,8 @@ fn setup(
         composite_material.clone(),
         composite.clone(),
         layers::COMPOSITE_PASS,
-        -18,
         "composite pass",
+        PIPELINE_LAG,
     );
     commands.insert_resource(EraseMaterials {
         mask: mask_material,
@@ -583,6 +608,7 @@ fn set_background(
     }
     if let Some((rgba, origin)) = new {
         info!("background H set from {origin}");
+        state.background_changed = true;
         state.background = Some(rgba);
         state.background_origin = Some(origin);
     }
@@ -646,9 +672,12 @@ fn prepare_frame(
             state.mask_stamp_s = Some(stamp);
         }
     }
+    let dirty = frame.is_some() || config.is_changed() || state.background_changed;
+    state.background_changed = false;
     if let Some(f) = frame {
         let slot = state.uploads % RING;
         state.uploads += 1;
+        state.frames_in += 1;
         if let Some(mut image) = images.get_mut(&targets.live[slot]) {
             image.data = Some(f.rgba.as_ref().clone());
         }
@@ -703,6 +732,7 @@ fn prepare_frame(
         slot: state.latest_slot,
         photometric: state.photometric,
         background: state.background.clone(),
+        dirty,
     };
     state.stages.push_back(entry);
     while state.stages.len() > PIPELINE_LAG + 1 {
@@ -725,6 +755,20 @@ fn prepare_frame(
             && m.live != targets.live[slot]
         {
             m.live = targets.live[slot].clone();
+        }
+    }
+}
+
+/// Renders each pass only at the update its stage works on something new (a camera frame, new
+/// settings or H); until the pipeline is full, every pass renders.
+fn gate_passes(mut state: ResMut<EraseState>, mut passes: Query<(&ErasePass, &mut Camera)>) {
+    for (pass, mut camera) in &mut passes {
+        let active = state.stage(pass.lag).is_none_or(|s| s.dirty);
+        if camera.is_active != active {
+            camera.is_active = active;
+        }
+        if active && let Some(n) = state.renders.get_mut(pass.lag.min(2)) {
+            *n += 1;
         }
     }
 }

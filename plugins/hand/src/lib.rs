@@ -3,8 +3,8 @@
 //!
 //! - Sources ([`HandSource`]): anything that yields timestamped 26-joint
 //!   [`HandFrame`](avatarm_core::hand::HandFrame)s: a scripted hand ([`ScriptedHand`]), a
-//!   recorded `.hand.jsonl` file ([`RecordedHand`]); Leap Motion, the desktop mouse hand and
-//!   OpenXR hand tracking implement the same trait.
+//!   recorded `.hand.jsonl` file ([`RecordedHand`]), Leap Motion ([`leap`]) and OpenXR hand
+//!   tracking ([`openxr`], frames pushed by the app's XR mode into a [`openxr::HandInbox`]).
 //! - Bodies: one capsule per phalanx (thumb 2, fingers 3 each) and a box for the palm, no more
 //!   than a grasp needs. Each is a dynamic body without gravity, driven toward its tracked pose
 //!   by a velocity clamped to `max_speed` (and `max_spin`), with continuous collision detection.
@@ -15,6 +15,7 @@
 //!   the hand's velocity at that point, ready for [`avatarm_core::grasp`].
 
 pub mod leap;
+pub mod openxr;
 
 use std::path::Path;
 

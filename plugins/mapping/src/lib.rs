@@ -32,8 +32,20 @@ pub struct MappingPlugin;
 
 impl Plugin for MappingPlugin {
     fn build(&self, app: &mut App) {
-        app.add_systems(FixedUpdate, teleop_tick.after(HandSystems::Contacts));
+        app.add_systems(
+            FixedUpdate,
+            teleop_tick
+                .in_set(MappingSystems::Tick)
+                .after(HandSystems::Contacts),
+        );
     }
+}
+
+/// The mapping's system set (`FixedUpdate`).
+#[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
+pub enum MappingSystems {
+    /// The control tick (after the hand's contacts).
+    Tick,
 }
 
 /// One control tick, as recorded.
@@ -99,6 +111,7 @@ pub struct Teleop {
     limiter: SafetyLimiter,
     robot: Box<dyn RobotInterface>,
     joints: Option<JointState>,
+    received: Vec<JointState>,
     /// Counters.
     pub status: TeleopStatus,
     /// Record every tick into [`Teleop::log`].
@@ -147,6 +160,7 @@ impl Teleop {
             v2r: config.v2r,
             robot: Box::new(robot),
             joints: None,
+            received: Vec::new(),
             status: TeleopStatus::default(),
             record: false,
             log: Vec::new(),
@@ -161,6 +175,22 @@ impl Teleop {
     /// The newest accepted joint state.
     pub fn joints(&self) -> Option<&JointState> {
         self.joints.as_ref()
+    }
+
+    /// The joint states accepted in the last tick, oldest first: what the app's twin of the
+    /// robot should receive too.
+    pub fn received(&self) -> &[JointState] {
+        &self.received
+    }
+
+    /// The robot backend.
+    pub fn robot(&self) -> &dyn RobotInterface {
+        self.robot.as_ref()
+    }
+
+    /// The virtual scene to the real one.
+    pub fn v2r(&self) -> &VirtualToReal {
+        &self.v2r
     }
 
     fn count(&mut self, what: Intervention) {
@@ -220,11 +250,13 @@ fn teleop_tick(
     let dt = time.timestep().as_secs_f64().max(1e-6);
     t.robot.advance(now);
     let n = t.model.dof();
+    t.received.clear();
     for s in t.robot.receive() {
         let ok = s.positions.len() == n
             && s.positions.iter().all(|v| v.is_finite())
             && s.stamp_s.is_finite();
         if ok {
+            t.received.push(s.clone());
             t.joints = Some(s);
         } else {
             t.status.bad_joint_states += 1;

@@ -462,7 +462,7 @@ fn bottle_collider(radius: f32, body: f32, height: f32) -> Collider {
 
 /// Checks the task and the set-up, and places the arm around the bottle: what every trial
 /// shares.
-fn prepare(task: &PouringTask, setup: &TrialSetup) -> Result<Prepared, String> {
+pub fn prepare(task: &PouringTask, setup: &TrialSetup) -> Result<Prepared, String> {
     task.validate()?;
     if !(setup.control_rate_hz.is_finite() && setup.control_rate_hz >= 10.0) {
         return Err(format!(
@@ -477,10 +477,141 @@ fn prepare(task: &PouringTask, setup: &TrialSetup) -> Result<Prepared, String> {
     })
 }
 
-/// The arm's start around the bottle and the bottle in the tool frame.
-struct Prepared {
+/// The arm's start around the bottle and the bottle in the tool frame ([`prepare`]).
+#[derive(Debug, Clone)]
+pub struct Prepared {
     q0: DVector<f64>,
     tcp_from_object: Isometry3<f64>,
+}
+
+/// One trial's world before it runs: the teleoperation loop with the simulated arm around the
+/// real bottle, the trial's hand script, and where the twin starts. [`run_trial`] steps it
+/// headless; `avatarm run` steps it live in the preview with any hand source.
+pub struct TrialParts {
+    /// The loop (simulated arm, mapping, limiter).
+    pub teleop: Teleop,
+    /// The trial's scripted hand (virtual scene).
+    pub script: HandScript,
+    /// The twin's start pose (virtual scene, its centre).
+    pub twin_start: Isometry3<f64>,
+    /// The virtual scene to the real one.
+    pub v2r: VirtualToReal,
+    /// The control (and physics) period.
+    pub period: Duration,
+    bodies: TrialBodies,
+}
+
+/// The physics bodies of a trial: a virtual table under the twin and the bottle's twin.
+#[derive(Debug, Clone, Copy)]
+struct TrialBodies {
+    twin: Transform,
+    table_top: f32,
+    radius: f32,
+    body: f32,
+    height: f32,
+    mass: f32,
+    friction: f32,
+}
+
+impl TrialParts {
+    /// Builds trial `trial` in `mode` (the arm placed by [`prepare`]).
+    pub fn new(
+        task: &PouringTask,
+        setup: &TrialSetup,
+        prepared: &Prepared,
+        mode: MappingMode,
+        trial: u32,
+    ) -> Result<Self, String> {
+        let (q0, tcp_from_object) = (prepared.q0.clone(), prepared.tcp_from_object);
+        let centre = setup.bottle_centre();
+        let v2r = task.virtual_to_real(&centre.translation.vector);
+        let twin_start = v2r.virtual_pose(&centre);
+        let script = trial_script(task, &twin_start.translation.vector, trial)?;
+        let period = Duration::from_secs_f64(1.0 / setup.control_rate_hz);
+        let dt = period.as_secs_f64();
+        let robot = SimRobot::new(setup.sim, setup.model.dof_limits(), q0);
+        let arm = SimArm::new(
+            robot,
+            setup.model.clone(),
+            setup.base,
+            setup.tcp,
+            CarriedObject {
+                pose: centre,
+                rest_z: centre.translation.z,
+                grasp_radius_m: 0.02,
+                held: None,
+            },
+        );
+        let teleop = Teleop::new(
+            TeleopConfig {
+                model: setup.model.clone(),
+                base: setup.base,
+                tcp: setup.tcp,
+                arm: setup.arm.clone(),
+                tcp_from_object,
+                v2r,
+                mapping: MappingSettings {
+                    mode,
+                    gain: task.gain,
+                    dls: avatarm_core::ik::DlsSettings {
+                        dt,
+                        ..Default::default()
+                    },
+                    ..MappingSettings::default()
+                },
+                safety: SafetySettings {
+                    max_tcp_speed: task.max_tcp_speed,
+                    ..SafetySettings::default()
+                },
+            },
+            arm,
+        )?;
+        let k = task.k as f32;
+        let twin = crate::transform(&twin_start);
+        let body = setup.body_height_m() as f32 * k;
+        Ok(Self {
+            teleop,
+            script,
+            twin_start,
+            v2r,
+            period,
+            bodies: TrialBodies {
+                twin,
+                table_top: twin.translation.z - body / 2.0,
+                radius: setup.bottle_radius_m as f32 * k,
+                body,
+                height: setup.bottle_height_m as f32 * k,
+                mass: task.mass_kg as f32,
+                friction: task.friction as f32,
+            },
+        })
+    }
+
+    /// A startup system that spawns the trial's bodies (needs Rapier and the hand plugin).
+    pub fn spawn_bodies(&self) -> impl FnMut(Commands) + Send + Sync + 'static {
+        let b = self.bodies;
+        move |mut commands: Commands| {
+            let at = b.twin.translation;
+            commands.spawn((
+                Name::new("virtual table"),
+                RigidBody::Fixed,
+                Collider::cuboid(0.6, 0.6, 0.05),
+                Friction::coefficient(0.6),
+                Transform::from_xyz(at.x, at.y, b.table_top - 0.05),
+            ));
+            commands.spawn((
+                Name::new("bottle twin"),
+                GraspTarget,
+                RigidBody::Dynamic,
+                bottle_collider(b.radius, b.body, b.height),
+                ColliderMassProperties::Mass(b.mass),
+                Friction::coefficient(b.friction),
+                Ccd::enabled(),
+                Velocity::zero(),
+                b.twin,
+            ));
+        }
+    }
 }
 
 /// Runs one trial in `mode`. Errors when the set-up is impossible (the gripper cannot reach
@@ -514,84 +645,19 @@ fn run_prepared(
     trial: u32,
     hand: impl FnOnce(ScriptedHand) -> ActiveHand,
 ) -> Result<TrialRecord, String> {
-    let (q0, tcp_from_object) = (prepared.q0.clone(), prepared.tcp_from_object);
+    let parts = TrialParts::new(task, setup, prepared, mode, trial)?;
     let centre = setup.bottle_centre();
-    let v2r = task.virtual_to_real(&centre.translation.vector);
-    let twin_start = v2r.virtual_pose(&centre);
-    let script = trial_script(task, &twin_start.translation.vector, trial)?;
-    let period = Duration::from_secs_f64(1.0 / setup.control_rate_hz);
+    let twin_start = parts.twin_start;
+    let period = parts.period;
     let dt = period.as_secs_f64();
-    let robot = SimRobot::new(setup.sim, setup.model.dof_limits(), q0.clone());
-    let arm = SimArm::new(
-        robot,
-        setup.model.clone(),
-        setup.base,
-        setup.tcp,
-        CarriedObject {
-            pose: centre,
-            rest_z: centre.translation.z,
-            grasp_radius_m: 0.02,
-            held: None,
-        },
-    );
-    let mut teleop = Teleop::new(
-        TeleopConfig {
-            model: setup.model.clone(),
-            base: setup.base,
-            tcp: setup.tcp,
-            arm: setup.arm.clone(),
-            tcp_from_object,
-            v2r,
-            mapping: MappingSettings {
-                mode,
-                gain: task.gain,
-                dls: avatarm_core::ik::DlsSettings {
-                    dt,
-                    ..Default::default()
-                },
-                ..MappingSettings::default()
-            },
-            safety: SafetySettings {
-                max_tcp_speed: task.max_tcp_speed,
-                ..SafetySettings::default()
-            },
-        },
-        arm,
-    )?;
+    let spawn = parts.spawn_bodies();
+    let mut teleop = parts.teleop;
     teleop.record = true;
-
-    let k = task.k as f32;
-    let radius = setup.bottle_radius_m as f32 * k;
-    let body = setup.body_height_m() as f32 * k;
-    let height = setup.bottle_height_m as f32 * k;
-    let twin_transform = crate::transform(&twin_start);
-    let table_top = twin_transform.translation.z - body / 2.0;
-    let (mass, friction) = (task.mass_kg as f32, task.friction as f32);
     let mut app = avatarm_hand::headless_app(period);
     app.add_plugins(MappingPlugin)
-        .insert_resource(hand(ScriptedHand::new(script, task.hand_rate_hz)))
+        .insert_resource(hand(ScriptedHand::new(parts.script, task.hand_rate_hz)))
         .insert_resource(teleop);
-    app.add_systems(Startup, move |mut commands: Commands| {
-        let at = twin_transform.translation;
-        commands.spawn((
-            Name::new("virtual table"),
-            RigidBody::Fixed,
-            Collider::cuboid(0.6, 0.6, 0.05),
-            Friction::coefficient(0.6),
-            Transform::from_xyz(at.x, at.y, table_top - 0.05),
-        ));
-        commands.spawn((
-            Name::new("bottle twin"),
-            GraspTarget,
-            RigidBody::Dynamic,
-            bottle_collider(radius, body, height),
-            ColliderMassProperties::Mass(mass),
-            Friction::coefficient(friction),
-            Ccd::enabled(),
-            Velocity::zero(),
-            twin_transform,
-        ));
-    });
+    app.add_systems(Startup, spawn);
     let steps = (task.duration_s / dt).round() as usize;
     let mut twin = Vec::with_capacity(steps);
     let mut max_contact: f64 = 0.0;

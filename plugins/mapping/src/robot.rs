@@ -33,6 +33,10 @@ pub trait RobotInterface: Send + Sync + 'static {
     fn true_object_pose(&self) -> Option<Isometry3<f64>> {
         None
     }
+    /// The simulated robot itself, for a simulated room to render (simulation only).
+    fn simulated(&self) -> Option<&SimRobot> {
+        None
+    }
 }
 
 /// The real object as the simulated gripper carries it: rigidly attached while the gripper is
@@ -155,5 +159,9 @@ impl RobotInterface for SimArm {
 
     fn true_object_pose(&self) -> Option<Isometry3<f64>> {
         Some(self.object.pose)
+    }
+
+    fn simulated(&self) -> Option<&SimRobot> {
+        Some(&self.robot)
     }
 }

@@ -25,8 +25,8 @@ use serde::{Deserialize, Serialize};
 /// What most users need.
 pub mod prelude {
     pub use crate::{
-        Prop, PropShape, SimCameras, SimRobotState, SimRoomConfig, SimRoomPlugin, SimRoomSystems,
-        SimTwins,
+        Prop, PropShape, SimCameras, SimPropPart, SimRobotState, SimRoomConfig, SimRoomPlugin,
+        SimRoomSystems, SimTwins, VideoCounter,
     };
 }
 
@@ -37,6 +37,9 @@ pub enum SimRoomSystems {
     Step,
     /// Poses the simulated robot's visuals at its true joint positions (`PostUpdate`).
     PoseRobot,
+    /// The real camera's capture (`Last`); ground truth for a frame is read back after it, in
+    /// the same update.
+    Capture,
 }
 
 /// A prop's shape (z up; the pose puts the shape's base centre on the table).
@@ -107,6 +110,20 @@ pub struct SimRoomConfig {
     pub twin: Option<Entity>,
     /// Deliver the real camera's frames as a video source (sensor model, latency).
     pub video: Option<SimVideo>,
+    /// Something else drives the robot (the live teleoperation steps its own simulated arm,
+    /// writes it into [`SimRobotState`] and delivers its joint states): the room neither
+    /// commands, steps nor reads out the robot, it renders it.
+    pub external_drive: bool,
+}
+
+/// One rendered part of a prop (the room's view and its silhouette view): moving a prop
+/// (the real object the arm carries) sets each part to the new pose times `local`.
+#[derive(Component, Debug, Clone, Copy)]
+pub struct SimPropPart {
+    /// Index into [`SimRoomConfig::props`].
+    pub prop: usize,
+    /// The part relative to the prop's base pose.
+    pub local: Transform,
 }
 
 /// The simulated camera as a video source.
@@ -118,6 +135,9 @@ pub struct SimVideo {
     pub frame_latency_s: f64,
     /// Seed of the sensor noise (frame `k` uses stream `k`).
     pub seed: u64,
+    /// Frames per second: the camera captures at most this often, however fast the app
+    /// updates (a headset's 72-90 Hz, a replay's one update per frame).
+    pub fps: f64,
 }
 
 /// The simulated robot (ground truth of its joints lives here).
@@ -161,12 +181,13 @@ impl Plugin for SimRoomPlugin {
                 SimRoomSystems::PoseRobot.in_set(RobotTwinSystems::ApplyJointStates),
             )
             .add_systems(PreStartup, setup_room)
-            .add_systems(Last, capture_video)
+            .add_systems(Last, capture_video.in_set(SimRoomSystems::Capture))
             .add_systems(
                 FixedUpdate,
                 (send_scripted_commands, step_robot, deliver_joint_states)
                     .chain()
-                    .in_set(SimRoomSystems::Step),
+                    .in_set(SimRoomSystems::Step)
+                    .run_if(|c: Res<SimRoomConfig>| !c.external_drive),
             )
             .add_systems(
                 PostUpdate,
@@ -190,7 +211,7 @@ fn setup_room(
         unlit: true,
         ..default()
     });
-    for prop in &config.props {
+    for (index, prop) in config.props.iter().enumerate() {
         let lit = materials.add(StandardMaterial {
             base_color: Color::srgba(prop.rgba[0], prop.rgba[1], prop.rgba[2], prop.rgba[3]),
             perceptual_roughness: 0.7,
@@ -199,12 +220,14 @@ fn setup_room(
         for (part, local) in prop_parts(&prop.shape) {
             let mesh = meshes.add(part);
             let transform = iso_to_transform(&prop.pose) * local;
+            let part = SimPropPart { prop: index, local };
             commands.spawn((
                 Name::new(prop.name.clone()),
                 Mesh3d(mesh.clone()),
                 MeshMaterial3d(lit.clone()),
                 transform,
                 RenderLayers::layer(layers::ROOM),
+                part,
             ));
             if config.ground_truth {
                 commands.spawn((
@@ -212,6 +235,7 @@ fn setup_room(
                     MeshMaterial3d(black.clone()),
                     transform,
                     RenderLayers::layer(layers::SIM_SILHOUETTE),
+                    part,
                 ));
             }
         }
@@ -408,18 +432,26 @@ fn pose_sim_robot(
     }
 }
 
-/// Frames captured by the simulated camera so far.
+/// Frames captured by the simulated camera so far, and when the next one is due.
 #[derive(Resource, Debug, Default)]
-struct VideoCounter(u64);
+pub struct VideoCounter {
+    /// Frames captured.
+    pub frames: u64,
+    /// The newest capture: frame index and capture time (robot clock, s).
+    pub last: Option<(u64, f64)>,
+    next_s: f64,
+}
 
-/// Each update, the real camera's image is read back (the simulated camera's "sensor"), the
-/// sensor model applied at the capture time, and the frame queued to arrive after the latency.
+/// At each update that reaches the next frame time (the camera's fps), the real camera's image
+/// is read back (the simulated camera's "sensor"), the sensor model applied at the capture
+/// time, and the frame queued to arrive after the latency.
 fn capture_video(
     mut commands: Commands,
     config: Res<SimRoomConfig>,
     cameras: Option<Res<SimCameras>>,
     robot: Option<Res<SimRobotState>>,
     counter: Option<ResMut<VideoCounter>>,
+    time: Res<Time>,
 ) {
     let (Some(video), Some(cameras), Some(robot)) = (config.video.clone(), cameras, robot) else {
         return;
@@ -428,9 +460,23 @@ fn capture_video(
         commands.init_resource::<VideoCounter>();
         return;
     };
-    let index = counter.0;
-    counter.0 += 1;
+    // Frame times on the app clock (a replay's updates land on them, up to rounding); the
+    // capture is stamped with the robot's clock, which moves in control steps.
+    let now = time.elapsed_secs_f64();
+    if now + 1e-6 < counter.next_s {
+        return;
+    }
+    let period = 1.0 / video.fps.max(1e-3);
+    counter.next_s = if now - counter.next_s < period {
+        counter.next_s + period
+    } else {
+        // Fell behind (a stall): the next frame one period from now.
+        now + period
+    };
     let capture_s = robot.0.time_s();
+    let index = counter.frames;
+    counter.frames += 1;
+    counter.last = Some((index, capture_s));
     commands
         .spawn(Screenshot::image(cameras.real.clone()))
         .observe(

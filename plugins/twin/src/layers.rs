@@ -17,3 +17,5 @@ pub const MASK_TWIN: usize = 5;
 pub const MASK_PASS: usize = 6;
 /// The full-screen quad of the composite pass.
 pub const COMPOSITE_PASS: usize = 7;
+/// What the headset's eye cameras see in XR mode: the interaction panel and the tracked hands.
+pub const XR_PANEL: usize = 8;

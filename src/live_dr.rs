@@ -1,0 +1,233 @@
+//! Live erasure scores in the preview, when the simulated room gives ground truth.
+//!
+//! Every `every`-th camera frame, the room's ground truth at its capture (the robot's
+//! silhouette and the room without the robot) is read back, and so are the GPU's mask and
+//! composite of that frame when the pipeline reaches it ([`avatarm_erase::PIPELINE_LAG`]);
+//! the frame is then scored as a replay scores every frame ([`crate::replay`]): IoU and leak
+//! of the erased region against the silhouette, PSNR of Ĩ(t) inside it. The preview shows the
+//! mean of the last [`WINDOW`] scored frames. Sampling keeps the read-backs (four images per
+//! scored frame) off most frames.
+
+use std::collections::{BTreeMap, VecDeque};
+
+use avatarm_core::dr::MaskScores;
+use avatarm_erase::{EraseConfig, EraseState, EraseTargets, PIPELINE_LAG};
+use avatarm_sim::{SimCameras, SimRoomSystems, VideoCounter};
+use bevy::prelude::*;
+use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
+
+use crate::SceneResource;
+use crate::replay::score_against_truth;
+
+/// Scored frames averaged for the display.
+pub const WINDOW: usize = 10;
+
+/// Frames waiting for their pipeline images before they are dropped.
+const MAX_PENDING: usize = 16;
+
+/// Scores the sampled frames (needs the simulated room with ground truth).
+pub struct LiveDrPlugin {
+    /// Score every N-th camera frame.
+    pub every: u64,
+}
+
+/// The live scores.
+#[derive(Resource, Debug, Default)]
+pub struct LiveDr {
+    /// Newest last: each scored frame's mask scores and PSNR (dB).
+    pub recent: VecDeque<(MaskScores, Option<f64>)>,
+    /// Frames scored so far.
+    pub scored: u64,
+    every: u64,
+    last_index: Option<u64>,
+    pending: BTreeMap<i64, Parts>,
+}
+
+/// One sampled frame's images as they come back.
+#[derive(Default, Debug)]
+struct Parts {
+    t_s: f64,
+    norobot: Option<Vec<u8>>,
+    silhouette: Option<Vec<u8>>,
+    mask: Option<Vec<u8>>,
+    composite: Option<Vec<u8>>,
+    /// The composite's α_H (0 without H or with erasure off), known when it is requested.
+    alpha_h: Option<f32>,
+    requested: [bool; 2],
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Part {
+    NoRobot,
+    Silhouette,
+    Mask,
+    Composite,
+}
+
+impl LiveDr {
+    /// Mean IoU, leak % and PSNR (dB) over the recent scored frames.
+    pub fn means(&self) -> Option<(f64, f64, Option<f64>)> {
+        let n = self.recent.len();
+        if n == 0 {
+            return None;
+        }
+        let iou = self.recent.iter().map(|(m, _)| m.iou).sum::<f64>() / n as f64;
+        let leak = self.recent.iter().map(|(m, _)| m.leak_pct).sum::<f64>() / n as f64;
+        let psnrs: Vec<f64> = self.recent.iter().filter_map(|(_, p)| *p).collect();
+        let psnr = (!psnrs.is_empty()).then(|| psnrs.iter().sum::<f64>() / psnrs.len() as f64);
+        Some((iou, leak, psnr))
+    }
+}
+
+impl Plugin for LiveDrPlugin {
+    fn build(&self, app: &mut App) {
+        app.insert_resource(LiveDr {
+            every: self.every.max(1),
+            ..default()
+        })
+        .add_systems(
+            Last,
+            (request_parts, score_parts)
+                .chain()
+                .after(SimRoomSystems::Capture),
+        );
+    }
+}
+
+fn key(t_s: f64) -> i64 {
+    (t_s * 1e6).round() as i64
+}
+
+fn request(commands: &mut Commands, image: Handle<Image>, part: Part, k: i64) {
+    commands.spawn(Screenshot::image(image)).observe(
+        move |captured: On<ScreenshotCaptured>, mut live: ResMut<LiveDr>| {
+            let Some(data) = captured.image.data.clone() else {
+                return;
+            };
+            let Some(p) = live.pending.get_mut(&k) else {
+                return;
+            };
+            match part {
+                Part::NoRobot => p.norobot = Some(data),
+                Part::Silhouette => p.silhouette = Some(data),
+                Part::Mask => p.mask = Some(data),
+                Part::Composite => p.composite = Some(data),
+            }
+        },
+    );
+}
+
+fn request_parts(
+    mut commands: Commands,
+    mut live: ResMut<LiveDr>,
+    counter: Option<Res<VideoCounter>>,
+    cameras: Option<Res<SimCameras>>,
+    targets: Option<Res<EraseTargets>>,
+    state: Res<EraseState>,
+    config: Res<EraseConfig>,
+) {
+    let (Some(counter), Some(cameras), Some(targets)) = (counter, cameras, targets) else {
+        return;
+    };
+    let (Some(norobot), Some(silhouette)) = (&cameras.no_robot, &cameras.silhouette) else {
+        return;
+    };
+    // The room's truth at the update the camera captured a sampled frame.
+    if let Some((index, t_s)) = counter.last
+        && live.last_index != Some(index)
+    {
+        live.last_index = Some(index);
+        if index.is_multiple_of(live.every) && live.pending.len() < MAX_PENDING {
+            let k = key(t_s);
+            live.pending.insert(k, Parts { t_s, ..default() });
+            request(&mut commands, norobot.clone(), Part::NoRobot, k);
+            request(&mut commands, silhouette.clone(), Part::Silhouette, k);
+        }
+    }
+    // The pipeline's images of a sampled frame, at the update each stage renders it.
+    let s = config.settings;
+    for (slot, lag, part, image) in [
+        (0, 1, Part::Mask, &targets.mask),
+        (1, PIPELINE_LAG, Part::Composite, &targets.composite),
+    ] {
+        let Some(stage) = state.stage(lag) else {
+            continue;
+        };
+        let Some((t_s, _, _)) = &stage.frame else {
+            continue;
+        };
+        let k = key(*t_s);
+        if matches!(part, Part::Composite) && stage.background.is_none() {
+            // Nothing to erase with yet (H not set): no score, not a 100 % leak.
+            live.pending.remove(&k);
+            continue;
+        }
+        let Some(p) = live.pending.get_mut(&k) else {
+            continue;
+        };
+        if p.requested[slot] {
+            continue;
+        }
+        p.requested[slot] = true;
+        if matches!(part, Part::Composite) {
+            p.alpha_h = Some(if s.enabled && stage.background.is_some() {
+                s.alpha_h
+            } else {
+                0.0
+            });
+        }
+        request(&mut commands, image.clone(), part, k);
+    }
+}
+
+fn score_parts(mut live: ResMut<LiveDr>, scene: Res<SceneResource>, config: Res<EraseConfig>) {
+    let done: Vec<i64> = live
+        .pending
+        .iter()
+        .filter(|(_, p)| {
+            p.norobot.is_some()
+                && p.silhouette.is_some()
+                && p.mask.is_some()
+                && p.composite.is_some()
+        })
+        .map(|(k, _)| *k)
+        .collect();
+    let k = config.camera.intrinsics;
+    for key in done {
+        let Some(p) = live.pending.remove(&key) else {
+            continue;
+        };
+        let (Some(mut norobot), Some(silhouette), Some(mask), Some(composite)) =
+            (p.norobot, p.silhouette, p.mask, p.composite)
+        else {
+            continue;
+        };
+        scene.0.file.camera.sensor.apply_gain(&mut norobot, p.t_s);
+        let mask: Vec<u8> = mask
+            .chunks_exact(4)
+            .map(|px| u8::from(px[0] > 127))
+            .collect();
+        match score_against_truth(
+            &config.settings,
+            p.alpha_h.unwrap_or(0.0),
+            (k.width, k.height),
+            &mask,
+            &composite,
+            &silhouette,
+            &norobot,
+        ) {
+            Ok(s) => {
+                live.recent.push_back((s.mask, s.psnr_db));
+                while live.recent.len() > WINDOW {
+                    live.recent.pop_front();
+                }
+                live.scored += 1;
+            }
+            Err(e) => warn!("live erasure scores: {e}"),
+        }
+    }
+    // Frames the pipeline never delivered (dropped, refused) are forgotten, oldest first.
+    while live.pending.len() > MAX_PENDING / 2 {
+        live.pending.pop_first();
+    }
+}

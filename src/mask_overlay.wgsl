@@ -1,0 +1,16 @@
+// The preview's mask overlay: the panel's image with the mask M(t) tinted over it.
+#import bevy_ui::ui_vertex_output::UiVertexOutput
+
+@group(1) @binding(0) var<uniform> tint: vec4<f32>;
+@group(1) @binding(1) var panel_image: texture_2d<f32>;
+@group(1) @binding(2) var panel_sampler: sampler;
+@group(1) @binding(3) var mask_image: texture_2d<f32>;
+@group(1) @binding(4) var mask_sampler: sampler;
+
+@fragment
+fn fragment(in: UiVertexOutput) -> @location(0) vec4<f32> {
+    let c = textureSample(panel_image, panel_sampler, in.uv);
+    let m = textureSample(mask_image, mask_sampler, in.uv).r;
+    let a = select(0.0, tint.a, m > 0.5);
+    return vec4<f32>(mix(c.rgb, tint.rgb, a), 1.0);
+}
