@@ -39,6 +39,7 @@ pub struct LiveDr {
     /// Frames scored so far.
     pub scored: u64,
     every: u64,
+    stopped: bool,
     last_index: Option<u64>,
     pending: BTreeMap<i64, Parts>,
 }
@@ -65,6 +66,11 @@ enum Part {
 }
 
 impl LiveDr {
+    /// Asks for no more read-backs (the app is about to quit).
+    pub fn stop(&mut self) {
+        self.stopped = true;
+    }
+
     /// Mean IoU, leak % and PSNR (dB) over the recent scored frames.
     pub fn means(&self) -> Option<(f64, f64, Option<f64>)> {
         let n = self.recent.len();
@@ -129,6 +135,9 @@ fn request_parts(
     let (Some(counter), Some(cameras), Some(targets)) = (counter, cameras, targets) else {
         return;
     };
+    if live.stopped {
+        return;
+    }
     let (Some(norobot), Some(silhouette)) = (&cameras.no_robot, &cameras.silhouette) else {
         return;
     };

@@ -44,7 +44,7 @@ enum Command {
     /// the background from the live frame, R re-centres the panel in the headset (XR), F12
     /// saves a screenshot, Esc quits. Desktop hand (--hand desktop): arrows or left-drag move
     /// it, PgUp/PgDn or the wheel raise and lower it, Space closes/opens it, Z/X tilt it (pour),
-    /// Home puts it back at the start.
+    /// Home puts it (and a dropped twin) back at the start.
     Run {
         /// The scene file.
         scene: Option<PathBuf>,

@@ -94,7 +94,13 @@ struct PreviewState {
     view: PanelView,
     mask_overlay: bool,
     wireframe: bool,
+    /// Updates left before quitting: read-backs already asked for (camera frames, scores,
+    /// screenshots) come back first, so none is sent to a closed app.
+    quit_in: Option<u32>,
 }
+
+/// Updates between asking to quit and quitting, with no new read-backs.
+const QUIT_DRAIN: u32 = 4;
 
 /// The panel's image with the mask tinted over it (`mask_overlay.wgsl`); a tint of alpha 0
 /// shows the image alone.
@@ -144,11 +150,19 @@ impl Plugin for PreviewPlugin {
             view: PanelView::default(),
             mask_overlay: false,
             wireframe: false,
+            quit_in: None,
         })
         .add_systems(Startup, setup_preview)
         .add_systems(
             Update,
-            (handle_keys, show_panel, update_status, count_frames).chain(),
+            (
+                handle_keys,
+                show_panel,
+                update_status,
+                count_frames,
+                quit_when_drained,
+            )
+                .chain(),
         );
     }
 }
@@ -362,19 +376,17 @@ fn update_status(
     }
 }
 
-#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn handle_keys(
     keys: Res<ButtonInput<KeyCode>>,
     mut commands: Commands,
     mut state: ResMut<PreviewState>,
     mut config: ResMut<EraseConfig>,
     mut capture: MessageWriter<CaptureBackground>,
-    mut exit: MessageWriter<AppExit>,
     #[cfg(feature = "xr")] mut recenter: MessageWriter<crate::xr::RecenterXrPanel>,
     twin_meshes: Query<(Entity, &RenderLayers), With<Mesh3d>>,
 ) {
     if keys.just_pressed(KeyCode::Escape) {
-        exit.write(AppExit::Success);
+        state.quit_in.get_or_insert(QUIT_DRAIN);
     }
     if keys.just_pressed(KeyCode::KeyV) {
         state.view = state.view.next();
@@ -440,7 +452,6 @@ fn count_frames(
     erase: Res<EraseState>,
     live_dr: Option<Res<LiveDr>>,
     teleop: LiveTeleopStatus,
-    mut exit: MessageWriter<AppExit>,
 ) {
     state.frame += 1;
     let last = match (state.options.frames, &state.options.screenshot) {
@@ -476,6 +487,29 @@ fn count_frames(
         if let Some(line) = teleop.summary() {
             info!("{line}");
         }
+        state.quit_in.get_or_insert(QUIT_DRAIN);
+    }
+}
+
+/// Quits [`QUIT_DRAIN`] updates after being asked to, asking for no new read-backs meanwhile.
+fn quit_when_drained(
+    mut state: ResMut<PreviewState>,
+    room: Option<ResMut<avatarm_sim::SimRoomConfig>>,
+    live_dr: Option<ResMut<LiveDr>>,
+    mut exit: MessageWriter<AppExit>,
+) {
+    let Some(left) = state.quit_in else { return };
+    if left == QUIT_DRAIN {
+        if let Some(mut room) = room {
+            room.video = None;
+        }
+        if let Some(mut live) = live_dr {
+            live.stop();
+        }
+    }
+    if left == 0 {
         exit.write(AppExit::Success);
+    } else {
+        state.quit_in = Some(left - 1);
     }
 }

@@ -325,6 +325,32 @@ fn run_teleoperates_the_pouring_task_live() {
     assert!(load_rgb(&shot).dimensions() == (1280, 720));
 }
 
+/// `avatarm run --hand` refuses what it cannot use before opening a window, naming the flag.
+#[test]
+fn run_refuses_a_hand_it_cannot_use() {
+    let pouring = "assets/scenes/pouring.toml";
+    let cases: [(&[&str], &str); 4] = [
+        (&["--hand", "desktop"], "no [task]"),
+        (&[pouring, "--hand", "xr"], "needs XR mode"),
+        (&[pouring, "--hand", "glove"], "'glove': expected"),
+        (&[pouring, "--hand", "gone.hand.jsonl"], "does not exist"),
+    ];
+    for (args, message) in cases {
+        let out = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+            .arg("run")
+            .args(args)
+            .current_dir(root())
+            .output()
+            .expect("avatarm runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} was accepted");
+        assert!(
+            err.contains("--hand") && err.contains(message),
+            "{args:?}: {err}"
+        );
+    }
+}
+
 /// `avatarm run --xr` on a machine without an OpenXR runtime (this one): one line says so, the
 /// desktop preview renders under Xvfb and saves its screenshot, and the mask is rendered once
 /// per camera frame while the display updates twice per camera frame.

@@ -1,10 +1,13 @@
 //! The CPU reference composite against the memory floor: a plain copy of the same frame,
 //! measured in the same run. `cargo bench -p avatarm_core --bench composite`.
 
+mod common;
+
 use std::hint::black_box;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use avatarm_core::dr::{self, EraseSettings, Photometric, RgbaView};
+use common::median;
 use criterion::{BenchmarkId, Criterion, Throughput};
 
 /// A frame of `w × h` with a robot-like blob covering about a fifth of it.
@@ -104,11 +107,6 @@ fn benches(c: &mut Criterion) {
 }
 
 /// The median of some timings.
-fn median(mut v: Vec<Duration>) -> Duration {
-    v.sort();
-    v[v.len() / 2]
-}
-
 /// The ratio to the memory floor, from timings interleaved in one loop (so both see the same
 /// machine state); criterion's own report above has the statistics of each.
 fn ratios() {

@@ -4,15 +4,18 @@
 //! (openrr) on the same URDF, checked equal first and reported as a ratio.
 //! `cargo bench -p avatarm_core --bench control`.
 
+mod common;
+
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use avatarm_core::grasp::Contact;
 use avatarm_core::kinematics::Frame;
 use avatarm_core::mapping::{Mapper, MappingSettings, RobotSide, TickInputs, VirtualToReal};
 use avatarm_core::robot::{PackagePath, RobotModel};
 use avatarm_core::safety::{self, SafetyLimiter, SafetySettings};
+use common::median;
 use criterion::{BenchmarkId, Criterion};
 use nalgebra::{DVector, Isometry3, Vector3};
 
@@ -158,11 +161,6 @@ fn benches(c: &mut Criterion) {
 }
 
 /// The median of some timings.
-fn median(mut v: Vec<Duration>) -> Duration {
-    v.sort();
-    v[v.len() / 2]
-}
-
 /// FK + Jacobian, Avatarm against k, from batches interleaved in one loop (so both see the
 /// same machine state); criterion's report above has the statistics of each.
 fn k_ratio() {
