@@ -20,7 +20,7 @@ use std::str::FromStr;
 use avatarm_core::hand::{HandFrame, Handedness, SKELETON, skeleton};
 use avatarm_core::mapping::MappingMode;
 use avatarm_erase::InteractionConfig;
-use avatarm_erase::interaction::ObjectTwin;
+use avatarm_erase::interaction::twin_transform;
 use avatarm_hand::openxr::HandInbox;
 use avatarm_hand::{ActiveHand, GraspTarget, HandPlugin, HeldObject, ObjectContacts, ScriptedHand};
 use avatarm_mapping::pouring::{PouringTask, TrialParts, prepare};
@@ -202,7 +202,7 @@ pub fn add_live_teleop(app: &mut App, scene: &Scene, choice: &HandChoice) -> Res
     .init_gizmo_group::<HandInteractionGizmos>()
     .add_systems(Startup, (spawn, configure_gizmos))
     .add_systems(FixedUpdate, mirror_room.after(MappingSystems::Tick))
-    .add_systems(Update, (follow_twin, draw_hand));
+    .add_systems(Update, (follow_twin, draw_hand).chain());
     if let Some(desktop) = desktop {
         app.insert_resource(desktop)
             .add_systems(Update, drive_desktop_hand.before(draw_hand));
@@ -335,14 +335,12 @@ fn follow_twin(
 
 /// The hand as a skeleton: in the 3-D view where the mapping puts it in the real world, and
 /// in the interaction view around the object's twin as drawn there.
-#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn draw_hand(
     hand: Res<ActiveHand>,
     held: Res<HeldObject>,
     live: Res<LiveTask>,
     teleop: Res<Teleop>,
     config: Res<InteractionConfig>,
-    twins: Query<(&ObjectTwin, &Transform)>,
     mut view: Gizmos<HandViewGizmos>,
     mut interaction: Gizmos<HandInteractionGizmos>,
 ) {
@@ -373,7 +371,8 @@ fn draw_hand(
     let Some(object) = config.objects.get(i) else {
         return;
     };
-    let Some((_, drawn)) = twins.iter().find(|(o, _)| o.index == i) else {
+    // Where the interaction layer draws the twin for the pose `follow_twin` set this update.
+    let Ok((drawn, _)) = twin_transform(&config, object) else {
         return;
     };
     let from_object = object.world_from_object.inverse();

@@ -158,10 +158,7 @@ fn report_session(
     report.last = state;
 }
 
-fn eye_cameras_see_the_panel(
-    mut commands: Commands,
-    cameras: Query<Entity, (Added<XrCamera>, Without<XrPanel>)>,
-) {
+fn eye_cameras_see_the_panel(mut commands: Commands, cameras: Query<Entity, Added<XrCamera>>) {
     for e in &cameras {
         commands
             .entity(e)
