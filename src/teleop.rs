@@ -458,6 +458,22 @@ fn drive_desktop_hand(
     });
 }
 
+/// How far the real object is from its twin mapped into the real world (mm), where the robot
+/// backend knows the real object (simulation).
+fn object_error_mm(teleop: &Teleop, twin: Option<Isometry3<f64>>) -> Option<f64> {
+    let truth = teleop.robot().true_object_pose()?;
+    let target = teleop.v2r().pose(&twin?);
+    Some((target.translation.vector - truth.translation.vector).norm() * 1e3)
+}
+
+fn holding(held: &HeldObject) -> &'static str {
+    if held.held.is_some() {
+        "holding"
+    } else {
+        "not holding"
+    }
+}
+
 /// One line for the end of a scripted run: grasps, how high the real object was lifted, and
 /// how far it is from its twin mapped into the real world.
 pub fn summary(
@@ -466,23 +482,16 @@ pub fn summary(
     held: &HeldObject,
     twin: Option<Isometry3<f64>>,
 ) -> String {
-    let truth = teleop.robot().true_object_pose();
-    let lifted_mm = truth.map_or(f64::NAN, |t| (t.translation.z - live.start_z) * 1e3);
-    let off_mm = match (twin, truth) {
-        (Some(twin), Some(truth)) => {
-            (teleop.v2r().pose(&twin).translation.vector - truth.translation.vector).norm() * 1e3
-        }
-        _ => f64::NAN,
-    };
+    let lifted_mm = teleop
+        .robot()
+        .true_object_pose()
+        .map_or(f64::NAN, |t| (t.translation.z - live.start_z) * 1e3);
+    let off_mm = object_error_mm(teleop, twin).unwrap_or(f64::NAN);
     format!(
         "teleop: {} ticks, {} grasps, {}, real object lifted {lifted_mm:.1} mm, {off_mm:.1} mm from its twin, max TCP speed {:.3} m/s",
         teleop.status.ticks,
         held.grasps,
-        if held.held.is_some() {
-            "holding"
-        } else {
-            "not holding"
-        },
+        holding(held),
         teleop.status.max_tcp_speed
     )
 }
@@ -497,14 +506,8 @@ pub fn status_line(
     twin: Option<Isometry3<f64>>,
 ) -> String {
     let s = &teleop.status;
-    let error = match (held.held, twin, teleop.robot().true_object_pose()) {
-        (Some(_), Some(twin), Some(truth)) => {
-            let target = teleop.v2r().pose(&twin);
-            format!(
-                "; real object {:.1} mm off its twin",
-                (target.translation.vector - truth.translation.vector).norm() * 1e3
-            )
-        }
+    let error = match object_error_mm(teleop, twin) {
+        Some(mm) if held.held.is_some() => format!("; real object {mm:.1} mm off its twin"),
         _ => String::new(),
     };
     let refused = if s.errors > 0 {
@@ -516,11 +519,7 @@ pub fn status_line(
         "teleop ({}, {}): {}, {} contacts, max TCP {:.3} m/s{refused}{error}",
         live.source,
         live.mode.name(),
-        if held.held.is_some() {
-            "holding"
-        } else {
-            "not holding"
-        },
+        holding(held),
         contacts.contacts.len(),
         s.max_tcp_speed,
     )
