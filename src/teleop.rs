@@ -197,6 +197,7 @@ pub fn add_live_teleop(app: &mut App, scene: &Scene, choice: &HandChoice) -> Res
         twin_start: avatarm_mapping::transform(&parts.twin_start),
     })
     .insert_resource(hand)
+    .insert_resource(parts.hand_drive)
     .insert_resource(parts.teleop)
     .init_gizmo_group::<HandViewGizmos>()
     .init_gizmo_group::<HandInteractionGizmos>()

@@ -136,6 +136,8 @@ fn benches(c: &mut Criterion) {
                             twin_pose: twin,
                             q: &q,
                             held: true,
+                            now_s: now,
+                            joints_stamp_s: now - 0.01,
                         },
                         &v2r,
                         &robot,

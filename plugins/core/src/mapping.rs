@@ -14,6 +14,8 @@
 //!
 //! The [`crate::safety::SafetyLimiter`] comes after this, always.
 
+use std::collections::VecDeque;
+
 use nalgebra::{DVector, Isometry3, Translation3, UnitQuaternion, Vector3, Vector6};
 
 use crate::grasp::{self, Contact, ContactModel};
@@ -107,6 +109,8 @@ pub struct MappingSettings {
     pub mode: MappingMode,
     /// Closed-loop gain on the pose error (1/s).
     pub gain: f64,
+    /// Time constant of the low-pass on the closed loop's feed-forward twist (s; 0: off).
+    pub feedforward_smoothing_s: f64,
 
     /// σ above which the gripper closes (N).
     pub close_at_n: f64,
@@ -122,7 +126,8 @@ impl Default for MappingSettings {
     fn default() -> Self {
         Self {
             mode: MappingMode::ClosedLoop,
-            gain: 10.0,
+            gain: 12.0,
+            feedforward_smoothing_s: 0.04,
             close_at_n: 1.0,
             open_at_n: 0.3,
             max_grip_n: 40.0,
@@ -161,6 +166,11 @@ pub struct TickInputs<'a> {
     /// The hand holds the twin (its grasp state, e.g. the hand plugin's grasp assist): the
     /// gripper closes on this as well as on σ.
     pub held: bool,
+    /// The tick's time (s, the clock of the joint states' stamps).
+    pub now_s: f64,
+    /// When the robot measured `q` (s, same clock): the closed loop compares `q` with the
+    /// target of that moment, not with the newer one.
+    pub joints_stamp_s: f64,
 }
 
 /// The gripper command.
@@ -203,7 +213,15 @@ pub struct TickOutput {
 pub struct Mapper {
     settings: MappingSettings,
     closed: bool,
+    /// The targets of the last [`TARGET_HISTORY_S`], oldest first, with their tick times.
+    history: VecDeque<(f64, Isometry3<f64>)>,
+    /// The low-passed feed-forward twist and the time it was last updated.
+    feedforward: (f64, Vector6<f64>),
 }
+
+/// How far back the mapper remembers its targets (s): longer than any joint-state latency
+/// the closed loop makes sense with.
+pub const TARGET_HISTORY_S: f64 = 0.5;
 
 impl Mapper {
     /// A mapper, gripper open.
@@ -211,12 +229,69 @@ impl Mapper {
         Self {
             settings,
             closed: false,
+            history: VecDeque::new(),
+            feedforward: (f64::NEG_INFINITY, Vector6::zeros()),
         }
     }
 
     /// The settings.
     pub fn settings(&self) -> &MappingSettings {
         &self.settings
+    }
+
+    /// Keeps `target` as the target at `t_s` and forgets those older than
+    /// [`TARGET_HISTORY_S`]. A clock that goes back (a restarted session) starts afresh.
+    fn remember(&mut self, t_s: f64, target: Isometry3<f64>) {
+        if self.history.back().is_some_and(|(t, _)| *t > t_s) {
+            self.history.clear();
+        }
+        self.history.push_back((t_s, target));
+        while self
+            .history
+            .front()
+            .is_some_and(|(t, _)| *t < t_s - TARGET_HISTORY_S)
+        {
+            self.history.pop_front();
+        }
+    }
+
+    /// `twist` through the first-order low-pass of [`MappingSettings::feedforward_smoothing_s`].
+    fn smooth_feedforward(&mut self, t_s: f64, twist: Vector6<f64>) -> Vector6<f64> {
+        let tau = self.settings.feedforward_smoothing_s;
+        let (last, state) = &mut self.feedforward;
+        let dt = t_s - *last;
+        *last = t_s;
+        if tau <= 0.0 || !(0.0..=0.1).contains(&dt) {
+            // Off, or the first tick or a gap: start from the twist as it is.
+            *state = twist;
+        } else {
+            *state += (twist - *state) * (1.0 - (-dt / tau).exp());
+        }
+        *state
+    }
+
+    /// The target at `t_s`, interpolated between the remembered ones; the oldest or the
+    /// newest outside them.
+    fn target_at(&self, t_s: f64) -> Isometry3<f64> {
+        let (Some(first), Some(last)) = (self.history.front(), self.history.back()) else {
+            return Isometry3::identity();
+        };
+        if t_s <= first.0 {
+            return first.1;
+        }
+        if t_s >= last.0 {
+            return last.1;
+        }
+        let after = self.history.partition_point(|(t, _)| *t <= t_s);
+        let (t0, a) = &self.history[after - 1];
+        let (t1, b) = &self.history[after];
+        let f = if t1 > t0 { (t_s - t0) / (t1 - t0) } else { 1.0 };
+        // Along the shortest rotation (never the undefined half-turn slerp).
+        let turn = (a.rotation.inverse() * b.rotation).scaled_axis() * f;
+        Isometry3::from_parts(
+            Translation3::from(a.translation.vector.lerp(&b.translation.vector, f)),
+            a.rotation * UnitQuaternion::from_scaled_axis(turn),
+        )
     }
 
     /// The real object's pose as the measured joints place it.
@@ -234,6 +309,12 @@ impl Mapper {
         let n = robot.model.dof();
         if input.q.len() != n || input.q.iter().any(|v| !v.is_finite()) {
             return Err(format!("joint state: {} finite values needed", n));
+        }
+        if !(input.now_s.is_finite() && input.joints_stamp_s.is_finite()) {
+            return Err(format!(
+                "tick time {} s or joint-state stamp {} s is not finite",
+                input.now_s, input.joints_stamp_s
+            ));
         }
         if input.contact_velocities.len() != input.contacts.len() {
             return Err(format!(
@@ -260,7 +341,7 @@ impl Mapper {
             (nu, a.squeeze, a.rank)
         };
         // Gripper from σ (with hysteresis) or the hand's grasp state.
-        let s = &self.settings;
+        let s = self.settings;
         if !self.closed && (squeeze_n >= s.close_at_n || input.held) {
             self.closed = true;
         } else if self.closed && squeeze_n < s.open_at_n && !input.held {
@@ -275,12 +356,22 @@ impl Mapper {
             },
         };
         let target = v2r.pose(&input.twin_pose);
+        self.remember(input.now_s, target);
         // One FK for the measured object pose, the tool point and its Jacobian.
         let poses = robot.model.forward_kinematics(&robot.base, input.q);
         let measured = poses[robot.tcp] * robot.tcp_from_object;
         let mut object_twist = v2r.twist(&twin_twist);
         if s.mode == MappingMode::ClosedLoop {
-            object_twist += pose_difference(&measured, &target) * s.gain;
+            // The contact twist carries the fingers' tracking jitter; integrated by the robot it
+            // becomes a slow wander that the correction has to undo. Low-passed, it still
+            // leads the correction.
+            object_twist = self.smooth_feedforward(input.now_s, object_twist);
+            // Like with like: the joints were measured at their stamp, so they are compared
+            // with the target of that moment. Against the newest target, a joint-state latency
+            // d makes the loop settle d ahead of a moving twin (1° at the pour's peak speed
+            // for 15 ms).
+            let then = self.target_at(input.joints_stamp_s);
+            object_twist += pose_difference(&measured, &then) * s.gain;
         }
         if !self.closed {
             // An open gripper cannot move the object: the arm holds still around it.
@@ -384,6 +475,77 @@ mod tests {
     }
 
     #[test]
+    fn the_closed_loop_compares_a_joint_state_with_the_target_of_its_stamp() {
+        let model = sawyer();
+        let tcp = model.link_id("right_gripper_tip").expect("tcp");
+        let arm: Vec<usize> = (0..7).collect();
+        let robot = RobotSide {
+            model: &model,
+            base: Isometry3::translation(0.0, 0.0, 0.75),
+            tcp,
+            arm: &arm,
+            tcp_from_object: Isometry3::identity(),
+        };
+        let v2r = VirtualToReal::identity();
+        let q = [0.0, -1.18, 0.0, 2.18, 0.0, 0.57, 3.3161, 0.02, 0.02];
+        let start = Mapper::measured_object(&robot, &q);
+        // The twin moves along x at 0.1 m/s; the robot's last joint state, taken at t = 0,
+        // put the object exactly on the twin of that moment.
+        let run = |stamped: bool| {
+            let mut m = Mapper::new(MappingSettings::default());
+            let mut out = None;
+            for k in 0..=5 {
+                let t = f64::from(k) * 0.01;
+                let twin = Isometry3::from_parts(
+                    Translation3::from(start.translation.vector + Vector3::x() * 0.1 * t),
+                    start.rotation,
+                );
+                out = Some(
+                    m.tick(
+                        &TickInputs {
+                            contacts: &[],
+                            contact_velocities: &[],
+                            twin_pose: twin,
+                            q: &q,
+                            held: true,
+                            now_s: t,
+                            joints_stamp_s: if stamped { 0.0 } else { t },
+                        },
+                        &v2r,
+                        &robot,
+                    )
+                    .expect("tick"),
+                );
+            }
+            out.expect("ticked").object_twist
+        };
+        // Against the target of its own time the measurement is on target: no correction.
+        assert!(run(true).norm() < 1e-9, "{}", run(true));
+        // Against the newest target, the same data look 5 mm behind.
+        let newest = run(false);
+        let want = MappingSettings::default().gain * 0.005;
+        assert!((newest[0] - want).abs() < 1e-9, "{newest}");
+        // A non-finite stamp is refused, naming it.
+        let mut m = Mapper::new(MappingSettings::default());
+        let e = m
+            .tick(
+                &TickInputs {
+                    contacts: &[],
+                    contact_velocities: &[],
+                    twin_pose: start,
+                    q: &q,
+                    held: true,
+                    now_s: 0.0,
+                    joints_stamp_s: f64::NAN,
+                },
+                &v2r,
+                &robot,
+            )
+            .expect_err("refused");
+        assert!(e.contains("stamp"), "{e}");
+    }
+
+    #[test]
     fn a_rigid_grasp_maps_to_the_twins_velocity_scaled() {
         let pose = Isometry3::translation(0.6, -0.1, 0.9);
         let nu = Vector6::new(0.02, -0.01, 0.05, 0.1, 0.0, 0.3);
@@ -415,6 +577,8 @@ mod tests {
                     twin_pose: pose,
                     q: &q,
                     held: true,
+                    now_s: 0.0,
+                    joints_stamp_s: 0.0,
                 },
                 &v2r,
                 &robot,
@@ -516,6 +680,7 @@ mod tests {
                 ..MappingSettings::default()
             });
             let mut q_meas = q0.clone();
+            let mut stamp = 0.0;
             let (mut targets, mut actual) = (Vec::new(), Vec::new());
             let dt = 0.01;
             for k in 0..250 {
@@ -524,6 +689,7 @@ mod tests {
                 let (contacts, vel) = grasp_contacts(&pose, &twist);
                 for s in sim.receive() {
                     q_meas = s.positions;
+                    stamp = s.stamp_s;
                 }
                 let out = m
                     .tick(
@@ -533,6 +699,8 @@ mod tests {
                             twin_pose: pose,
                             q: q_meas.as_slice(),
                             held: true,
+                            now_s: t,
+                            joints_stamp_s: stamp,
                         },
                         &v2r,
                         &robot,

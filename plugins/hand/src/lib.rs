@@ -20,7 +20,9 @@ pub mod openxr;
 use std::path::Path;
 
 use avatarm_core::grasp::Contact;
-use avatarm_core::hand::{HandFrame, HandScript, JOINT_NAMES, PALM, WRIST, parse_frames};
+use avatarm_core::hand::{
+    HandFilter, HandFilterSettings, HandFrame, HandScript, JOINT_NAMES, PALM, WRIST, parse_frames,
+};
 use bevy::prelude::*;
 use bevy_rapier3d::prelude::*;
 use nalgebra::Vector3;
@@ -37,6 +39,9 @@ pub trait HandSource: Send + Sync + 'static {
 pub struct ScriptedHand {
     script: HandScript,
     period_s: f64,
+    /// The last frame's time: a poll before the next frame is due gives nothing, as a
+    /// tracker's does (a repeated frame would stop the hand bodies for a step).
+    last_s: Option<f64>,
 }
 
 impl ScriptedHand {
@@ -45,6 +50,7 @@ impl ScriptedHand {
         Self {
             script,
             period_s: 1.0 / rate_hz.max(1.0),
+            last_s: None,
         }
     }
 }
@@ -56,6 +62,10 @@ impl HandSource for ScriptedHand {
 
     fn poll(&mut self, now_s: f64) -> Option<HandFrame> {
         let t = (now_s / self.period_s).floor() * self.period_s;
+        if self.last_s.is_some_and(|last| t <= last) {
+            return None;
+        }
+        self.last_s = Some(t);
         Some(self.script.frame_at(t))
     }
 }
@@ -103,10 +113,12 @@ impl HandSource for RecordedHand {
 #[derive(Resource)]
 pub struct ActiveHand {
     source: Box<dyn HandSource>,
-    /// The newest frame received.
+    /// The newest frame received (filtered, see [`HandDrive::filter`]).
     pub latest: Option<HandFrame>,
     /// Frames refused (bad numbers), for the status line.
     pub refused: u64,
+    /// The joint filter, made from [`HandDrive::filter`] at the first frame.
+    filter: Option<HandFilter>,
 }
 
 impl ActiveHand {
@@ -116,6 +128,7 @@ impl ActiveHand {
             source: Box::new(source),
             latest: None,
             refused: 0,
+            filter: None,
         }
     }
 
@@ -140,10 +153,11 @@ pub struct HandDrive {
     /// it instead of pushing the tracked fingers' depth into it, which would shake the object
     /// against the palm's hold.
     pub held_finger_speed: f32,
-    /// Time constant of the low-pass filter on the tracked joint positions (s; 0: off).
-    /// Trackers jitter by about a millimetre per frame; unfiltered, the hand bodies pass that
-    /// jitter to a held object at up to `max_speed`.
-    pub smoothing_s: f32,
+    /// The adaptive filter on the tracked joint positions. Trackers jitter by about
+    /// a millimetre per frame; unfiltered, the hand bodies pass that jitter to a held object
+    /// and into the contact twist the robot follows, and a grasp detected on jittering fingers
+    /// can come late (docs/hand.md).
+    pub filter: HandFilterSettings,
     /// Time in which a body closes its gap to the tracked pose (s), at least one physics step.
     /// A fixed time, not the step: at a higher physics rate a step-sized drive pushes twice as
     /// hard into the object for the same tracked depth (200 Hz physics knocked the bottle out
@@ -159,7 +173,7 @@ impl Default for HandDrive {
             density: 5000.0,
             friction: 1.0,
             held_finger_speed: 0.05,
-            smoothing_s: 0.03,
+            filter: HandFilterSettings::default(),
             response_s: 0.01,
         }
     }
@@ -240,6 +254,10 @@ pub struct HeldObject {
     pub grasps: u32,
     /// Releases so far.
     pub releases: u32,
+    /// The closure at the last release while the hand still touches the object: an opening
+    /// hand whose fingers still rest on the object does not take it again until it closes
+    /// again (or lets go of it).
+    pub released_at: Option<f64>,
 }
 
 /// How closed a hand is: the mean distance of its five fingertips to the palm joint (m).
@@ -442,20 +460,9 @@ fn drive_hand(
     if let Some(mut frame) = hand.source.poll(now) {
         match frame.validate() {
             Ok(()) => {
-                // Exponential smoothing of the joint positions over the time between frames.
-                if drive.smoothing_s > 0.0
-                    && let Some(prev) = hand.latest.as_ref().filter(|p| {
-                        p.tracked && frame.tracked && p.joints.len() == frame.joints.len()
-                    })
-                {
-                    let gap = (frame.t_s - prev.t_s).max(0.0);
-                    let a = 1.0 - (-gap / f64::from(drive.smoothing_s)).exp();
-                    for (j, p) in frame.joints.iter_mut().zip(&prev.joints) {
-                        let v = p.pose.translation.vector
-                            + (j.pose.translation.vector - p.pose.translation.vector) * a;
-                        j.pose.translation.vector = v;
-                    }
-                }
+                hand.filter
+                    .get_or_insert_with(|| HandFilter::new(drive.filter))
+                    .apply(&mut frame);
                 hand.latest = Some(frame);
             }
             Err(e) => {
@@ -632,12 +639,23 @@ fn assist_grasp(
             }
             held.held = None;
             held.releases += 1;
+            held.released_at = now_closure;
         }
         return;
+    }
+    if contacts.contacts.is_empty() {
+        held.released_at = None;
     }
     let Some(closure_now) = now_closure else {
         return;
     };
+    if let Some(at) = held.released_at {
+        if closure_now < at - assist.release_opening_m {
+            held.released_at = None;
+        } else {
+            return;
+        }
+    }
     if !assist.enabled || contacts.contacts.is_empty() {
         return;
     }

@@ -182,3 +182,22 @@ fn recorded_hands_replay_on_their_timestamps() {
     assert!(err.contains("line 1"), "{err}");
     let _ = std::fs::remove_file(&path);
 }
+
+#[test]
+fn a_scripted_hand_gives_each_tracker_frame_once() {
+    use crate::HandSource;
+    let script = HandScript::new(
+        Handedness::Right,
+        vec![key(0.0, [0.5, 0.0, 1.0], 0.0)],
+        HandNoise::default(),
+    )
+    .expect("script");
+    let mut hand = ScriptedHand::new(script, 90.0);
+    // Polled at 100 Hz for a second: 90 frames, each newer than the one before; the polls
+    // between frames give nothing (a repeated frame would stop the hand bodies for a step).
+    let frames: Vec<f64> = (0..100)
+        .filter_map(|i| hand.poll(f64::from(i) * 0.01).map(|f| f.t_s))
+        .collect();
+    assert!((89..=91).contains(&frames.len()), "{}", frames.len());
+    assert!(frames.windows(2).all(|w| w[1] > w[0]));
+}

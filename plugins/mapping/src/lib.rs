@@ -292,6 +292,8 @@ fn teleop_tick(
                 twin_pose: *pose,
                 q: &q,
                 held: held.as_ref().is_some_and(|h| h.held.is_some()),
+                now_s: now,
+                joints_stamp_s: t.joints.as_ref().map_or(now, |s| s.stamp_s),
             },
             &t.v2r,
             &side,

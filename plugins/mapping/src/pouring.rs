@@ -13,14 +13,14 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use avatarm_core::hand::{HandKeyframe, HandNoise, HandScript, Handedness};
+use avatarm_core::hand::{HandFilterSettings, HandKeyframe, HandNoise, HandScript, Handedness};
 use avatarm_core::ik::solve_pose;
 use avatarm_core::mapping::{MappingMode, MappingSettings, VirtualToReal, pose_rmse};
 use avatarm_core::rng::Rng;
 use avatarm_core::robot::{LinkId, RobotModel};
 use avatarm_core::safety::SafetySettings;
 use avatarm_core::sim::{SimRobot, SimRobotParams};
-use avatarm_hand::{ActiveHand, GraspTarget, ObjectContacts, ScriptedHand};
+use avatarm_hand::{ActiveHand, GraspTarget, HandDrive, ObjectContacts, ScriptedHand};
 use bevy::prelude::*;
 use bevy_rapier3d::prelude::*;
 use nalgebra::{DVector, Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
@@ -61,6 +61,10 @@ pub struct PouringTask {
     pub noise: HandNoise,
     /// Closed-loop gain (1/s).
     pub gain: f64,
+    /// Time constant of the closed loop's low-pass on the feed-forward twist (s; 0: off).
+    pub feedforward_smoothing_s: f64,
+    /// The filter on the tracked hand's joints (docs/hand.md).
+    pub hand_filter: HandFilterSettings,
     /// TCP speed cap (m/s), the paper's ISO 10218 figure by default.
     pub max_tcp_speed: f64,
     /// Scale of the twin relative to the real bottle (`k`).
@@ -104,6 +108,8 @@ impl Default for PouringTask {
             hand_rate_hz: 90.0,
             noise: HandNoise::default(),
             gain: MappingSettings::default().gain,
+            feedforward_smoothing_s: MappingSettings::default().feedforward_smoothing_s,
+            hand_filter: HandFilterSettings::default(),
             max_tcp_speed: SafetySettings::default().max_tcp_speed,
             k: 1.0,
             virtual_yaw_deg: 0.0,
@@ -143,6 +149,7 @@ impl PouringTask {
             ("start_jitter_m", self.start_jitter_m),
             ("grasp_jitter_m", self.grasp_jitter_m),
             ("gain", self.gain),
+            ("feedforward_smoothing_s", self.feedforward_smoothing_s),
         ];
         for (name, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {
@@ -155,6 +162,9 @@ impl PouringTask {
         if !self.virtual_yaw_deg.is_finite() || self.virtual_offset.iter().any(|v| !v.is_finite()) {
             return Err("task.virtual_yaw_deg / virtual_offset must be finite".into());
         }
+        self.hand_filter
+            .validate()
+            .map_err(|e| format!("task.hand_filter: {e}"))?;
         HandScript::new(Handedness::Right, self.hand.clone(), self.noise)
             .map(|_| ())
             .map_err(|e| format!("task.hand: {e}"))
@@ -492,6 +502,8 @@ pub struct TrialParts {
     pub teleop: Teleop,
     /// The trial's scripted hand (virtual scene).
     pub script: HandScript,
+    /// How the hand bodies follow whichever hand source drives them (the task's filter).
+    pub hand_drive: HandDrive,
     /// The twin's start pose (virtual scene, its centre).
     pub twin_start: Isometry3<f64>,
     /// The virtual scene to the real one.
@@ -553,6 +565,7 @@ impl TrialParts {
                 mapping: MappingSettings {
                     mode,
                     gain: task.gain,
+                    feedforward_smoothing_s: task.feedforward_smoothing_s,
                     dls: avatarm_core::ik::DlsSettings {
                         dt,
                         ..Default::default()
@@ -572,6 +585,10 @@ impl TrialParts {
         Ok(Self {
             teleop,
             script,
+            hand_drive: HandDrive {
+                filter: task.hand_filter,
+                ..HandDrive::default()
+            },
             twin_start,
             v2r,
             period,
@@ -655,6 +672,7 @@ fn run_prepared(
     teleop.record = true;
     let mut app = avatarm_hand::headless_app(period);
     app.add_plugins(MappingPlugin)
+        .insert_resource(parts.hand_drive)
         .insert_resource(hand(ScriptedHand::new(parts.script, task.hand_rate_hz)))
         .insert_resource(teleop);
     app.add_systems(Startup, spawn);
