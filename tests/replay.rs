@@ -507,10 +507,6 @@ fn num(report: &serde_json::Value, path: &str) -> f64 {
 }
 
 fn run(scene: &Scene, name: &str) -> serde_json::Value {
-    run_checked(scene, name, true)
-}
-
-fn run_checked(scene: &Scene, name: &str, check_gpu: bool) -> serde_json::Value {
     let mut options = ReplayOptions::new(out_dir(name));
     options.frames_every = 1000;
     let report = replay::run(scene, options).unwrap_or_else(|e| panic!("{name}: {e}"));
@@ -519,18 +515,16 @@ fn run_checked(scene: &Scene, name: &str, check_gpu: bool) -> serde_json::Value 
         report["mask"], report["dr"], report["gpu_vs_cpu"], report["timing_ms"]
     );
     // The GPU passes agree with the CPU reference on the same inputs.
-    if check_gpu {
-        assert!(
-            num(&report, "gpu_vs_cpu.max_abs_diff") <= 1.0,
-            "{name}: {}",
-            report["gpu_vs_cpu"]
-        );
-        assert_eq!(
-            num(&report, "gpu_vs_cpu.mask_mismatch_px_max"),
-            0.0,
-            "{name}"
-        );
-    }
+    assert!(
+        num(&report, "gpu_vs_cpu.max_abs_diff") <= 1.0,
+        "{name}: {}",
+        report["gpu_vs_cpu"]
+    );
+    assert_eq!(
+        num(&report, "gpu_vs_cpu.mask_mismatch_px_max"),
+        0.0,
+        "{name}"
+    );
     assert!(
         num(&report, "mask.frames_scored") >= 20.0,
         "{name}: {}",
@@ -575,9 +569,9 @@ fn latency_compensation_cuts_the_leak_at_full_speed() {
     eprintln!("fast_motion: peak commanded TCP speed {peak:.3} m/s");
     assert!((0.2..=0.27).contains(&peak), "peak TCP speed {peak}");
     scene.file.erase.latency_compensation = false;
-    // Known issue: without compensation the GPU mask and the CPU reference disagree on some
-    // frames (the stage alignment is checked with compensation on, where it holds exactly).
-    let off = run_checked(&scene, "dr_fast_off", false);
+    // Without compensation the twin moves on every update; the passes render once per camera
+    // frame, so the threshold still reads the twin render of its own frame (GPU = CPU).
+    let off = run(&scene, "dr_fast_off");
     let (leak_on, leak_off) = (
         num(&on, "mask.leak_pct_mean"),
         num(&off, "mask.leak_pct_mean"),
