@@ -464,8 +464,8 @@ impl HandFilterSettings {
 /// Adaptive low-pass filter of a hand's joint positions: heavy on a still hand, where a
 /// tracker's millimetre of jitter would shake a held object, light on a moving one, where a
 /// fixed filter would lag. Joint orientations pass through (the sources derive them from the
-/// positions or report them smooth). An untracked frame, a different joint count or a clock
-/// that goes back starts the filter afresh.
+/// positions or report them smooth). A repeated frame (same time) gives the same output; an
+/// untracked frame, a different joint count or a clock that goes back starts it afresh.
 #[derive(Debug, Clone)]
 pub struct HandFilter {
     settings: HandFilterSettings,
@@ -492,10 +492,20 @@ impl HandFilter {
         }
         let restart = match &self.state {
             Some((t, joints)) => {
-                !frame.tracked || joints.len() != frame.joints.len() || frame.t_s <= *t
+                !frame.tracked || joints.len() != frame.joints.len() || frame.t_s < *t
             }
             None => true,
         };
+        if let Some((t, joints)) = &self.state
+            && !restart
+            && frame.t_s == *t
+        {
+            // The same frame again (a source that repeats its newest one): the same output.
+            for (j, (x, _)) in frame.joints.iter_mut().zip(joints) {
+                j.pose.translation.vector = *x;
+            }
+            return;
+        }
         if restart {
             self.state = frame.tracked.then(|| {
                 let joints = frame
@@ -770,7 +780,7 @@ mod tests {
     }
 
     #[test]
-    fn the_hand_filter_restarts_on_a_lost_hand_and_a_clock_that_goes_back() {
+    fn the_hand_filter_restarts_on_a_lost_hand_and_a_clock_that_goes_back_not_on_a_repeat() {
         let s = HandScript::new(Handedness::Right, keys(), HandNoise::default()).expect("valid");
         let mut f = HandFilter::new(HandFilterSettings::default());
         let mut a = s.frame_at(0.0);
@@ -791,6 +801,13 @@ mod tests {
         let raw = back.clone();
         f.apply(&mut back);
         assert_eq!(back, raw);
+        // A repeated frame gives what the filter gave for it, not the raw frame.
+        let mut next = s.frame_at(0.6);
+        f.apply(&mut next);
+        let mut again = s.frame_at(0.6);
+        f.apply(&mut again);
+        assert_eq!(again, next);
+        assert_ne!(again, s.frame_at(0.6));
         for bad in [
             HandFilterSettings {
                 min_cutoff_hz: 0.0,

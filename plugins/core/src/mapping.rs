@@ -439,6 +439,20 @@ pub fn pose_rmse(target: &[Isometry3<f64>], actual: &[Isometry3<f64>]) -> Option
 mod tests {
     use super::*;
     use crate::kinematics::tests::sawyer;
+
+    /// The Sawyer's seven arm joints (the gripper's fingers follow).
+    const ARM: [usize; 7] = [0, 1, 2, 3, 4, 5, 6];
+
+    /// The Sawyer on the 0.75 m table, holding the object at its tool point.
+    fn sawyer_side(model: &RobotModel) -> RobotSide<'_> {
+        RobotSide {
+            model,
+            base: Isometry3::translation(0.0, 0.0, 0.75),
+            tcp: model.link_id("right_gripper_tip").expect("tcp"),
+            arm: &ARM,
+            tcp_from_object: Isometry3::identity(),
+        }
+    }
     use crate::sim::{JointCommand, SimRobot, SimRobotParams};
 
     /// Four fingertips around a bottle of radius 3.5 cm, squeezing 3 N each.
@@ -477,15 +491,7 @@ mod tests {
     #[test]
     fn the_closed_loop_compares_a_joint_state_with_the_target_of_its_stamp() {
         let model = sawyer();
-        let tcp = model.link_id("right_gripper_tip").expect("tcp");
-        let arm: Vec<usize> = (0..7).collect();
-        let robot = RobotSide {
-            model: &model,
-            base: Isometry3::translation(0.0, 0.0, 0.75),
-            tcp,
-            arm: &arm,
-            tcp_from_object: Isometry3::identity(),
-        };
+        let robot = sawyer_side(&model);
         let v2r = VirtualToReal::identity();
         let q = [0.0, -1.18, 0.0, 2.18, 0.0, 0.57, 3.3161, 0.02, 0.02];
         let start = Mapper::measured_object(&robot, &q);
@@ -551,15 +557,7 @@ mod tests {
         let nu = Vector6::new(0.02, -0.01, 0.05, 0.1, 0.0, 0.3);
         let (contacts, vel) = grasp_contacts(&pose, &nu);
         let model = sawyer();
-        let tcp = model.link_id("right_gripper_tip").expect("tcp");
-        let arm: Vec<usize> = (0..7).collect();
-        let robot = RobotSide {
-            model: &model,
-            base: Isometry3::translation(0.0, 0.0, 0.75),
-            tcp,
-            arm: &arm,
-            tcp_from_object: Isometry3::identity(),
-        };
+        let robot = sawyer_side(&model);
         let v2r = VirtualToReal {
             k: 0.5,
             ..VirtualToReal::identity()
@@ -631,17 +629,8 @@ mod tests {
     #[test]
     fn closed_loop_tracks_the_twin_better_than_open_loop() {
         let model = sawyer();
-        let tcp = model.link_id("right_gripper_tip").expect("tcp");
-        let arm: Vec<usize> = (0..7).collect();
-        let base = Isometry3::translation(0.0, 0.0, 0.75);
         let q0 = DVector::from_row_slice(&[0.0, -1.18, 0.0, 2.18, 0.0, 0.57, 3.3161, 0.02, 0.02]);
-        let robot = RobotSide {
-            model: &model,
-            base,
-            tcp,
-            arm: &arm,
-            tcp_from_object: Isometry3::identity(),
-        };
+        let robot = sawyer_side(&model);
         let start = Mapper::measured_object(&robot, q0.as_slice());
         let v2r = VirtualToReal {
             k: 0.5,

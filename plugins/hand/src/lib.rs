@@ -40,7 +40,7 @@ pub struct ScriptedHand {
     script: HandScript,
     period_s: f64,
     /// The last frame's time: a poll before the next frame is due gives nothing, as a
-    /// tracker's does (a repeated frame would stop the hand bodies for a step).
+    /// tracker's does.
     last_s: Option<f64>,
 }
 

@@ -194,7 +194,7 @@ fn a_scripted_hand_gives_each_tracker_frame_once() {
     .expect("script");
     let mut hand = ScriptedHand::new(script, 90.0);
     // Polled at 100 Hz for a second: 90 frames, each newer than the one before; the polls
-    // between frames give nothing (a repeated frame would stop the hand bodies for a step).
+    // between frames give nothing.
     let frames: Vec<f64> = (0..100)
         .filter_map(|i| hand.poll(f64::from(i) * 0.01).map(|f| f.t_s))
         .collect();
