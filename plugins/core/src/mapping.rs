@@ -356,7 +356,6 @@ impl Mapper {
             },
         };
         let target = v2r.pose(&input.twin_pose);
-        self.remember(input.now_s, target);
         // One FK for the measured object pose, the tool point and its Jacobian.
         let poses = robot.model.forward_kinematics(&robot.base, input.q);
         let measured = poses[robot.tcp] * robot.tcp_from_object;
@@ -370,6 +369,7 @@ impl Mapper {
             // with the target of that moment. Against the newest target, a joint-state latency
             // d makes the loop settle d ahead of a moving twin (1° at the pour's peak speed
             // for 15 ms).
+            self.remember(input.now_s, target);
             let then = self.target_at(input.joints_stamp_s);
             object_twist += pose_difference(&measured, &then) * s.gain;
         }
@@ -439,6 +439,7 @@ pub fn pose_rmse(target: &[Isometry3<f64>], actual: &[Isometry3<f64>]) -> Option
 mod tests {
     use super::*;
     use crate::kinematics::tests::sawyer;
+    use crate::sim::{JointCommand, SimRobot, SimRobotParams};
 
     /// The Sawyer's seven arm joints (the gripper's fingers follow).
     const ARM: [usize; 7] = [0, 1, 2, 3, 4, 5, 6];
@@ -453,7 +454,6 @@ mod tests {
             tcp_from_object: Isometry3::identity(),
         }
     }
-    use crate::sim::{JointCommand, SimRobot, SimRobotParams};
 
     /// Four fingertips around a bottle of radius 3.5 cm, squeezing 3 N each.
     fn grasp_contacts(

@@ -409,23 +409,21 @@ fn closed_loop_meets_the_goal_over_the_ten_default_trials() {
                 .result
         })
         .collect();
-    let mean = |f: fn(&crate::pouring::TrialResult) -> f64| {
-        results.iter().map(f).sum::<f64>() / results.len() as f64
-    };
-    let (pos, roll, pitch, yaw) = (
-        mean(|r| r.pos_rmse_m),
-        mean(|r| r.roll_rmse_deg),
-        mean(|r| r.pitch_rmse_deg),
-        mean(|r| r.yaw_rmse_deg),
-    );
-    eprintln!(
-        "closed loop, 10 trials: {:.2} mm, roll {roll:.2} pitch {pitch:.2} yaw {yaw:.2} deg",
-        pos * 1e3
-    );
     assert!(
         results
             .iter()
             .all(|r| r.grasp_at_s.is_some_and(|t| t < 2.5))
+    );
+    let m = crate::pouring::ModeSummary::of(results);
+    let (pos, roll, pitch, yaw) = (
+        m.pos_rmse_m.mean,
+        m.roll_rmse_deg.mean,
+        m.pitch_rmse_deg.mean,
+        m.yaw_rmse_deg.mean,
+    );
+    eprintln!(
+        "closed loop, 10 trials: {:.2} mm, roll {roll:.2} pitch {pitch:.2} yaw {yaw:.2} deg",
+        pos * 1e3
     );
     assert!(pos <= 0.005, "{pos}");
     assert!(
