@@ -64,6 +64,11 @@ pub struct DrPoint {
     pub frame_ms_p95: f64,
     /// `frame_ms_median` over that of the baseline setting of the same run.
     pub frame_cost_ratio: f64,
+    /// Median GPU time of the mask camera + threshold pass per camera frame, ms (`None` when
+    /// the device has no timestamp queries).
+    pub gpu_mask_ms: Option<f64>,
+    /// Median GPU time of the composite pass, ms.
+    pub gpu_composite_ms: Option<f64>,
     /// Median CPU reference threshold + dilation time, ms.
     pub cpu_mask_ms: f64,
     /// Median CPU reference feather + composite time, ms.
@@ -82,6 +87,21 @@ pub struct DrPoint {
     pub pareto_leak: bool,
     /// On the cost/PSNR Pareto front.
     pub pareto_psnr: bool,
+    /// On the Pareto front of erase GPU time against leak.
+    pub pareto_leak_gpu: bool,
+    /// On the Pareto front of erase GPU time against PSNR.
+    pub pareto_psnr_gpu: bool,
+}
+
+impl DrPoint {
+    /// GPU time of the whole erase per camera frame (mask camera, threshold, composite), ms;
+    /// NaN without GPU times.
+    pub fn erase_gpu_ms(&self) -> f64 {
+        match (self.gpu_mask_ms, self.gpu_composite_ms) {
+            (Some(m), Some(c)) => m + c,
+            _ => f64::NAN,
+        }
+    }
 }
 
 /// What the sweep wrote.
@@ -166,6 +186,7 @@ pub fn run_dr(scene: &Scene, sweep: &DrSweep, out: &Path) -> Result<DrOutputs, S
                 .as_f64()
                 .ok_or_else(|| format!("{label}: the replay's report has no {path}"))
         };
+        let on_gpu = report["timing_ms"]["source"] == "gpu";
         points.push(DrPoint {
             label: label.clone(),
             resolution_scale: s,
@@ -175,8 +196,12 @@ pub fn run_dr(scene: &Scene, sweep: &DrSweep, out: &Path) -> Result<DrOutputs, S
             frame_ms_median: num("timing_ms.frame.median")?,
             frame_ms_p95: num("timing_ms.frame.p95")?,
             frame_cost_ratio: 1.0,
-            cpu_mask_ms: num("timing_ms.mask.median")?,
-            cpu_composite_ms: num("timing_ms.composite.median")?,
+            gpu_mask_ms: on_gpu.then(|| num("timing_ms.mask.median")).transpose()?,
+            gpu_composite_ms: on_gpu
+                .then(|| num("timing_ms.composite.median"))
+                .transpose()?,
+            cpu_mask_ms: num("timing_ms.cpu_reference.mask.median")?,
+            cpu_composite_ms: num("timing_ms.cpu_reference.composite.median")?,
             iou_mean: num("mask.iou_mean")?,
             leak_pct_mean: num("mask.leak_pct_mean")?,
             leak_pct_max: num("mask.leak_pct_max")?,
@@ -184,6 +209,8 @@ pub fn run_dr(scene: &Scene, sweep: &DrSweep, out: &Path) -> Result<DrOutputs, S
             psnr_db_mean: num("dr.psnr_robot_db_mean")?,
             pareto_leak: false,
             pareto_psnr: false,
+            pareto_leak_gpu: false,
+            pareto_psnr_gpu: false,
         });
         bar.inc(1);
     }
@@ -204,10 +231,14 @@ pub fn run_dr(scene: &Scene, sweep: &DrSweep, out: &Path) -> Result<DrOutputs, S
     let cost: Vec<f64> = points.iter().map(|p| p.frame_ms_median).collect();
     let leak: Vec<f64> = points.iter().map(|p| p.leak_pct_mean).collect();
     let psnr: Vec<f64> = points.iter().map(|p| -p.psnr_db_mean).collect();
+    let gpu: Vec<f64> = points.iter().map(DrPoint::erase_gpu_ms).collect();
     let (front_leak, front_psnr) = (pareto_front(&cost, &leak), pareto_front(&cost, &psnr));
+    let (gpu_leak, gpu_psnr) = (pareto_front(&gpu, &leak), pareto_front(&gpu, &psnr));
     for (i, p) in points.iter_mut().enumerate() {
         p.pareto_leak = front_leak[i];
         p.pareto_psnr = front_psnr[i];
+        p.pareto_leak_gpu = gpu_leak[i];
+        p.pareto_psnr_gpu = gpu_psnr[i];
     }
     let csv = out.join("dr_speed_accuracy.csv");
     write_csv(&csv, &points)?;
@@ -247,15 +278,17 @@ pub fn pareto_front(cost: &[f64], bad: &[f64]) -> Vec<bool> {
 }
 
 const CSV_HEADER: &str = "label,resolution_scale,dilate_px,feather_px,latency_compensation,\
-frame_ms_median,frame_ms_p95,frame_cost_ratio,cpu_mask_ms,cpu_composite_ms,iou_mean,\
-leak_pct_mean,leak_pct_max,overmask_pct_mean,psnr_db_mean,pareto_leak,pareto_psnr";
+frame_ms_median,frame_ms_p95,frame_cost_ratio,gpu_mask_ms,gpu_composite_ms,cpu_mask_ms,\
+cpu_composite_ms,iou_mean,\
+leak_pct_mean,leak_pct_max,overmask_pct_mean,psnr_db_mean,pareto_leak,pareto_psnr,\
+pareto_leak_gpu,pareto_psnr_gpu";
 
 fn write_csv(path: &Path, points: &[DrPoint]) -> Result<(), String> {
     let mut text = String::from(CSV_HEADER);
     text.push('\n');
     for p in points {
         text.push_str(&format!(
-            "{},{},{},{},{},{:.3},{:.3},{:.4},{:.4},{:.4},{:.5},{:.5},{:.5},{:.5},{:.3},{},{}\n",
+            "{},{},{},{},{},{:.3},{:.3},{:.4},{},{},{:.4},{:.4},{:.5},{:.5},{:.5},{:.5},{:.3},{},{},{},{}\n",
             p.label,
             p.resolution_scale,
             p.dilate_px,
@@ -264,6 +297,8 @@ fn write_csv(path: &Path, points: &[DrPoint]) -> Result<(), String> {
             p.frame_ms_median,
             p.frame_ms_p95,
             p.frame_cost_ratio,
+            p.gpu_mask_ms.map_or(String::new(), |v| format!("{v:.4}")),
+            p.gpu_composite_ms.map_or(String::new(), |v| format!("{v:.4}")),
             p.cpu_mask_ms,
             p.cpu_composite_ms,
             p.iou_mean,
@@ -272,7 +307,9 @@ fn write_csv(path: &Path, points: &[DrPoint]) -> Result<(), String> {
             p.overmask_pct_mean,
             p.psnr_db_mean,
             p.pareto_leak,
-            p.pareto_psnr
+            p.pareto_psnr,
+            p.pareto_leak_gpu,
+            p.pareto_psnr_gpu
         ));
     }
     std::fs::write(path, text).map_err(|e| format!("{}: cannot write: {e}", path.display()))
@@ -436,7 +473,7 @@ impl Chart for DrChart<'_> {
 
 /// Draws the chart to `svg` and `png`.
 pub fn plot(points: &[DrPoint], title: &str, svg: &Path, png: &Path) -> Result<(), String> {
-    save_chart(&DrChart { points, title }, CHART_SIZE, svg, png)
+    save_chart(&DrChart { points, title }, chart_size(points), svg, png)
 }
 
 fn draw<DB: DrawingBackend>(
@@ -450,29 +487,68 @@ where
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(err)?;
     let root = root.titled(title, ("sans-serif", 24)).map_err(err)?;
-    let (left, right) = root.split_horizontally(CHART_SIZE.0 / 2);
-    panel(
-        &left,
-        points,
-        "leak, % of robot pixels (lower is better)",
-        |p| p.leak_pct_mean,
-        |p| p.pareto_leak,
-        SeriesLabelPosition::UpperRight,
-    )?;
-    panel(
-        &right,
-        points,
-        "PSNR in the robot region, dB (higher is better)",
-        |p| p.psnr_db_mean,
-        |p| p.pareto_psnr,
-        SeriesLabelPosition::LowerRight,
-    )?;
+    let rows = root.split_evenly((chart_rows(points), 1));
+    let costs = [
+        Axis {
+            desc: "frame cost, ms (median wall time per update)",
+            x: |p| p.frame_ms_median,
+            fronts: [|p| p.pareto_leak, |p| p.pareto_psnr],
+        },
+        Axis {
+            desc: "erase GPU time, ms per camera frame (mask camera + threshold + composite)",
+            x: DrPoint::erase_gpu_ms,
+            fronts: [|p| p.pareto_leak_gpu, |p| p.pareto_psnr_gpu],
+        },
+    ];
+    for (row, axis) in rows.iter().zip(&costs) {
+        let (left, right) = row.split_horizontally(CHART_SIZE.0 / 2);
+        panel(
+            &left,
+            points,
+            axis,
+            "leak, % of robot pixels (lower is better)",
+            |p| p.leak_pct_mean,
+            axis.fronts[0],
+            SeriesLabelPosition::UpperRight,
+        )?;
+        panel(
+            &right,
+            points,
+            axis,
+            "PSNR in the robot region, dB (higher is better)",
+            |p| p.psnr_db_mean,
+            axis.fronts[1],
+            SeriesLabelPosition::LowerRight,
+        )?;
+    }
     root.present().map_err(err)
+}
+
+/// Rows of the chart: frame cost, and erase GPU time when the passes were timed.
+fn chart_rows(points: &[DrPoint]) -> usize {
+    if points.iter().any(|p| p.erase_gpu_ms().is_finite()) {
+        2
+    } else {
+        1
+    }
+}
+
+/// The chart's size for these points.
+pub fn chart_size(points: &[DrPoint]) -> (u32, u32) {
+    (CHART_SIZE.0, CHART_SIZE.1 * chart_rows(points) as u32)
+}
+
+/// A row's cost axis and its points' Pareto flags (against leak, against PSNR).
+struct Axis {
+    desc: &'static str,
+    x: fn(&DrPoint) -> f64,
+    fronts: [fn(&DrPoint) -> bool; 2],
 }
 
 fn panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     points: &[DrPoint],
+    axis: &Axis,
     y_desc: &str,
     y: impl Fn(&DrPoint) -> f64,
     front: impl Fn(&DrPoint) -> bool,
@@ -482,22 +558,23 @@ where
     DB::ErrorType: 'static,
 {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    let x = axis.x;
     let finite: Vec<&DrPoint> = points
         .iter()
-        .filter(|p| p.frame_ms_median.is_finite() && y(p).is_finite())
+        .filter(|p| x(p).is_finite() && y(p).is_finite())
         .collect();
     let mut chart = axes(
         area,
-        padded(finite.iter().map(|p| p.frame_ms_median)),
+        padded(finite.iter().map(|p| x(p))),
         padded(finite.iter().map(|p| y(p))),
-        "frame cost, ms (median wall time per update)",
+        axis.desc,
         y_desc,
     )?;
     let mut on_front: Vec<&DrPoint> = finite.iter().copied().filter(|p| front(p)).collect();
-    on_front.sort_by(|a, b| a.frame_ms_median.total_cmp(&b.frame_ms_median));
+    on_front.sort_by(|a, b| x(a).total_cmp(&x(b)));
     chart
         .draw_series(LineSeries::new(
-            on_front.iter().map(|p| (p.frame_ms_median, y(p))),
+            on_front.iter().map(|p| (x(p), y(p))),
             RED.stroke_width(2),
         ))
         .map_err(err)?
@@ -512,7 +589,7 @@ where
                 finite
                     .iter()
                     .filter(|p| p.latency_compensation == on)
-                    .map(|p| Circle::new((p.frame_ms_median, y(p)), 5, color.filled())),
+                    .map(|p| Circle::new((x(p), y(p)), 5, color.filled())),
             )
             .map_err(err)?
             .label(name)
@@ -522,12 +599,12 @@ where
         .draw_series(
             on_front
                 .iter()
-                .map(|p| Circle::new((p.frame_ms_median, y(p)), 9, RED.stroke_width(2))),
+                .map(|p| Circle::new((x(p), y(p)), 9, RED.stroke_width(2))),
         )
         .map_err(err)?;
     chart
         .draw_series(on_front.iter().map(|p| {
-            EmptyElement::at((p.frame_ms_median, y(p)))
+            EmptyElement::at((x(p), y(p)))
                 + Text::new(
                     p.label.clone(),
                     (10, -18),
@@ -565,6 +642,8 @@ mod tests {
             frame_ms_median: ms,
             frame_ms_p95: ms,
             frame_cost_ratio: 1.0,
+            gpu_mask_ms: Some(ms / 10.0),
+            gpu_composite_ms: Some(1.0),
             cpu_mask_ms: 0.1,
             cpu_composite_ms: 1.0,
             iou_mean: 0.99,
@@ -574,6 +653,8 @@ mod tests {
             psnr_db_mean: psnr,
             pareto_leak: true,
             pareto_psnr: lc,
+            pareto_leak_gpu: lc,
+            pareto_psnr_gpu: true,
         }
     }
 
@@ -588,20 +669,39 @@ mod tests {
         ];
         let (svg, png) = (dir.join("c.svg"), dir.join("c.png"));
         plot(&points, "test chart", &svg, &png).expect("plot");
+        // Without GPU times (no timestamp queries) only the frame-cost row is drawn.
+        let mut untimed = points.clone();
+        for p in &mut untimed {
+            p.gpu_composite_ms = None;
+        }
+        assert_eq!(chart_size(&untimed), CHART_SIZE);
         let text = std::fs::read_to_string(&svg).expect("svg");
         assert!(
-            text.contains("<svg") && text.contains("Pareto front"),
+            text.contains("<svg")
+                && text.contains("Pareto front")
+                && text.contains("erase GPU time"),
             "{text}"
         );
         let img = image::open(&png).expect("png").to_rgb8();
-        assert_eq!(img.dimensions(), CHART_SIZE);
+        // Two rows: frame cost and erase GPU time (the test points have GPU times).
+        assert_eq!(img.dimensions(), (CHART_SIZE.0, 2 * CHART_SIZE.1));
         // Not blank: the points and the front are drawn in colour.
         assert!(img.pixels().any(|p| p.0 == [255, 0, 0]));
         let csv = dir.join("t.csv");
         write_csv(&csv, &points).expect("csv");
         let table = std::fs::read_to_string(&csv).expect("csv");
         assert_eq!(table.lines().count(), 4);
-        assert_eq!(table.lines().next().map(|l| l.split(',').count()), Some(17));
+        assert!(table.lines().all(|l| l.split(',').count() == 21), "{table}");
+        // No GPU time (a device without timestamp queries) is an empty cell, not a number.
+        write_csv(&csv, &untimed).expect("csv");
+        let table = std::fs::read_to_string(&csv).expect("csv");
+        assert!(
+            table
+                .lines()
+                .nth(1)
+                .is_some_and(|l| l.contains(",10.0000,,")),
+            "{table}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -344,21 +344,31 @@ fn run(cli: Cli) -> Result<(), String> {
             let outputs = bench::run_dr(&scene, &sweep, &out)?;
             let base = &outputs.points[outputs.baseline];
             println!(
-                "{:<22} {:>9} {:>7} {:>8} {:>8} {:>8}  front",
-                "setting", "frame ms", "ratio", "leak %", "over %", "PSNR dB"
+                "{:<22} {:>9} {:>7} {:>12} {:>8} {:>8} {:>8}  front (frame cost / erase GPU time)",
+                "setting", "frame ms", "ratio", "erase GPU ms", "leak %", "over %", "PSNR dB"
             );
             for p in &outputs.points {
-                let front = match (p.pareto_leak, p.pareto_psnr) {
+                let front = |leak: bool, psnr: bool| match (leak, psnr) {
                     (true, true) => "leak, PSNR",
                     (true, false) => "leak",
                     (false, true) => "PSNR",
-                    (false, false) => "",
+                    (false, false) => "-",
+                };
+                let front = format!(
+                    "{} / {}",
+                    front(p.pareto_leak, p.pareto_psnr),
+                    front(p.pareto_leak_gpu, p.pareto_psnr_gpu)
+                );
+                let erase_gpu = match (p.gpu_mask_ms, p.gpu_composite_ms) {
+                    (Some(m), Some(c)) => format!("{:.1}", m + c),
+                    _ => "-".into(),
                 };
                 println!(
-                    "{:<22} {:>9.1} {:>7.3} {:>8.3} {:>8.2} {:>8.2}  {front}",
+                    "{:<22} {:>9.1} {:>7.3} {:>12} {:>8.3} {:>8.2} {:>8.2}  {front}",
                     p.label,
                     p.frame_ms_median,
                     p.frame_cost_ratio,
+                    erase_gpu,
                     p.leak_pct_mean,
                     p.overmask_pct_mean,
                     p.psnr_db_mean

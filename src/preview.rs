@@ -335,12 +335,17 @@ fn update_status(
     robot: Option<Res<avatarm_sim::SimRobotState>>,
     twin: Option<Res<crate::AppTwin>>,
     twins: Query<&avatarm_twin::RobotTwin>,
-    erase: (Res<EraseConfig>, Res<EraseState>, Res<LiveVideo>),
+    erase: (
+        Res<EraseConfig>,
+        Res<EraseState>,
+        Res<LiveVideo>,
+        Res<avatarm_erase::GpuPassTimes>,
+    ),
     live_dr: Option<Res<LiveDr>>,
     time: Res<Time<Real>>,
     teleop: LiveTeleopStatus,
 ) {
-    let (config, erase_state, live) = erase;
+    let (config, erase_state, live, gpu_times) = erase;
     let (Some(robot), Some(twin)) = (robot, twin) else {
         return;
     };
@@ -357,6 +362,7 @@ fn update_status(
     };
     let stale = if live.stale { "   CAMERA STALE" } else { "" };
     let per_frame = erase_state.renders[0] as f64 / erase_state.frames_in.max(1) as f64;
+    let gpu = gpu_pass_times(&gpu_times).map_or(String::new(), |g| format!("   {g}"));
     let scores = match live_dr.as_deref().and_then(LiveDr::means) {
         Some((iou, leak, psnr)) => format!(
             "\nlive vs truth (last {} scored): IoU {iou:.3}   leak {leak:.2} %   PSNR {}",
@@ -369,7 +375,7 @@ fn update_status(
     let teleop_line = teleop.line();
     for mut line in &mut text {
         **line = format!(
-            "{teleop_line}sim {t:6.2} s   frame {:5.1} ms   refused joint states {}{stale}\ncamera frame age {frame_age_ms:5.1} ms   joint state age {age_ms:5.1} ms\nmask renders per camera frame {per_frame:.2}\n{erasing}{scores}",
+            "{teleop_line}sim {t:6.2} s   frame {:5.1} ms   refused joint states {}{stale}\ncamera frame age {frame_age_ms:5.1} ms   joint state age {age_ms:5.1} ms\nmask renders per camera frame {per_frame:.2}{gpu}\n{erasing}{scores}",
             time.delta_secs_f64() * 1e3,
             twin.rejected
         );
@@ -446,10 +452,23 @@ fn handle_keys(
     }
 }
 
+/// The erase passes' recent GPU times (median of the last 30 renders) for the status line and
+/// the run's summary; nothing before the first times arrive.
+fn gpu_pass_times(gpu: &avatarm_erase::GpuPassTimes) -> Option<String> {
+    match (gpu.recent_medians(30), gpu.unavailable()) {
+        ([Some(mask), Some(threshold), Some(composite)], _) => Some(format!(
+            "GPU ms: mask camera {mask:.2}, threshold {threshold:.2}, composite {composite:.2}"
+        )),
+        (_, Some(_)) => Some("GPU ms: no timestamp queries on this device".to_owned()),
+        _ => None,
+    }
+}
+
 fn count_frames(
     mut commands: Commands,
     mut state: ResMut<PreviewState>,
     erase: Res<EraseState>,
+    gpu_times: Res<avatarm_erase::GpuPassTimes>,
     live_dr: Option<Res<LiveDr>>,
     teleop: LiveTeleopStatus,
 ) {
@@ -480,8 +499,9 @@ fn count_frames(
             .map_or(String::new(), |(n, (iou, leak, _))| {
                 format!("; {n} frames scored live, last IoU {iou:.3}, leak {leak:.2} %")
             });
+        let gpu = gpu_pass_times(&gpu_times).map_or(String::new(), |g| format!("; {g}"));
         info!(
-            "preview: {} frames rendered, {} camera frames, mask rendered {} times, composite {} times{scores}",
+            "preview: {} frames rendered, {} camera frames, mask rendered {} times, composite {} times{scores}{gpu}",
             state.frame, erase.frames_in, erase.renders[0], erase.renders[2]
         );
         if let Some(line) = teleop.summary() {

@@ -20,7 +20,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use avatarm_core::dr::{self, EraseSettings, MaskScores, Photometric, RgbaView};
-use avatarm_erase::{EraseState, EraseTargets, PIPELINE_LAG};
+use avatarm_erase::{EraseState, EraseTargets, GpuPassTimes, PASS_NAMES, PIPELINE_LAG, PassTimes};
 use avatarm_sim::{SimCameras, SimRobotState};
 use avatarm_twin::RobotTwin;
 use avatarm_video::LiveVideo;
@@ -146,6 +146,8 @@ struct Replay {
     last_update: Option<Instant>,
     errors: Vec<String>,
     started: Option<Instant>,
+    /// GPU pass samples measured before time started (warm-up renders, not reported).
+    gpu_measured_at_start: [u64; 3],
     bar: ProgressBar,
 }
 
@@ -201,6 +203,7 @@ impl Plugin for ReplayPlugin {
             last_update: None,
             errors: Vec::new(),
             started: None,
+            gpu_measured_at_start: [0; 3],
             bar,
         })
         .add_systems(Startup, pause_for_warmup)
@@ -259,12 +262,17 @@ fn drive_replay(
     cameras: Option<Res<SimCameras>>,
     robot: Option<Res<SimRobotState>>,
     app_twin: Option<Res<AppTwin>>,
-    erase: (Option<Res<EraseTargets>>, Res<EraseState>, Res<LiveVideo>),
+    erase: (
+        Option<Res<EraseTargets>>,
+        Res<EraseState>,
+        Res<LiveVideo>,
+        Res<GpuPassTimes>,
+    ),
     twins: Query<&RobotTwin>,
     scene: Res<SceneResource>,
     mut exit: MessageWriter<AppExit>,
 ) {
-    let (targets, erase_state, live) = erase;
+    let (targets, erase_state, live, gpu_times) = erase;
     let (Some(cameras), Some(robot), Some(app_twin), Some(targets)) =
         (cameras, robot, app_twin, targets)
     else {
@@ -289,6 +297,7 @@ fn drive_replay(
         if replay.warmup_left == 0 {
             time.unpause();
             replay.started = Some(Instant::now());
+            replay.gpu_measured_at_start = gpu_times.measured();
         }
         return;
     }
@@ -396,7 +405,16 @@ fn drive_replay(
     if replay.pending == usize::MAX {
         return;
     }
-    let outcome = finish(&replay, &scene, &robot, &twins, app_twin.0, &erase_state);
+    let gpu = gpu_times.snapshot();
+    let outcome = finish(
+        &replay,
+        &scene,
+        &robot,
+        &twins,
+        app_twin.0,
+        &erase_state,
+        &gpu,
+    );
     replay.bar.finish_and_clear();
     let failed = outcome.is_err();
     if let Ok(mut slot) = replay.options.result.lock() {
@@ -634,6 +652,49 @@ fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
     (n > 0).then(|| s / n as f64)
 }
 
+/// `timing_ms`: the mask (mask camera + threshold pass) and composite stages timed on the GPU
+/// when the device has timestamp queries, else the CPU reference; the CPU reference and each
+/// GPU pass are reported beside them.
+fn stage_timings(replay: &Replay, gpu: &PassTimes) -> serde_json::Value {
+    let cpu_mask: Vec<f64> = replay.scores.iter().map(|f| f.cpu_mask_ms).collect();
+    let cpu_comp: Vec<f64> = replay.scores.iter().map(|f| f.cpu_composite_ms).collect();
+    let passes: Vec<Vec<f64>> = (0..PASS_NAMES.len())
+        .map(|i| gpu.since(i, replay.gpu_measured_at_start[i]))
+        .collect();
+    // The n-th mask render and the n-th threshold render work on the same camera frame.
+    let gpu_mask: Vec<f64> = passes[0]
+        .iter()
+        .zip(&passes[1])
+        .map(|(a, b)| a + b)
+        .collect();
+    let gpu_comp = &passes[2];
+    let on_gpu = !gpu_mask.is_empty() && !gpu_comp.is_empty();
+    let source = match (&gpu.unavailable, on_gpu) {
+        (_, true) => "gpu".to_string(),
+        (Some(why), false) => format!("cpu reference: {why}"),
+        (None, false) => "cpu reference: no GPU pass time arrived".to_string(),
+    };
+    let gpu_passes: serde_json::Map<String, serde_json::Value> = PASS_NAMES
+        .iter()
+        .zip(&passes)
+        .map(|(name, ms)| {
+            (
+                name.to_string(),
+                json!({"ms": spread(ms), "renders_timed": ms.len()}),
+            )
+        })
+        .collect();
+    json!({
+        "mask": spread(if on_gpu { &gpu_mask } else { &cpu_mask }),
+        "composite": spread(if on_gpu { gpu_comp } else { &cpu_comp }),
+        "frame": spread(&replay.frame_ms),
+        "source": source,
+        "gpu_passes": gpu_passes,
+        "cpu_reference": {"mask": spread(&cpu_mask), "composite": spread(&cpu_comp)},
+        "note": "mask: the mask camera's render plus the threshold pass, composite: the composite pass, each the GPU time between timestamps written before and after the pass camera renders (source \"gpu\"), or the CPU reference of the same steps when the device has no timestamp queries; cpu_reference: avatarm_core::dr on the same frame; frame: wall time per app update, all cameras included",
+    })
+}
+
 fn finish(
     replay: &Replay,
     scene: &SceneResource,
@@ -641,6 +702,7 @@ fn finish(
     twins: &Query<&RobotTwin>,
     app_twin: Entity,
     erase: &EraseState,
+    gpu: &PassTimes,
 ) -> Result<serde_json::Value, String> {
     if !replay.errors.is_empty() {
         return Err(replay.errors.join("; "));
@@ -678,8 +740,7 @@ fn finish(
         "max_abs_diff": replay.scores.iter().map(|f| f.gpu_cpu_max_diff).max(),
         "mask_mismatch_px_max": replay.scores.iter().map(|f| f.gpu_cpu_mask_mismatch_px).max(),
     });
-    let cpu_mask: Vec<f64> = replay.scores.iter().map(|f| f.cpu_mask_ms).collect();
-    let cpu_comp: Vec<f64> = replay.scores.iter().map(|f| f.cpu_composite_ms).collect();
+    let timing = stage_timings(replay, gpu);
     let report = json!({
         "scene": s.file.name,
         "scene_file": s.path.display().to_string(),
@@ -715,12 +776,7 @@ fn finish(
         "mask": mask,
         "dr": dr_report,
         "gpu_vs_cpu": gpu_cpu,
-        "timing_ms": {
-            "mask": spread(&cpu_mask),
-            "composite": spread(&cpu_comp),
-            "frame": spread(&replay.frame_ms),
-            "note": "mask and composite: the CPU reference on each frame (the GPU passes are not timed separately); frame: wall time per app update, all cameras included",
-        },
+        "timing_ms": timing,
         "outputs": {
             "frames": "frame_NNNNN.png",
             "erased": "erased_NNNNN.png",

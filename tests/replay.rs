@@ -376,7 +376,8 @@ fn run_with_xr_falls_back_to_the_preview_and_renders_frames() {
         1,
         "one fallback line:\n{log}"
     );
-    // "preview: N frames rendered, C camera frames, mask rendered M times, composite K times"
+    // "preview: N frames rendered, C camera frames, mask rendered M times, composite K times;
+    // GPU ms: ..."
     let line = log.lines().find(|l| l.contains("preview: ")).unwrap();
     let n: Vec<u64> = numbers_after(&log, "preview: ")
         .iter()
@@ -391,6 +392,11 @@ fn run_with_xr_falls_back_to_the_preview_and_renders_frames() {
     // Once per camera frame, plus the updates before the pipeline is full and H arrives.
     assert!(mask <= camera + 4 && mask + 2 >= camera, "{line}");
     assert!(composite <= camera + 4, "{line}");
+    // The passes' GPU times, measured with timestamp queries (llvmpipe has them).
+    assert!(
+        line.contains("GPU ms: mask camera") || line.contains("no timestamp queries"),
+        "{line}"
+    );
     let img = load_rgb(&shot);
     assert_eq!(img.dimensions(), (1280, 720));
     let mut colours = std::collections::HashSet::new();
@@ -545,6 +551,23 @@ fn default_scene_erases_the_robot() {
     for stage in ["mask", "composite", "frame"] {
         assert!(num(&r, &format!("timing_ms.{stage}.median")) > 0.0);
     }
+    // Each pass is timed on the GPU on nearly every camera frame, unless the device has no
+    // timestamp queries (then the report says so and gives the CPU reference).
+    let source = r["timing_ms"]["source"].as_str().unwrap_or_default();
+    if !source.contains("no timestamp queries") {
+        assert_eq!(source, "gpu", "{}", r["timing_ms"]);
+        let frames = num(&r, "frames_shown");
+        for pass in ["mask camera", "threshold pass", "composite pass"] {
+            let timed = r["timing_ms"]["gpu_passes"][pass]["renders_timed"]
+                .as_f64()
+                .unwrap_or_default();
+            assert!(
+                timed >= 0.8 * frames,
+                "{pass}: {timed} of {frames} frames timed"
+            );
+            assert!(r["timing_ms"]["gpu_passes"][pass]["ms"]["median"].as_f64() > Some(0.0));
+        }
+    }
 }
 
 /// At the 0.25 m/s cap with frames arriving 50 ms late, rendering the twin at each frame's
@@ -673,16 +696,29 @@ fn bench_dr_writes_the_chart_and_the_table() {
     );
     assert!(stdout.contains("ratios against 'x1 d0 f0 LC'"), "{stdout}");
     let csv = std::fs::read_to_string(out.join("dr_speed_accuracy.csv")).expect("csv");
+    let header: Vec<&str> = csv.lines().next().unwrap_or_default().split(',').collect();
     let rows: Vec<Vec<&str>> = csv
         .lines()
         .skip(1)
         .map(|l| l.split(',').collect())
         .collect();
     assert_eq!(rows.len(), 2, "{csv}");
-    let leak = |r: &[&str]| r[11].parse::<f64>().expect("leak");
+    let cell = |r: &[&str], name: &str| {
+        let i = header.iter().position(|h| *h == name).expect(name);
+        r[i].to_string()
+    };
+    let leak = |r: &[&str]| cell(r, "leak_pct_mean").parse::<f64>().expect("leak");
     assert!(leak(&rows[1]) > leak(&rows[0]) + 0.5, "{csv}");
-    // The full-resolution point is the least leaky, so it is on the leak front.
-    assert_eq!(rows[0][15], "true", "{csv}");
+    // The full-resolution point is the least leaky, so it is on both leak fronts.
+    assert_eq!(cell(&rows[0], "pareto_leak"), "true", "{csv}");
+    assert_eq!(cell(&rows[0], "pareto_leak_gpu"), "true", "{csv}");
+    // Each setting's passes were timed on the GPU (llvmpipe has timestamp queries).
+    for r in &rows {
+        for column in ["gpu_mask_ms", "gpu_composite_ms"] {
+            let ms: f64 = cell(r, column).parse().expect(column);
+            assert!(ms > 0.0, "{column}: {csv}");
+        }
+    }
     let svg = std::fs::read_to_string(out.join("dr_speed_accuracy.svg")).expect("svg");
     assert!(svg.contains("Pareto front"));
     let png = image::open(out.join("dr_speed_accuracy.png")).expect("png");

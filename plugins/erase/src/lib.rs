@@ -29,6 +29,7 @@
 //! region: the links' bounding spheres projected by FK ([`avatarm_core::dr::sphere_mask`]).
 //! The CPU reference of steps 3–4 is [`avatarm_core::dr`].
 
+pub mod gpu_timing;
 pub mod interaction;
 
 use std::collections::VecDeque;
@@ -48,6 +49,7 @@ use bevy::camera::{OrthographicProjection, ScalingMode};
 use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
 use bevy::pbr::{Material, MaterialPlugin};
 use bevy::prelude::*;
+use bevy::render::extract_component::ExtractComponent;
 use bevy::render::render_resource::{
     AsBindGroup, Extent3d, ShaderType, TextureDimension, TextureFormat, TextureUsages,
 };
@@ -55,6 +57,7 @@ use bevy::render::view::Msaa;
 use bevy::shader::ShaderRef;
 use nalgebra::{DVector, Isometry3};
 
+pub use gpu_timing::{GpuPassTimes, PASS_NAMES, PassTimes};
 pub use interaction::{InteractionConfig, InteractionPlugin, InteractionTargets};
 
 /// Updates between posing the mask twin for a frame and compositing that frame.
@@ -139,7 +142,7 @@ pub struct EraseState {
 }
 
 /// Marks a camera of the pipeline with the stage it renders ([`EraseState::stage`]).
-#[derive(Component, Debug, Clone, Copy)]
+#[derive(Component, ExtractComponent, Debug, Clone, Copy)]
 pub struct ErasePass {
     /// Updates behind the mask camera: 0 mask camera, 1 threshold, [`PIPELINE_LAG`] composite.
     pub lag: usize,
@@ -334,6 +337,7 @@ impl Plugin for ErasePlugin {
         app.add_plugins((
             MaterialPlugin::<MaskMaterial>::default(),
             MaterialPlugin::<CompositeMaterial>::default(),
+            gpu_timing::PassTimingPlugin,
         ))
         .add_message::<SetBackground>()
         .add_message::<CaptureBackground>()
