@@ -362,7 +362,7 @@ fn update_status(
     };
     let stale = if live.stale { "   CAMERA STALE" } else { "" };
     let per_frame = erase_state.renders[0] as f64 / erase_state.frames_in.max(1) as f64;
-    let gpu = gpu_pass_times(&gpu_times).map_or(String::new(), |g| format!("   {g}"));
+    let gpu = gpu_pass_times(&gpu_times).map_or(String::new(), |g| format!("\n{g}"));
     let scores = match live_dr.as_deref().and_then(LiveDr::means) {
         Some((iou, leak, psnr)) => format!(
             "\nlive vs truth (last {} scored): IoU {iou:.3}   leak {leak:.2} %   PSNR {}",
@@ -457,7 +457,7 @@ fn handle_keys(
 fn gpu_pass_times(gpu: &avatarm_erase::GpuPassTimes) -> Option<String> {
     match (gpu.recent_medians(30), gpu.unavailable()) {
         ([Some(mask), Some(threshold), Some(composite)], _) => Some(format!(
-            "GPU ms: mask camera {mask:.2}, threshold {threshold:.2}, composite {composite:.2}"
+            "GPU ms: mask camera {mask:.1} + threshold {threshold:.1}, composite {composite:.1}"
         )),
         (_, Some(_)) => Some("GPU ms: no timestamp queries on this device".to_owned()),
         _ => None,
