@@ -136,8 +136,8 @@ impl Plugin for PassTimingPlugin {
         render_app
             .insert_resource(times)
             .add_systems(RenderStartup, create_clock)
-            .add_systems(Core3d, stamp_begin.before(Core3dSystems::Prepass))
-            .add_systems(Core3d, stamp_end.after(Core3dSystems::PostProcess))
+            .add_systems(Core3d, stamp::<false>.before(Core3dSystems::Prepass))
+            .add_systems(Core3d, stamp::<true>.after(Core3dSystems::PostProcess))
             .add_systems(
                 RenderGraph,
                 collect
@@ -165,9 +165,8 @@ struct PassClock {
     queries: wgpu::QuerySet,
     resolved: wgpu::Buffer,
     period_ns: f64,
-    /// Passes whose begin (and end) timestamps were written this frame.
-    begun: [bool; PASSES],
-    written: [bool; PASSES],
+    /// Timestamps written per pass this frame: 1 begun, 2 begun and ended.
+    stamps: [u8; PASSES],
     free: Vec<wgpu::Buffer>,
     in_flight: Vec<Readback>,
 }
@@ -216,8 +215,7 @@ fn create_clock(
         queries,
         resolved,
         period_ns: f64::from(queue.get_timestamp_period()),
-        begun: [false; PASSES],
-        written: [false; PASSES],
+        stamps: [0; PASSES],
         free,
         in_flight: Vec::new(),
     });
@@ -228,7 +226,8 @@ fn current_pass(view: Option<Res<CurrentView>>, passes: &Query<&ErasePass>) -> O
     passes.get(view?.0).ok().map(|p| p.lag.min(PASSES - 1))
 }
 
-fn stamp_begin(
+/// Writes the begin (`END = false`) or end timestamp of the pass camera being rendered.
+fn stamp<const END: bool>(
     view: Option<Res<CurrentView>>,
     passes: Query<&ErasePass>,
     clock: Option<ResMut<PassClock>>,
@@ -237,26 +236,13 @@ fn stamp_begin(
     let (Some(i), Some(mut clock)) = (current_pass(view, &passes), clock) else {
         return;
     };
-    ctx.command_encoder()
-        .write_timestamp(&clock.queries, 2 * i as u32);
-    clock.begun[i] = true;
-}
-
-fn stamp_end(
-    view: Option<Res<CurrentView>>,
-    passes: Query<&ErasePass>,
-    clock: Option<ResMut<PassClock>>,
-    mut ctx: RenderContext,
-) {
-    let (Some(i), Some(mut clock)) = (current_pass(view, &passes), clock) else {
-        return;
-    };
-    if !clock.begun[i] {
+    // An end needs this frame's begin; stamps counts the ones written (2: both).
+    if clock.stamps[i] != u8::from(END) {
         return;
     }
     ctx.command_encoder()
-        .write_timestamp(&clock.queries, 2 * i as u32 + 1);
-    clock.written[i] = true;
+        .write_timestamp(&clock.queries, 2 * i as u32 + u32::from(END));
+    clock.stamps[i] += 1;
 }
 
 /// Reads the buffers whose copies have arrived, then resolves this frame's timestamps into a
@@ -312,8 +298,7 @@ fn collect(
         });
     }
 
-    let written = std::mem::take(&mut clock.written);
-    clock.begun = [false; PASSES];
+    let written = std::mem::take(&mut clock.stamps).map(|n| n == 2);
     if !written.contains(&true) {
         return;
     }
@@ -342,4 +327,24 @@ fn collect(
         passes: written,
         state,
     });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn since_gives_the_samples_after_a_mark_still_kept() {
+        let mut t = PassTimes::default();
+        t.ms[1] = (0..5).map(f64::from).collect();
+        t.measured[1] = 5;
+        assert_eq!(t.since(1, 2), [2.0, 3.0, 4.0]);
+        assert_eq!(t.since(1, 5), Vec::<f64>::new());
+        assert!(t.since(0, 0).is_empty());
+        // The oldest were dropped: 12 measured, the last 5 kept; after mark 4, 8 are newer
+        // but only the 5 kept come back.
+        t.measured[1] = 12;
+        assert_eq!(t.since(1, 4), [0.0, 1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(t.since(1, 10), [3.0, 4.0]);
+    }
 }
