@@ -86,8 +86,10 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> App {
                 ..default()
             });
             add_window_plugins(&mut app, plugins, options.xr);
-            if options.fixed_timestep {
-                app.insert_resource(TimeUpdateStrategy::ManualDuration(frame_dt / 2));
+            if let Some(step) = options.fixed_step_s {
+                app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+                    step,
+                )));
             }
         }
     }

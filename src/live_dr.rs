@@ -2,8 +2,7 @@
 //!
 //! Every `every`-th camera frame, the room's ground truth at its capture (the robot's
 //! silhouette and the room without the robot) is read back, and so are the GPU's mask and
-//! composite of that frame when the pipeline reaches it ([`avatarm_erase::PIPELINE_LAG`]);
-//! the frame is then scored as a replay scores every frame ([`crate::replay`]): IoU and leak
+//! composite of that frame at the end of the update that erases it; the frame is then scored as a replay scores every frame ([`crate::replay`]): IoU and leak
 //! of the erased region against the silhouette, PSNR of Ĩ(t) inside it. The preview shows the
 //! mean of the last [`WINDOW`] scored frames. Sampling keeps the read-backs (four images per
 //! scored frame) off most frames.
@@ -11,10 +10,10 @@
 use std::collections::{BTreeMap, VecDeque};
 
 use avatarm_core::dr::MaskScores;
-use avatarm_erase::{EraseConfig, EraseState, EraseTargets, PIPELINE_LAG};
+use avatarm_erase::{EraseConfig, EraseState, EraseTargets};
 use avatarm_sim::{SimCameras, SimRoomSystems, VideoCounter};
+use avatarm_twin::readback::{ImageRead, read_image_once};
 use bevy::prelude::*;
-use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 
 use crate::SceneResource;
 use crate::replay::score_against_truth;
@@ -54,7 +53,8 @@ struct Parts {
     composite: Option<Vec<u8>>,
     /// The composite's α_H (0 without H or with erasure off), known when it is requested.
     alpha_h: Option<f32>,
-    requested: [bool; 2],
+    /// The mask and composite have been requested.
+    requested: bool,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -105,14 +105,12 @@ fn key(t_s: f64) -> i64 {
 }
 
 fn request(commands: &mut Commands, image: Handle<Image>, part: Part, k: i64) {
-    commands.spawn(Screenshot::image(image)).observe(
-        move |captured: On<ScreenshotCaptured>, mut live: ResMut<LiveDr>| {
-            let Some(data) = captured.image.data.clone() else {
-                return;
-            };
+    read_image_once(commands, image).observe(
+        move |read: On<ImageRead>, mut live: ResMut<LiveDr>| {
             let Some(p) = live.pending.get_mut(&k) else {
                 return;
             };
+            let data = read.data.clone();
             match part {
                 Part::NoRobot => p.norobot = Some(data),
                 Part::Silhouette => p.silhouette = Some(data),
@@ -153,40 +151,31 @@ fn request_parts(
             request(&mut commands, silhouette.clone(), Part::Silhouette, k);
         }
     }
-    // The pipeline's images of a sampled frame, at the update each stage renders it.
-    let s = config.settings;
-    for (slot, lag, part, image) in [
-        (0, 1, Part::Mask, &targets.mask),
-        (1, PIPELINE_LAG, Part::Composite, &targets.composite),
-    ] {
-        let Some(stage) = state.stage(lag) else {
-            continue;
-        };
-        let Some((t_s, _, _)) = &stage.frame else {
-            continue;
-        };
-        let k = key(*t_s);
-        if matches!(part, Part::Composite) && stage.background.is_none() {
-            // Nothing to erase with yet (H not set): no score, not a 100 % leak.
-            live.pending.remove(&k);
-            continue;
-        }
-        let Some(p) = live.pending.get_mut(&k) else {
-            continue;
-        };
-        if p.requested[slot] {
-            continue;
-        }
-        p.requested[slot] = true;
-        if matches!(part, Part::Composite) {
-            p.alpha_h = Some(if s.enabled && stage.background.is_some() {
-                s.alpha_h
-            } else {
-                0.0
-            });
-        }
-        request(&mut commands, image.clone(), part, k);
+    // The pipeline's images of a sampled frame, at the end of the update that erases it (the
+    // frame's first: it is fresh there).
+    let Some(current) = state.current.as_ref().filter(|c| c.dirty) else {
+        return;
+    };
+    let Some((t_s, _, _)) = &current.frame else {
+        return;
+    };
+    let k = key(*t_s);
+    if current.background.is_none() {
+        // Nothing to erase with yet (H not set): no score, not a 100 % leak.
+        live.pending.remove(&k);
+        return;
     }
+    let Some(p) = live.pending.get_mut(&k) else {
+        return;
+    };
+    if p.requested {
+        return;
+    }
+    p.requested = true;
+    let s = config.settings;
+    p.alpha_h = Some(if s.enabled { s.alpha_h } else { 0.0 });
+    request(&mut commands, targets.mask.clone(), Part::Mask, k);
+    request(&mut commands, targets.composite.clone(), Part::Composite, k);
 }
 
 fn score_parts(mut live: ResMut<LiveDr>, scene: Res<SceneResource>, config: Res<EraseConfig>) {

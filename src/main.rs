@@ -54,6 +54,10 @@ enum Command {
         /// Quit after N frames.
         #[arg(long, value_name = "N")]
         frames: Option<u32>,
+        /// Advance simulated time by MS per rendered frame instead of by the wall clock
+        /// (default with --frames: half a camera frame, a display twice as fast as the camera).
+        #[arg(long = "step-ms", value_name = "MS", value_parser = step_ms)]
+        step_ms: Option<f64>,
         /// Save a screenshot of the window at the last frame.
         #[arg(long, value_name = "PATH")]
         screenshot: Option<PathBuf>,
@@ -255,6 +259,7 @@ fn run(cli: Cli) -> Result<(), String> {
             scene,
             xr,
             frames,
+            step_ms,
             screenshot,
             package_path,
             webcam,
@@ -285,7 +290,9 @@ fn run(cli: Cli) -> Result<(), String> {
                 frames,
                 screenshot,
                 xr,
-                fixed_timestep: frames.is_some(),
+                fixed_step_s: step_ms
+                    .map(|ms| ms / 1e3)
+                    .or_else(|| frames.map(|_| 0.5 / scene.file.camera.fps)),
                 webcam,
                 hand,
             });
@@ -444,5 +451,19 @@ fn run(cli: Cli) -> Result<(), String> {
             );
             Ok(())
         }
+    }
+}
+
+/// `--step-ms`: a time step in milliseconds, more than 0 and at most 250 (Bevy clamps a longer update).
+fn step_ms(s: &str) -> Result<f64, String> {
+    let ms: f64 = s
+        .parse()
+        .map_err(|_| format!("'{s}': expected a number of milliseconds"))?;
+    if ms.is_finite() && ms > 0.0 && ms <= 250.0 {
+        Ok(ms)
+    } else {
+        Err(format!(
+            "'{s}': expected more than 0 and at most 250 ms (a longer step is clamped)"
+        ))
     }
 }

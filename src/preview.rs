@@ -40,9 +40,10 @@ pub struct PreviewOptions {
     pub screenshot: Option<PathBuf>,
     /// Start an OpenXR session (falls back to the window without a runtime).
     pub xr: bool,
-    /// Advance time by exactly half a camera frame per rendered frame (scripted runs): a
-    /// display twice as fast as the camera, as a headset's is.
-    pub fixed_timestep: bool,
+    /// Advance simulated time by exactly this much per rendered frame (s) instead of by the
+    /// wall clock: scripted runs use half a camera frame, a display twice as fast as the
+    /// camera, as a headset's is.
+    pub fixed_step_s: Option<f64>,
     /// Take the camera feed from this webcam instead of the simulated room's camera (needs
     /// the `webcam` feature).
     pub webcam: Option<u32>,

@@ -20,12 +20,12 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use avatarm_core::dr::{self, EraseSettings, MaskScores, Photometric, RgbaView};
-use avatarm_erase::{EraseState, EraseTargets, GpuPassTimes, PASS_NAMES, PIPELINE_LAG, PassTimes};
+use avatarm_erase::{EraseState, EraseTargets, GpuPassTimes, PASS_NAMES, PassTimes};
 use avatarm_sim::{SimCameras, SimRobotState};
 use avatarm_twin::RobotTwin;
+use avatarm_twin::readback::{ImageRead, read_image_once};
 use avatarm_video::LiveVideo;
 use bevy::prelude::*;
-use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 use serde_json::json;
@@ -114,7 +114,8 @@ struct Pending {
     composite: Option<Vec<u8>>,
     inputs: Option<FrameInputs>,
     q_true: Option<Vec<f64>>,
-    requested: [bool; 3],
+    /// The pipeline's images have been requested.
+    requested: bool,
 }
 
 #[derive(Clone)]
@@ -232,21 +233,15 @@ fn spawn_capture(
     k: i64,
 ) {
     replay.pending += 1;
-    commands.spawn(Screenshot::image(handle)).observe(
-        move |captured: On<ScreenshotCaptured>, mut replay: ResMut<Replay>| {
+    read_image_once(commands, handle).observe(
+        move |read: On<ImageRead>, mut replay: ResMut<Replay>| {
             replay.pending = replay.pending.saturating_sub(1);
-            let image = &captured.image;
-            let Some(data) = image.data.clone() else {
-                replay
-                    .errors
-                    .push(format!("capture {kind:?} at {k} us came back empty"));
-                return;
-            };
+            let data = read.data.clone();
             let entry = replay.frames.entry(k).or_default();
             match kind {
                 Capture::NoRobot => entry.norobot = Some(data),
                 Capture::Silhouette => entry.silhouette = Some(data),
-                Capture::Raw => entry.raw = Some((image.width(), image.height(), data)),
+                Capture::Raw => entry.raw = Some((read.width, read.height, data)),
                 Capture::Mask => entry.mask = Some(data),
                 Capture::Composite => entry.composite = Some(data),
             }
@@ -347,39 +342,32 @@ fn drive_replay(
                 });
             }
         }
-        // What each stage of the pipeline works on now (see avatarm_erase::PIPELINE_LAG): the
-        // twin render for the newest frame, the mask for the one before, the composite for
-        // the one PIPELINE_LAG updates ago. Each is captured once per frame.
-        let stages = [
-            (0, Capture::Raw, targets.raw.clone()),
-            (1, Capture::Mask, targets.mask.clone()),
-            (PIPELINE_LAG, Capture::Composite, targets.composite.clone()),
-        ];
-        for (slot, (lag, kind, handle)) in stages.into_iter().enumerate() {
-            let Some(stage) = erase_state.stage(lag) else {
-                continue;
-            };
-            let Some((t_s, index, rgba)) = stage.frame.clone() else {
-                continue;
-            };
+        // The pipeline's images of the frame it erases in this update (the frame's first: it
+        // is fresh there), read back at the end of the update, after all three passes.
+        if let Some(current) = erase_state.current.as_ref().filter(|c| c.dirty)
+            && let Some((t_s, index, rgba)) = current.frame.clone()
+        {
             let fk = key(t_s);
             let save = replay.save_keys.contains(&fk);
             let entry = replay.frames.entry(fk).or_default();
-            if entry.requested[slot] {
-                continue;
-            }
-            entry.requested[slot] = true;
-            if matches!(kind, Capture::Composite) {
+            if !entry.requested {
+                entry.requested = true;
                 entry.inputs = Some(FrameInputs {
                     index,
                     t_s,
                     live: rgba,
-                    background: stage.background.clone(),
-                    photometric: stage.photometric,
+                    background: current.background.clone(),
+                    photometric: current.photometric,
                     save,
                 });
+                for (kind, handle) in [
+                    (Capture::Raw, targets.raw.clone()),
+                    (Capture::Mask, targets.mask.clone()),
+                    (Capture::Composite, targets.composite.clone()),
+                ] {
+                    spawn_capture(&mut commands, &mut replay, handle, kind, fk);
+                }
             }
-            spawn_capture(&mut commands, &mut replay, handle, kind, fk);
         }
         // True joints at capture, for frames.json.
         replay.frames.entry(k).or_default().q_true =

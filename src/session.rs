@@ -7,8 +7,8 @@ use std::sync::Arc;
 use avatarm_core::rng::Rng;
 use avatarm_erase::{CaptureBackground, SetBackground};
 use avatarm_sim::SimCameras;
+use avatarm_twin::readback::{ImageRead, read_image_once};
 use bevy::prelude::*;
-use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 
 use crate::SceneResource;
 use crate::scene::BackgroundSpec;
@@ -104,15 +104,10 @@ fn empty_room(
         return;
     }
     progress.in_flight = true;
-    commands.spawn(Screenshot::image(handle)).observe(
-        |captured: On<ScreenshotCaptured>,
-         mut commands: Commands,
-         mut progress: ResMut<BackgroundProgress>| {
+    read_image_once(&mut commands, handle).observe(
+        |read: On<ImageRead>, mut commands: Commands, mut progress: ResMut<BackgroundProgress>| {
             progress.in_flight = false;
-            let image = &captured.image;
-            let Some(rgba) = image.data.clone() else {
-                return;
-            };
+            let rgba = read.data.clone();
             // A render with no mesh drawn yet is black: not a room.
             if rgba.chunks_exact(4).all(|px| px[..3] == [0, 0, 0]) {
                 progress.identical = 0;
@@ -123,7 +118,7 @@ fn empty_room(
                 .as_ref()
                 .is_some_and(|(_, _, last)| *last == rgba);
             progress.identical = if same { progress.identical + 1 } else { 1 };
-            let (width, height) = (image.width(), image.height());
+            let (width, height) = (read.width, read.height);
             if progress.identical >= SETTLED_CAPTURES && !progress.empty_room_done {
                 progress.empty_room_done = true;
                 commands.queue(move |world: &mut World| {

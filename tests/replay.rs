@@ -410,6 +410,32 @@ fn run_with_xr_falls_back_to_the_preview_and_renders_frames() {
     );
 }
 
+/// The preview erases each frame in the update it arrives in, whatever the display rate: with
+/// a camera frame on every update (a display no faster than the camera, or a slow machine: 250
+/// ms of simulated time per update here) the live score stays at the replay's. A pass that
+/// read the previous pass's image of one update earlier paired a frame with a newer mask here
+/// (measured before the fix, 250 ms per update with a 4 fps camera: IoU 0.842, leak 8.69 %).
+#[test]
+fn preview_erases_with_a_camera_frame_on_every_update() {
+    let out = out_dir("run_frame_every_update");
+    std::fs::create_dir_all(&out).unwrap();
+    let log = run_preview(&["--frames", "40", "--step-ms", "250"], &out);
+    let line = log.lines().find(|l| l.contains("preview: ")).unwrap();
+    // "preview: N frames rendered, C camera frames, mask rendered M times, composite K times;
+    // S frames scored live, last IoU I, leak L %; GPU ms: ..."
+    let n = numbers_after(&log, "preview: ");
+    let (rendered, camera, mask) = (n[0], n[1], n[2]);
+    assert!(
+        camera + 8.0 >= rendered,
+        "a camera frame on (nearly) every update: {line}"
+    );
+    assert!(mask + 2.0 >= camera, "the mask follows every frame: {line}");
+    assert!(line.contains("frames scored live"), "{line}");
+    let (scored, iou, leak) = (n[4], n[5], n[6]);
+    assert!(scored >= 1.0, "{line}");
+    assert!(iou >= 0.98 && leak <= 1.0, "{line}");
+}
+
 #[test]
 fn robot_command_prints_fk_poses_as_json() {
     let urdf = root().join("assets/robots/sawyer_lite/sawyer_lite.urdf");

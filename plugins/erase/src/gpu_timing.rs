@@ -32,7 +32,7 @@ use bevy::render::{RenderApp, RenderStartup};
 
 use crate::ErasePass;
 
-/// The timed passes, in [`ErasePass::lag`] order.
+/// The timed passes, in [`ErasePass::stage`] order.
 pub const PASS_NAMES: [&str; PASSES] = ["mask camera", "threshold pass", "composite pass"];
 
 const PASSES: usize = 3;
@@ -223,7 +223,7 @@ fn create_clock(
 
 /// The pass the camera being rendered is, if it is one.
 fn current_pass(view: Option<Res<CurrentView>>, passes: &Query<&ErasePass>) -> Option<usize> {
-    passes.get(view?.0).ok().map(|p| p.lag.min(PASSES - 1))
+    passes.get(view?.0).ok().map(|p| p.stage.min(PASSES - 1))
 }
 
 /// Writes the begin (`END = false`) or end timestamp of the pass camera being rendered.

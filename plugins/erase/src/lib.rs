@@ -16,13 +16,12 @@
 //!    into [`EraseTargets::composite`], which is Ĩ(t) before the hand and object twin are drawn
 //!    in front ([`interaction`]).
 //!
-//! **Pipeline lag.** In Bevy 0.19 a camera's output image, read by a later camera's material,
-//! shows the previous frame's content (measured: the threshold pass reads the mask camera's
-//! render of one update earlier, the composite reads the threshold pass's of one update
-//! earlier, whatever the camera order). The pipeline is therefore aligned explicitly: the frame
-//! and photometric model of update `u` are composited at update `u + 2` ([`PIPELINE_LAG`]),
-//! with the live frames in a ring of textures, so that Ĩ always combines a frame with the mask
-//! of the same joint state. The cost is two updates of display latency.
+//! **One update.** The three pass cameras render in camera order (mask camera, threshold,
+//! composite, then the interaction camera), so a frame that arrives in an update is erased and
+//! shown in that update's render. Reading a pass's image back must not use Bevy's
+//! `Screenshot::image`: in the frame of a screenshot the camera renders into a temporary texture
+//! copied into its image only after every camera, so the next pass would see the previous
+//! frame's mask ([`avatarm_twin::readback`] reads an image back without that).
 //!
 //! Nothing is read back to the CPU on this path. Photometric compensation fits the background
 //! to each frame on the CPU (both images are CPU data anyway) outside a conservative robot
@@ -60,14 +59,8 @@ use nalgebra::{DVector, Isometry3};
 pub use gpu_timing::{GpuPassTimes, PASS_NAMES, PassTimes};
 pub use interaction::{InteractionConfig, InteractionPlugin, InteractionTargets};
 
-/// Updates between posing the mask twin for a frame and compositing that frame.
-pub const PIPELINE_LAG: usize = 2;
-
 /// Render order of the mask camera; the passes follow it.
 const MASK_CAMERA_ORDER: isize = -20;
-
-/// Live frame textures in the ring (more than [`PIPELINE_LAG`]).
-const RING: usize = 4;
 
 /// What the erase plugin needs to know. Insert it before the app starts.
 #[derive(Resource, Debug, Clone)]
@@ -97,9 +90,8 @@ pub struct EraseTargets {
     pub mask: Handle<Image>,
     /// Ĩ(t): the live frame with the robot erased.
     pub composite: Handle<Image>,
-    /// The ring of live frame textures; the composite reads the one of [`PIPELINE_LAG`]
-    /// updates ago.
-    pub live: Vec<Handle<Image>>,
+    /// The live frame as uploaded for the composite.
+    pub live: Handle<Image>,
     /// The background H as uploaded (after refreshes).
     pub background: Handle<Image>,
 }
@@ -126,54 +118,39 @@ pub struct EraseState {
     /// The conservative robot region used by the last fit (0/1 per pixel), for refresh and
     /// diagnostics.
     pub robot_region: Option<Arc<Vec<u8>>>,
-    /// Per update, newest last: what each stage works on ([`PIPELINE_LAG`] + 1 entries).
-    pub stages: VecDeque<StageInputs>,
+    /// What the passes work on in this update.
+    pub current: Option<StageInputs>,
     /// Renders of each pass so far: mask camera, threshold, composite. Each pass renders
     /// once per camera frame (and when the settings or H change), however fast the display
     /// updates: an XR headset at 72-90 Hz over a 30 fps camera does not redo the mask.
     pub renders: [u64; 3],
     /// Camera frames taken into the pipeline.
     pub frames_in: u64,
-    /// Ring slot holding the newest frame.
-    latest_slot: Option<usize>,
-    uploads: usize,
     /// H changed since the last update.
     background_changed: bool,
 }
 
-/// Marks a camera of the pipeline with the stage it renders ([`EraseState::stage`]).
+/// Marks a camera of the pipeline with the pass it renders, in render order: 0 the mask
+/// camera, 1 the threshold pass, 2 the composite pass ([`PASS_NAMES`]).
 #[derive(Component, ExtractComponent, Debug, Clone, Copy)]
 pub struct ErasePass {
-    /// Updates behind the mask camera: 0 mask camera, 1 threshold, [`PIPELINE_LAG`] composite.
-    pub lag: usize,
+    /// The pass.
+    pub stage: usize,
 }
 
-/// What the pipeline used in one update: the mask camera renders the twin for `frame` now, the
-/// threshold pass one update later, the composite [`PIPELINE_LAG`] updates later.
+/// What the passes work on in one update: the mask camera renders the twin for `frame`, the
+/// threshold pass its mask and the composite pass erases it, all in that update's render.
 #[derive(Debug, Clone)]
 pub struct StageInputs {
     /// The newest frame at that update (capture time, index, pixels).
     pub frame: Option<(f64, u64, Arc<Vec<u8>>)>,
-    /// Ring slot of that frame.
-    pub slot: Option<usize>,
     /// The photometric model fitted to it.
     pub photometric: Photometric,
     /// Background H at that update.
     pub background: Option<Arc<Vec<u8>>>,
     /// Something the passes draw changed at that update (a new frame, the settings, H); the
-    /// stage that works on it renders, the others keep their last image.
+    /// passes render, otherwise they keep their last images.
     pub dirty: bool,
-}
-
-impl EraseState {
-    /// Inputs of the stage that is `lag` updates behind the mask camera (0 = the mask camera,
-    /// 1 = threshold pass, [`PIPELINE_LAG`] = composite), when the pipeline is that full.
-    pub fn stage(&self, lag: usize) -> Option<&StageInputs> {
-        self.stages
-            .len()
-            .checked_sub(1 + lag)
-            .and_then(|i| self.stages.get(i))
-    }
 }
 
 /// Sets the background H.
@@ -372,8 +349,8 @@ pub fn upload_image(width: u32, height: u32) -> Image {
 }
 
 /// Spawns an orthographic camera that draws one full-target quad with `material` into
-/// `target` for the stage `lag` updates behind the mask camera; the quad's fragment shader works
-/// in pixel coordinates.
+/// `target` as pass `stage` (rendered after the passes before it); the quad's fragment shader
+/// works in pixel coordinates.
 fn spawn_pass<M: Material>(
     commands: &mut Commands,
     meshes: &mut Assets<Mesh>,
@@ -381,7 +358,7 @@ fn spawn_pass<M: Material>(
     target: Handle<Image>,
     layer: usize,
     name: &str,
-    lag: usize,
+    stage: usize,
 ) {
     let layers = RenderLayers::layer(layer);
     commands.spawn((
@@ -395,8 +372,8 @@ fn spawn_pass<M: Material>(
         Name::new(name.to_owned()),
         Camera3d::default(),
         Camera {
-            // After the mask camera (order MASK_CAMERA_ORDER), one per stage.
-            order: MASK_CAMERA_ORDER + lag as isize,
+            // After the mask camera (order MASK_CAMERA_ORDER) and the passes before it.
+            order: MASK_CAMERA_ORDER + stage as isize,
             clear_color: ClearColorConfig::Custom(Color::BLACK),
             ..default()
         },
@@ -415,7 +392,7 @@ fn spawn_pass<M: Material>(
         DebandDither::Disabled,
         Msaa::Off,
         layers,
-        ErasePass { lag },
+        ErasePass { stage },
     ));
 }
 
@@ -465,9 +442,7 @@ fn setup(
     let raw = images.add(target_image(raw_k.width, raw_k.height));
     let mask = images.add(target_image(k.width, k.height));
     let composite = images.add(target_image(k.width, k.height));
-    let live: Vec<Handle<Image>> = (0..RING)
-        .map(|_| images.add(upload_image(k.width, k.height)))
-        .collect();
+    let live = images.add(upload_image(k.width, k.height));
     let background = images.add(upload_image(k.width, k.height));
     let mask_camera = PinholeCamera {
         intrinsics: raw_k,
@@ -482,7 +457,7 @@ fn setup(
         MASK_CAMERA_ORDER,
         "mask camera",
     );
-    commands.entity(mask_camera).insert(ErasePass { lag: 0 });
+    commands.entity(mask_camera).insert(ErasePass { stage: 0 });
     let s = &config.settings;
     let mask_material = mask_materials.add(MaskMaterial {
         params: MaskParams {
@@ -496,7 +471,7 @@ fn setup(
     });
     let composite_material = composite_materials.add(CompositeMaterial {
         params: composite_params(s, &Photometric::default(), false),
-        live: live[0].clone(),
+        live: live.clone(),
         background: background.clone(),
         mask: mask.clone(),
     });
@@ -516,7 +491,7 @@ fn setup(
         composite.clone(),
         layers::COMPOSITE_PASS,
         "composite pass",
-        PIPELINE_LAG,
+        2,
     );
     commands.insert_resource(EraseMaterials {
         mask: mask_material,
@@ -679,13 +654,10 @@ fn prepare_frame(
     let dirty = frame.is_some() || config.is_changed() || state.background_changed;
     state.background_changed = false;
     if let Some(f) = frame {
-        let slot = state.uploads % RING;
-        state.uploads += 1;
         state.frames_in += 1;
-        if let Some(mut image) = images.get_mut(&targets.live[slot]) {
+        if let Some(mut image) = images.get_mut(&targets.live) {
             image.data = Some(f.rgba.as_ref().clone());
         }
-        state.latest_slot = Some(slot);
         state.frame_capture_s = Some(f.capture_s);
         let mut photometric = state.photometric;
         if let Some(bg) = state.background.clone()
@@ -727,51 +699,43 @@ fn prepare_frame(
         }
         state.photometric = photometric;
     }
-    // This update's inputs; the composite takes those of PIPELINE_LAG updates ago.
-    let entry = StageInputs {
+    // This update's inputs: all three passes render them in this update's frame.
+    let current = StageInputs {
         frame: live
             .frame
             .as_ref()
             .map(|f| (f.capture_s, f.index, f.rgba.clone())),
-        slot: state.latest_slot,
         photometric: state.photometric,
         background: state.background.clone(),
         dirty,
     };
-    state.stages.push_back(entry);
-    while state.stages.len() > PIPELINE_LAG + 1 {
-        state.stages.pop_front();
-    }
-    let Some(due) = state.stage(PIPELINE_LAG).cloned() else {
+    if !dirty {
+        state.current = Some(current);
         return;
-    };
-    if let Some(bg) = &due.background
+    }
+    if let Some(bg) = &current.background
         && let Some(mut image) = images.get_mut(&targets.background)
         && image.data.as_deref() != Some(bg.as_slice())
     {
         image.data = Some(bg.as_ref().clone());
     }
     if let Some(mut m) = composite_materials.get_mut(&passes.composite) {
-        let mut params = composite_params(&s, &due.photometric, due.background.is_some());
+        let mut params = composite_params(&s, &current.photometric, current.background.is_some());
         params.size = UVec2::new(k.width, k.height);
         m.params = params;
-        if let Some(slot) = due.slot
-            && m.live != targets.live[slot]
-        {
-            m.live = targets.live[slot].clone();
-        }
     }
+    state.current = Some(current);
 }
 
-/// Renders each pass only at the update its stage works on something new (a camera frame, new
-/// settings or H); until the pipeline is full, every pass renders.
+/// Renders the passes only in an update with something new to draw (a camera frame, new
+/// settings or H); before the first update of the pipeline, every pass renders.
 fn gate_passes(mut state: ResMut<EraseState>, mut passes: Query<(&ErasePass, &mut Camera)>) {
+    let active = state.current.as_ref().is_none_or(|s| s.dirty);
     for (pass, mut camera) in &mut passes {
-        let active = state.stage(pass.lag).is_none_or(|s| s.dirty);
         if camera.is_active != active {
             camera.is_active = active;
         }
-        if active && let Some(n) = state.renders.get_mut(pass.lag.min(2)) {
+        if active && let Some(n) = state.renders.get_mut(pass.stage.min(2)) {
             *n += 1;
         }
     }

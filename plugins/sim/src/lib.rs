@@ -14,11 +14,11 @@ use avatarm_core::sim::{JointCommand, SimRobot, SimRobotParams};
 use avatarm_core::trajectory::JointTrajectory;
 pub use avatarm_twin::camera::{spawn_pinhole_camera, target_image};
 use avatarm_twin::prelude::*;
+use avatarm_twin::readback::{ImageRead, ImageReadbackPlugin, read_image_once};
 use avatarm_twin::{TwinEntities, TwinMeshCache, layers};
 use avatarm_video::{VideoFrame, VideoInbox};
 use bevy::camera::visibility::RenderLayers;
 use bevy::prelude::*;
-use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
 use nalgebra::{DVector, Isometry3};
 use serde::{Deserialize, Serialize};
 
@@ -174,6 +174,9 @@ impl Plugin for SimRoomPlugin {
             .world()
             .get_resource::<SimRoomConfig>()
             .map_or(100.0, |c| c.control_rate_hz);
+        if !app.is_plugin_added::<ImageReadbackPlugin>() {
+            app.add_plugins(ImageReadbackPlugin);
+        }
         app.insert_resource(Time::<Fixed>::from_hz(rate))
             .configure_sets(FixedUpdate, SimRoomSystems::Step)
             .configure_sets(
@@ -477,30 +480,24 @@ fn capture_video(
     let index = counter.frames;
     counter.frames += 1;
     counter.last = Some((index, capture_s));
-    commands
-        .spawn(Screenshot::image(cameras.real.clone()))
-        .observe(
-            move |captured: On<ScreenshotCaptured>, mut inbox: ResMut<VideoInbox>| {
-                let image = &captured.image;
-                let (width, height) = (image.width(), image.height());
-                let Some(mut rgba) = image.data.clone() else {
-                    error!("simulated camera: frame {index} came back without pixels");
-                    return;
-                };
-                video
-                    .sensor
-                    .apply(&mut rgba, capture_s, &mut Rng::stream(video.seed, index));
-                let frame = VideoFrame {
-                    index,
-                    capture_s,
-                    arrival_s: capture_s + video.frame_latency_s,
-                    width,
-                    height,
-                    rgba: Arc::new(rgba),
-                };
-                if let Err(e) = inbox.push(frame) {
-                    error!("simulated camera: {e}");
-                }
-            },
-        );
+    read_image_once(&mut commands, cameras.real.clone()).observe(
+        move |read: On<ImageRead>, mut inbox: ResMut<VideoInbox>| {
+            let (width, height) = (read.width, read.height);
+            let mut rgba = read.data.clone();
+            video
+                .sensor
+                .apply(&mut rgba, capture_s, &mut Rng::stream(video.seed, index));
+            let frame = VideoFrame {
+                index,
+                capture_s,
+                arrival_s: capture_s + video.frame_latency_s,
+                width,
+                height,
+                rgba: Arc::new(rgba),
+            };
+            if let Err(e) = inbox.push(frame) {
+                error!("simulated camera: {e}");
+            }
+        },
+    );
 }

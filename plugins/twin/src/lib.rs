@@ -5,11 +5,14 @@
 //!   geometry as meshes on chosen [`RenderLayers`](bevy::camera::visibility::RenderLayers).
 //! - [`JointStateMessage`]s update a twin; bad ones are refused and the last good state kept.
 //! - [`camera::PinholeProjection`] matches a Bevy camera to pinhole intrinsics.
+//! - [`readback::read_image_once`] reads a render target back without disturbing the cameras
+//!   that sample it.
 //!
 //! Frames: Avatarm's world is the robot's world, z up, metres; link transforms are FK poses.
 
 pub mod camera;
 pub mod layers;
+pub mod readback;
 mod spawn;
 
 use std::sync::Arc;
