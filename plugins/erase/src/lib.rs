@@ -37,7 +37,7 @@ use std::sync::Arc;
 use avatarm_core::camera::PinholeCamera;
 use avatarm_core::dr::{self, EraseSettings, LinkSphere, Photometric, RgbaView};
 use avatarm_core::robot::RobotModel;
-use avatarm_twin::camera::{spawn_pinhole_camera, target_image};
+use avatarm_twin::camera::{SCENERY_DEPTH_BIAS, spawn_pinhole_camera, target_image};
 use avatarm_twin::prelude::*;
 use avatarm_twin::{TwinMeshCache, layers};
 use avatarm_video::{LiveVideo, VideoSystems};
@@ -427,6 +427,7 @@ fn setup(
     let black = std_materials.add(StandardMaterial {
         base_color: Color::BLACK,
         unlit: true,
+        depth_bias: SCENERY_DEPTH_BIAS,
         ..default()
     });
     for (mesh, transform) in &config.occluders {

@@ -12,6 +12,7 @@ use avatarm_core::robot::RobotModel;
 use avatarm_core::sensor::SensorModel;
 use avatarm_core::sim::{JointCommand, SimRobot, SimRobotParams};
 use avatarm_core::trajectory::JointTrajectory;
+use avatarm_twin::camera::SCENERY_DEPTH_BIAS;
 pub use avatarm_twin::camera::{spawn_pinhole_camera, target_image};
 use avatarm_twin::prelude::*;
 use avatarm_twin::readback::{ImageRead, ImageReadbackPlugin, read_image_once};
@@ -212,12 +213,14 @@ fn setup_room(
     let black = materials.add(StandardMaterial {
         base_color: Color::BLACK,
         unlit: true,
+        depth_bias: SCENERY_DEPTH_BIAS,
         ..default()
     });
     for (index, prop) in config.props.iter().enumerate() {
         let lit = materials.add(StandardMaterial {
             base_color: Color::srgba(prop.rgba[0], prop.rgba[1], prop.rgba[2], prop.rgba[3]),
             perceptual_roughness: 0.7,
+            depth_bias: SCENERY_DEPTH_BIAS,
             ..default()
         });
         for (part, local) in prop_parts(&prop.shape) {
