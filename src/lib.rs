@@ -179,6 +179,9 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> App {
         })
         .add_plugins((
             RobotTwinPlugin,
+            // Before the room (which adds it too when alone): the replay, the live scores and
+            // the empty-room background read images back with it.
+            avatarm_twin::readback::ImageReadbackPlugin,
             SimRoomPlugin,
             VideoPlugin,
             ErasePlugin,

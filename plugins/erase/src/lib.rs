@@ -119,7 +119,7 @@ pub struct EraseState {
     /// diagnostics.
     pub robot_region: Option<Arc<Vec<u8>>>,
     /// What the passes work on in this update.
-    pub current: Option<StageInputs>,
+    pub current: Option<PassInputs>,
     /// Renders of each pass so far: mask camera, threshold, composite. Each pass renders
     /// once per camera frame (and when the settings or H change), however fast the display
     /// updates: an XR headset at 72-90 Hz over a 30 fps camera does not redo the mask.
@@ -141,7 +141,7 @@ pub struct ErasePass {
 /// What the passes work on in one update: the mask camera renders the twin for `frame`, the
 /// threshold pass its mask and the composite pass erases it, all in that update's render.
 #[derive(Debug, Clone)]
-pub struct StageInputs {
+pub struct PassInputs {
     /// The newest frame at that update (capture time, index, pixels).
     pub frame: Option<(f64, u64, Arc<Vec<u8>>)>,
     /// The photometric model fitted to it.
@@ -701,7 +701,7 @@ fn prepare_frame(
         state.photometric = photometric;
     }
     // This update's inputs: all three passes render them in this update's frame.
-    let current = StageInputs {
+    let current = PassInputs {
         frame: live
             .frame
             .as_ref()
