@@ -2,8 +2,9 @@
 //!
 //! Every `every`-th camera frame, the room's ground truth at its capture (the robot's
 //! silhouette and the room without the robot) is read back, and so are the GPU's mask and
-//! composite of that frame at the end of the update that erases it; the frame is then scored as a replay scores every frame ([`crate::replay`]): IoU and leak
-//! of the erased region against the silhouette, PSNR of Ĩ(t) inside it. The preview shows the
+//! composite of that frame at the end of the update that erases it; the frame is then scored
+//! as a replay scores every frame ([`crate::replay`]): IoU and leak of the erased region
+//! against the silhouette, PSNR of Ĩ(t) inside it. The preview shows the
 //! mean of the last [`WINDOW`] scored frames. Sampling keeps the read-backs (four images per
 //! scored frame) off most frames.
 

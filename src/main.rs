@@ -454,7 +454,8 @@ fn run(cli: Cli) -> Result<(), String> {
     }
 }
 
-/// `--step-ms`: a time step in milliseconds, more than 0 and at most 250 (Bevy clamps a longer update).
+/// `--step-ms`: a time step in milliseconds, more than 0 and at most 250 (Bevy clamps a longer
+/// update).
 fn step_ms(s: &str) -> Result<f64, String> {
     let ms: f64 = s
         .parse()
