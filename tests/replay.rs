@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use avatarm::replay::{self, ReplayOptions};
-use avatarm::scene::{Scene, SceneError};
+use avatarm::scene::Scene;
 use avatarm_core::robot::{PackagePath, Shape};
 use nalgebra::{Isometry3, Point3};
 
@@ -186,78 +186,6 @@ fn replay_shows_the_robot_where_fk_and_the_camera_model_project_it() {
     assert!(moved > 0.01, "the robot did not move: {moved}");
 }
 
-#[test]
-fn bad_scenes_are_refused_naming_the_field() {
-    let path = root().join("assets/scenes/default.toml");
-    let text = std::fs::read_to_string(&path).unwrap();
-    let parse = |t: &str| Scene::parse(t, &path, &PackagePath::default());
-
-    let e = parse(&text.replace("fps = 30.0", "fps = 30.0\nfsp = 1")).unwrap_err();
-    assert!(
-        matches!(e, SceneError::Parse { .. }) && e.to_string().contains("fsp"),
-        "{e}"
-    );
-
-    let e = parse(&text.replace("fx = 461.0", "fx = -461.0"))
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("camera.intrinsics") && e.contains("fx"), "{e}");
-
-    let e = parse(&text.replace(
-        "q = { right_j0 = 0.1, right_j6 = 4.5 }",
-        "q = { right_j9 = 0.1 }",
-    ))
-    .unwrap_err()
-    .to_string();
-    assert!(
-        e.contains("timeline.robot[5].q") && e.contains("right_j9"),
-        "{e}"
-    );
-
-    let e = parse(&text.replace(
-        "latency_compensation = true",
-        "latency_compensation = true\nranges = [[240, 255], [250, 240], [240, 255], [240, 255]]",
-    ))
-    .unwrap_err()
-    .to_string();
-    assert!(e.contains("erase") && e.contains("G range"), "{e}");
-    let e = parse(&text.replace(
-        "[erase]",
-        "[background]\nsource = \"file\"\npath = \"nowhere.png\"\n\n[erase]",
-    ))
-    .unwrap_err()
-    .to_string();
-    assert!(
-        e.contains("background.path") && e.contains("nowhere.png"),
-        "{e}"
-    );
-    let e = parse(&text.replace("duration_s = 10.0", "duration_s = -1"))
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("duration_s"), "{e}");
-
-    let e = parse(&text.replace("sawyer_lite.urdf\"", "missing.urdf\""))
-        .unwrap_err()
-        .to_string();
-    assert!(
-        e.contains("robot.urdf") && e.contains("missing.urdf"),
-        "{e}"
-    );
-
-    let e = parse(&text.replace("t_s = 2.5", "t_s = 0.2"))
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("timeline.robot[1].t_s"), "{e}");
-
-    let e = parse(&format!("{text}\n[xr_layout]\npanel_distance_m = 0.05\n"))
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("xr_layout") && e.contains("0.05"), "{e}");
-    let xr = parse(&text.replace("duration_s = 10.0", "duration_s = 10.0\nxr = true"))
-        .expect("xr = true is a scene setting");
-    assert!(xr.file.xr);
-}
-
 /// Runs `avatarm run ARGS` under Xvfb; returns the log (stdout and stderr) after checking it
 /// succeeded without a panic.
 fn run_preview(args: &[&str], out: &Path) -> String {
@@ -321,7 +249,8 @@ fn run_teleoperates_the_pouring_task_live() {
     assert!(ticks >= 300.0, "{line}");
     assert!(grasps >= 1.0 && line.contains(" holding"), "{line}");
     assert!(lifted_mm > 5.0, "the real bottle is lifted: {line}");
-    assert!(off_mm < 25.0, "the real bottle follows its twin: {line}");
+    // Measured: 2.1 mm. Allowed: 8 mm.
+    assert!(off_mm < 8.0, "the real bottle follows its twin: {line}");
     assert!(load_rgb(&shot).dimensions() == (1280, 720));
 }
 
@@ -329,11 +258,18 @@ fn run_teleoperates_the_pouring_task_live() {
 #[test]
 fn run_refuses_a_hand_it_cannot_use() {
     let pouring = "assets/scenes/pouring.toml";
-    let cases: [(&[&str], &str); 4] = [
+    // ../shared/cases/16-hand-zero-quaternion: line 4 gives index_proximal the orientation
+    // [0, 0, 0, 0]; it used to run without the hand and exit 0.
+    let zero = "tests/fixtures/zero_quat.hand.jsonl";
+    let cases: [(&[&str], &str); 5] = [
         (&["--hand", "desktop"], "no [task]"),
         (&[pouring, "--hand", "xr"], "needs XR mode"),
         (&[pouring, "--hand", "glove"], "'glove': expected"),
         (&[pouring, "--hand", "gone.hand.jsonl"], "does not exist"),
+        (
+            &[pouring, "--hand", zero, "--frames", "30"],
+            "zero_quat.hand.jsonl: line 4: joint index_proximal: zero-length orientation",
+        ),
     ];
     for (args, message) in cases {
         let out = Command::new(env!("CARGO_BIN_EXE_avatarm"))
@@ -345,10 +281,31 @@ fn run_refuses_a_hand_it_cannot_use() {
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{args:?} was accepted");
         assert!(
-            err.contains("--hand") && err.contains(message),
+            (err.contains("--hand") || args.contains(&zero)) && err.contains(message),
             "{args:?}: {err}"
         );
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
     }
+}
+
+/// `avatarm run` without a display says what to do instead, with a non-zero exit and no panic.
+#[test]
+fn run_without_a_display_says_so() {
+    let out = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["run", "--frames", "1"])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .env_remove("WAYLAND_SOCKET")
+        .current_dir(root())
+        .output()
+        .expect("avatarm runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("no display") && err.contains("xvfb-run"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
 }
 
 /// `avatarm run --xr` on a machine without an OpenXR runtime (this one): one line says so, the
@@ -433,7 +390,8 @@ fn preview_erases_with_a_camera_frame_on_every_update() {
     assert!(line.contains("frames scored live"), "{line}");
     let (scored, iou, leak) = (n[4], n[5], n[6]);
     assert!(scored >= 1.0, "{line}");
-    assert!(iou >= 0.98 && leak <= 1.0, "{line}");
+    // Measured: IoU 0.988, leak 0.03 %. Allowed: IoU 0.975, leak 0.3 %.
+    assert!(iou >= 0.975 && leak <= 0.3, "{line}");
 }
 
 #[test]
@@ -571,9 +529,11 @@ fn default_scene_erases_the_robot() {
     let mut scene = default_scene();
     scene.file.duration_s = 3.0; // the reach: the arm moves most of this time
     let r = run(&scene, "dr_default");
-    assert!(num(&r, "mask.iou_mean") >= 0.98, "{}", r["mask"]);
-    assert!(num(&r, "mask.leak_pct_mean") <= 1.0, "{}", r["mask"]);
-    assert!(num(&r, "dr.psnr_robot_db_mean") >= 30.0, "{}", r["dr"]);
+    // Measured (llvmpipe): IoU 0.9992, leak 0.007 %, PSNR 46.3 dB. Allowed: IoU down by
+    // 0.0025, leak 7x, PSNR 3 dB lower.
+    assert!(num(&r, "mask.iou_mean") >= 0.9967, "{}", r["mask"]);
+    assert!(num(&r, "mask.leak_pct_mean") <= 0.05, "{}", r["mask"]);
+    assert!(num(&r, "dr.psnr_robot_db_mean") >= 43.0, "{}", r["dr"]);
     for stage in ["mask", "composite", "frame"] {
         assert!(num(&r, &format!("timing_ms.{stage}.median")) > 0.0);
     }
@@ -626,9 +586,11 @@ fn latency_compensation_cuts_the_leak_at_full_speed() {
         num(&off, "mask.leak_pct_mean"),
     );
     eprintln!("leak with compensation {leak_on:.3} %, without {leak_off:.3} %");
-    assert!(leak_off >= 3.0 * leak_on, "on {leak_on} vs off {leak_off}");
+    // Measured: on 0.010 %, off 3.06 % (306x). Allowed: on up to 0.1 %, at least 20x less.
+    assert!(leak_on <= 0.1, "with compensation: {leak_on}");
+    assert!(leak_off >= 20.0 * leak_on, "on {leak_on} vs off {leak_off}");
     assert!(
-        leak_off > 0.5,
+        leak_off > 1.0,
         "without compensation the fast arm must leak: {leak_off}"
     );
 }
@@ -646,8 +608,9 @@ fn photometric_compensation_follows_exposure() {
         num(&off, "dr.psnr_robot_db_mean"),
     );
     eprintln!("PSNR with photometric compensation {p_on:.2} dB, without {p_off:.2} dB");
-    assert!(p_on >= 27.0, "{p_on}");
-    assert!(p_on >= p_off + 6.0, "on {p_on} vs off {p_off}");
+    // Measured: on 46.3 dB, off 21.1 dB. Allowed: on 3 dB lower, a gain of at least 15 dB.
+    assert!(p_on >= 43.0, "{p_on}");
+    assert!(p_on >= p_off + 15.0, "on {p_on} vs off {p_off}");
 }
 
 /// A 1 degree / 5 mm calibration error: how much dilation restores leak <= 1 %.
@@ -674,11 +637,13 @@ fn dilation_covers_calibration_error() {
     eprintln!(
         "calibration error 1 deg / 5 mm: (dilate_px, leak %, overmask %, PSNR dB) = {table:?}"
     );
+    // Measured: leak 11.2 / 3.06 / 0.57 / 0.0 % at 0 / 4 / 8 / 12 px.
     assert!(
-        table[0].1 > 1.0,
+        table[0].1 > 5.0,
         "the error must show without dilation: {table:?}"
     );
     let d = restored.expect("some dilation restores leak <= 1 %");
+    assert!(d <= 8, "8 px restored it when measured: {d} px, {table:?}");
     eprintln!("dilation that restores leak <= 1 %: {d} px");
     // More dilation never leaks more, and erases the robot region better (the background it
     // paints is the room, so PSNR inside the robot rises with the covered share).
@@ -749,4 +714,59 @@ fn bench_dr_writes_the_chart_and_the_table() {
     assert!(svg.contains("Pareto front"));
     let png = image::open(out.join("dr_speed_accuracy.png")).expect("png");
     assert!(png.width() >= 800);
+}
+
+/// No two of the project's own systems touch the same data in an undefined order, in any
+/// schedule: the replay's app with the preview's plugins, the live scores, the XR view and the
+/// live teleoperation added (everything `avatarm run` and `avatarm replay` can add), built with
+/// Bevy's ambiguity detection.
+#[test]
+fn the_apps_own_systems_run_in_a_defined_order() {
+    let scene = scene("pouring");
+    let options = ReplayOptions::new(out_dir("ambiguities"));
+    let mut app = avatarm::build_app(&scene, &avatarm::Mode::Headless(options)).expect("app");
+    let preview = avatarm::preview::PreviewOptions {
+        frames: Some(1),
+        screenshot: None,
+        xr: false,
+        fixed_step_s: None,
+        webcam: None,
+        hand: None,
+    };
+    app.add_plugins((
+        avatarm::preview::PreviewPlugin(preview),
+        avatarm::preview::live_scores::LiveDrPlugin { every: 15 },
+    ));
+    #[cfg(feature = "xr")]
+    app.add_plugins(avatarm::preview::xr::XrViewPlugin);
+    avatarm::teleop::add_live_teleop(&mut app, &scene, &avatarm::scene::hand::HandChoice::Desktop)
+        .expect("live teleoperation");
+    // Two systems of this test that write the same resource unordered: the check must see them.
+    app.init_resource::<Probe>()
+        .add_systems(bevy::prelude::Update, (probe_a, probe_b));
+    let found = avatarm::app::ambiguities(&mut app, &["avatarm", "replay::probe"]);
+    let (probes, ours): (Vec<&String>, Vec<&String>) =
+        found.iter().partition(|f| f.contains("replay::probe"));
+    assert_eq!(probes.len(), 1, "the check finds a planted pair: {found:?}");
+    assert!(probes[0].contains("probe_a") && probes[0].contains("probe_b"));
+    assert!(
+        ours.is_empty(),
+        "{} ambiguous pairs of Avatarm's systems:\n{}",
+        ours.len(),
+        ours.iter()
+            .map(|s| s.as_str())
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+}
+
+#[derive(bevy::prelude::Resource, Default)]
+struct Probe(u32);
+
+fn probe_a(mut p: bevy::prelude::ResMut<Probe>) {
+    p.0 += 1;
+}
+
+fn probe_b(mut p: bevy::prelude::ResMut<Probe>) {
+    p.0 += 2;
 }

@@ -10,11 +10,13 @@ use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use avatarm_core::grasp::Contact;
-use avatarm_core::kinematics::Frame;
-use avatarm_core::mapping::{Mapper, MappingSettings, RobotSide, TickInputs, VirtualToReal};
+use avatarm_core::robot::kinematics::Frame;
 use avatarm_core::robot::{PackagePath, RobotModel};
-use avatarm_core::safety::{self, SafetyLimiter, SafetySettings};
+use avatarm_core::teleop::grasp::Contact;
+use avatarm_core::teleop::mapping::{
+    Mapper, MappingSettings, RobotSide, TickInputs, VirtualToReal,
+};
+use avatarm_core::teleop::safety::{self, SafetyLimiter, SafetySettings};
 use common::median;
 use criterion::{BenchmarkId, Criterion};
 use nalgebra::{DVector, Isometry3, Vector3};

@@ -2,6 +2,13 @@
 
 use std::path::PathBuf;
 
+impl Error {
+    /// An [`Error::GraspNotFinite`].
+    pub fn grasp_not_finite(what: &'static str) -> Self {
+        Self::GraspNotFinite { what }
+    }
+}
+
 /// Result with the core's [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
@@ -209,6 +216,56 @@ pub enum Error {
         what: String,
         /// What is wrong.
         message: String,
+    },
+    /// A line of a hand recording (`.hand.jsonl`) that is not a valid frame record.
+    #[error("line {line}: {source}")]
+    HandRecordLine {
+        /// 1-based line.
+        line: usize,
+        /// The JSON parser's error.
+        source: serde_json::Error,
+    },
+    /// A hand frame that cannot be used: a joint with a zero-length orientation, a non-finite
+    /// pose, the wrong joint count, time going back.
+    #[error("{}{}{message}", .line.map(|n| format!("line {n}: ")).unwrap_or_default(), .joint.map(|j| format!("joint {j}: ")).unwrap_or_default())]
+    BadHandFrame {
+        /// 1-based line in a recording, when the frame came from one.
+        line: Option<usize>,
+        /// The joint at fault (an OpenXR hand joint name), when one is.
+        joint: Option<&'static str>,
+        /// What is wrong.
+        message: String,
+    },
+    /// An input of the control tick that cannot be used (the caller stops the robot).
+    #[error("control tick: {message}")]
+    BadTickInput {
+        /// What is wrong.
+        message: String,
+    },
+    /// Inverse kinematics did not reach the target pose.
+    #[error("IK: {message}")]
+    Ik {
+        /// Why, with the error left.
+        message: String,
+    },
+    /// A grasp with no contacts.
+    #[error("grasp: no contacts")]
+    NoContacts,
+    /// A NaN or infinite number in a grasp's input.
+    #[error("grasp: {what} is not finite")]
+    GraspNotFinite {
+        /// Which input.
+        what: &'static str,
+    },
+    /// A grasp's inputs whose sizes do not agree.
+    #[error("grasp: {what}: expected {expected} values, got {got}")]
+    GraspSize {
+        /// Which input.
+        what: &'static str,
+        /// Expected count.
+        expected: usize,
+        /// Given count.
+        got: usize,
     },
     /// A setting out of its range.
     #[error("{what}: {message}")]

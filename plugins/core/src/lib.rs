@@ -1,46 +1,36 @@
 //! Avatarm's pure core: everything that is maths, not ECS.
 //!
-//! - [`robot`]: robot descriptions loaded from URDF (through `urdf-rs`), with mesh URIs resolved
-//!   through a package search path, as a tree of links and joints in depth-first order.
-//! - [`kinematics`]: forward kinematics of every link and geometric Jacobians.
-//! - [`ik`]: damped-least-squares velocity IK with joint position and velocity limits.
-//! - [`mesh`]: triangle meshes from STL, OBJ and glTF/GLB files.
-//! - [`camera`]: pinhole cameras (intrinsics + pose) and projection of world points to pixels.
+//! - [`robot`]: robot descriptions from URDF ([`robot::RobotModel`]), meshes, forward
+//!   kinematics and Jacobians, IK and joint trajectories.
+//! - [`vision`]: pinhole cameras, the camera's sensor model, and where the object's twin is
+//!   placed in front of the video panel (the paper's perspective equations).
 //! - [`dr`]: diminished reality on the CPU: mask, feathering, composite, photometric fit and
 //!   scores; the reference the GPU passes are checked against.
-//! - [`placement`]: where the object's twin goes in front of the video panel so that it covers
-//!   the real object's pixels (the paper's perspective equations, for any pinhole camera).
+//! - [`teleop`]: the hand skeleton and hand sources, grasp maths, the mapping tick and the
+//!   safety limiter.
 //! - [`sim`]: the simulated robot (command latency, first-order response, limits, delayed joint
 //!   states) that stands in for the real arm.
 //! - [`rng`]: a small seeded generator so that every replay is reproducible.
+//! - [`error`]: the crate's error type.
 //!
 //! Nothing here imports Bevy; time is always an argument.
 
-pub mod camera;
 pub mod dr;
 pub mod error;
-pub mod grasp;
-pub mod hand;
-pub mod ik;
-pub mod kinematics;
-pub mod mapping;
-pub mod mesh;
-pub mod placement;
 pub mod rng;
 pub mod robot;
-pub mod safety;
-pub mod sensor;
 pub mod sim;
-pub mod trajectory;
+pub mod teleop;
+pub mod vision;
 
 pub use error::{Error, Result};
 
 /// The types most users of the core need.
 pub mod prelude {
-    pub use crate::camera::{CameraPose, Intrinsics, PinholeCamera};
     pub use crate::error::{Error, Result};
-    pub use crate::ik::{DlsSettings, IkStep, dls_step};
-    pub use crate::kinematics::Frame;
+    pub use crate::robot::ik::{DlsSettings, IkStep, dls_step};
+    pub use crate::robot::kinematics::Frame;
     pub use crate::robot::{JointKind, LinkId, RobotModel, Shape};
     pub use crate::sim::{JointCommand, JointState, SimRobot, SimRobotParams};
+    pub use crate::vision::camera::{CameraPose, Intrinsics, PinholeCamera};
 }

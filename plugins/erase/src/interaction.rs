@@ -1,11 +1,11 @@
 //! The interaction layer: what the user sees. The composite Ĩ(t) on a video panel that spans
 //! the camera's frustum, and the object twins in front of it, placed by the paper's
-//! perspective equations ([`avatarm_core::placement`]) so that each covers its real object's
+//! perspective equations ([`avatarm_core::vision::placement`]) so that each covers its real object's
 //! pixels. The interaction camera renders [`layers::INTERACTION`] into
 //! [`InteractionTargets::view`]; the preview shows that image, and the XR mode the same panel.
 
-use avatarm_core::camera::PinholeCamera;
-use avatarm_core::placement::{panel_corners, place_twin};
+use avatarm_core::vision::camera::PinholeCamera;
+use avatarm_core::vision::placement::{panel_corners, place_twin};
 use avatarm_twin::camera::{spawn_pinhole_camera, target_image};
 use avatarm_twin::{iso_to_transform, layers};
 use bevy::camera::visibility::RenderLayers;
@@ -67,7 +67,9 @@ impl Plugin for InteractionPlugin {
     fn build(&self, app: &mut App) {
         app.add_systems(PostStartup, setup).add_systems(
             Update,
-            follow_objects.run_if(resource_changed::<InteractionConfig>),
+            follow_objects
+                .run_if(resource_changed::<InteractionConfig>)
+                .in_set(crate::EraseSystems::Interaction),
         );
     }
 }
@@ -77,10 +79,9 @@ impl Plugin for InteractionPlugin {
 pub fn twin_transform(
     config: &InteractionConfig,
     object: &ObjectTwinSpec,
-) -> Result<(Transform, f64), String> {
+) -> Result<(Transform, f64), avatarm_core::Error> {
     let depth = config.object_depth_m.min(0.9 * config.panel_distance_m);
-    let placement = place_twin(&config.real_camera, &object.world_from_object, depth)
-        .map_err(|e| e.to_string())?;
+    let placement = place_twin(&config.real_camera, &object.world_from_object, depth)?;
     let world_from_twin = config.camera.world_from_camera * placement.camera_from_twin;
     Ok((
         iso_to_transform(&world_from_twin).with_scale(Vec3::splat(placement.scale as f32)),

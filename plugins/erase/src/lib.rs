@@ -27,6 +27,9 @@
 //! to each frame on the CPU (both images are CPU data anyway) outside a conservative robot
 //! region: the links' bounding spheres projected by FK ([`avatarm_core::dr::sphere_mask`]).
 //! The CPU reference of steps 3–4 is [`avatarm_core::dr`].
+//!
+//! Modules: [`interaction`] (the panel, the object twins and the interaction camera),
+//! [`gpu_timing`] (each pass timed with GPU timestamp queries).
 
 pub mod gpu_timing;
 pub mod interaction;
@@ -34,14 +37,14 @@ pub mod interaction;
 use std::collections::VecDeque;
 use std::sync::Arc;
 
-use avatarm_core::camera::PinholeCamera;
 use avatarm_core::dr::{self, EraseSettings, LinkSphere, Photometric, RgbaView};
 use avatarm_core::robot::RobotModel;
+use avatarm_core::vision::camera::PinholeCamera;
 use avatarm_twin::camera::{SCENERY_DEPTH_BIAS, spawn_pinhole_camera, target_image};
+use avatarm_twin::layers;
 use avatarm_twin::prelude::*;
-use avatarm_twin::{TwinMeshCache, layers};
 use avatarm_video::{LiveVideo, VideoSystems};
-use bevy::asset::{RenderAssetUsages, embedded_asset};
+use bevy::asset::embedded_asset;
 use bevy::camera::RenderTarget;
 use bevy::camera::visibility::RenderLayers;
 use bevy::camera::{OrthographicProjection, ScalingMode};
@@ -49,15 +52,19 @@ use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
 use bevy::pbr::{Material, MaterialPlugin};
 use bevy::prelude::*;
 use bevy::render::extract_component::ExtractComponent;
-use bevy::render::render_resource::{
-    AsBindGroup, Extent3d, ShaderType, TextureDimension, TextureFormat, TextureUsages,
-};
+use bevy::render::render_resource::{AsBindGroup, ShaderType, TextureFormat, TextureUsages};
 use bevy::render::view::Msaa;
 use bevy::shader::ShaderRef;
 use nalgebra::{DVector, Isometry3};
 
 pub use gpu_timing::{GpuPassTimes, PASS_NAMES, PassTimes};
 pub use interaction::{InteractionConfig, InteractionPlugin, InteractionTargets};
+
+/// What most users of the erase pipeline need.
+pub mod prelude {
+    pub use crate::interaction::{InteractionConfig, InteractionPlugin, ObjectTwinSpec};
+    pub use crate::{EraseConfig, ErasePlugin, EraseState, EraseSystems, EraseTargets};
+}
 
 /// Render order of the mask camera; the passes follow it.
 const MASK_CAMERA_ORDER: isize = -20;
@@ -216,11 +223,15 @@ impl JointHistory {
     }
 }
 
-/// The erase system sets (`Update`, after the video is published).
+/// The erase system sets (`Update`, after the video is published), in this order.
 #[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum EraseSystems {
-    /// Joint history, background, live frame upload, mask twin pose, photometric fit.
+    /// Joint history, background, live frame upload, mask twin pose, photometric fit
+    /// (`Update`).
     Prepare,
+    /// The interaction layer: object twins follow their objects (`Update`,
+    /// [`InteractionPlugin`]).
+    Interaction,
 }
 
 /// The threshold pass's material.
@@ -320,7 +331,13 @@ impl Plugin for ErasePlugin {
         .add_message::<CaptureBackground>()
         .init_resource::<EraseState>()
         .init_resource::<JointHistory>()
-        .configure_sets(Update, EraseSystems::Prepare.after(VideoSystems::Publish))
+        .configure_sets(
+            Update,
+            (
+                EraseSystems::Prepare.after(VideoSystems::Publish),
+                EraseSystems::Interaction.after(EraseSystems::Prepare),
+            ),
+        )
         .add_systems(Startup, setup)
         .add_systems(
             Update,
@@ -333,19 +350,12 @@ impl Plugin for ErasePlugin {
 
 /// An RGBA8 image the CPU writes and the GPU samples as raw 8-bit values (not sRGB-decoded).
 pub fn upload_image(width: u32, height: u32) -> Image {
-    let mut image = Image::new_fill(
-        Extent3d {
-            width,
-            height,
-            depth_or_array_layers: 1,
-        },
-        TextureDimension::D2,
-        &[0, 0, 0, 255],
+    avatarm_twin::camera::rgba8_image(
+        width,
+        height,
         TextureFormat::Rgba8Unorm,
-        RenderAssetUsages::default(),
-    );
-    image.texture_descriptor.usage = TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_DST;
-    image
+        TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_DST,
+    )
 }
 
 /// Spawns an orthographic camera that draws one full-target quad with `material` into
@@ -396,35 +406,27 @@ fn spawn_pass<M: Material>(
     ));
 }
 
-#[expect(clippy::too_many_arguments, reason = "a startup system's inputs")]
 fn setup(
     mut commands: Commands,
     config: Res<EraseConfig>,
-    mut meshes: ResMut<Assets<Mesh>>,
-    mut std_materials: ResMut<Assets<StandardMaterial>>,
+    mut twin_assets: TwinAssets,
     mut mask_materials: ResMut<Assets<MaskMaterial>>,
     mut composite_materials: ResMut<Assets<CompositeMaterial>>,
     mut images: ResMut<Assets<Image>>,
-    mut cache: ResMut<TwinMeshCache>,
 ) {
     let k = config.camera.intrinsics;
     let raw_k = k.scaled(config.settings.resolution_scale);
-    let twin = spawn_twin(&mut commands, config.model.clone(), &config.base);
-    if let Err(e) = attach_visuals(
+    let twin = spawn_twin_with_visuals(
         &mut commands,
-        &mut meshes,
-        &mut std_materials,
-        &mut cache,
+        &mut twin_assets,
         &config.model,
-        &twin,
+        &config.base,
         TwinAppearance::Unlit(Color::WHITE),
-        GeometrySource::Visual,
         &RenderLayers::layer(layers::MASK_TWIN),
-    ) {
-        error!("mask twin: {e}");
-    }
+        "mask twin",
+    );
     commands.insert_resource(MaskTwin(twin.root));
-    let black = std_materials.add(StandardMaterial {
+    let black = twin_assets.materials.add(StandardMaterial {
         base_color: Color::BLACK,
         unlit: true,
         depth_bias: SCENERY_DEPTH_BIAS,
@@ -433,7 +435,7 @@ fn setup(
     for (mesh, transform) in &config.occluders {
         commands.spawn((
             Name::new("mask occluder"),
-            Mesh3d(meshes.add(mesh.clone())),
+            Mesh3d(twin_assets.meshes.add(mesh.clone())),
             MeshMaterial3d(black.clone()),
             *transform,
             RenderLayers::layer(layers::MASK_TWIN),
@@ -478,7 +480,7 @@ fn setup(
     });
     spawn_pass(
         &mut commands,
-        &mut meshes,
+        &mut twin_assets.meshes,
         mask_material.clone(),
         mask.clone(),
         layers::MASK_PASS,
@@ -487,7 +489,7 @@ fn setup(
     );
     spawn_pass(
         &mut commands,
-        &mut meshes,
+        &mut twin_assets.meshes,
         composite_material.clone(),
         composite.clone(),
         layers::COMPOSITE_PASS,
@@ -778,3 +780,6 @@ mod tests {
         assert!(JointHistory::default().at(0.0).is_none());
     }
 }
+
+#[cfg(test)]
+mod headless_tests;

@@ -16,8 +16,10 @@
 //! palm position. Joint frames follow Avatarm's convention: +x along the bone toward the tip,
 //! +z out of the back of the hand (against Leap's palm normal). Radii are half the bone widths.
 
-use avatarm_core::hand::{HandFrame, HandJoint, Handedness, JOINT_NAMES};
+use avatarm_core::teleop::hand::{HandFrame, HandJoint, Handedness, JOINT_NAMES};
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+
+use crate::HandError;
 
 /// One Leap bone: its two joints (mm, Leap frame) and width (mm).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -72,7 +74,16 @@ impl Default for LeapMount {
 
 /// Converts one Leap hand at app time `t_s` into a frame in the scene. Errors name the bone
 /// when a number is not finite or a bone has no length where one is needed.
-pub fn leap_frame(data: &LeapHandData, mount: &LeapMount, t_s: f64) -> Result<HandFrame, String> {
+pub fn leap_frame(
+    data: &LeapHandData,
+    mount: &LeapMount,
+    t_s: f64,
+) -> Result<HandFrame, HandError> {
+    let bad = |what: String, message: &str| HandError::BadTrackerFrame {
+        tracker: "Leap",
+        what,
+        message: message.to_owned(),
+    };
     const DIGITS: [&str; 5] = ["thumb", "index", "middle", "ring", "pinky"];
     const BONES: [&str; 4] = ["metacarpal", "proximal", "intermediate", "distal"];
     let to_scene = |p: [f32; 3]| -> Vector3<f64> {
@@ -83,7 +94,7 @@ pub fn leap_frame(data: &LeapHandData, mount: &LeapMount, t_s: f64) -> Result<Ha
         if v.iter().all(|x| x.is_finite()) {
             Ok(())
         } else {
-            Err(format!("Leap {what}: not finite"))
+            Err(bad(what, "not finite"))
         }
     };
     finite("palm".into(), &data.palm)?;
@@ -104,7 +115,7 @@ pub fn leap_frame(data: &LeapHandData, mount: &LeapMount, t_s: f64) -> Result<Ha
             f64::from(data.palm_normal[2]),
         ))
     .try_normalize(1e-9)
-    .ok_or("Leap palm normal: zero length")?;
+    .ok_or_else(|| bad("palm normal".into(), "zero length"))?;
     // Joint positions, their bone direction (toward the tip) and radius, in OpenXR order.
     let mut points: Vec<(Vector3<f64>, Vector3<f64>, f64)> = Vec::with_capacity(26);
     let wrist = to_scene(data.arm.next);
@@ -131,10 +142,10 @@ pub fn leap_frame(data: &LeapHandData, mount: &LeapMount, t_s: f64) -> Result<Ha
         .map(|(&(p, along, radius), name)| {
             let x = along
                 .try_normalize(1e-6)
-                .ok_or_else(|| format!("Leap bone at {name}: zero length"))?;
+                .ok_or_else(|| bad(format!("bone at {name}"), "zero length"))?;
             let z = (back - x * back.dot(&x))
                 .try_normalize(1e-6)
-                .ok_or_else(|| format!("Leap bone at {name}: along the palm normal"))?;
+                .ok_or_else(|| bad(format!("bone at {name}"), "along the palm normal"))?;
             let y = z.cross(&x);
             let r = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, z]));
             Ok(HandJoint {
@@ -145,7 +156,7 @@ pub fn leap_frame(data: &LeapHandData, mount: &LeapMount, t_s: f64) -> Result<Ha
                 radius: radius.max(1e-3),
             })
         })
-        .collect::<Result<Vec<_>, String>>()?;
+        .collect::<Result<Vec<_>, HandError>>()?;
     let frame = HandFrame {
         t_s,
         hand: data.hand,
@@ -166,12 +177,12 @@ mod device {
     use std::sync::{Arc, Mutex};
     use std::time::Instant;
 
-    use avatarm_core::hand::{HandFrame, Handedness};
+    use avatarm_core::teleop::hand::{HandFrame, Handedness};
     use bevy::log::{error, info, warn};
     use leaprs::{Connection, ConnectionConfig, EventRef, HandType};
 
     use super::{LeapBone, LeapHandData, LeapMount, leap_frame};
-    use crate::HandSource;
+    use crate::{HandError, HandSource};
 
     /// What the Leap source tracks.
     #[derive(Debug, Clone, Copy)]
@@ -224,7 +235,7 @@ mod device {
     impl LeapHand {
         /// Starts the worker. Fails only when the thread cannot start; a missing service or
         /// device is reported from the worker, and the source then stays silent.
-        pub fn start(options: LeapOptions) -> Result<Self, String> {
+        pub fn start(options: LeapOptions) -> Result<Self, HandError> {
             let (tx, rx) = channel();
             let timeout = options.service_timeout_s;
             let stop = Arc::new(AtomicBool::new(false));
@@ -232,7 +243,10 @@ mod device {
             std::thread::Builder::new()
                 .name("leap".into())
                 .spawn(move || worker(&tx, timeout, &stop_worker))
-                .map_err(|e| format!("Leap: cannot start the worker thread: {e}"))?;
+                .map_err(|e| HandError::Device {
+                    source_name: "Leap",
+                    message: format!("cannot start the worker thread: {e}"),
+                })?;
             Ok(Self {
                 options,
                 rx: Mutex::new(rx),
@@ -449,14 +463,14 @@ mod tests {
         let mut nan = flat_hand();
         nan.digits[3][2].next[1] = f32::NAN;
         let e = leap_frame(&nan, &LeapMount::default(), 0.0).expect_err("NaN");
-        assert!(e.contains("ring intermediate"), "{e}");
+        assert!(e.to_string().contains("ring intermediate"), "{e}");
         let mut flat = flat_hand();
         flat.palm_normal = [0.0; 3];
         let e = leap_frame(&flat, &LeapMount::default(), 0.0).expect_err("no normal");
-        assert!(e.contains("palm normal"), "{e}");
+        assert!(e.to_string().contains("palm normal"), "{e}");
         let mut short = flat_hand();
         short.digits[1][3].next = short.digits[1][3].prev;
         let e = leap_frame(&short, &LeapMount::default(), 0.0).expect_err("zero bone");
-        assert!(e.contains("index"), "{e}");
+        assert!(e.to_string().contains("index"), "{e}");
     }
 }

@@ -2,7 +2,7 @@
 //! contacts they make, every physics step.
 //!
 //! - Sources ([`HandSource`]): anything that yields timestamped 26-joint
-//!   [`HandFrame`](avatarm_core::hand::HandFrame)s: a scripted hand ([`ScriptedHand`]), a
+//!   [`HandFrame`](avatarm_core::teleop::hand::HandFrame)s: a scripted hand ([`ScriptedHand`]), a
 //!   recorded `.hand.jsonl` file ([`RecordedHand`]), Leap Motion ([`leap`]) and OpenXR hand
 //!   tracking ([`openxr`], frames pushed by the app's XR mode into a [`openxr::HandInbox`]).
 //! - Bodies: one capsule per phalanx (thumb 2, fingers 3 each) and a box for the palm, no more
@@ -12,15 +12,29 @@
 //!   at most its drive, it does not teleport into it) and nothing tunnels.
 //! - Contacts ([`ObjectContacts`]): after each step, every contact between a hand body and a
 //!   body marked [`GraspTarget`]: world point, inward normal, normal force (impulse / step) and
-//!   the hand's velocity at that point, ready for [`avatarm_core::grasp`].
+//!   the hand's velocity at that point, ready for [`avatarm_core::teleop::grasp`].
+//!
+//! Modules: [`leap`] (Leap Motion's bones to the skeleton; the device behind feature `leap`),
+//! [`openxr`] (OpenXR hand joints to the skeleton), [`error`].
 
+pub mod error;
 pub mod leap;
 pub mod openxr;
 
+pub use error::HandError;
+
+/// What most users of the hand need.
+pub mod prelude {
+    pub use crate::{
+        ActiveHand, GraspTarget, HandContact, HandError, HandPlugin, HandSource, HandSystems,
+        HeldObject, ObjectContacts, RecordedHand, ScriptedHand,
+    };
+}
+
 use std::path::Path;
 
-use avatarm_core::grasp::Contact;
-use avatarm_core::hand::{
+use avatarm_core::teleop::grasp::Contact;
+use avatarm_core::teleop::hand::{
     HandFilter, HandFilterSettings, HandFrame, HandScript, JOINT_NAMES, PALM, WRIST, parse_frames,
 };
 use bevy::prelude::*;
@@ -78,13 +92,20 @@ pub struct RecordedHand {
 }
 
 impl RecordedHand {
-    /// Loads a file; errors name the file and line.
-    pub fn open(path: &Path) -> Result<Self, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
-        let frames = parse_frames(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+    /// Loads a `.hand.jsonl` file; errors name the file, the line and the joint.
+    pub fn open(path: &Path) -> Result<Self, HandError> {
+        let text = std::fs::read_to_string(path).map_err(|source| HandError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let frames = parse_frames(&text).map_err(|source| HandError::Recording {
+            path: path.to_owned(),
+            source: Box::new(source),
+        })?;
         if frames.is_empty() {
-            return Err(format!("{}: no hand frames", path.display()));
+            return Err(HandError::Empty {
+                path: path.to_owned(),
+            });
         }
         Ok(Self {
             name: path.display().to_string(),
@@ -192,26 +213,33 @@ pub struct HandPart {
 #[derive(Component, Debug, Clone, Copy, Default)]
 pub struct GraspTarget;
 
-/// Contacts of the hand on the grasp target, after the last physics step (world frame).
+/// One contact of a hand body on a grasp target, after a physics step (world frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HandContact {
+    /// The hand body that makes it.
+    pub part: Entity,
+    /// The grasp target it is on.
+    pub object: Entity,
+    /// Point, inward normal, and the normal force as `force` (N).
+    pub contact: Contact,
+    /// The hand body's velocity at the point (m/s).
+    pub hand_velocity: Vector3<f64>,
+    /// The object's own velocity at the point (m/s): the material point under the contact,
+    /// from the object's pose over the last step. For a grasp that holds (no slip) it equals
+    /// the hand's velocity there without the tracking jitter of the finger bodies, and it is
+    /// what the paper differentiates: the contact points' positions over time.
+    pub object_velocity: Vector3<f64>,
+}
+
+/// Contacts of the hand on the grasp targets, after the last physics step (world frame).
 #[derive(Resource, Debug, Clone, Default)]
 pub struct ObjectContacts {
     /// Time of the step (s, `Time<Fixed>`).
     pub t_s: f64,
-    /// The contacts: point, inward normal, normal force as `force`.
-    pub contacts: Vec<Contact>,
-    /// The hand's velocity at each contact point (m/s).
-    pub velocities: Vec<Vector3<f64>>,
+    /// One record per contact.
+    pub contacts: Vec<HandContact>,
     /// Largest normal force in this step (N).
     pub max_force_n: f64,
-    /// The hand body that makes each contact.
-    pub parts: Vec<Entity>,
-    /// The grasp target each contact is on.
-    pub objects: Vec<Entity>,
-    /// The object's own velocity at each contact point (m/s): the material point under the
-    /// contact, from the object's pose over the last step. For a grasp that holds (no slip)
-    /// it equals the hand's velocity there without the tracking jitter of the finger bodies,
-    /// and it is what the paper differentiates: the contact points' positions over time.
-    pub object_velocities: Vec<Vector3<f64>>,
 }
 
 /// Holding the object once the hand closes around it.
@@ -263,7 +291,7 @@ pub struct HeldObject {
 /// How closed a hand is: the mean distance of its five fingertips to the palm joint (m).
 pub fn closure(frame: &HandFrame) -> Option<f64> {
     let palm = frame.joints.get(PALM)?.pose.translation.vector;
-    let tips = avatarm_core::hand::TIPS;
+    let tips = avatarm_core::teleop::hand::TIPS;
     let sum: f64 = tips
         .iter()
         .map(|&t| {
@@ -547,10 +575,6 @@ fn read_contacts(
 ) {
     out.t_s = time.elapsed_secs_f64();
     out.contacts.clear();
-    out.velocities.clear();
-    out.parts.clear();
-    out.objects.clear();
-    out.object_velocities.clear();
     out.max_force_n = 0.0;
     let Ok(context) = context.single() else {
         return;
@@ -590,25 +614,19 @@ fn read_contacts(
                     let r = p - transform.translation;
                     let v = velocity.linear + velocity.angular.cross(r);
                     out.max_force_n = out.max_force_n.max(force);
-                    out.contacts.push(Contact {
-                        point: Vector3::new(f64::from(p.x), f64::from(p.y), f64::from(p.z)),
-                        normal,
-                        force: normal * force,
-                        moment: Vector3::zeros(),
-                    });
-                    out.velocities.push(Vector3::new(
-                        f64::from(v.x),
-                        f64::from(v.y),
-                        f64::from(v.z),
-                    ));
-                    out.parts.push(hand_entity);
-                    out.objects.push(target);
                     let w = (p - back(p)) / dt as f32;
-                    out.object_velocities.push(Vector3::new(
-                        f64::from(w.x),
-                        f64::from(w.y),
-                        f64::from(w.z),
-                    ));
+                    out.contacts.push(HandContact {
+                        part: hand_entity,
+                        object: target,
+                        contact: Contact {
+                            point: p.as_dvec3().to_array().into(),
+                            normal,
+                            force: normal * force,
+                            moment: Vector3::zeros(),
+                        },
+                        hand_velocity: v.as_dvec3().to_array().into(),
+                        object_velocity: w.as_dvec3().to_array().into(),
+                    });
                 }
             }
         }
@@ -660,17 +678,16 @@ fn assist_grasp(
         return;
     }
     // An object touched by two hand bodies from opposing sides.
-    let c = &*contacts;
-    let n = c.contacts.len();
-    let opposed = (0..n).find_map(|i| {
-        (i + 1..n)
-            .any(|j| {
-                c.objects[i] == c.objects[j]
-                    && c.parts[i] != c.parts[j]
-                    && c.contacts[i].normal.dot(&c.contacts[j].normal)
-                        < f64::from(assist.opposition)
+    let c = &contacts.contacts;
+    let opposed = c.iter().enumerate().find_map(|(i, a)| {
+        c[i + 1..]
+            .iter()
+            .any(|b| {
+                a.object == b.object
+                    && a.part != b.part
+                    && a.contact.normal.dot(&b.contact.normal) < f64::from(assist.opposition)
             })
-            .then_some(c.objects[i])
+            .then_some(a.object)
     });
     let Some(object) = opposed else {
         return;

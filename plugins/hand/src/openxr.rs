@@ -13,11 +13,11 @@
 
 use std::sync::{Arc, Mutex};
 
-use avatarm_core::hand::{HandFrame, HandJoint, Handedness, JOINT_NAMES};
+use avatarm_core::teleop::hand::{HandFrame, HandJoint, Handedness, JOINT_NAMES};
 use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3};
 
-use crate::HandSource;
 use crate::leap::LeapMount;
+use crate::{HandError, HandSource};
 
 /// One located joint, as the runtime gives it (tracking space).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -67,12 +67,16 @@ pub fn xr_frame(
     hand: Handedness,
     mount: &XrMount,
     t_s: f64,
-) -> Result<HandFrame, String> {
+) -> Result<HandFrame, HandError> {
+    let bad = |what: String, message: String| HandError::BadTrackerFrame {
+        tracker: "OpenXR hand",
+        what,
+        message,
+    };
     if joints.len() != JOINT_NAMES.len() {
-        return Err(format!(
-            "OpenXR hand: {} joints, expected {}",
-            joints.len(),
-            JOINT_NAMES.len()
+        return Err(bad(
+            "joints".into(),
+            format!("{} joints, expected {}", joints.len(), JOINT_NAMES.len()),
         ));
     }
     if joints.iter().any(|j| !j.tracked) {
@@ -90,11 +94,11 @@ pub fn xr_frame(
         .map(|(j, name)| {
             let numbers = j.position.iter().chain(&j.orientation).chain([&j.radius]);
             if !numbers.into_iter().all(|v| v.is_finite()) {
-                return Err(format!("OpenXR hand joint {name}: not finite"));
+                return Err(bad(format!("joint {name}"), "not finite".into()));
             }
             let [x, y, z, w] = j.orientation.map(f64::from);
             let q = UnitQuaternion::try_new(Quaternion::new(w, x, y, z), 1e-6)
-                .ok_or_else(|| format!("OpenXR hand joint {name}: zero orientation"))?;
+                .ok_or_else(|| bad(format!("joint {name}"), "zero-length orientation".into()))?;
             let p = Vector3::from(j.position.map(f64::from));
             let in_xr = Isometry3::from_parts(Translation3::from(p), q * turn);
             Ok(HandJoint {
@@ -102,7 +106,7 @@ pub fn xr_frame(
                 radius: f64::from(j.radius).max(1e-3),
             })
         })
-        .collect::<Result<Vec<_>, String>>()?;
+        .collect::<Result<Vec<_>, HandError>>()?;
     let frame = HandFrame {
         t_s,
         hand,
@@ -197,14 +201,14 @@ mod tests {
         hand[10].position[1] = f32::NAN;
         let e = xr_frame(&hand, Handedness::Left, &XrMount::default(), 0.0)
             .expect_err("NaN is refused");
-        assert!(e.contains(JOINT_NAMES[10]), "{e}");
+        assert!(e.to_string().contains(JOINT_NAMES[10]), "{e}");
         let mut hand = straight_hand();
         hand[3].tracked = false;
         let f = xr_frame(&hand, Handedness::Left, &XrMount::default(), 0.0).expect("untracked");
         assert!(!f.tracked && f.joints.is_empty());
         let e = xr_frame(&hand[..20], Handedness::Left, &XrMount::default(), 0.0)
             .expect_err("short hand");
-        assert!(e.contains("20 joints"), "{e}");
+        assert!(e.to_string().contains("20 joints"), "{e}");
     }
 
     #[test]

@@ -8,41 +8,55 @@
 //! a ramped stop; the gripper keeps its state while the robot is being stopped, so a lost hand
 //! does not drop the real object.
 //!
+//! Modules: [`robot`] (the robot-interface trait and the simulated arm), [`pouring`], [`error`].
+//!
 //! [`pouring`] is the paper's experiment on top of it: a scripted hand grasps the bottle's
 //! twin, lifts, pours and raises it, and the simulated arm carries the real bottle; the error
 //! between them is the paper's measure.
 
+pub mod error;
 pub mod pouring;
 pub mod robot;
 
 use std::sync::Arc;
 
-use avatarm_core::mapping::{Mapper, MappingSettings, RobotSide, TickInputs, VirtualToReal};
 use avatarm_core::robot::{LinkId, RobotModel};
-use avatarm_core::safety::{self, Intervention, SafetyLimiter};
 use avatarm_core::sim::JointState;
+use avatarm_core::teleop::grasp::Contact;
+use avatarm_core::teleop::mapping::{
+    Mapper, MappingSettings, RobotSide, TickInputs, VirtualToReal,
+};
+use avatarm_core::teleop::safety::{self, Intervention, SafetyLimiter};
 use avatarm_hand::{ActiveHand, GraspTarget, HandSystems, HeldObject, ObjectContacts};
 use bevy::prelude::*;
-use nalgebra::{DVector, Isometry3, Matrix6xX, Translation3, UnitQuaternion};
+use nalgebra::{DVector, Isometry3, Matrix6xX, Translation3, UnitQuaternion, Vector3};
 
+pub use error::MappingError;
 pub use robot::{CarriedObject, RobotInterface, SimArm};
+
+/// What most users of the mapping need.
+pub mod prelude {
+    pub use crate::pouring::{PouringTask, TrialParts, TrialSetup, run_trials};
+    pub use crate::{
+        MappingError, MappingPlugin, MappingSystems, RobotInterface, SimArm, Teleop, TeleopConfig,
+    };
+}
 
 /// Adds the control tick. Needs the [`avatarm_hand::HandPlugin`] and a [`Teleop`] resource.
 pub struct MappingPlugin;
 
 impl Plugin for MappingPlugin {
     fn build(&self, app: &mut App) {
-        app.add_systems(
+        app.configure_sets(
             FixedUpdate,
-            teleop_tick
-                .in_set(MappingSystems::Tick)
-                .after(HandSystems::Contacts),
-        );
+            MappingSystems::Tick.after(HandSystems::Contacts),
+        )
+        .add_systems(FixedUpdate, teleop_tick.in_set(MappingSystems::Tick));
     }
 }
 
-/// The mapping's system set (`FixedUpdate`).
-#[derive(SystemSet, Debug, Clone, PartialEq, Eq, Hash)]
+/// The mapping's system set (`FixedUpdate`), after the hand's contacts.
+#[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum MappingSystems {
     /// The control tick (after the hand's contacts).
     Tick,
@@ -142,11 +156,13 @@ pub struct TeleopConfig {
 
 impl Teleop {
     /// The loop for `robot`. Errors when the settings are invalid.
-    pub fn new(config: TeleopConfig, robot: impl RobotInterface) -> Result<Self, String> {
+    pub fn new(config: TeleopConfig, robot: impl RobotInterface) -> Result<Self, MappingError> {
         config.safety.validate()?;
         let n = config.model.dof();
         if let Some(&bad) = config.arm.iter().find(|&&i| i >= n) {
-            return Err(format!("arm joint index {bad} out of range ({n} joints)"));
+            return Err(MappingError::Setup {
+                message: format!("arm joint index {bad} out of range ({n} joints)"),
+            });
         }
         let limits = config.model.dof_limits();
         Ok(Self {
@@ -217,24 +233,6 @@ impl Teleop {
     }
 }
 
-/// A Bevy transform as an isometry (scale ignored).
-pub fn isometry(t: &Transform) -> Isometry3<f64> {
-    let p = t.translation.as_dvec3();
-    let q = t.rotation.as_dquat();
-    Isometry3::from_parts(
-        Translation3::new(p.x, p.y, p.z),
-        UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z)),
-    )
-}
-
-/// An isometry as a Bevy transform (f32).
-pub fn transform(p: &Isometry3<f64>) -> Transform {
-    let t = p.translation.vector;
-    let q = p.rotation;
-    Transform::from_xyz(t.x as f32, t.y as f32, t.z as f32)
-        .with_rotation(Quat::from_xyzw(q.i as f32, q.j as f32, q.k as f32, q.w as f32).normalize())
-}
-
 fn teleop_tick(
     time: Res<Time<Fixed>>,
     contacts: Res<ObjectContacts>,
@@ -242,8 +240,17 @@ fn teleop_tick(
     held: Option<Res<HeldObject>>,
     twin: Query<&Transform, With<GraspTarget>>,
     teleop: Option<ResMut<Teleop>>,
+    mut scratch: Local<(Vec<Contact>, Vec<Vector3<f64>>)>,
 ) {
     let Some(mut teleop) = teleop else { return };
+    // The core's tick takes the contacts and their points' velocities as two slices; the
+    // buffers keep their capacity from tick to tick.
+    scratch.0.clear();
+    scratch.1.clear();
+    for c in &contacts.contacts {
+        scratch.0.push(c.contact);
+        scratch.1.push(c.object_velocity);
+    }
     let started = std::time::Instant::now();
     let t = &mut *teleop;
     let now = time.elapsed_secs_f64();
@@ -267,7 +274,7 @@ fn teleop_tick(
         Some(f) => (Some(f.t_s), f.tracked),
         None => (None, false),
     };
-    let twin_pose = twin.single().map(isometry);
+    let twin_pose = twin.single().map(avatarm_twin::transform_to_iso);
     let q: Vec<f64> = t
         .joints
         .as_ref()
@@ -285,19 +292,22 @@ fn teleop_tick(
             "the mapping needs exactly one object twin (GraspTarget): {e}"
         )),
         (_, None) => Err("no joint state received yet".to_string()),
-        (Ok(pose), Some(_)) => t.mapper.tick(
-            &TickInputs {
-                contacts: &contacts.contacts,
-                contact_velocities: &contacts.object_velocities,
-                twin_pose: *pose,
-                q: &q,
-                held: held.as_ref().is_some_and(|h| h.held.is_some()),
-                now_s: now,
-                joints_stamp_s: t.joints.as_ref().map_or(now, |s| s.stamp_s),
-            },
-            &t.v2r,
-            &side,
-        ),
+        (Ok(pose), Some(_)) => t
+            .mapper
+            .tick(
+                &TickInputs {
+                    contacts: &scratch.0,
+                    contact_velocities: &scratch.1,
+                    twin_pose: *pose,
+                    q: &q,
+                    held: held.as_ref().is_some_and(|h| h.held.is_some()),
+                    now_s: now,
+                    joints_stamp_s: t.joints.as_ref().map_or(now, |s| s.stamp_s),
+                },
+                &t.v2r,
+                &side,
+            )
+            .map_err(|e| e.to_string()),
     };
     let (qdot, jacobian, out) = match mapped {
         Ok(out) => (out.qdot.clone(), out.tcp_jacobian.clone(), Some(out)),
@@ -331,7 +341,7 @@ fn teleop_tick(
     if let Some(cmd) = &limited.command
         && let Err(e) = t.robot.send(cmd)
     {
-        t.fail(format!("{}: {e}", t.robot.name()));
+        t.fail(e.to_string());
     }
     // The gripper follows σ only while the hand drives the robot: a lost hand or a refused
     // tick keeps it as it is (never drops the real object).
@@ -339,7 +349,7 @@ fn teleop_tick(
         && !limited.stopping
         && let Err(e) = t.robot.gripper(&out.gripper)
     {
-        t.fail(format!("{}: {e}", t.robot.name()));
+        t.fail(e.to_string());
     }
     t.status.tick_wall_s += started.elapsed().as_secs_f64();
     if t.record {

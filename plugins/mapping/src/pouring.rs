@@ -10,268 +10,90 @@
 //!
 //! Headless and without rendering: the object metrics do not depend on the video.
 
-use std::sync::Arc;
 use std::time::Duration;
 
-use avatarm_core::hand::{HandFilterSettings, HandKeyframe, HandNoise, HandScript, Handedness};
-use avatarm_core::ik::solve_pose;
-use avatarm_core::mapping::{MappingMode, MappingSettings, VirtualToReal, pose_rmse};
 use avatarm_core::rng::Rng;
-use avatarm_core::robot::{LinkId, RobotModel};
-use avatarm_core::safety::SafetySettings;
-use avatarm_core::sim::{SimRobot, SimRobotParams};
+use avatarm_core::robot::ik::solve_pose;
+use avatarm_core::sim::SimRobot;
+use avatarm_core::teleop::hand::{HandKeyframe, HandNoise, HandScript, Handedness};
+use avatarm_core::teleop::mapping::{MappingMode, MappingSettings, VirtualToReal, pose_rmse};
+use avatarm_core::teleop::safety::SafetySettings;
 use avatarm_hand::{ActiveHand, GraspTarget, HandDrive, ObjectContacts, ScriptedHand};
+use avatarm_scene::prop::BOTTLE_NECK_RADIUS_FRACTION;
+pub use avatarm_scene::task::{PouringTask, TrialSetup};
 use bevy::prelude::*;
 use bevy_rapier3d::prelude::*;
 use nalgebra::{DVector, Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
-use crate::{CarriedObject, MappingPlugin, SimArm, Teleop, TeleopConfig, TeleopSample};
+use crate::{
+    CarriedObject, MappingError, MappingPlugin, SimArm, Teleop, TeleopConfig, TeleopSample,
+};
 
-/// The task as a scene describes it (`[task]`, docs/scene-format.md).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct PouringTask {
-    /// The scene prop that is the bottle (a `bottle` or `cylinder` prop).
-    pub object: String,
-    /// The robot's tool link, between the gripper's fingers.
-    pub tcp_link: String,
-    /// Joints the mapping drives; empty: every movable joint whose name does not contain
-    /// "finger" (the gripper's).
-    pub arm_joints: Vec<String>,
-    /// Trials per mode.
-    pub trials: u32,
-    /// Seed of trial 0 (trial `i` uses `seed + i` for its noise and start pose).
-    pub seed: u64,
-    /// Length of a trial (s).
-    pub duration_s: f64,
-    /// The modes to run.
-    pub modes: Vec<MappingMode>,
-    /// Mass of the bottle's twin (kg).
-    pub mass_kg: f64,
-    /// Friction of the twin's surface.
-    pub friction: f64,
-    /// Start pose of the hand: uniform offset in each axis, ± this (m).
-    pub start_jitter_m: f64,
-    /// Height of the grasp on the bottle: uniform offset, ± this (m).
-    pub grasp_jitter_m: f64,
-    /// Hand tracker rate (Hz).
-    pub hand_rate_hz: f64,
-    /// Tremor and tracking noise (the seed is set per trial).
-    pub noise: HandNoise,
-    /// Closed-loop gain (1/s).
-    pub gain: f64,
-    /// Time constant of the closed loop's low-pass on the feed-forward twist (s; 0: off).
-    pub feedforward_smoothing_s: f64,
-    /// The filter on the tracked hand's joints (docs/hand.md).
-    pub hand_filter: HandFilterSettings,
-    /// TCP speed cap (m/s), the paper's ISO 10218 figure by default.
-    pub max_tcp_speed: f64,
-    /// Scale of the twin relative to the real bottle (`k`).
-    pub k: f64,
-    /// The virtual scene's yaw about the bottle (degrees) and its offset (m): where the twin
-    /// stands in front of the user, relative to the real bottle.
-    pub virtual_yaw_deg: f64,
-    /// See `virtual_yaw_deg`.
-    pub virtual_offset: [f64; 3],
-    /// The hand's keyframes, positions relative to the twin's centre (virtual scene axes).
-    pub hand: Vec<HandKeyframe>,
-}
-
-impl Default for PouringTask {
-    fn default() -> Self {
-        let roll = std::f64::consts::FRAC_PI_2;
-        let pour: f64 = 1.0;
-        let key = |t_s: f64, xyz: [f64; 3], roll: f64, grip: f64| HandKeyframe {
-            t_s,
-            xyz,
-            rpy: [roll, 0.0, 0.0],
-            grip,
-            tracked: true,
-        };
-        // Palm on the bottle's −y side, fingers along +x wrapping around it; the pour turns
-        // the hand about the bottle's centre (the wrist moves on that arc).
-        let (px, py, gg): (f64, f64, f64) = (-0.05, -0.040, 0.7);
-        let (wy, wz) = (py * pour.cos(), -py * pour.sin());
-        Self {
-            object: "bottle".into(),
-            tcp_link: "right_gripper_tip".into(),
-            arm_joints: Vec::new(),
-            trials: 10,
-            seed: 1,
-            duration_s: 10.0,
-            modes: vec![MappingMode::Paper, MappingMode::ClosedLoop],
-            mass_kg: 0.5,
-            friction: 1.0,
-            start_jitter_m: 0.02,
-            grasp_jitter_m: 0.01,
-            hand_rate_hz: 90.0,
-            noise: HandNoise::default(),
-            gain: MappingSettings::default().gain,
-            feedforward_smoothing_s: MappingSettings::default().feedforward_smoothing_s,
-            hand_filter: HandFilterSettings::default(),
-            max_tcp_speed: SafetySettings::default().max_tcp_speed,
-            k: 1.0,
-            virtual_yaw_deg: 0.0,
-            virtual_offset: [0.0; 3],
-            hand: vec![
-                key(0.0, [px, -0.14, 0.0], roll, 0.0),
-                key(1.0, [px, py, 0.0], roll, 0.0),
-                key(1.8, [px, py, 0.0], roll, gg),
-                key(2.2, [px, py, 0.0], roll, gg),
-                key(3.7, [px, py, 0.05], roll, gg),
-                key(5.2, [px, wy, 0.05 + wz], roll - pour, gg),
-                key(5.7, [px, wy, 0.05 + wz], roll - pour, gg),
-                key(7.2, [px, py, 0.05], roll, gg),
-                key(8.7, [px, py, 0.14], roll, gg),
-            ],
-        }
-    }
-}
-
-impl PouringTask {
-    /// Checks the numbers; errors name the field.
-    pub fn validate(&self) -> Result<(), String> {
-        let positive = [
-            ("duration_s", self.duration_s),
-            ("mass_kg", self.mass_kg),
-            ("hand_rate_hz", self.hand_rate_hz),
-            ("max_tcp_speed", self.max_tcp_speed),
-            ("k", self.k),
-        ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("task.{name} = {v}: must be a positive number"));
+/// The arm of `setup` with its open gripper around the bottle: a side grasp at the body's
+/// centre, approaching horizontally from the robot's base, fingers closing horizontally.
+/// Returns the joint positions and the bottle's centre in the tool frame.
+pub fn grasp_configuration(
+    setup: &TrialSetup,
+) -> Result<(DVector<f64>, Isometry3<f64>), MappingError> {
+    let c = setup.bottle_centre();
+    let p = c.translation.vector;
+    let b = setup.base.translation.vector;
+    let approach = Vector3::new(p.x - b.x, p.y - b.y, 0.0)
+        .try_normalize(1e-9)
+        .unwrap_or_else(Vector3::x);
+    let fingers = Vector3::new(-approach.y, approach.x, 0.0);
+    let down = fingers.cross(&approach);
+    let rot = UnitQuaternion::from_matrix(&Matrix3::from_columns(&[down, fingers, approach]));
+    let tool = Isometry3::from_parts(Translation3::from(p), rot);
+    // Several starts; keep the solution farthest from its joint limits, so the arm has room
+    // to lift and pour (the first solution found is often at a wrist limit).
+    let limits = setup.model.dof_limits();
+    let margin = |q: &DVector<f64>| {
+        setup
+            .arm
+            .iter()
+            .map(|&i| {
+                let l = &limits[i];
+                ((q[i] - l.lower).min(l.upper - q[i]) / (l.upper - l.lower)).max(0.0)
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let yaw = (p.y - b.y).atan2(p.x - b.x);
+    let mut best: Option<DVector<f64>> = None;
+    let mut last_err = None;
+    for j0 in [setup.q_start[setup.arm[0]], yaw] {
+        for wrist in [-1.5, 0.0, 1.5, 3.0] {
+            let mut start = setup.q_start.clone();
+            if setup.arm.len() == 7 {
+                start[setup.arm[0]] = j0;
+                start[setup.arm[4]] = 0.0;
+                start[setup.arm[6]] = wrist;
             }
-        }
-        let non_negative = [
-            ("friction", self.friction),
-            ("start_jitter_m", self.start_jitter_m),
-            ("grasp_jitter_m", self.grasp_jitter_m),
-            ("gain", self.gain),
-            ("feedforward_smoothing_s", self.feedforward_smoothing_s),
-        ];
-        for (name, v) in non_negative {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("task.{name} = {v}: must be a number >= 0"));
-            }
-        }
-        if self.trials == 0 || self.modes.is_empty() {
-            return Err("task: at least one trial and one mode".into());
-        }
-        if !self.virtual_yaw_deg.is_finite() || self.virtual_offset.iter().any(|v| !v.is_finite()) {
-            return Err("task.virtual_yaw_deg / virtual_offset must be finite".into());
-        }
-        self.hand_filter
-            .validate()
-            .map_err(|e| format!("task.hand_filter: {e}"))?;
-        HandScript::new(Handedness::Right, self.hand.clone(), self.noise)
-            .map(|_| ())
-            .map_err(|e| format!("task.hand: {e}"))
-    }
-
-    /// The virtual scene relative to the real one, for a bottle whose centre is at `centre`.
-    pub fn virtual_to_real(&self, centre: &Vector3<f64>) -> VirtualToReal {
-        VirtualToReal {
-            k: self.k,
-            rotation: UnitQuaternion::from_euler_angles(
-                0.0,
-                0.0,
-                self.virtual_yaw_deg.to_radians(),
-            ),
-            real_centre: *centre,
-            virtual_centre: centre + Vector3::from(self.virtual_offset),
-        }
-    }
-}
-
-/// The real side of a trial: the robot and the bottle, from the scene.
-#[derive(Debug, Clone)]
-pub struct TrialSetup {
-    /// The robot.
-    pub model: Arc<RobotModel>,
-    /// Its root link in the world.
-    pub base: Isometry3<f64>,
-    /// Joint positions before the arm is moved to the bottle (IK starts here).
-    pub q_start: DVector<f64>,
-    /// The tool link.
-    pub tcp: LinkId,
-    /// Arm joints.
-    pub arm: Vec<usize>,
-    /// Simulated robot timing.
-    pub sim: SimRobotParams,
-    /// Control and physics rate (Hz).
-    pub control_rate_hz: f64,
-    /// Where the bottle's base centre stands on the table (world).
-    pub bottle_base: Isometry3<f64>,
-    /// Bottle body radius and total height (m); the body is the lower 68 %, as the scene's
-    /// bottle prop.
-    pub bottle_radius_m: f64,
-    /// See `bottle_radius_m`.
-    pub bottle_height_m: f64,
-}
-
-impl TrialSetup {
-    /// Height of the bottle's body (the part the hand and the gripper hold).
-    pub fn body_height_m(&self) -> f64 {
-        self.bottle_height_m * 0.68
-    }
-
-    /// The bottle's reference frame: the centre of its body, z up.
-    pub fn bottle_centre(&self) -> Isometry3<f64> {
-        self.bottle_base * Translation3::new(0.0, 0.0, self.body_height_m() / 2.0)
-    }
-
-    /// The arm with its open gripper around the bottle: a side grasp at the body's centre,
-    /// approaching horizontally from the robot's base, fingers closing horizontally.
-    pub fn grasp_configuration(&self) -> Result<(DVector<f64>, Isometry3<f64>), String> {
-        let c = self.bottle_centre();
-        let p = c.translation.vector;
-        let b = self.base.translation.vector;
-        let approach = Vector3::new(p.x - b.x, p.y - b.y, 0.0)
-            .try_normalize(1e-9)
-            .unwrap_or_else(Vector3::x);
-        let fingers = Vector3::new(-approach.y, approach.x, 0.0);
-        let down = fingers.cross(&approach);
-        let rot = UnitQuaternion::from_matrix(&Matrix3::from_columns(&[down, fingers, approach]));
-        let tool = Isometry3::from_parts(Translation3::from(p), rot);
-        // Several starts; keep the solution farthest from its joint limits, so the arm has room
-        // to lift and pour (the first solution found is often at a wrist limit).
-        let limits = self.model.dof_limits();
-        let margin = |q: &DVector<f64>| {
-            self.arm
-                .iter()
-                .map(|&i| {
-                    let l = &limits[i];
-                    ((q[i] - l.lower).min(l.upper - q[i]) / (l.upper - l.lower)).max(0.0)
-                })
-                .fold(f64::INFINITY, f64::min)
-        };
-        let yaw = (p.y - b.y).atan2(p.x - b.x);
-        let mut best: Option<DVector<f64>> = None;
-        let mut last_err = String::new();
-        for j0 in [self.q_start[self.arm[0]], yaw] {
-            for wrist in [-1.5, 0.0, 1.5, 3.0] {
-                let mut start = self.q_start.clone();
-                if self.arm.len() == 7 {
-                    start[self.arm[0]] = j0;
-                    start[self.arm[4]] = 0.0;
-                    start[self.arm[6]] = wrist;
-                }
-                match solve_pose(&self.model, &self.base, self.tcp, &self.arm, &start, &tool) {
-                    Ok(q) => {
-                        if best.as_ref().is_none_or(|b| margin(&q) > margin(b)) {
-                            best = Some(q);
-                        }
+            match solve_pose(
+                &setup.model,
+                &setup.base,
+                setup.tcp,
+                &setup.arm,
+                &start,
+                &tool,
+            ) {
+                Ok(q) => {
+                    if best.as_ref().is_none_or(|b| margin(&q) > margin(b)) {
+                        best = Some(q);
                     }
-                    Err(e) => last_err = e,
                 }
+                Err(e) => last_err = Some(e),
             }
         }
-        let q = best.ok_or_else(|| format!("placing the gripper around the bottle: {last_err}"))?;
-        let reached = self.model.forward_kinematics(&self.base, q.as_slice())[self.tcp];
-        Ok((q, reached.inverse() * c))
     }
+    let q = best.ok_or_else(|| MappingError::Grasp {
+        source: Box::new(last_err.unwrap_or_else(|| avatarm_core::Error::Ik {
+            message: "no start tried".into(),
+        })),
+    })?;
+    let reached = setup.model.forward_kinematics(&setup.base, q.as_slice())[setup.tcp];
+    Ok((q, reached.inverse() * c))
 }
 
 /// One trial's result.
@@ -426,7 +248,7 @@ pub fn trial_script(
     task: &PouringTask,
     twin_centre: &Vector3<f64>,
     trial: u32,
-) -> Result<HandScript, String> {
+) -> Result<HandScript, MappingError> {
     let seed = task.seed.wrapping_add(u64::from(trial));
     let mut rng = Rng::stream(seed, 0x504f_5552);
     let mut sym = |a: f64| (2.0 * rng.uniform() - 1.0) * a;
@@ -453,7 +275,11 @@ pub fn trial_script(
             }
         })
         .collect();
-    HandScript::new(Handedness::Right, keys, HandNoise { seed, ..task.noise })
+    Ok(HandScript::new(
+        Handedness::Right,
+        keys,
+        HandNoise { seed, ..task.noise },
+    )?)
 }
 
 /// The twin's collider: the body cylinder about the origin and the neck above (z up).
@@ -465,22 +291,21 @@ fn bottle_collider(radius: f32, body: f32, height: f32) -> Collider {
         (
             Vec3::new(0.0, 0.0, body / 2.0 + neck / 2.0),
             up,
-            Collider::cylinder(neck / 2.0, radius * 0.38),
+            Collider::cylinder(neck / 2.0, radius * BOTTLE_NECK_RADIUS_FRACTION as f32),
         ),
     ])
 }
 
 /// Checks the task and the set-up, and places the arm around the bottle: what every trial
 /// shares.
-pub fn prepare(task: &PouringTask, setup: &TrialSetup) -> Result<Prepared, String> {
+pub fn prepare(task: &PouringTask, setup: &TrialSetup) -> Result<Prepared, MappingError> {
     task.validate()?;
     if !(setup.control_rate_hz.is_finite() && setup.control_rate_hz >= 10.0) {
-        return Err(format!(
-            "control rate {} Hz: at least 10 Hz",
-            setup.control_rate_hz
-        ));
+        return Err(MappingError::Setup {
+            message: format!("control rate {} Hz: at least 10 Hz", setup.control_rate_hz),
+        });
     }
-    let (q0, tcp_from_object) = setup.grasp_configuration()?;
+    let (q0, tcp_from_object) = grasp_configuration(setup)?;
     Ok(Prepared {
         q0,
         tcp_from_object,
@@ -533,7 +358,7 @@ impl TrialParts {
         prepared: &Prepared,
         mode: MappingMode,
         trial: u32,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, MappingError> {
         let (q0, tcp_from_object) = (prepared.q0.clone(), prepared.tcp_from_object);
         let centre = setup.bottle_centre();
         let v2r = task.virtual_to_real(&centre.translation.vector);
@@ -566,7 +391,7 @@ impl TrialParts {
                     mode,
                     gain: task.gain,
                     feedforward_smoothing_s: task.feedforward_smoothing_s,
-                    dls: avatarm_core::ik::DlsSettings {
+                    dls: avatarm_core::robot::ik::DlsSettings {
                         dt,
                         ..Default::default()
                     },
@@ -580,7 +405,7 @@ impl TrialParts {
             arm,
         )?;
         let k = task.k as f32;
-        let twin = crate::transform(&twin_start);
+        let twin = avatarm_twin::iso_to_transform(&twin_start);
         let body = setup.body_height_m() as f32 * k;
         Ok(Self {
             teleop,
@@ -638,7 +463,7 @@ pub fn run_trial(
     setup: &TrialSetup,
     mode: MappingMode,
     trial: u32,
-) -> Result<TrialRecord, String> {
+) -> Result<TrialRecord, MappingError> {
     run_trial_with(task, setup, mode, trial, ActiveHand::new)
 }
 
@@ -650,7 +475,7 @@ pub fn run_trial_with(
     mode: MappingMode,
     trial: u32,
     hand: impl FnOnce(ScriptedHand) -> ActiveHand,
-) -> Result<TrialRecord, String> {
+) -> Result<TrialRecord, MappingError> {
     run_prepared(task, setup, &prepare(task, setup)?, mode, trial, hand)
 }
 
@@ -661,7 +486,7 @@ fn run_prepared(
     mode: MappingMode,
     trial: u32,
     hand: impl FnOnce(ScriptedHand) -> ActiveHand,
-) -> Result<TrialRecord, String> {
+) -> Result<TrialRecord, MappingError> {
     let parts = TrialParts::new(task, setup, prepared, mode, trial)?;
     let centre = setup.bottle_centre();
     let twin_start = parts.twin_start;
@@ -687,17 +512,21 @@ fn run_prepared(
             .query_filtered::<&Transform, With<GraspTarget>>();
         let pose = q
             .single(app.world())
-            .map(crate::isometry)
-            .map_err(|e| format!("the twin is gone: {e}"))?;
+            .map(avatarm_twin::transform_to_iso)
+            .map_err(|e| MappingError::Trial {
+                message: format!("the twin is gone: {e}"),
+            })?;
         twin.push(pose);
         max_contact = max_contact.max(app.world().resource::<ObjectContacts>().max_force_n);
     }
     let wall_s = started.elapsed().as_secs_f64();
     let hand_frames_refused = app.world().resource::<ActiveHand>().refused;
-    let teleop = app
-        .world_mut()
-        .remove_resource::<Teleop>()
-        .ok_or("the teleoperation state is gone")?;
+    let teleop =
+        app.world_mut()
+            .remove_resource::<Teleop>()
+            .ok_or_else(|| MappingError::Trial {
+                message: "the teleoperation state is gone".into(),
+            })?;
     let samples = teleop.log;
     let grasp = samples.iter().position(|s| s.gripper_closed);
     let from = grasp.unwrap_or(0);
@@ -707,7 +536,9 @@ fn run_prepared(
         .collect();
     let targets: Vec<Isometry3<f64>> = window.iter().map(|s| s.target).collect();
     let truths: Vec<Isometry3<f64>> = window.iter().filter_map(|s| s.truth).collect();
-    let rmse = pose_rmse(&targets, &truths).ok_or("no samples to measure")?;
+    let rmse = pose_rmse(&targets, &truths).ok_or_else(|| MappingError::Trial {
+        message: "no samples to measure".into(),
+    })?;
     let max_pos_error_m = targets
         .iter()
         .zip(&truths)
@@ -753,7 +584,7 @@ pub fn run_trials(
     task: &PouringTask,
     setup: &TrialSetup,
     mut progress: impl FnMut(MappingMode, u32),
-) -> Result<Vec<(MappingMode, ModeSummary)>, String> {
+) -> Result<Vec<(MappingMode, ModeSummary)>, MappingError> {
     let prepared = prepare(task, setup)?;
     let mut out = Vec::new();
     for &mode in &task.modes {

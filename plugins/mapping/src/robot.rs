@@ -8,10 +8,12 @@
 
 use std::sync::Arc;
 
-use avatarm_core::mapping::GripperCommand;
 use avatarm_core::robot::{LinkId, RobotModel};
 use avatarm_core::sim::{JointCommand, JointState, SimRobot};
+use avatarm_core::teleop::mapping::GripperCommand;
 use nalgebra::{DVector, Isometry3, Translation3, UnitQuaternion};
+
+use crate::MappingError;
 
 /// A robot arm that takes joint velocity commands and reports joint states.
 ///
@@ -22,10 +24,11 @@ pub trait RobotInterface: Send + Sync + 'static {
     fn name(&self) -> &str;
     /// Joint states received since the last call, oldest first.
     fn receive(&mut self) -> Vec<JointState>;
-    /// Sends joint velocities (all joints, the model's order). Errors name what was refused.
-    fn send(&mut self, qdot: &DVector<f64>) -> Result<(), String>;
+    /// Sends joint velocities (all joints, the model's order). Errors
+    /// ([`MappingError::Robot`]) name the backend and what was refused.
+    fn send(&mut self, qdot: &DVector<f64>) -> Result<(), MappingError>;
     /// Sends a gripper command.
-    fn gripper(&mut self, command: &GripperCommand) -> Result<(), String>;
+    fn gripper(&mut self, command: &GripperCommand) -> Result<(), MappingError>;
     /// Called once per control tick with the app clock: hardware backends pump their I/O here,
     /// the simulated arm advances its physics to `now_s`.
     fn advance(&mut self, _now_s: f64) {}
@@ -134,15 +137,21 @@ impl RobotInterface for SimArm {
         self.robot.receive()
     }
 
-    fn send(&mut self, qdot: &DVector<f64>) -> Result<(), String> {
+    fn send(&mut self, qdot: &DVector<f64>) -> Result<(), MappingError> {
         self.robot
             .send(JointCommand::Velocity(qdot.clone()))
-            .map_err(|e| e.to_string())
+            .map_err(|e| MappingError::Robot {
+                robot: self.name().to_owned(),
+                message: e.to_string(),
+            })
     }
 
-    fn gripper(&mut self, command: &GripperCommand) -> Result<(), String> {
+    fn gripper(&mut self, command: &GripperCommand) -> Result<(), MappingError> {
         if !command.force_n.is_finite() {
-            return Err(format!("gripper force {} is not finite", command.force_n));
+            return Err(MappingError::Robot {
+                robot: self.name().to_owned(),
+                message: format!("gripper force {} is not finite", command.force_n),
+            });
         }
         // The object is taken or let go at the next `advance` (the next tick).
         self.closed = command.closed;

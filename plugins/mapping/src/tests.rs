@@ -2,13 +2,13 @@
 
 use std::sync::Arc;
 
-use avatarm_core::mapping::MappingMode;
 use avatarm_core::robot::{PackagePath, RobotModel};
 use avatarm_core::sim::SimRobotParams;
+use avatarm_core::teleop::mapping::MappingMode;
 use nalgebra::{DVector, Isometry3};
 
-use avatarm_core::hand::{HandFrame, HandNoise};
-use avatarm_core::ik::{pinv_step, smallest_singular_value};
+use avatarm_core::robot::ik::{pinv_step, smallest_singular_value};
+use avatarm_core::teleop::hand::{HandFrame, HandNoise};
 use avatarm_hand::{ActiveHand, HandSource, ScriptedHand};
 use nalgebra::Vector6;
 
@@ -228,7 +228,7 @@ fn a_twin_carried_out_of_reach_meets_a_singularity_that_dls_survives_and_pinv_do
             q.as_slice(),
             s.tcp,
             &nalgebra::Vector3::zeros(),
-            avatarm_core::kinematics::Frame::World,
+            avatarm_core::robot::kinematics::Frame::World,
         );
         nalgebra::Matrix6xX::from_fn(s.arm.len(), |r, c| full[(r, s.arm[c])])
     };

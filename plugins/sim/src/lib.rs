@@ -3,25 +3,29 @@
 //! Add [`SimRoomPlugin`] with a [`SimRoomConfig`] resource. The room spawns at startup; the robot
 //! steps in `FixedUpdate` at the control rate; joint states are sent, with their latency, to the
 //! twin named by [`SimRoomConfig::twin`] as [`JointStateMessage`]s.
+//!
+//! One module: this one. Props are described by `avatarm_scene::prop` (re-exported here) and
+//! drawn by [`prop_parts`]; the simulated robot's dynamics are `avatarm_core::sim`.
 
 use std::sync::Arc;
 
-use avatarm_core::camera::PinholeCamera;
 use avatarm_core::rng::Rng;
 use avatarm_core::robot::RobotModel;
-use avatarm_core::sensor::SensorModel;
+use avatarm_core::robot::trajectory::JointTrajectory;
 use avatarm_core::sim::{JointCommand, SimRobot, SimRobotParams};
-use avatarm_core::trajectory::JointTrajectory;
+use avatarm_core::vision::camera::PinholeCamera;
+use avatarm_core::vision::sensor::SensorModel;
+use avatarm_scene::prop::{BOTTLE_BODY_FRACTION, BOTTLE_NECK_RADIUS_FRACTION};
+pub use avatarm_scene::prop::{Prop, PropShape};
 use avatarm_twin::camera::SCENERY_DEPTH_BIAS;
 pub use avatarm_twin::camera::{spawn_pinhole_camera, target_image};
+use avatarm_twin::layers;
 use avatarm_twin::prelude::*;
 use avatarm_twin::readback::{ImageRead, ImageReadbackPlugin, read_image_once};
-use avatarm_twin::{TwinEntities, TwinMeshCache, layers};
 use avatarm_video::{VideoFrame, VideoInbox};
 use bevy::camera::visibility::RenderLayers;
 use bevy::prelude::*;
 use nalgebra::{DVector, Isometry3};
-use serde::{Deserialize, Serialize};
 
 /// What most users need.
 pub mod prelude {
@@ -36,54 +40,13 @@ pub mod prelude {
 pub enum SimRoomSystems {
     /// Scripted commands, robot step, joint-state delivery (`FixedUpdate`).
     Step,
+    /// Spawns the room: props, the robot, the cameras (`PreStartup`).
+    Setup,
     /// Poses the simulated robot's visuals at its true joint positions (`PostUpdate`).
     PoseRobot,
     /// The real camera's capture (`Last`); ground truth for a frame is read back after it, in
     /// the same update.
     Capture,
-}
-
-/// A prop's shape (z up; the pose puts the shape's base centre on the table).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "shape", rename_all = "snake_case", deny_unknown_fields)]
-pub enum PropShape {
-    /// A box, sizes along x, y, z (m), resting on its base.
-    Box {
-        /// Sizes.
-        size: [f64; 3],
-    },
-    /// An upright cylinder.
-    Cylinder {
-        /// Radius (m).
-        radius: f64,
-        /// Height (m).
-        height: f64,
-    },
-    /// A bottle: a cylinder body and a narrower neck.
-    Bottle {
-        /// Body radius (m).
-        radius: f64,
-        /// Total height (m).
-        height: f64,
-    },
-    /// A sphere resting on the table.
-    Sphere {
-        /// Radius (m).
-        radius: f64,
-    },
-}
-
-/// An object in the room.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Prop {
-    /// Name (unique in the scene).
-    pub name: String,
-    /// Shape.
-    pub shape: PropShape,
-    /// Pose of the base centre in the world.
-    pub pose: Isometry3<f64>,
-    /// Colour (sRGB, alpha).
-    pub rgba: [f32; 4],
 }
 
 /// Everything the room needs to know. Insert it before the app starts.
@@ -184,7 +147,7 @@ impl Plugin for SimRoomPlugin {
                 PostUpdate,
                 SimRoomSystems::PoseRobot.in_set(RobotTwinSystems::ApplyJointStates),
             )
-            .add_systems(PreStartup, setup_room)
+            .add_systems(PreStartup, setup_room.in_set(SimRoomSystems::Setup))
             .add_systems(Last, capture_video.in_set(SimRoomSystems::Capture))
             .add_systems(
                 FixedUpdate,
@@ -205,26 +168,24 @@ impl Plugin for SimRoomPlugin {
 fn setup_room(
     mut commands: Commands,
     config: Res<SimRoomConfig>,
-    mut meshes: ResMut<Assets<Mesh>>,
-    mut materials: ResMut<Assets<StandardMaterial>>,
+    mut assets: TwinAssets,
     mut images: ResMut<Assets<Image>>,
-    mut cache: ResMut<TwinMeshCache>,
 ) {
-    let black = materials.add(StandardMaterial {
+    let black = assets.materials.add(StandardMaterial {
         base_color: Color::BLACK,
         unlit: true,
         depth_bias: SCENERY_DEPTH_BIAS,
         ..default()
     });
     for (index, prop) in config.props.iter().enumerate() {
-        let lit = materials.add(StandardMaterial {
+        let lit = assets.materials.add(StandardMaterial {
             base_color: Color::srgba(prop.rgba[0], prop.rgba[1], prop.rgba[2], prop.rgba[3]),
             perceptual_roughness: 0.7,
             depth_bias: SCENERY_DEPTH_BIAS,
             ..default()
         });
         for (part, local) in prop_parts(&prop.shape) {
-            let mesh = meshes.add(part);
+            let mesh = assets.meshes.add(part);
             let transform = iso_to_transform(&prop.pose) * local;
             let part = SimPropPart { prop: index, local };
             commands.spawn((
@@ -261,45 +222,27 @@ fn setup_room(
         ..default()
     });
 
-    let spawn_robot = |commands: &mut Commands,
-                       cache: &mut TwinMeshCache,
-                       meshes: &mut Assets<Mesh>,
-                       materials: &mut Assets<StandardMaterial>,
-                       appearance,
-                       layer| {
-        let twin: TwinEntities = spawn_twin(commands, config.model.clone(), &config.robot_base);
-        if let Err(e) = attach_visuals(
-            commands,
-            meshes,
-            materials,
-            cache,
-            &config.model,
-            &twin,
-            appearance,
-            GeometrySource::Visual,
-            &RenderLayers::layer(layer),
-        ) {
-            error!("simulated room: {e}");
-        }
-        twin.root
-    };
-    let real = spawn_robot(
+    let real = spawn_twin_with_visuals(
         &mut commands,
-        &mut cache,
-        &mut meshes,
-        &mut materials,
+        &mut assets,
+        &config.model,
+        &config.robot_base,
         TwinAppearance::Urdf,
-        layers::SIM_ROBOT,
-    );
+        &RenderLayers::layer(layers::SIM_ROBOT),
+        "simulated room",
+    )
+    .root;
     let silhouette = config.ground_truth.then(|| {
-        spawn_robot(
+        spawn_twin_with_visuals(
             &mut commands,
-            &mut cache,
-            &mut meshes,
-            &mut materials,
+            &mut assets,
+            &config.model,
+            &config.robot_base,
             TwinAppearance::Unlit(Color::WHITE),
-            layers::SIM_SILHOUETTE,
+            &RenderLayers::layer(layers::SIM_SILHOUETTE),
+            "simulated room's silhouette",
         )
+        .root
     });
     commands.insert_resource(SimTwins { real, silhouette });
 
@@ -368,7 +311,7 @@ pub fn prop_parts(shape: &PropShape) -> Vec<(Mesh, Transform)> {
             upright(height / 2.0),
         )],
         PropShape::Bottle { radius, height } => {
-            let body = height * 0.68;
+            let body = height * BOTTLE_BODY_FRACTION;
             let neck = height - body;
             vec![
                 (
@@ -376,7 +319,8 @@ pub fn prop_parts(shape: &PropShape) -> Vec<(Mesh, Transform)> {
                     upright(body / 2.0),
                 ),
                 (
-                    Cylinder::new((radius * 0.38) as f32, neck as f32).into(),
+                    Cylinder::new((radius * BOTTLE_NECK_RADIUS_FRACTION) as f32, neck as f32)
+                        .into(),
                     upright(body + neck / 2.0),
                 ),
             ]
@@ -504,3 +448,6 @@ fn capture_video(
         },
     );
 }
+
+#[cfg(test)]
+mod tests;

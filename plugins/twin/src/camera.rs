@@ -1,6 +1,6 @@
 //! A Bevy camera projection built from pinhole intrinsics.
 
-use avatarm_core::camera::PinholeCamera;
+use avatarm_core::vision::camera::PinholeCamera;
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::RenderTarget;
 use bevy::camera::visibility::RenderLayers;
@@ -50,8 +50,9 @@ pub fn camera_transform(camera: &PinholeCamera) -> Transform {
 /// still frames).
 pub const SCENERY_DEPTH_BIAS: f32 = 16.0;
 
-/// A render target image of the camera's size.
-pub fn target_image(width: u32, height: u32) -> Image {
+/// A `width × height` 2-D image filled with opaque black, in `format` (one of the RGBA8
+/// formats), usable as `usage` says.
+pub fn rgba8_image(width: u32, height: u32, format: TextureFormat, usage: TextureUsages) -> Image {
     let mut image = Image::new_fill(
         Extent3d {
             width,
@@ -60,14 +61,24 @@ pub fn target_image(width: u32, height: u32) -> Image {
         },
         TextureDimension::D2,
         &[0, 0, 0, 255],
-        TextureFormat::Rgba8UnormSrgb,
+        format,
         RenderAssetUsages::default(),
     );
-    image.texture_descriptor.usage = TextureUsages::TEXTURE_BINDING
-        | TextureUsages::COPY_SRC
-        | TextureUsages::COPY_DST
-        | TextureUsages::RENDER_ATTACHMENT;
+    image.texture_descriptor.usage = usage;
     image
+}
+
+/// A render target image of the camera's size (sRGB, read back and sampled).
+pub fn target_image(width: u32, height: u32) -> Image {
+    rgba8_image(
+        width,
+        height,
+        TextureFormat::Rgba8UnormSrgb,
+        TextureUsages::TEXTURE_BINDING
+            | TextureUsages::COPY_SRC
+            | TextureUsages::COPY_DST
+            | TextureUsages::RENDER_ATTACHMENT,
+    )
 }
 
 /// Spawns a camera that renders `layers` of the world through `camera` into `target`.

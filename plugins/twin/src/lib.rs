@@ -8,6 +8,14 @@
 //! - [`readback::read_image_once`] reads a render target back without disturbing the cameras
 //!   that sample it.
 //!
+//! - [`spawn_twin_with_visuals`] is the one way the app spawns a twin with its meshes (one
+//!   clear error for a mesh that cannot be loaded); [`iso_to_transform`] and
+//!   [`transform_to_iso`] the one conversion between poses and transforms.
+//!
+//! Modules: [`camera`] (pinhole projection, render targets), [`layers`] (the render layers every
+//! plugin uses), [`readback`] (image read-back), `spawn` (twin entities and meshes, re-exported
+//! here).
+//!
 //! Frames: Avatarm's world is the robot's world, z up, metres; link transforms are FK poses.
 
 pub mod camera;
@@ -23,8 +31,8 @@ use bevy::transform::TransformSystems;
 use nalgebra::{DVector, Isometry3};
 
 pub use spawn::{
-    GeometrySource, TwinAppearance, TwinEntities, TwinMeshCache, attach_visuals, spawn_twin,
-    to_bevy_mesh,
+    GeometrySource, TwinAppearance, TwinAssets, TwinEntities, TwinMeshCache, attach_visuals,
+    spawn_twin, spawn_twin_with_visuals, to_bevy_mesh,
 };
 
 /// What most users of the twin need.
@@ -32,7 +40,8 @@ pub mod prelude {
     pub use crate::camera::PinholeProjection;
     pub use crate::{
         GeometrySource, JointStateMessage, RobotTwin, RobotTwinPlugin, RobotTwinSystems,
-        TwinAppearance, TwinLink, attach_visuals, iso_to_transform, spawn_twin,
+        TwinAppearance, TwinAssets, TwinLink, attach_visuals, iso_to_transform, spawn_twin,
+        spawn_twin_with_visuals, transform_to_iso,
     };
 }
 
@@ -48,6 +57,19 @@ pub enum TwinError {
         link: String,
         /// Why.
         source: Box<avatarm_core::Error>,
+    },
+    /// A joint state that cannot be applied (sizes that do not match, a non-finite value, an
+    /// unknown joint name); the twin keeps its previous state.
+    #[error("joint state: {message}")]
+    JointState {
+        /// What is wrong.
+        message: String,
+    },
+    /// An image read back from the GPU that cannot be used.
+    #[error("image read-back: {message}")]
+    Readback {
+        /// What is wrong.
+        message: String,
     },
 }
 
@@ -151,19 +173,20 @@ impl JointStateMessage {
 
 impl RobotTwin {
     /// Applies a joint state, or says why it was refused (nothing changes then).
-    pub fn apply(&mut self, msg: &JointStateMessage) -> Result<(), String> {
+    pub fn apply(&mut self, msg: &JointStateMessage) -> Result<(), TwinError> {
+        let bad = |message: String| TwinError::JointState { message };
         if msg.names.len() != msg.positions.len()
             || (!msg.velocities.is_empty() && msg.velocities.len() != msg.names.len())
         {
-            return Err(format!(
+            return Err(bad(format!(
                 "{} names, {} positions and {} velocities do not match",
                 msg.names.len(),
                 msg.positions.len(),
                 msg.velocities.len()
-            ));
+            )));
         }
         if !msg.stamp_s.is_finite() {
-            return Err(format!("timestamp {} is not finite", msg.stamp_s));
+            return Err(bad(format!("timestamp {} is not finite", msg.stamp_s)));
         }
         let mut positions = self.positions.clone();
         let mut velocities = self.velocities.clone();
@@ -171,14 +194,14 @@ impl RobotTwin {
             let index = match self.model.dof_index(name) {
                 Ok(i) => i,
                 Err(_) if !self.strict_names => continue,
-                Err(e) => return Err(e.to_string()),
+                Err(e) => return Err(bad(e.to_string())),
             };
             let p = msg.positions[k];
             let v = msg.velocities.get(k).copied().unwrap_or(0.0);
             if !p.is_finite() || !v.is_finite() {
-                return Err(format!(
+                return Err(bad(format!(
                     "joint '{name}': position {p} / velocity {v} is not finite"
-                ));
+                )));
             }
             positions[index] = p;
             velocities[index] = v;
@@ -190,7 +213,8 @@ impl RobotTwin {
     }
 }
 
-/// Converts a pose to a Bevy transform (f64 -> f32).
+/// Converts a pose to a Bevy transform (f64 -> f32, unit scale). The one conversion of the
+/// workspace, with [`transform_to_iso`] its inverse.
 pub fn iso_to_transform(iso: &Isometry3<f64>) -> Transform {
     let t = iso.translation.vector;
     let q = iso.rotation.quaternion();
@@ -199,6 +223,16 @@ pub fn iso_to_transform(iso: &Isometry3<f64>) -> Transform {
         rotation: Quat::from_xyzw(q.i as f32, q.j as f32, q.k as f32, q.w as f32).normalize(),
         scale: Vec3::ONE,
     }
+}
+
+/// Converts a Bevy transform to a pose (f32 -> f64; the scale is ignored).
+pub fn transform_to_iso(t: &Transform) -> Isometry3<f64> {
+    let p = t.translation.as_dvec3();
+    let q = t.rotation.as_dquat();
+    Isometry3::from_parts(
+        nalgebra::Translation3::new(p.x, p.y, p.z),
+        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z)),
+    )
 }
 
 /// Reads joint states into their twins; refused messages are logged and counted.

@@ -11,6 +11,8 @@ use bevy::image::TextureFormatPixelInfo;
 use bevy::prelude::*;
 use bevy::render::gpu_readback::{Readback, ReadbackComplete};
 
+use crate::TwinError;
+
 /// An image read back from the GPU, triggered on the entity [`read_image_once`] returns.
 #[derive(EntityEvent, Debug, Clone)]
 pub struct ImageRead {
@@ -84,28 +86,31 @@ fn deliver_image(
             height,
             data,
         }),
-        Err(e) => warn!("image readback: {e}"),
+        Err(e) => warn!("{e}"),
     }
     // After the trigger: the entity carries the caller's observer.
     commands.entity(entity).despawn();
 }
 
 /// The image's size and packed bytes out of a readback of it.
-fn read_image(data: &[u8], image: Option<&Image>) -> Result<(u32, u32, Vec<u8>), String> {
-    let image = image.ok_or("the image was removed before its data arrived")?;
+fn read_image(data: &[u8], image: Option<&Image>) -> Result<(u32, u32, Vec<u8>), TwinError> {
+    let bad = |message: String| TwinError::Readback { message };
+    let image = image.ok_or_else(|| bad("the image was removed before its data arrived".into()))?;
     let descriptor = &image.texture_descriptor;
     let size = descriptor.size;
-    let pixel = descriptor
-        .format
-        .pixel_size()
-        .map_err(|_| format!("format {:?} has no fixed pixel size", descriptor.format))?;
+    let pixel = descriptor.format.pixel_size().map_err(|_| {
+        bad(format!(
+            "format {:?} has no fixed pixel size",
+            descriptor.format
+        ))
+    })?;
     let packed = unpad_rows(data, size.width, size.height, pixel).ok_or_else(|| {
-        format!(
+        bad(format!(
             "{} bytes do not hold a {}x{} image",
             data.len(),
             size.width,
             size.height
-        )
+        ))
     })?;
     Ok((size.width, size.height, packed))
 }

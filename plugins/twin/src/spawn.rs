@@ -4,7 +4,7 @@ use std::collections::HashMap;
 use std::f32::consts::FRAC_PI_2;
 use std::sync::Arc;
 
-use avatarm_core::mesh::{TriMesh, load_mesh};
+use avatarm_core::robot::mesh::{TriMesh, load_mesh};
 use avatarm_core::robot::{Geometry, RobotModel, Shape};
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::visibility::RenderLayers;
@@ -132,6 +132,51 @@ pub fn attach_visuals(
         }
     }
     Ok(())
+}
+
+/// The assets a twin's visuals are built into.
+#[derive(bevy::ecs::system::SystemParam)]
+pub struct TwinAssets<'w> {
+    /// Meshes.
+    pub meshes: ResMut<'w, Assets<Mesh>>,
+    /// Materials.
+    pub materials: ResMut<'w, Assets<StandardMaterial>>,
+    /// Meshes and materials already built.
+    pub cache: ResMut<'w, TwinMeshCache>,
+}
+
+/// Spawns a twin of `model` at `base` with its visual geometry on `layers`: the one way every
+/// twin of the app is made (the app's twin, the mask twin, the simulated robot and its
+/// silhouette). A mesh that cannot be loaded is the same clear error everywhere: logged naming
+/// the `role`, the robot, the link and the file, and the app exits with an error (a twin with
+/// a missing link would erase the wrong pixels).
+pub fn spawn_twin_with_visuals(
+    commands: &mut Commands,
+    assets: &mut TwinAssets,
+    model: &Arc<RobotModel>,
+    base: &Isometry3<f64>,
+    appearance: TwinAppearance,
+    layers: &RenderLayers,
+    role: &str,
+) -> TwinEntities {
+    let twin = spawn_twin(commands, Arc::clone(model), base);
+    if let Err(e) = attach_visuals(
+        commands,
+        &mut assets.meshes,
+        &mut assets.materials,
+        &mut assets.cache,
+        model,
+        &twin,
+        appearance,
+        GeometrySource::Visual,
+        layers,
+    ) {
+        error!("{role}: {e}");
+        commands.queue(|world: &mut World| {
+            world.write_message(AppExit::error());
+        });
+    }
+    twin
 }
 
 fn material_for(

@@ -10,36 +10,7 @@ use std::sync::Arc;
 
 use bevy::prelude::*;
 
-use crate::{VideoFrame, VideoInbox, VideoSystems, app_clock};
-
-/// Problems with a recorded session.
-#[derive(Debug, thiserror::Error)]
-pub enum FolderError {
-    /// The timestamps file could not be read.
-    #[error("{path}: cannot read: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// Why.
-        source: std::io::Error,
-    },
-    /// A line of the timestamps file is wrong.
-    #[error("{path}:{line}: {message}")]
-    Line {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line.
-        line: usize,
-        /// What is wrong.
-        message: String,
-    },
-    /// The folder has no frames listed.
-    #[error("{path}: no frames listed")]
-    Empty {
-        /// The file.
-        path: PathBuf,
-    },
-}
+use crate::{VideoError, VideoFrame, VideoInbox, VideoSystems, app_clock};
 
 /// A recorded session played back as a video source.
 #[derive(Resource, Debug, Clone)]
@@ -55,16 +26,16 @@ pub struct FolderSource {
 impl FolderSource {
     /// Reads `folder/timestamps.csv` and checks that every listed frame exists and that times
     /// increase.
-    pub fn open(folder: &Path) -> Result<Self, FolderError> {
+    pub fn open(folder: &Path) -> Result<Self, VideoError> {
         let path = folder.join("timestamps.csv");
-        let text = std::fs::read_to_string(&path).map_err(|source| FolderError::Io {
+        let text = std::fs::read_to_string(&path).map_err(|source| VideoError::Io {
             path: path.clone(),
             source,
         })?;
         let mut frames: Vec<(PathBuf, f64)> = Vec::new();
         for (i, raw) in text.lines().enumerate() {
             let line = raw.trim();
-            let err = |message: String| FolderError::Line {
+            let err = |message: String| VideoError::Line {
                 path: path.clone(),
                 line: i + 1,
                 message,
@@ -96,7 +67,7 @@ impl FolderSource {
             frames.push((file, t));
         }
         if frames.is_empty() {
-            return Err(FolderError::Empty { path });
+            return Err(VideoError::Empty { path });
         }
         Ok(Self {
             folder: folder.to_owned(),

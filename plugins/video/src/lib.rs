@@ -9,9 +9,12 @@
 //! Sources: the simulated camera (in `avatarm_sim`), [`folder::FolderSource`] (recorded frames
 //! with a timestamps file) and, with the `webcam` feature, a webcam through `nokhwa`.
 //!
+//! Modules: [`folder`], [`pixels`], `webcam` (feature `webcam`), [`error`].
+//!
 //! Clock: frame times are on the app clock, `Time<Fixed>`'s elapsed time, which is also the
 //! clock of joint states (the simulated robot steps in `FixedUpdate`).
 
+pub mod error;
 pub mod folder;
 pub mod pixels;
 #[cfg(feature = "webcam")]
@@ -20,6 +23,13 @@ pub mod webcam;
 use std::sync::Arc;
 
 use bevy::prelude::*;
+
+pub use error::VideoError;
+
+/// What most users of the video need.
+pub mod prelude {
+    pub use crate::{LiveVideo, VideoError, VideoFrame, VideoInbox, VideoPlugin, VideoSystems};
+}
 
 /// One camera frame, RGBA8, top row first.
 #[derive(Debug, Clone)]
@@ -47,22 +57,25 @@ pub struct VideoInbox {
 
 impl VideoInbox {
     /// Queues a frame; frames whose size does not match `width × height × 4` are refused.
-    pub fn push(&mut self, frame: VideoFrame) -> Result<(), String> {
+    pub fn push(&mut self, frame: VideoFrame) -> Result<(), VideoError> {
         let expected = frame.width as usize * frame.height as usize * 4;
+        let what = || format!("video frame {}", frame.index);
         if frame.rgba.len() != expected || expected == 0 {
-            return Err(format!(
-                "video frame {}: {}x{} needs {expected} bytes, got {}",
-                frame.index,
-                frame.width,
-                frame.height,
-                frame.rgba.len()
-            ));
+            return Err(VideoError::BadFrame {
+                what: what(),
+                message: format!(
+                    "{}x{} needs {expected} bytes, got {}",
+                    frame.width,
+                    frame.height,
+                    frame.rgba.len()
+                ),
+            });
         }
         if !frame.capture_s.is_finite() || !frame.arrival_s.is_finite() {
-            return Err(format!(
-                "video frame {}: timestamp is not finite",
-                frame.index
-            ));
+            return Err(VideoError::BadFrame {
+                what: what(),
+                message: "timestamp is not finite".into(),
+            });
         }
         self.pending.push(frame);
         Ok(())
@@ -231,7 +244,13 @@ mod tests {
                 rgba: Arc::new(vec![0; 3]),
                 ..frame(4, now, now)
             };
-            assert!(inbox.push(bad).expect_err("size").contains("needs 8 bytes"));
+            assert!(
+                inbox
+                    .push(bad)
+                    .expect_err("size")
+                    .to_string()
+                    .contains("needs 8 bytes")
+            );
         }
         app.update();
         let live = app.world().resource::<LiveVideo>();

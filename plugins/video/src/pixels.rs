@@ -18,6 +18,8 @@ pub enum PixelFormat {
     Bgr,
 }
 
+use crate::VideoError;
+
 /// Converts one frame to RGBA8 (`width * height * 4` bytes); errors name the format and the
 /// sizes when the data does not fit.
 pub fn to_rgba(
@@ -25,14 +27,16 @@ pub fn to_rgba(
     width: u32,
     height: u32,
     data: &[u8],
-) -> Result<Vec<u8>, String> {
+) -> Result<Vec<u8>, VideoError> {
     let n = width as usize * height as usize;
-    let need = |bytes: usize| -> Result<(), String> {
+    let what = || format!("{format:?} frame {width}x{height}");
+    let bad = |message: String| VideoError::BadFrame {
+        what: what(),
+        message,
+    };
+    let need = |bytes: usize| -> Result<(), VideoError> {
         if data.len() < bytes || n == 0 {
-            Err(format!(
-                "{format:?} frame {width}x{height} needs {bytes} bytes, got {}",
-                data.len()
-            ))
+            Err(bad(format!("needs {bytes} bytes, got {}", data.len())))
         } else {
             Ok(())
         }
@@ -41,20 +45,23 @@ pub fn to_rgba(
     match format {
         PixelFormat::Mjpeg => {
             let img = image::load_from_memory_with_format(data, image::ImageFormat::Jpeg)
-                .map_err(|e| format!("MJPEG frame: {e}"))?
+                .map_err(|source| VideoError::Decode {
+                    what: what(),
+                    source,
+                })?
                 .to_rgba8();
             if img.dimensions() != (width, height) {
-                return Err(format!(
-                    "MJPEG frame is {}x{}, the stream says {width}x{height}",
+                return Err(bad(format!(
+                    "decodes to {}x{}, the stream says {width}x{height}",
                     img.width(),
                     img.height()
-                ));
+                )));
             }
             return Ok(img.into_raw());
         }
         PixelFormat::Yuyv => {
             if !width.is_multiple_of(2) {
-                return Err(format!("YUYV frame width {width} is odd"));
+                return Err(bad("the width is odd".into()));
             }
             need(n * 2)?;
             for q in data[..n * 2].chunks_exact(4) {
@@ -65,7 +72,7 @@ pub fn to_rgba(
         }
         PixelFormat::Nv12 => {
             if !width.is_multiple_of(2) || !height.is_multiple_of(2) {
-                return Err(format!("NV12 frame {width}x{height} has an odd size"));
+                return Err(bad("the size is odd".into()));
             }
             need(n + n / 2)?;
             let (luma, chroma) = data.split_at(n);
@@ -143,7 +150,10 @@ mod tests {
             vec![7, 7, 7, 255, 9, 9, 9, 255]
         );
         let short = to_rgba(PixelFormat::Rgb, 2, 2, &[0; 5]).expect_err("short");
-        assert!(short.contains("needs 12 bytes, got 5"), "{short}");
+        assert!(
+            short.to_string().contains("needs 12 bytes, got 5"),
+            "{short}"
+        );
         assert!(to_rgba(PixelFormat::Yuyv, 3, 1, &[0; 6]).is_err());
         assert!(to_rgba(PixelFormat::Mjpeg, 2, 2, b"not a jpeg").is_err());
     }

@@ -1,0 +1,68 @@
+//! Which hand teleoperates a scene's `[task]`: `hand = "..."` in the scene, `--hand` on the
+//! command line.
+
+use std::path::PathBuf;
+use std::str::FromStr;
+
+use crate::error::SceneError;
+
+/// Where the live hand comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum HandChoice {
+    /// The task's scripted hand (trial 0: grasp, lift, pour, raise).
+    Scripted,
+    /// Keys and mouse in the preview.
+    Desktop,
+    /// OpenXR hand tracking (needs XR mode).
+    Xr,
+    /// Leap Motion (feature `leap`).
+    Leap,
+    /// A recorded `.hand.jsonl` file (docs/hand.md).
+    File(PathBuf),
+}
+
+impl FromStr for HandChoice {
+    type Err = SceneError;
+
+    /// `scripted`, `desktop` (or `mouse`), `xr` (or `openxr`), `leap`, or a path ending in
+    /// `.jsonl`; anything else is a [`SceneError::Field`] on `hand`.
+    fn from_str(s: &str) -> Result<Self, SceneError> {
+        Ok(match s {
+            "scripted" => Self::Scripted,
+            "desktop" | "mouse" => Self::Desktop,
+            "xr" | "openxr" => Self::Xr,
+            "leap" => Self::Leap,
+            path if path.ends_with(".jsonl") => Self::File(PathBuf::from(path)),
+            other => {
+                return Err(SceneError::field(
+                    "hand",
+                    format!(
+                        "'{other}': expected scripted, desktop, xr, leap or a .hand.jsonl file"
+                    ),
+                ));
+            }
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hand_names_parse_and_unknown_ones_are_refused_by_name() {
+        assert_eq!(
+            "mouse".parse::<HandChoice>().ok(),
+            Some(HandChoice::Desktop)
+        );
+        assert_eq!(
+            "rec/a.hand.jsonl".parse::<HandChoice>().ok(),
+            Some(HandChoice::File("rec/a.hand.jsonl".into()))
+        );
+        let err = "glove".parse::<HandChoice>().expect_err("unknown");
+        assert_eq!(
+            err.to_string(),
+            "hand: 'glove': expected scripted, desktop, xr, leap or a .hand.jsonl file"
+        );
+    }
+}

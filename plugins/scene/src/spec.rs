@@ -1,0 +1,284 @@
+//! The scene file as written: one struct per TOML table, documented in
+//! `docs/scene-format.md`. [`crate::Scene::load`] parses these and checks every value.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use avatarm_core::dr::EraseSettings;
+use avatarm_core::sim::SimRobotParams;
+use avatarm_core::vision::camera::{CameraPose, Intrinsics};
+use avatarm_core::vision::sensor::SensorModel;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use serde::Deserialize;
+
+use crate::prop::PropShape;
+use crate::task::PouringTask;
+
+/// A pose: position and roll-pitch-yaw (rad, fixed axes, as URDF).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct PoseSpec {
+    /// Position (m).
+    #[serde(default)]
+    pub xyz: [f64; 3],
+    /// Roll, pitch, yaw (rad).
+    #[serde(default)]
+    pub rpy: [f64; 3],
+}
+
+impl PoseSpec {
+    /// As an isometry.
+    pub fn to_isometry(&self) -> Isometry3<f64> {
+        Isometry3::from_parts(
+            Translation3::new(self.xyz[0], self.xyz[1], self.xyz[2]),
+            UnitQuaternion::from_euler_angles(self.rpy[0], self.rpy[1], self.rpy[2]),
+        )
+    }
+}
+
+/// Joint positions, by name (`{ right_j0 = 0.1 }`) or in joint-vector order (`[0.1, ...]`).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum JointValues {
+    /// By joint name.
+    Named(BTreeMap<String, f64>),
+    /// In joint-vector order (missing trailing joints keep their previous value).
+    List(Vec<f64>),
+}
+
+/// `[robot]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotSpec {
+    /// URDF file, relative to the scene file.
+    pub urdf: PathBuf,
+    /// Folders for `package://` URIs, relative to the scene file.
+    #[serde(default)]
+    pub package_path: Vec<PathBuf>,
+    /// Pose of the robot's root link in the world.
+    #[serde(default)]
+    pub base: PoseSpec,
+    /// Initial joint positions.
+    pub q0: Option<JointValues>,
+    /// Simulated robot timing and response.
+    #[serde(default)]
+    pub sim: SimRobotParams,
+}
+
+/// Calibration error between the camera's true pose and the pose the app believes.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct CalibrationError {
+    /// Rotation error (degrees) about `axis` through the camera centre.
+    pub rotation_deg: f64,
+    /// Rotation axis (world).
+    pub axis: [f64; 3],
+    /// Translation error (mm, world).
+    pub translation_mm: [f64; 3],
+}
+
+/// `[camera]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSpec {
+    /// Intrinsics; when absent, `fov_y_deg` with `width` × `height`.
+    pub intrinsics: Option<Intrinsics>,
+    /// Vertical field of view (degrees), used when `intrinsics` is absent.
+    #[serde(default = "default_fov")]
+    pub fov_y_deg: f64,
+    /// Width (px), with `fov_y_deg`.
+    #[serde(default = "default_width")]
+    pub width: u32,
+    /// Height (px), with `fov_y_deg`.
+    #[serde(default = "default_height")]
+    pub height: u32,
+    /// True pose.
+    pub pose: CameraPose,
+    /// Frames per second.
+    #[serde(default = "default_fps")]
+    pub fps: f64,
+    /// Delay from capture to arrival (s).
+    #[serde(default)]
+    pub frame_latency_s: f64,
+    /// Noise and exposure.
+    #[serde(default)]
+    pub sensor: SensorModel,
+    /// Error of the pose the app believes.
+    #[serde(default)]
+    pub calibration_error: CalibrationError,
+}
+
+fn default_fov() -> f64 {
+    55.0
+}
+fn default_width() -> u32 {
+    640
+}
+fn default_height() -> u32 {
+    480
+}
+fn default_fps() -> f64 {
+    30.0
+}
+fn default_rate() -> f64 {
+    100.0
+}
+
+/// `[[props]]`: a prop or real object.
+#[derive(Debug, Clone, Deserialize)]
+pub struct PropSpec {
+    /// Name.
+    pub name: String,
+    /// Shape and size (`shape = "box" | "cylinder" | "bottle" | "sphere"`).
+    #[serde(flatten)]
+    pub shape: PropShape,
+    /// Pose of the base centre.
+    #[serde(default)]
+    pub pose: PoseSpec,
+    /// Colour, sRGB + alpha.
+    #[serde(default = "default_rgba")]
+    pub rgba: [f32; 4],
+    /// One of the real objects the user manipulates (vs. a prop).
+    #[serde(default)]
+    pub object: bool,
+    /// Known to the app as something that can hide the robot (the desk): the mask camera draws
+    /// it black so that the mask follows the robot's visible pixels.
+    #[serde(default)]
+    pub occluder: bool,
+}
+
+fn default_rgba() -> [f32; 4] {
+    [0.6, 0.6, 0.6, 1.0]
+}
+
+/// A keyframe of `[[timeline.robot]]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotKeyframe {
+    /// Time (s).
+    pub t_s: f64,
+    /// Joint positions; joints not given keep the previous keyframe's value.
+    pub q: JointValues,
+}
+
+/// `[timeline]`.
+#[derive(Debug, Clone, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct Timeline {
+    /// Joint-position keyframes of the robot (minimum-jerk in between).
+    #[serde(default)]
+    pub robot: Vec<RobotKeyframe>,
+}
+
+/// The scene file as written.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    /// Name, for reports.
+    pub name: String,
+    /// Random seed: the same seed gives the same replay.
+    #[serde(default)]
+    pub seed: u64,
+    /// Length of the replay (s).
+    pub duration_s: f64,
+    /// Control and simulation step rate (Hz).
+    #[serde(default = "default_rate")]
+    pub control_rate_hz: f64,
+    /// The robot.
+    pub robot: RobotSpec,
+    /// The real camera.
+    pub camera: CameraSpec,
+    /// The room.
+    #[serde(default)]
+    pub props: Vec<PropSpec>,
+    /// What happens.
+    #[serde(default)]
+    pub timeline: Timeline,
+    /// How the robot is erased (`[erase]`).
+    #[serde(default)]
+    pub erase: EraseSettings,
+    /// Where the background H comes from (`[background]`).
+    #[serde(default)]
+    pub background: BackgroundSpec,
+    /// The interaction layer (`[interaction]`).
+    #[serde(default)]
+    pub interaction: InteractionSpec,
+    /// The teleoperation task measured on every replay (`[task]`), e.g. the paper's pouring.
+    #[serde(default)]
+    pub task: Option<PouringTask>,
+    /// Start `avatarm run` in XR (an OpenXR headset), as `--xr` does.
+    #[serde(default)]
+    pub xr: bool,
+    /// The hand that teleoperates the `[task]` in `avatarm run` (as `--hand`): scripted,
+    /// desktop, xr, leap, a `.hand.jsonl` file or none.
+    #[serde(default)]
+    pub hand: Option<String>,
+    /// Where the interaction layer sits in the headset (`[xr_layout]`).
+    #[serde(default)]
+    pub xr_layout: XrLayout,
+}
+
+/// `[xr_layout]`: the interaction layer in the headset, relative to where the user's head is
+/// when the session starts (looking ahead).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct XrLayout {
+    /// Distance of the video panel in front of the eyes (m).
+    pub panel_distance_m: f64,
+    /// Height of the video panel (m); its width follows the camera's aspect ratio.
+    pub panel_height_m: f64,
+    /// How far the panel's centre is below eye level (m): a little below is easier on the
+    /// neck for a seated user.
+    pub panel_below_eye_m: f64,
+}
+
+impl Default for XrLayout {
+    fn default() -> Self {
+        Self {
+            panel_distance_m: 1.2,
+            panel_height_m: 0.7,
+            panel_below_eye_m: 0.15,
+        }
+    }
+}
+
+/// `[background]`: where the background image H comes from.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(tag = "source", rename_all = "snake_case", deny_unknown_fields)]
+pub enum BackgroundSpec {
+    /// The simulated room photographed with the robot out of the way, through the same sensor
+    /// model (simulated room only).
+    #[default]
+    EmptyRoom,
+    /// An image file of the camera's size (PNG or JPEG), relative to the scene.
+    File {
+        /// The image.
+        path: PathBuf,
+    },
+    /// The live frame at a time of the timeline (s), e.g. while the robot is out of view.
+    Capture {
+        /// When (s).
+        at_s: f64,
+    },
+    /// None until one is captured on command (the preview's B key).
+    None,
+}
+
+/// `[interaction]`: the layout of what the user sees.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InteractionSpec {
+    /// Distance of the video panel from the viewer (m).
+    pub panel_distance_m: f64,
+    /// Depth of the object twins, in front of the panel (m).
+    pub object_depth_m: f64,
+}
+
+impl Default for InteractionSpec {
+    fn default() -> Self {
+        Self {
+            panel_distance_m: 2.5,
+            object_depth_m: 1.0,
+        }
+    }
+}

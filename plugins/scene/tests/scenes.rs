@@ -1,0 +1,216 @@
+//! Scene validation: every bad value is refused when the scene loads, naming the file and the
+//! field. No Bevy here: these tests link only the scene crate and the core.
+
+use std::path::{Path, PathBuf};
+
+use avatarm_core::robot::PackagePath;
+use avatarm_scene::{Scene, SceneError};
+
+/// The workspace root (the scenes live in its `assets/`).
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn scene_text(name: &str) -> (PathBuf, String) {
+    let path = root().join("assets/scenes").join(name);
+    let text = std::fs::read_to_string(&path).expect("the scene file");
+    (path, text)
+}
+
+#[test]
+fn bad_scenes_are_refused_naming_the_field() {
+    let path = root().join("assets/scenes/default.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let parse = |t: &str| Scene::parse(t, &path, &PackagePath::default());
+
+    let e = parse(&text.replace("fps = 30.0", "fps = 30.0\nfsp = 1")).unwrap_err();
+    assert!(
+        matches!(e, SceneError::Parse { .. }) && e.to_string().contains("fsp"),
+        "{e}"
+    );
+
+    let e = parse(&text.replace("fx = 461.0", "fx = -461.0"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("camera.intrinsics") && e.contains("fx"), "{e}");
+
+    let e = parse(&text.replace(
+        "q = { right_j0 = 0.1, right_j6 = 4.5 }",
+        "q = { right_j9 = 0.1 }",
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("timeline.robot[5].q") && e.contains("right_j9"),
+        "{e}"
+    );
+
+    let e = parse(&text.replace(
+        "latency_compensation = true",
+        "latency_compensation = true\nranges = [[240, 255], [250, 240], [240, 255], [240, 255]]",
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("erase") && e.contains("G range"), "{e}");
+    let e = parse(&text.replace(
+        "[erase]",
+        "[background]\nsource = \"file\"\npath = \"nowhere.png\"\n\n[erase]",
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("background.path") && e.contains("nowhere.png"),
+        "{e}"
+    );
+    let e = parse(&text.replace("duration_s = 10.0", "duration_s = -1"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("duration_s"), "{e}");
+
+    let e = parse(&text.replace("sawyer_lite.urdf\"", "missing.urdf\""))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("robot.urdf") && e.contains("missing.urdf"),
+        "{e}"
+    );
+
+    let e = parse(&text.replace("t_s = 2.5", "t_s = 0.2"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("timeline.robot[1].t_s"), "{e}");
+
+    let e = parse(&format!("{text}\n[xr_layout]\npanel_distance_m = 0.05\n"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("xr_layout") && e.contains("0.05"), "{e}");
+    let xr = parse(&text.replace("duration_s = 10.0", "duration_s = 10.0\nxr = true"))
+        .expect("xr = true is a scene setting");
+    assert!(xr.file.xr);
+}
+
+/// `../shared/cases/18-scene-nan-camera-pose`: a NaN in the camera pose (found by mutating the
+/// default scene) used to pass validation and panic inside Bevy.
+#[test]
+fn a_nan_anywhere_in_a_scene_is_refused_at_load_naming_its_field() {
+    let text = include_str!("fixtures/nan_camera_pose.toml");
+    // As if copied to assets/scenes (its robot path is relative to that folder).
+    let path = root().join("assets/scenes/nan_pose.toml");
+    let e = Scene::parse(text, &path, &PackagePath::default()).expect_err("NaN pose");
+    let message = e.to_string();
+    assert!(
+        matches!(&e, SceneError::Invalid { field, .. } if field == "camera.pose.eye[2]"),
+        "{message}"
+    );
+    assert!(
+        message.contains("nan_pose.toml") && message.contains("NaN is not a finite number"),
+        "{message}"
+    );
+    // The same text with the NaN fixed loads (-0.0 is a valid latency).
+    let fixed = text.replace("eye = [1.85, 0.0, nan]", "eye = [1.85, 0.0, 1.25]");
+    Scene::parse(&fixed, &path, &PackagePath::default()).expect("fixed scene");
+
+    // Every table: a non-finite number is refused wherever it is.
+    let (path, text) = scene_text("default.toml");
+    for (from, to, field) in [
+        ("duration_s = 10.0", "duration_s = inf", "duration_s"),
+        ("fx = 461.0", "fx = nan", "camera.intrinsics.fx"),
+        (
+            "base = { xyz = [0.0, 0.0, 0.75] }",
+            "base = { xyz = [0.0, -inf, 0.75] }",
+            "robot.base.xyz[1]",
+        ),
+        (
+            "noise_sigma = 1.0",
+            "noise_sigma = nan",
+            "camera.sensor.noise_sigma",
+        ),
+    ] {
+        assert!(text.contains(from), "the default scene has '{from}'");
+        let e = Scene::parse(&text.replace(from, to), &path, &PackagePath::default())
+            .expect_err(to)
+            .to_string();
+        assert!(
+            e.contains(field) && e.contains("not a finite number"),
+            "{to}: {e}"
+        );
+    }
+}
+
+/// Numbers that are finite but out of their range are refused too.
+#[test]
+fn out_of_range_numbers_are_refused_naming_their_field() {
+    let (path, text) = scene_text("default.toml");
+    let parse = |t: &str| Scene::parse(t, &path, &PackagePath::default());
+    for (from, to, field) in [
+        (
+            "noise_sigma = 1.0",
+            "noise_sigma = -2.0",
+            "camera.sensor.noise_sigma",
+        ),
+        (
+            "frame_latency_s = 0.05",
+            "frame_latency_s = 50.0",
+            "camera.frame_latency_s",
+        ),
+    ] {
+        assert!(text.contains(from), "the default scene has '{from}'");
+        let e = parse(&text.replace(from, to)).expect_err(to).to_string();
+        assert!(e.contains(field), "{to}: {e}");
+    }
+    let with_prop = format!(
+        "{text}\n[[props]]\nname = \"cup\"\nshape = \"sphere\"\nradius = 0.05\nrgba = [1.5, 0.0, 0.0, 1.0]\n"
+    );
+    let e = parse(&with_prop).expect_err("rgba > 1").to_string();
+    assert!(e.contains("props[") && e.contains("rgba"), "{e}");
+    let twice = format!(
+        "{text}\n[[props]]\nname = \"cup\"\nshape = \"sphere\"\nradius = 0.05\n\n[[props]]\nname = \"cup\"\nshape = \"sphere\"\nradius = 0.05\n"
+    );
+    let e = parse(&twice).expect_err("two cups").to_string();
+    assert!(e.contains("already named 'cup'"), "{e}");
+}
+
+/// The `[task]` is checked when the scene loads (it used to be checked only after a whole
+/// replay), with errors naming the file and the `task.*` field.
+#[test]
+fn the_task_is_validated_at_load() {
+    let (path, text) = scene_text("pouring.toml");
+    let parse = |t: &str| Scene::parse(t, &path, &PackagePath::default());
+    let scene = parse(&text).expect("the pouring scene loads");
+    let setup = scene.trial.as_ref().expect("its task is resolved");
+    assert_eq!(scene.model.links[setup.tcp].name, "right_gripper_tip");
+    assert_eq!(setup.arm.len(), 7, "the arm joints, not the fingers");
+    for (from, to, field) in [
+        ("object = \"bottle\"", "object = \"glass?\"", "task.object"),
+        (
+            "trials = 10\n",
+            "trials = 10\nmass_kg = -0.5\n",
+            "task.mass_kg",
+        ),
+        (
+            "tcp_link = \"right_gripper_tip\"",
+            "tcp_link = \"nowhere\"",
+            "task.tcp_link",
+        ),
+        (
+            "trials = 10\n",
+            "trials = 10\narm_joints = [\"right_j9\"]\n",
+            "task.arm_joints",
+        ),
+        (
+            "trials = 10\n",
+            "trials = 10\nhand_filter = { min_cutoff_hz = 0.0 }\n",
+            "task.hand_filter",
+        ),
+        ("gain = 12.0", "gain = -1.0", "task.gain"),
+    ] {
+        assert_eq!(text.matches(from).count(), 1, "'{from}' once in the task");
+        let e = parse(&text.replace(from, to)).expect_err(to);
+        let message = e.to_string();
+        assert!(
+            matches!(&e, SceneError::Invalid { field: f, .. } if f == field),
+            "{to}: {message}"
+        );
+        assert!(message.contains("pouring.toml"), "{message}");
+    }
+}

@@ -1,0 +1,168 @@
+//! The room without a renderer (`MinimalPlugins`): what it spawns, on which layers, and how its
+//! robot moves and reports. Rendering is the replay tests' job (`tests/replay.rs`).
+
+use std::path::Path;
+use std::time::Duration;
+
+use avatarm_core::robot::PackagePath;
+use avatarm_core::robot::trajectory::Keyframe;
+use avatarm_core::vision::camera::{CameraPose, Intrinsics};
+use avatarm_twin::{RobotTwin, RobotTwinPlugin};
+use bevy::time::TimeUpdateStrategy;
+use nalgebra::{Translation3, UnitQuaternion};
+
+use super::*;
+
+fn config(ground_truth: bool) -> SimRoomConfig {
+    let urdf = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../assets/robots/sawyer_lite/sawyer_lite.urdf");
+    let model = Arc::new(RobotModel::from_urdf_file(&urdf, &PackagePath::default()).expect("urdf"));
+    let pose = CameraPose {
+        eye: [1.85, 0.0, 1.25],
+        target: [0.4, 0.0, 0.95],
+        up: [0.0, 0.0, 1.0],
+    };
+    let q0 = DVector::zeros(model.dof());
+    let mut q1 = q0.clone();
+    q1[0] = 0.5;
+    SimRoomConfig {
+        robot_base: Isometry3::translation(0.0, 0.0, 0.75),
+        robot: SimRobotParams::default(),
+        trajectory: JointTrajectory::new(vec![
+            Keyframe {
+                t_s: 0.0,
+                q: q0.clone(),
+            },
+            Keyframe { t_s: 0.3, q: q1 },
+        ]),
+        q0,
+        control_rate_hz: 100.0,
+        camera: PinholeCamera {
+            intrinsics: Intrinsics::from_fov_y(55f64.to_radians(), 64, 48),
+            world_from_camera: pose.to_isometry().expect("pose"),
+        },
+        props: vec![
+            Prop {
+                name: "desk".into(),
+                shape: PropShape::Box {
+                    size: [1.0, 1.0, 0.05],
+                },
+                pose: Isometry3::identity(),
+                rgba: [0.5, 0.4, 0.3, 1.0],
+            },
+            Prop {
+                name: "bottle".into(),
+                shape: PropShape::Bottle {
+                    radius: 0.035,
+                    height: 0.25,
+                },
+                pose: Isometry3::from_parts(
+                    Translation3::new(0.6, 0.0, 0.75),
+                    UnitQuaternion::identity(),
+                ),
+                rgba: [0.2, 0.5, 0.9, 1.0],
+            },
+        ],
+        ground_truth,
+        twin: None,
+        video: None,
+        external_drive: false,
+        model,
+    }
+}
+
+fn room(config: SimRoomConfig) -> App {
+    let mut app = App::new();
+    app.add_plugins((MinimalPlugins, AssetPlugin::default()))
+        .init_asset::<Mesh>()
+        .init_asset::<StandardMaterial>()
+        .init_asset::<Image>()
+        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(
+            10,
+        )))
+        .insert_resource(config)
+        .add_plugins((RobotTwinPlugin, SimRoomPlugin));
+    app
+}
+
+fn on_layer(app: &mut App, layer: usize) -> usize {
+    app.world_mut()
+        .query::<(&RenderLayers, &Mesh3d)>()
+        .iter(app.world())
+        .filter(|(l, _)| l.intersects(&RenderLayers::layer(layer)))
+        .count()
+}
+
+#[test]
+fn the_room_spawns_props_robot_and_cameras_on_their_layers() {
+    for ground_truth in [false, true] {
+        let mut app = room(config(ground_truth));
+        app.update();
+        // A desk (one part) and a bottle (body and neck).
+        let props = on_layer(&mut app, layers::ROOM);
+        assert_eq!(props, 3, "ground truth {ground_truth}");
+        let robot_meshes = on_layer(&mut app, layers::SIM_ROBOT);
+        assert!(
+            robot_meshes >= 9,
+            "every link with a visual: {robot_meshes}"
+        );
+        // The silhouette view: the props black and the robot white, only with ground truth.
+        let silhouette = on_layer(&mut app, layers::SIM_SILHOUETTE);
+        let expected = if ground_truth { 3 + robot_meshes } else { 0 };
+        assert_eq!(silhouette, expected, "ground truth {ground_truth}");
+        let cameras = app.world_mut().query::<&Camera>().iter(app.world()).count();
+        assert_eq!(cameras, if ground_truth { 3 } else { 1 });
+        let sim = app.world().resource::<SimCameras>();
+        assert_eq!(sim.no_robot.is_some(), ground_truth);
+        assert_eq!(sim.silhouette.is_some(), ground_truth);
+        let twins = app.world().resource::<SimTwins>();
+        assert_eq!(twins.silhouette.is_some(), ground_truth);
+        assert!(app.world().get::<RobotTwin>(twins.real).is_some());
+    }
+}
+
+#[test]
+fn the_robot_follows_its_trajectory_and_reports_joint_states() {
+    let mut app = room(config(false));
+    // A twin of the app's, to receive the joint states.
+    let model = app.world().resource::<SimRoomConfig>().model.clone();
+    let n = model.dof();
+    let twin = app
+        .world_mut()
+        .spawn(RobotTwin {
+            model,
+            positions: DVector::zeros(n),
+            velocities: DVector::zeros(n),
+            stamp_s: None,
+            links: Vec::new(),
+            rejected: 0,
+            strict_names: true,
+        })
+        .id();
+    app.world_mut().resource_mut::<SimRoomConfig>().twin = Some(twin);
+    for _ in 0..60 {
+        app.update();
+    }
+    let robot = &app.world().resource::<SimRobotState>().0;
+    assert!(
+        robot.time_s() > 0.5,
+        "the robot stepped: {} s",
+        robot.time_s()
+    );
+    let q = robot.true_positions()[0];
+    assert!((q - 0.5).abs() < 0.02, "j0 reached its keyframe: {q}");
+    // Joint states at 100 Hz, 10 ms late: the twin is at most a few control steps behind.
+    let got = app.world().get::<RobotTwin>(twin).expect("twin");
+    let stamp = got.stamp_s.expect("joint states arrived");
+    assert!(
+        robot.time_s() - stamp < 0.05,
+        "{stamp} vs {}",
+        robot.time_s()
+    );
+    assert_eq!(got.rejected, 0);
+    assert!((got.positions[0] - q).abs() < 0.05, "{}", got.positions[0]);
+    // The room's own twin shows the true joints.
+    let real = app.world().resource::<SimTwins>().real;
+    let shown = app.world().get::<RobotTwin>(real).expect("twin").positions[0];
+    assert!((shown - q).abs() < 1e-9);
+}

@@ -1,0 +1,171 @@
+//! Where the background H comes from, per the scene's `[background]`: the simulated empty
+//! room, a file, or the live frame at a given time. The preview's key and the CLI send
+//! [`CaptureBackground`] for a capture on command.
+
+use std::sync::Arc;
+
+use avatarm_core::rng::Rng;
+use avatarm_erase::{CaptureBackground, SetBackground};
+use avatarm_sim::SimCameras;
+use avatarm_twin::readback::{ImageRead, read_image_once};
+use bevy::prelude::*;
+
+use crate::{AppError, AvatarmSystems, SceneResource};
+use avatarm_scene::spec::BackgroundSpec;
+
+/// Sets the background from the scene's `[background]`. The simulated empty room is
+/// photographed once its render has settled: renderers compile pipelines over a varying number
+/// of frames, and a capture taken before that is black or misses meshes.
+pub struct BackgroundSourcePlugin;
+
+/// Identical consecutive empty-room captures needed before one is used.
+const SETTLED_CAPTURES: u32 = 3;
+/// Updates after which the newest empty-room capture is used even if it never settled.
+const EMPTY_ROOM_GIVE_UP: u32 = 240;
+
+impl Plugin for BackgroundSourcePlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<BackgroundProgress>()
+            .add_systems(Startup, load_file)
+            .add_systems(
+                Update,
+                (empty_room, capture_at)
+                    .chain()
+                    .in_set(AvatarmSystems::Background),
+            );
+    }
+}
+
+/// How far the scene's background source has got.
+#[derive(Resource, Debug, Default)]
+pub struct BackgroundProgress {
+    updates: u32,
+    captured: bool,
+    in_flight: bool,
+    /// The last empty-room capture (before the sensor model) and how many in a row matched it.
+    last: Option<(u32, u32, Vec<u8>)>,
+    identical: u32,
+    /// The empty room has been set as the background (or the scene uses another source).
+    pub empty_room_done: bool,
+}
+
+/// Loads an image file as RGBA8.
+pub fn load_rgba(path: &std::path::Path) -> Result<(u32, u32, Vec<u8>), AppError> {
+    let img = image::open(path).map_err(|source| AppError::Image {
+        path: path.to_owned(),
+        source,
+    })?;
+    let rgba = img.to_rgba8();
+    Ok((rgba.width(), rgba.height(), rgba.into_raw()))
+}
+
+fn load_file(scene: Res<SceneResource>, mut out: MessageWriter<SetBackground>) {
+    let Some(path) = &scene.0.background_path else {
+        return;
+    };
+    match load_rgba(path) {
+        Ok((width, height, rgba)) => {
+            out.write(SetBackground {
+                rgba: Arc::new(rgba),
+                width,
+                height,
+                origin: path.display().to_string(),
+            });
+        }
+        Err(e) => error!("background: {e}; the robot is not erased until one is set"),
+    }
+}
+
+/// The simulated room without the robot, through the camera's sensor model at t = 0 (as if
+/// photographed before the robot was installed). One capture in flight at a time; the room is
+/// static, so the render has settled when consecutive captures are identical and not black.
+fn empty_room(
+    mut commands: Commands,
+    scene: Res<SceneResource>,
+    cameras: Option<Res<SimCameras>>,
+    mut progress: ResMut<BackgroundProgress>,
+) {
+    if scene.0.file.background != BackgroundSpec::EmptyRoom {
+        progress.empty_room_done = true;
+        return;
+    }
+    if progress.empty_room_done || progress.in_flight {
+        return;
+    }
+    progress.updates += 1;
+    let Some(handle) = cameras.and_then(|c| c.no_robot.clone()) else {
+        warn_once!("background: the empty room needs the simulated room's no-robot view");
+        return;
+    };
+    if progress.updates >= EMPTY_ROOM_GIVE_UP
+        && let Some((width, height, rgba)) = progress.last.take()
+    {
+        warn!(
+            "background: the empty room's render did not settle in {EMPTY_ROOM_GIVE_UP} updates; \
+             using the newest capture"
+        );
+        progress.empty_room_done = true;
+        commands.queue(move |world: &mut World| {
+            send_empty_room(world, width, height, rgba);
+        });
+        return;
+    }
+    progress.in_flight = true;
+    read_image_once(&mut commands, handle).observe(
+        |read: On<ImageRead>, mut commands: Commands, mut progress: ResMut<BackgroundProgress>| {
+            progress.in_flight = false;
+            let rgba = read.data.clone();
+            // A render with no mesh drawn yet is black: not a room.
+            if rgba.chunks_exact(4).all(|px| px[..3] == [0, 0, 0]) {
+                progress.identical = 0;
+                return;
+            }
+            let same = progress
+                .last
+                .as_ref()
+                .is_some_and(|(_, _, last)| *last == rgba);
+            progress.identical = if same { progress.identical + 1 } else { 1 };
+            let (width, height) = (read.width, read.height);
+            if progress.identical >= SETTLED_CAPTURES && !progress.empty_room_done {
+                progress.empty_room_done = true;
+                commands.queue(move |world: &mut World| {
+                    send_empty_room(world, width, height, rgba);
+                });
+            } else {
+                progress.last = Some((width, height, rgba));
+            }
+        },
+    );
+}
+
+fn send_empty_room(world: &mut World, width: u32, height: u32, mut rgba: Vec<u8>) {
+    let Some(scene) = world.get_resource::<SceneResource>() else {
+        return;
+    };
+    let sensor = scene.0.file.camera.sensor.clone();
+    let seed = scene.0.file.seed;
+    sensor.apply(&mut rgba, 0.0, &mut Rng::stream(seed, u64::MAX));
+    world.write_message(SetBackground {
+        rgba: Arc::new(rgba),
+        width,
+        height,
+        origin: "the simulated empty room".into(),
+    });
+}
+
+fn capture_at(
+    scene: Res<SceneResource>,
+    time: Res<Time<Fixed>>,
+    live: Res<avatarm_video::LiveVideo>,
+    mut progress: ResMut<BackgroundProgress>,
+    mut out: MessageWriter<CaptureBackground>,
+) {
+    if let BackgroundSpec::Capture { at_s } = scene.0.file.background
+        && !progress.captured
+        && time.elapsed_secs_f64() >= at_s
+        && live.fresh
+    {
+        progress.captured = true;
+        out.write(CaptureBackground);
+    }
+}

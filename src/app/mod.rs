@@ -1,0 +1,413 @@
+//! The app assembled from the plugins: [`build_app`] for a scene in a [`Mode`] (the desktop
+//! preview or a headless replay), with the app's own twin of the robot ([`AppTwin`]) and the
+//! scene as a resource ([`SceneResource`]).
+//!
+//! - [`background`]: where the background H comes from (the scene's `[background]`).
+
+pub mod background;
+
+use std::time::Duration;
+
+use avatarm_erase::interaction::ObjectTwinSpec;
+use avatarm_erase::{EraseConfig, ErasePlugin, InteractionConfig, InteractionPlugin};
+use avatarm_sim::{SimRoomConfig, SimRoomPlugin, SimVideo};
+use avatarm_twin::layers;
+use avatarm_twin::prelude::*;
+use avatarm_video::{LiveVideo, VideoPlugin};
+use bevy::app::{PluginGroupBuilder, ScheduleRunnerPlugin};
+use bevy::camera::visibility::RenderLayers;
+use bevy::prelude::*;
+use bevy::render::RenderPlugin;
+use bevy::time::TimeUpdateStrategy;
+use bevy::window::ExitCondition;
+use bevy::winit::WinitPlugin;
+
+use avatarm_scene::Scene;
+use avatarm_scene::spec::BackgroundSpec;
+
+use crate::{AppError, preview, replay, teleop};
+
+/// How the app runs.
+#[derive(Debug, Clone)]
+pub enum Mode {
+    /// A window with the camera feed and the twin.
+    Preview(preview::PreviewOptions),
+    /// No window: replay the scene on a fixed timestep and write frames and a report.
+    Headless(replay::ReplayOptions),
+}
+
+/// The app's own twin of the robot (what the app believes, from received joint states).
+#[derive(Resource, Debug, Clone, Copy)]
+pub struct AppTwin(pub Entity);
+
+/// The scene being run.
+#[derive(Resource, Debug, Clone)]
+pub struct SceneResource(pub Scene);
+
+/// Builds the app for a scene; shared by `main` and the tests. Errors when the preview's live
+/// teleoperation cannot be set up (the hand source, the task's grasp).
+pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
+    // Before any window: a hand or task that cannot be set up is refused at start-up.
+    let live = match mode {
+        Mode::Preview(options) => options
+            .hand
+            .as_ref()
+            .map(|choice| teleop::LiveTeleop::prepare(scene, choice))
+            .transpose()?,
+        Mode::Headless(_) => None,
+    };
+    let mut app = App::new();
+    let frame_dt = Duration::from_secs_f64(1.0 / scene.file.camera.fps);
+    match mode {
+        Mode::Headless(_) => {
+            app.add_plugins((
+                DefaultPlugins
+                    .set(WindowPlugin {
+                        primary_window: None,
+                        exit_condition: ExitCondition::DontExit,
+                        ..default()
+                    })
+                    .set(RenderPlugin {
+                        synchronous_pipeline_compilation: true,
+                        ..default()
+                    })
+                    .disable::<WinitPlugin>(),
+                ScheduleRunnerPlugin::run_loop(Duration::ZERO),
+            ))
+            .insert_resource(TimeUpdateStrategy::ManualDuration(frame_dt));
+        }
+        Mode::Preview(options) => {
+            // winit panics without a display server; say what to do instead.
+            let no_display = ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"]
+                .iter()
+                .all(|v| std::env::var_os(v).is_none_or(|s| s.is_empty()));
+            if cfg!(all(unix, not(target_os = "macos"))) && no_display {
+                return Err(AppError::NoDisplay);
+            }
+            let window = Window {
+                title: format!("Avatarm — {}", scene.file.name),
+                resolution: (1280u32, 720u32).into(),
+                ..default()
+            };
+            let plugins = DefaultPlugins.set(WindowPlugin {
+                primary_window: Some(window),
+                ..default()
+            });
+            add_window_plugins(&mut app, plugins, options.xr);
+            if let Some(step) = options.fixed_step_s {
+                app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+                    step,
+                )));
+            }
+        }
+    }
+    app.add_plugins(AvatarmPlugins {
+        scene: scene.clone(),
+        mode: mode.clone(),
+    });
+    if let Some(live) = live {
+        live.install(&mut app)?;
+    }
+    Ok(app)
+}
+
+/// Every plugin of Avatarm for a scene in a mode, on top of Bevy's window or headless
+/// renderer ([`build_app`] adds those): the robot twin, image read-backs, the simulated room,
+/// the video, the erase pipeline and the interaction layer, the background source, and the
+/// replay or the preview (with live scores and the XR view). [`AvatarmSetupPlugin`] goes first:
+/// it inserts the scene's resources the others read, and orders [`AvatarmSystems`].
+pub struct AvatarmPlugins {
+    /// The scene.
+    pub scene: Scene,
+    /// How the app runs.
+    pub mode: Mode,
+}
+
+impl PluginGroup for AvatarmPlugins {
+    fn build(self) -> PluginGroupBuilder {
+        let webcam = match &self.mode {
+            Mode::Preview(options) => options.webcam,
+            Mode::Headless(_) => None,
+        };
+        let live_scores =
+            webcam.is_none() && self.scene.file.background == BackgroundSpec::EmptyRoom;
+        // Two scored frames a second.
+        let every = (self.scene.file.camera.fps / 2.0).round().max(1.0) as u64;
+        let mut group = PluginGroupBuilder::start::<Self>()
+            .add(AvatarmSetupPlugin {
+                scene: self.scene.clone(),
+                mode: self.mode.clone(),
+            })
+            .add(RobotTwinPlugin)
+            // Before the room (which adds it too when alone): the replay, the live scores and
+            // the empty-room background read images back with it.
+            .add(avatarm_twin::readback::ImageReadbackPlugin)
+            .add(SimRoomPlugin)
+            .add(VideoPlugin)
+            .add(ErasePlugin)
+            .add(InteractionPlugin)
+            .add(background::BackgroundSourcePlugin);
+        #[cfg(feature = "webcam")]
+        if let Some(index) = webcam {
+            let k = &self.scene.true_camera.intrinsics;
+            group = group.add(avatarm_video::webcam::WebcamPlugin(
+                avatarm_video::webcam::WebcamConfig {
+                    index,
+                    width: k.width,
+                    height: k.height,
+                    fps: self.scene.file.camera.fps.round().max(1.0) as u32,
+                    latency_s: self.scene.file.camera.frame_latency_s,
+                },
+            ));
+        }
+        match self.mode {
+            Mode::Headless(options) => group.add(replay::ReplayPlugin(options)),
+            Mode::Preview(options) => {
+                #[cfg(feature = "xr")]
+                if options.xr {
+                    group = group.add(preview::xr::XrViewPlugin);
+                }
+                if live_scores {
+                    // The room renders its ground truth anyway (the empty room is H).
+                    group = group.add(preview::live_scores::LiveDrPlugin { every });
+                }
+                group.add(preview::PreviewPlugin(options))
+            }
+        }
+    }
+}
+
+/// The app's own system sets, ordered once by [`AvatarmSetupPlugin`] against the plugins'
+/// sets. Each variant says its schedule.
+#[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum AvatarmSystems {
+    /// `FixedUpdate`, after the mapping's tick (and the simulated room's own stepping, which
+    /// the live teleoperation switches off): the live teleoperation puts the simulated arm
+    /// and the carried object where the loop left them.
+    Mirror,
+    /// `Update`, between the video's publish and the erase pipeline's prepare: the background
+    /// H from the scene's source.
+    Background,
+    /// `Update`, after the erase pipeline's prepare and before the object twins follow their
+    /// objects: the live teleoperation moves the twins and draws the hands. Its start-up
+    /// systems are in this set in `Startup`.
+    Teleop,
+    /// `Update`, after the interaction layer: the preview's keys, panel and status line.
+    View,
+    /// `Update`, after the preview (whose key re-centres the headset's panel): the XR view,
+    /// its panel and the tracked hands. In `Startup` too, after [`AvatarmSystems::Teleop`].
+    Xr,
+    /// `Last`, after the simulated room's capture: read-backs, scores and the replay's
+    /// stepping.
+    Score,
+}
+
+/// Inserts the scene's resources (the room, the video, the erase pipeline, the interaction
+/// layer), spawns the app's twin of the robot, and orders [`AvatarmSystems`].
+pub struct AvatarmSetupPlugin {
+    /// The scene.
+    pub scene: Scene,
+    /// How the app runs.
+    pub mode: Mode,
+}
+
+impl Plugin for AvatarmSetupPlugin {
+    fn build(&self, app: &mut App) {
+        let (scene, mode) = (&self.scene, &self.mode);
+        let webcam = match mode {
+            Mode::Preview(options) => options.webcam,
+            Mode::Headless(_) => None,
+        };
+        app.insert_resource(SceneResource(scene.clone()))
+            .insert_resource(SimRoomConfig {
+                model: scene.model.clone(),
+                robot_base: scene.robot_base(),
+                robot: scene.file.robot.sim,
+                q0: scene.q0.clone(),
+                trajectory: scene.trajectory.clone(),
+                control_rate_hz: scene.file.control_rate_hz,
+                camera: scene.true_camera,
+                props: scene.props.clone(),
+                // The no-robot view also gives the simulated "empty room" background.
+                ground_truth: matches!(mode, Mode::Headless(_))
+                    || scene.file.background == BackgroundSpec::EmptyRoom,
+                twin: None,
+                video: webcam.is_none().then(|| SimVideo {
+                    sensor: scene.file.camera.sensor.clone(),
+                    frame_latency_s: scene.file.camera.frame_latency_s,
+                    seed: scene.file.seed,
+                    fps: scene.file.camera.fps,
+                }),
+                external_drive: false,
+            })
+            .insert_resource(LiveVideo::new(
+                match webcam {
+                    Some(i) => format!("webcam {i}"),
+                    None => "simulated camera".to_owned(),
+                },
+                (3.0 / scene.file.camera.fps).max(0.2) + scene.file.camera.frame_latency_s,
+            ))
+            .insert_resource(EraseConfig {
+                settings: scene.file.erase,
+                camera: scene.believed_camera,
+                model: scene.model.clone(),
+                base: scene.robot_base(),
+                source_twin: None,
+                occluders: scene
+                    .file
+                    .props
+                    .iter()
+                    .zip(&scene.props)
+                    .filter(|(spec, _)| spec.occluder)
+                    .flat_map(|(_, prop)| {
+                        avatarm_sim::prop_parts(&prop.shape)
+                            .into_iter()
+                            .map(|(mesh, local)| (mesh, iso_to_transform(&prop.pose) * local))
+                    })
+                    .collect(),
+            })
+            .insert_resource(InteractionConfig {
+                camera: scene.believed_camera,
+                real_camera: scene.believed_camera,
+                panel_distance_m: scene.file.interaction.panel_distance_m,
+                object_depth_m: scene.file.interaction.object_depth_m,
+                objects: scene
+                    .file
+                    .props
+                    .iter()
+                    .zip(&scene.props)
+                    .filter(|(spec, _)| spec.object)
+                    .map(|(_, prop)| ObjectTwinSpec {
+                        name: prop.name.clone(),
+                        parts: avatarm_sim::prop_parts(&prop.shape),
+                        world_from_object: prop.pose,
+                        rgba: prop.rgba,
+                    })
+                    .collect(),
+            })
+            .add_systems(
+                PreStartup,
+                spawn_app_twin.after(avatarm_sim::SimRoomSystems::Setup),
+            )
+            .configure_sets(
+                FixedUpdate,
+                AvatarmSystems::Mirror
+                    .after(avatarm_mapping::MappingSystems::Tick)
+                    .after(avatarm_sim::SimRoomSystems::Step),
+            )
+            .configure_sets(Startup, AvatarmSystems::Xr.after(AvatarmSystems::Teleop))
+            .configure_sets(
+                Update,
+                (
+                    AvatarmSystems::Background
+                        .after(avatarm_video::VideoSystems::Publish)
+                        .before(avatarm_erase::EraseSystems::Prepare),
+                    AvatarmSystems::Teleop
+                        .after(avatarm_erase::EraseSystems::Prepare)
+                        .before(avatarm_erase::EraseSystems::Interaction),
+                    AvatarmSystems::View.after(avatarm_erase::EraseSystems::Interaction),
+                    AvatarmSystems::Xr.after(AvatarmSystems::View),
+                ),
+            )
+            .configure_sets(
+                Last,
+                AvatarmSystems::Score.after(avatarm_sim::SimRoomSystems::Capture),
+            );
+    }
+}
+
+#[cfg(feature = "xr")]
+fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupBuilder, xr: bool) {
+    if xr {
+        // Falls back to the flat renderer, with a log line, when no OpenXR runtime is present.
+        app.add_plugins(bevy_mod_openxr::add_xr_plugins(plugins));
+    } else {
+        app.add_plugins(plugins);
+    }
+}
+
+#[cfg(not(feature = "xr"))]
+fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupBuilder, xr: bool) {
+    if xr {
+        warn!("--xr: this build has no OpenXR support (feature `xr`); using the desktop preview");
+    }
+    app.add_plugins(plugins);
+}
+
+/// Spawns the app's twin on the twin layer and points the simulated room's joint states at it.
+fn spawn_app_twin(
+    mut commands: Commands,
+    mut config: ResMut<SimRoomConfig>,
+    mut erase: ResMut<EraseConfig>,
+    mut assets: TwinAssets,
+) {
+    let twin = spawn_twin_with_visuals(
+        &mut commands,
+        &mut assets,
+        &config.model,
+        &config.robot_base,
+        TwinAppearance::Urdf,
+        &RenderLayers::layer(layers::TWIN),
+        "the app's twin",
+    );
+    config.twin = Some(twin.root);
+    erase.source_twin = Some(twin.root);
+    commands.insert_resource(AppTwin(twin.root));
+}
+
+/// The pairs of systems whose full names (`crate::module::system`) both start with one of
+/// `prefixes` and that conflict in some schedule of the main world with no order between them:
+/// each as `"SCHEDULE: a <-> b (on C, D)"`. Finishes the app's plugins (waiting for the
+/// renderer) and builds every schedule with Bevy's ambiguity detection. With `["avatarm"]`, the
+/// project's own systems; the test suite asserts that there are none (docs/architecture.md).
+pub fn ambiguities(app: &mut App, prefixes: &[&str]) -> Vec<String> {
+    while app.plugins_state() == bevy::app::PluginsState::Adding {
+        bevy::tasks::tick_global_task_pools_on_main_thread();
+    }
+    app.finish();
+    app.cleanup();
+    let ours = |name: &str| prefixes.iter().any(|p| name.starts_with(p));
+    let mut found = Vec::new();
+    let world = app.world_mut();
+    let labels: Vec<_> = world
+        .resource::<Schedules>()
+        .iter()
+        .map(|(_, schedule)| schedule.label())
+        .collect();
+    for label in labels {
+        // Out of `Schedules` while it builds: building looks `Schedules` up in the world.
+        let Some(mut schedule) = world.resource_mut::<Schedules>().remove(label) else {
+            continue;
+        };
+        schedule.set_build_settings(bevy::ecs::schedule::ScheduleBuildSettings {
+            ambiguity_detection: bevy::ecs::schedule::LogLevel::Warn,
+            use_shortnames: false,
+            report_sets: false,
+            ..default()
+        });
+        if let Err(e) = schedule.initialize(world) {
+            found.push(format!("{label:?}: the schedule does not build: {e}"));
+        }
+        // Built: the systems live in the executable schedule now, not the graph.
+        let names: std::collections::HashMap<_, String> = schedule
+            .systems()
+            .into_iter()
+            .flatten()
+            .map(|(key, system)| (key, system.name().to_string()))
+            .collect();
+        let name = |key| names.get(key).cloned().unwrap_or_default();
+        for (a, b, on) in schedule.graph().conflicting_systems().iter() {
+            let (a, b) = (name(a), name(b));
+            if ours(&a) && ours(&b) {
+                let on: Vec<String> = on
+                    .iter()
+                    .filter_map(|id| world.components().get_name(*id))
+                    .map(|n| n.to_string())
+                    .collect();
+                found.push(format!("{label:?}: {a} <-> {b} (on {})", on.join(", ")));
+            }
+        }
+        world.resource_mut::<Schedules>().insert(schedule);
+    }
+    found
+}

@@ -1,0 +1,12 @@
+//! `avatarm bench`: speed charted against accuracy, as ratios against a baseline measured in the
+//! same run.
+//!
+//! - [`dr`]: the erase pipeline's settings (mask scale, dilation, feathering, latency
+//!   compensation) on a scene: frame cost and erase GPU time against leak and PSNR.
+//! - [`control`]: the teleoperation loop (control rate, command latency, TCP speed cap) on a
+//!   scene's pouring task: object RMSE against rate and loop cost.
+//! - [`chart`]: what both share: the Pareto front and the charts' house style.
+
+pub mod chart;
+pub mod control;
+pub mod dr;

@@ -1,0 +1,477 @@
+//! The `avatarm` command line: the clap types, the scene overrides ([`overrides`]), the
+//! `avatarm robot` check ([`robot`]) and the dispatch to the app, the replay and the benches.
+//!
+//! - [`overrides`]: `--erase`, `--dilate`, ... applied to a loaded scene.
+//! - [`robot`]: `avatarm robot`: a description's tree, meshes and link poses.
+
+pub mod overrides;
+pub mod robot;
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use avatarm_core::robot::{PackagePath, RobotModel};
+use avatarm_scene::hand::HandChoice;
+use avatarm_scene::spec::BackgroundSpec;
+use avatarm_scene::{Scene, SceneError};
+use clap::{Parser, Subcommand};
+
+use crate::bench::control::{self as bench_control, ControlSweep};
+use crate::bench::dr::{self as bench_dr, DrSweep};
+use crate::preview::PreviewOptions;
+use crate::replay::ReplayOptions;
+use crate::{AppError, Mode, build_app};
+use overrides::{EraseOverrides, on_off};
+
+/// Avatarm: manipulate real objects through a robot arm hidden from view.
+#[derive(Parser, Debug)]
+#[command(version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Check a robot description: joint/link tree, limits, meshes, link poses at q.
+    Robot {
+        /// The URDF file.
+        urdf: PathBuf,
+        /// Folder searched for package://NAME/... URIs (repeatable; ROS_PACKAGE_PATH is added).
+        #[arg(long = "package-path", value_name = "DIR")]
+        package_path: Vec<PathBuf>,
+        /// Joint values: v1,v2,... in the printed q order, or name=value,... (others are 0).
+        #[arg(long, value_name = "Q", allow_hyphen_values = true)]
+        q: Option<String>,
+        /// Print link poses at q as JSON instead of the tree.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Open the desktop preview of a scene (default: assets/scenes/default.toml).
+    #[command(after_help = crate::preview::keys::help())]
+    Run {
+        /// The scene file.
+        scene: Option<PathBuf>,
+        /// Start an OpenXR session; without a runtime the preview window is used.
+        #[arg(long)]
+        xr: bool,
+        /// Quit after N frames.
+        #[arg(long, value_name = "N")]
+        frames: Option<u32>,
+        /// Advance simulated time by MS per rendered frame instead of by the wall clock
+        /// (default with --frames: half a camera frame, a display twice as fast as the camera).
+        #[arg(long = "step-ms", value_name = "MS", value_parser = step_ms)]
+        step_ms: Option<f64>,
+        /// Save a screenshot of the window at the last frame.
+        #[arg(long, value_name = "PATH")]
+        screenshot: Option<PathBuf>,
+        /// Folder searched for package:// URIs (repeatable).
+        #[arg(long = "package-path", value_name = "DIR")]
+        package_path: Vec<PathBuf>,
+        /// Take the camera feed from webcam N (feature `webcam`) instead of the simulated room.
+        #[arg(long, value_name = "N")]
+        webcam: Option<u32>,
+        /// With a scene that has a [task]: teleoperate it live with this hand: scripted (the
+        /// task's trial, default), desktop (keys and mouse), xr (OpenXR hand tracking, with
+        /// --xr), leap (feature `leap`), a recorded FILE.hand.jsonl, or none.
+        #[arg(long, value_name = "SOURCE")]
+        hand: Option<String>,
+        #[command(flatten)]
+        overrides: EraseOverrides,
+    },
+    /// Replay a scene without a window: frames, ground truth and report.json in --out.
+    Replay {
+        /// The scene file.
+        scene: PathBuf,
+        /// Run without a window (replays are always headless; accepted for clarity).
+        #[arg(long)]
+        headless: bool,
+        /// Output folder.
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        /// Save every N-th camera frame.
+        #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+        frames_every: u32,
+        /// Folder searched for package:// URIs (repeatable).
+        #[arg(long = "package-path", value_name = "DIR")]
+        package_path: Vec<PathBuf>,
+        #[command(flatten)]
+        overrides: EraseOverrides,
+    },
+    /// Measure speed against accuracy and chart it.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+}
+
+#[derive(Subcommand, Debug)]
+enum BenchCommand {
+    /// Sweep the erase pipeline's settings on a scene (default: the default scene, whose arm
+    /// reaches, lifts and pours: the pouring scene's arm rests during its video) and chart
+    /// frame cost against leak and PSNR: DIR/dr_speed_accuracy.{svg,png,csv}.
+    Dr {
+        /// The scene file.
+        scene: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long, value_name = "DIR", default_value = "out/bench_dr")]
+        out: PathBuf,
+        /// Mask resolution scales.
+        #[arg(long, value_delimiter = ',', default_values_t = [1.0, 0.5, 0.25])]
+        scales: Vec<f64>,
+        /// Dilations (px).
+        #[arg(long, value_delimiter = ',', default_values_t = [0, 4])]
+        dilate: Vec<u32>,
+        /// Feathering widths (px).
+        #[arg(long, value_delimiter = ',', default_values_t = [0, 2])]
+        feather: Vec<u32>,
+        /// Latency compensation settings (off, on).
+        #[arg(long, value_delimiter = ',', value_parser = on_off, default_values_t = [false, true])]
+        latency: Vec<bool>,
+        /// Simulated seconds replayed per setting.
+        #[arg(long, value_name = "S", default_value_t = 1.5)]
+        duration: f64,
+        /// Folder searched for package:// URIs (repeatable).
+        #[arg(long = "package-path", value_name = "DIR")]
+        package_path: Vec<PathBuf>,
+    },
+    /// Sweep the teleoperation loop on a scene's pouring task (default: the pouring scene):
+    /// control rate x simulated command latency x TCP speed cap, both mapping modes, and chart
+    /// object position RMSE against rate and loop cost: DIR/control_speed_accuracy.{svg,png,csv}.
+    Control {
+        /// The scene file (needs a [task]).
+        scene: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long, value_name = "DIR", default_value = "out/bench_control")]
+        out: PathBuf,
+        /// Control (and physics) rates, Hz.
+        #[arg(long, value_delimiter = ',', default_values_t = [50.0, 100.0, 200.0])]
+        rates: Vec<f64>,
+        /// Simulated command latencies, ms.
+        #[arg(long = "latency-ms", value_delimiter = ',', default_values_t = [0.0, 20.0, 50.0])]
+        latency_ms: Vec<f64>,
+        /// TCP speed caps, m/s.
+        #[arg(long, value_delimiter = ',', default_values_t = [0.1, 0.25, 0.5])]
+        caps: Vec<f64>,
+        /// Trials per setting and mode.
+        #[arg(long, value_name = "N", default_value_t = 3)]
+        trials: u32,
+        /// Folder searched for package:// URIs (repeatable).
+        #[arg(long = "package-path", value_name = "DIR")]
+        package_path: Vec<PathBuf>,
+    },
+}
+
+fn packages(dirs: Vec<PathBuf>) -> PackagePath {
+    let mut p = PackagePath(dirs);
+    if let Ok(env) = std::env::var("ROS_PACKAGE_PATH") {
+        p.extend_from_env_list(&env);
+    }
+    p
+}
+
+/// A scene shipped in assets/scenes: from the working folder when run from the repository,
+/// else from the source tree this binary was built from.
+fn bundled_scene(file: &str) -> PathBuf {
+    let local = Path::new("assets/scenes").join(file);
+    if local.is_file() {
+        local
+    } else {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("assets/scenes")
+            .join(file)
+    }
+}
+
+fn default_scene() -> PathBuf {
+    bundled_scene("default.toml")
+}
+
+fn pouring_scene() -> PathBuf {
+    bundled_scene("pouring.toml")
+}
+
+/// The live hand for `avatarm run`: `--hand`, else the scene's `hand`, else the scripted hand
+/// when the scene has a `[task]`; errors name the flag.
+fn live_hand(scene: &Scene, flag: Option<&str>, xr: bool) -> Result<Option<HandChoice>, AppError> {
+    let (text, from) = match (flag, &scene.file.hand) {
+        (Some(f), _) => (f.to_owned(), "--hand"),
+        (None, Some(h)) => (h.clone(), "hand (scene)"),
+        (None, None) if scene.file.task.is_some() => ("scripted".to_owned(), "[task]"),
+        (None, None) => return Ok(None),
+    };
+    if text == "none" {
+        return Ok(None);
+    }
+    let refuse = |message: String| AppError::flag(from, message);
+    let choice: HandChoice = text.parse().map_err(|e| match e {
+        SceneError::Field { message, .. } => refuse(message),
+        other => refuse(other.to_string()),
+    })?;
+    if scene.file.task.is_none() {
+        return Err(refuse(format!(
+            "the scene '{}' has no [task] to teleoperate (try assets/scenes/pouring.toml)",
+            scene.file.name
+        )));
+    }
+    match &choice {
+        HandChoice::Xr if !xr => Err(refuse("xr needs XR mode (--xr)".into())),
+        HandChoice::Leap if !cfg!(feature = "leap") => Err(refuse(
+            "this avatarm was built without the leap feature; rebuild with `cargo build \
+             --features leap` (needs the Ultraleap SDK, docs/hardware.md)"
+                .into(),
+        )),
+        HandChoice::File(path) if !path.is_file() => {
+            Err(refuse(format!("{} does not exist", path.display())))
+        }
+        _ => Ok(Some(choice)),
+    }
+}
+
+/// Parses the command line and runs it; errors are printed and give exit code 1.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<(), AppError> {
+    match cli.command {
+        Command::Robot {
+            urdf,
+            package_path,
+            q,
+            json,
+        } => {
+            let model = RobotModel::from_urdf_file(&urdf, &packages(package_path))?;
+            let meshes = robot::check_meshes(&model)?;
+            let q = model
+                .parse_q(q.as_deref().unwrap_or(""))
+                .map_err(|e| AppError::flag("--q", e.to_string()))?;
+            let q: Vec<f64> = q.iter().copied().collect();
+            if json {
+                let text = serde_json::to_string_pretty(&robot::poses_json(&model, &q))?;
+                println!("{text}");
+            } else {
+                print!("{}", robot::tree_text(&model));
+                for line in meshes {
+                    println!("mesh {line}");
+                }
+            }
+            Ok(())
+        }
+        Command::Run {
+            scene,
+            xr,
+            frames,
+            step_ms,
+            screenshot,
+            package_path,
+            webcam,
+            hand,
+            overrides,
+        } => {
+            if webcam.is_some() && !cfg!(feature = "webcam") {
+                return Err(AppError::flag(
+                    "--webcam",
+                    "this avatarm was built without the webcam feature; rebuild with `cargo \
+                     build --features webcam`",
+                ));
+            }
+            let path = scene.unwrap_or_else(default_scene);
+            let mut scene = Scene::load(&path, &packages(package_path))?;
+            overrides.apply(&mut scene)?;
+            if webcam.is_some() && scene.file.background == BackgroundSpec::EmptyRoom {
+                eprintln!(
+                    "webcam: the simulated empty room is no background for it; press B with the \
+                     robot out of view to capture one (or pass --background PATH)"
+                );
+                scene.file.background = BackgroundSpec::None;
+            }
+            let xr = xr || scene.file.xr;
+            let hand = live_hand(&scene, hand.as_deref(), xr)?;
+            let mode = Mode::Preview(PreviewOptions {
+                frames,
+                screenshot,
+                xr,
+                fixed_step_s: step_ms
+                    .map(|ms| ms / 1e3)
+                    .or_else(|| frames.map(|_| 0.5 / scene.file.camera.fps)),
+                webcam,
+                hand,
+            });
+            let exit = build_app(&scene, &mode)?.run();
+            if exit.is_error() {
+                return Err(AppError::Preview);
+            }
+            Ok(())
+        }
+        Command::Replay {
+            scene,
+            headless: _,
+            out,
+            frames_every,
+            package_path,
+            overrides,
+        } => {
+            let mut scene = Scene::load(&scene, &packages(package_path))?;
+            overrides.apply(&mut scene)?;
+            let mut options = ReplayOptions::new(out.clone());
+            options.frames_every = frames_every;
+            options.progress = true;
+            let report = crate::replay::run(&scene, options)?;
+            eprintln!(
+                "replayed '{}': {} frames, {:.2} s simulated in {:.2} s ({:.2} sim s per wall s); report: {}",
+                scene.file.name,
+                report["frames"],
+                report["sim_time_s"].as_f64().unwrap_or(0.0),
+                report["wall_time_s"].as_f64().unwrap_or(0.0),
+                report["sim_s_per_wall_s"].as_f64().unwrap_or(0.0),
+                out.join("report.json").display()
+            );
+            Ok(())
+        }
+        Command::Bench(BenchCommand::Dr {
+            scene,
+            out,
+            scales,
+            dilate,
+            feather,
+            latency,
+            duration,
+            package_path,
+        }) => {
+            let path = scene.unwrap_or_else(default_scene);
+            let scene = Scene::load(&path, &packages(package_path))?;
+            let sweep = DrSweep {
+                scales,
+                dilate,
+                feather,
+                latency,
+                duration_s: duration,
+                progress: true,
+            };
+            let outputs = bench_dr::run_dr(&scene, &sweep, &out)?;
+            let base = &outputs.points[outputs.baseline];
+            println!(
+                "{:<22} {:>9} {:>7} {:>12} {:>8} {:>8} {:>8}  front (frame cost / erase GPU time)",
+                "setting", "frame ms", "ratio", "erase GPU ms", "leak %", "over %", "PSNR dB"
+            );
+            for p in &outputs.points {
+                let front = |leak: bool, psnr: bool| match (leak, psnr) {
+                    (true, true) => "leak, PSNR",
+                    (true, false) => "leak",
+                    (false, true) => "PSNR",
+                    (false, false) => "-",
+                };
+                let front = format!(
+                    "{} / {}",
+                    front(p.pareto_leak, p.pareto_psnr),
+                    front(p.pareto_leak_gpu, p.pareto_psnr_gpu)
+                );
+                let erase_gpu = match (p.gpu_mask_ms, p.gpu_composite_ms) {
+                    (Some(m), Some(c)) => format!("{:.1}", m + c),
+                    _ => "-".into(),
+                };
+                println!(
+                    "{:<22} {:>9.1} {:>7.3} {:>12} {:>8.3} {:>8.2} {:>8.2}  {front}",
+                    p.label,
+                    p.frame_ms_median,
+                    p.frame_cost_ratio,
+                    erase_gpu,
+                    p.leak_pct_mean,
+                    p.overmask_pct_mean,
+                    p.psnr_db_mean
+                );
+            }
+            println!(
+                "ratios against '{}' ({:.1} ms) of the same run; wrote {}, {}, {}",
+                base.label,
+                base.frame_ms_median,
+                outputs.csv.display(),
+                outputs.svg.display(),
+                outputs.png.display()
+            );
+            Ok(())
+        }
+        Command::Bench(BenchCommand::Control {
+            scene,
+            out,
+            rates,
+            latency_ms,
+            caps,
+            trials,
+            package_path,
+        }) => {
+            let path = scene.unwrap_or_else(pouring_scene);
+            let scene = Scene::load(&path, &packages(package_path))?;
+            let sweep = ControlSweep {
+                rates_hz: rates,
+                latencies_ms: latency_ms,
+                caps,
+                trials,
+                progress: true,
+            };
+            let outputs = bench_control::run_control(&scene, &sweep, &out)?;
+            let base = &outputs.points[outputs.baseline];
+            println!(
+                "{:<22} {:<11} {:>8} {:>7} {:>7} {:>7} {:>7} {:>8} {:>7} {:>7}  front",
+                "setting",
+                "mode",
+                "pos mm",
+                "std",
+                "roll",
+                "pitch",
+                "yaw",
+                "ms/sim s",
+                "ratio",
+                "tick us"
+            );
+            for p in &outputs.points {
+                println!(
+                    "{:<22} {:<11} {:>8.2} {:>7.2} {:>7.2} {:>7.2} {:>7.2} {:>8.1} {:>7.3} {:>7.1}  {}",
+                    p.label,
+                    p.mode.name(),
+                    p.pos_rmse_mm,
+                    p.pos_rmse_mm_std,
+                    p.roll_rmse_deg,
+                    p.pitch_rmse_deg,
+                    p.yaw_rmse_deg,
+                    p.wall_ms_per_sim_s,
+                    p.cost_ratio,
+                    p.tick_us,
+                    if p.pareto { "*" } else { "" }
+                );
+            }
+            println!(
+                "ratios against '{} {}' ({:.1} ms per simulated s) of the same run; wrote {}, {}, {}",
+                base.label,
+                base.mode.name(),
+                base.wall_ms_per_sim_s,
+                outputs.csv.display(),
+                outputs.svg.display(),
+                outputs.png.display()
+            );
+            Ok(())
+        }
+    }
+}
+
+/// `--step-ms`: a time step in milliseconds, more than 0 and at most 250 (Bevy clamps a longer
+/// update).
+fn step_ms(s: &str) -> Result<f64, AppError> {
+    let ms: f64 = s
+        .parse()
+        .map_err(|_| AppError::flag(s, "expected a number of milliseconds"))?;
+    if ms.is_finite() && ms > 0.0 && ms <= 250.0 {
+        Ok(ms)
+    } else {
+        Err(AppError::flag(
+            s,
+            "expected more than 0 and at most 250 ms (a longer step is clamped)",
+        ))
+    }
+}

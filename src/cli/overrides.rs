@@ -1,0 +1,101 @@
+//! Command-line overrides of a scene's `[erase]` and `[background]`.
+
+use std::path::PathBuf;
+
+use avatarm_scene::Scene;
+use avatarm_scene::spec::BackgroundSpec;
+
+use crate::AppError;
+
+/// Command-line overrides of a scene's `[erase]` and `[background]` (each flag left out keeps
+/// the scene's value). Shared by `avatarm run` and `avatarm replay`.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct EraseOverrides {
+    /// Erase the robot at all.
+    #[arg(long, value_name = "on|off", value_parser = on_off)]
+    pub erase: Option<bool>,
+    /// Grow the mask by N pixels.
+    #[arg(long, value_name = "N")]
+    pub dilate: Option<u32>,
+    /// Soften the mask's edge over N pixels.
+    #[arg(long, value_name = "N")]
+    pub feather: Option<u32>,
+    /// Render the twin at each frame's capture time (predicted joint state).
+    #[arg(long, value_name = "on|off", value_parser = on_off)]
+    pub latency_compensation: Option<bool>,
+    /// Fit the background's gain and offset to each frame.
+    #[arg(long, value_name = "on|off", value_parser = on_off)]
+    pub photometric: Option<bool>,
+    /// Render the mask twin at this fraction of the camera's resolution.
+    #[arg(long, value_name = "F")]
+    pub mask_scale: Option<f64>,
+    /// Refresh the background from pixels the robot cannot cover (0 = never, 1 = copy).
+    #[arg(long, value_name = "F")]
+    pub background_refresh: Option<f64>,
+    /// Load the background H from an image file (the camera's size).
+    #[arg(long, value_name = "PATH", conflicts_with = "capture_background_at")]
+    pub background: Option<PathBuf>,
+    /// Capture the background H from the live frame at this time (s).
+    #[arg(long, value_name = "S")]
+    pub capture_background_at: Option<f64>,
+}
+
+/// Parses `on`/`off` (also `true`/`false`, `1`/`0`) for command-line switches.
+pub fn on_off(s: &str) -> Result<bool, AppError> {
+    match s {
+        "on" | "true" | "1" => Ok(true),
+        "off" | "false" | "0" => Ok(false),
+        _ => Err(AppError::flag(s, "expected on or off")),
+    }
+}
+
+impl EraseOverrides {
+    /// Applies the overrides to `scene` and checks the result; errors name the flag.
+    pub fn apply(&self, scene: &mut Scene) -> Result<(), AppError> {
+        let o = self;
+        let e = &mut scene.file.erase;
+        if let Some(v) = o.erase {
+            e.enabled = v;
+        }
+        if let Some(v) = o.dilate {
+            e.dilate_px = v;
+        }
+        if let Some(v) = o.feather {
+            e.feather_px = v;
+        }
+        if let Some(v) = o.latency_compensation {
+            e.latency_compensation = v;
+        }
+        if let Some(v) = o.photometric {
+            e.photometric = v;
+        }
+        if let Some(v) = o.mask_scale {
+            e.resolution_scale = v;
+        }
+        if let Some(v) = o.background_refresh {
+            e.background_refresh = v as f32;
+        }
+        e.validate("command line")?;
+        if let Some(path) = &o.background {
+            if !path.is_file() {
+                return Err(AppError::flag(
+                    "--background",
+                    format!("{} does not exist", path.display()),
+                ));
+            }
+            scene.file.background = BackgroundSpec::File { path: path.clone() };
+            scene.background_path = Some(path.clone());
+        }
+        if let Some(at_s) = o.capture_background_at {
+            if !(at_s.is_finite() && at_s >= 0.0) {
+                return Err(AppError::flag(
+                    "--capture-background-at",
+                    format!("{at_s} must be >= 0"),
+                ));
+            }
+            scene.file.background = BackgroundSpec::Capture { at_s };
+            scene.background_path = None;
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,152 @@
+//! The app's one error type: each layer's error is wrapped, not flattened into text.
+
+use std::path::PathBuf;
+
+/// What can go wrong running Avatarm's commands.
+#[derive(Debug, thiserror::Error)]
+pub enum AppError {
+    /// A scene that does not load.
+    #[error(transparent)]
+    Scene(Box<avatarm_scene::SceneError>),
+    /// A robot description, mesh, joint vector or setting the core refused.
+    #[error(transparent)]
+    Core(Box<avatarm_core::Error>),
+    /// The teleoperation loop or the pouring task could not be set up or run.
+    #[error(transparent)]
+    Mapping(Box<avatarm_mapping::MappingError>),
+    /// A hand source could not be set up (a recording that cannot be read, a device).
+    #[error(transparent)]
+    Hand(Box<avatarm_hand::HandError>),
+    /// A command-line flag (or the scene field it stands for) with a value that cannot be used.
+    #[error("{flag}: {message}")]
+    Flag {
+        /// The flag (`--hand`) or field (`hand (scene)`).
+        flag: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A file or folder that could not be read, written or created.
+    #[error("{path}: cannot {action}: {source}")]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// `read`, `write`, `create`.
+        action: &'static str,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// An image file that could not be read or written.
+    #[error("{path}: {source}")]
+    Image {
+        /// The file.
+        path: PathBuf,
+        /// The image library's error.
+        source: image::ImageError,
+    },
+    /// An image buffer whose size does not match its width and height.
+    #[error("{what}: the buffer does not hold a {width}x{height} image")]
+    ImageSize {
+        /// Which image.
+        what: String,
+        /// Width (px).
+        width: u32,
+        /// Height (px).
+        height: u32,
+    },
+    /// A report or table that could not be serialised.
+    #[error("report: {0}")]
+    Json(#[from] serde_json::Error),
+    /// A chart that could not be drawn.
+    #[error("chart {what}: {source}")]
+    Chart {
+        /// The chart's file or part.
+        what: String,
+        /// The drawing library's error.
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// No font to draw a chart's text with.
+    #[error(
+        "no font for the chart's text: install fonts-dejavu-core (looked for {searched}) or set AVATARM_FONT to a .ttf file"
+    )]
+    NoFont {
+        /// The files looked for.
+        searched: String,
+    },
+    /// A replay that did not finish or measured something wrong (names what).
+    #[error("replay: {message}")]
+    Replay {
+        /// What went wrong.
+        message: String,
+    },
+    /// A bench setting that could not run.
+    #[error("bench setting '{label}': {source}")]
+    BenchSetting {
+        /// The setting's label.
+        label: String,
+        /// Why.
+        source: Box<AppError>,
+    },
+    /// `avatarm run` opens a window, and there is no display to open it on.
+    #[error(
+        "avatarm run opens a window and there is no display (DISPLAY and WAYLAND_DISPLAY are \
+         unset): run it in a desktop session, under `xvfb-run -a`, or replay the scene headless \
+         with `avatarm replay SCENE --headless --out DIR`"
+    )]
+    NoDisplay,
+    /// The desktop preview or the XR view stopped with an error (logged above it).
+    #[error("the preview stopped with an error (see the log above)")]
+    Preview,
+}
+
+impl AppError {
+    /// An [`AppError::Flag`].
+    pub fn flag(flag: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::Flag {
+            flag: flag.into(),
+            message: message.into(),
+        }
+    }
+
+    /// An [`AppError::Io`] for writing `path`.
+    pub fn write(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Self::Io {
+            path: path.into(),
+            action: "write",
+            source,
+        }
+    }
+
+    /// An [`AppError::Replay`].
+    pub fn replay(message: impl Into<String>) -> Self {
+        Self::Replay {
+            message: message.into(),
+        }
+    }
+}
+
+/// Result with [`AppError`].
+pub type Result<T, E = AppError> = std::result::Result<T, E>;
+
+impl From<avatarm_scene::SceneError> for AppError {
+    fn from(e: avatarm_scene::SceneError) -> Self {
+        Self::Scene(Box::new(e))
+    }
+}
+
+impl From<avatarm_core::Error> for AppError {
+    fn from(e: avatarm_core::Error) -> Self {
+        Self::Core(Box::new(e))
+    }
+}
+
+impl From<avatarm_mapping::MappingError> for AppError {
+    fn from(e: avatarm_mapping::MappingError) -> Self {
+        Self::Mapping(Box::new(e))
+    }
+}
+
+impl From<avatarm_hand::HandError> for AppError {
+    fn from(e: avatarm_hand::HandError) -> Self {
+        Self::Hand(Box::new(e))
+    }
+}

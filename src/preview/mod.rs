@@ -1,0 +1,540 @@
+//! The desktop preview: what the remote user sees (the interaction view Ĩ(t) with the robot
+//! erased and the object twins in front), or the raw camera feed, or the mask, beside a 3-D
+//! view of the robot twin.
+//!
+//! Keys: [`keys::PREVIEW_KEYS`] (the one list the on-screen help, `--help` and the README
+//! show). The status lines show the frame time, the ages of the
+//! camera frame and joint state, how often the mask was rendered per camera frame and, in the
+//! simulated room, the live erasure scores against its ground truth ([`crate::preview::live_scores`]).
+
+pub mod keys;
+pub mod live_scores;
+#[cfg(feature = "xr")]
+pub mod xr;
+
+use std::path::PathBuf;
+
+use avatarm_erase::{
+    CaptureBackground, EraseConfig, EraseState, EraseTargets, InteractionTargets, toggle_erasure,
+};
+use avatarm_sim::SimCameras;
+use avatarm_twin::layers;
+use avatarm_video::LiveVideo;
+use bevy::asset::embedded_asset;
+use bevy::camera::visibility::RenderLayers;
+use bevy::core_pipeline::tonemapping::Tonemapping;
+use bevy::pbr::wireframe::{Wireframe, WireframeColor, WireframePlugin};
+use bevy::prelude::*;
+use bevy::render::render_resource::AsBindGroup;
+use bevy::render::view::screenshot::{Screenshot, save_to_disk};
+use bevy::shader::ShaderRef;
+use bevy::ui_render::UiMaterialPlugin;
+use bevy::ui_render::ui_material::{MaterialNode, UiMaterial};
+
+use crate::preview::live_scores::LiveDr;
+use crate::{AvatarmSystems, SceneResource};
+
+/// Options of the preview.
+#[derive(Debug, Clone, Default)]
+pub struct PreviewOptions {
+    /// Quit after this many frames.
+    pub frames: Option<u32>,
+    /// Save a screenshot of the window at the last frame (needs `frames`; default 120).
+    pub screenshot: Option<PathBuf>,
+    /// Start an OpenXR session (falls back to the window without a runtime).
+    pub xr: bool,
+    /// Advance simulated time by exactly this much per rendered frame (s) instead of by the
+    /// wall clock: scripted runs use half a camera frame, a display twice as fast as the
+    /// camera, as a headset's is.
+    pub fixed_step_s: Option<f64>,
+    /// Take the camera feed from this webcam instead of the simulated room's camera (needs
+    /// the `webcam` feature).
+    pub webcam: Option<u32>,
+    /// Run the scene's `[task]` live with this hand ([`crate::teleop`]).
+    pub hand: Option<avatarm_scene::hand::HandChoice>,
+}
+
+/// The preview's cameras, panels and keys.
+pub struct PreviewPlugin(pub PreviewOptions);
+
+/// What the preview's panel shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PanelView {
+    /// The interaction camera's image: Ĩ(t) with the object twins.
+    #[default]
+    Interaction,
+    /// The live camera frame I(t) as received.
+    Feed,
+    /// The mask M(t).
+    Mask,
+}
+
+impl PanelView {
+    fn next(self) -> Self {
+        match self {
+            Self::Interaction => Self::Feed,
+            Self::Feed => Self::Mask,
+            Self::Mask => Self::Interaction,
+        }
+    }
+
+    fn title(self) -> &'static str {
+        match self {
+            Self::Interaction => "Interaction view: robot erased, object twins in front",
+            Self::Feed => "Camera feed I(t), as received",
+            Self::Mask => "Mask M(t) from the twin",
+        }
+    }
+}
+
+#[derive(Resource)]
+struct PreviewState {
+    options: PreviewOptions,
+    frame: u32,
+    shots: u32,
+    view: PanelView,
+    mask_overlay: bool,
+    wireframe: bool,
+    /// Updates left before quitting: read-backs already asked for (camera frames, scores,
+    /// screenshots) come back first, so none is sent to a closed app.
+    quit_in: Option<u32>,
+}
+
+/// Updates between asking to quit and quitting, with no new read-backs.
+const QUIT_DRAIN: u32 = 4;
+
+/// The panel's image with the mask tinted over it (`mask_overlay.wgsl`); a tint of alpha 0
+/// shows the image alone.
+#[derive(Asset, TypePath, AsBindGroup, Debug, Clone)]
+struct PanelMaterial {
+    #[uniform(0)]
+    tint: Vec4,
+    #[texture(1)]
+    #[sampler(2)]
+    image: Handle<Image>,
+    #[texture(3)]
+    #[sampler(4)]
+    mask: Handle<Image>,
+}
+
+impl UiMaterial for PanelMaterial {
+    fn fragment_shader() -> ShaderRef {
+        "embedded://avatarm/preview/mask_overlay.wgsl".into()
+    }
+}
+
+/// The mask overlay's colour and opacity.
+const MASK_TINT: Vec4 = Vec4::new(1.0, 0.1, 0.6, 0.45);
+
+#[derive(Component)]
+struct StatusText;
+
+#[derive(Component)]
+struct PanelTitle;
+
+#[derive(Component)]
+struct PanelImage;
+
+impl Plugin for PreviewPlugin {
+    fn build(&self, app: &mut App) {
+        embedded_asset!(app, "mask_overlay.wgsl");
+        #[cfg(feature = "xr")]
+        app.add_message::<crate::preview::xr::RecenterXrPanel>();
+        app.add_plugins((
+            UiMaterialPlugin::<PanelMaterial>::default(),
+            WireframePlugin::default(),
+        ))
+        .insert_resource(PreviewState {
+            options: self.0.clone(),
+            frame: 0,
+            shots: 0,
+            view: PanelView::default(),
+            mask_overlay: false,
+            wireframe: false,
+            quit_in: None,
+        })
+        .add_systems(Startup, setup_preview)
+        .add_systems(
+            Update,
+            (
+                handle_keys,
+                show_panel,
+                update_status,
+                count_frames,
+                quit_when_drained,
+            )
+                .chain()
+                .in_set(AvatarmSystems::View),
+        );
+    }
+}
+
+fn setup_preview(
+    mut commands: Commands,
+    cameras: Res<SimCameras>,
+    scene: Res<SceneResource>,
+    mut materials: ResMut<Assets<PanelMaterial>>,
+    desktop_hand: Option<Res<crate::teleop::DesktopHand>>,
+) {
+    let base = scene.0.robot_base().translation.vector;
+    let focus = Vec3::new(base.x as f32 + 0.45, base.y as f32, base.z as f32 + 0.25);
+    // Aimed a little left of the robot so that the twin shows right of the camera feed panel.
+    let eye = focus + Vec3::new(1.6, -1.6, 0.9);
+    let right = (focus - eye).cross(Vec3::Z).normalize();
+    commands.spawn((
+        Name::new("preview camera"),
+        Camera3d::default(),
+        Tonemapping::None,
+        Transform::from_translation(eye).looking_at(focus - 0.45 * right, Vec3::Z),
+        RenderLayers::from_layers(&[layers::ROOM, layers::TWIN]),
+    ));
+    let k = &scene.0.true_camera.intrinsics;
+    let panel_w = 560.0;
+    let panel_h = panel_w * k.height as f32 / k.width as f32;
+    commands
+        .spawn((
+            Node {
+                position_type: PositionType::Absolute,
+                left: Val::Px(12.0),
+                top: Val::Px(12.0),
+                width: Val::Px(panel_w),
+                flex_direction: FlexDirection::Column,
+                row_gap: Val::Px(6.0),
+                ..default()
+            },
+            BackgroundColor(Color::srgba(0.05, 0.05, 0.07, 0.8)),
+        ))
+        .with_children(|panel| {
+            panel.spawn((
+                PanelTitle,
+                Text::new(PanelView::default().title()),
+                TextFont {
+                    font_size: FontSize::Px(18.0),
+                    ..default()
+                },
+                TextColor(Color::WHITE),
+            ));
+            panel.spawn((
+                PanelImage,
+                MaterialNode(materials.add(PanelMaterial {
+                    tint: Vec4::ZERO,
+                    image: cameras.real.clone(),
+                    mask: cameras.real.clone(),
+                })),
+                Node {
+                    width: Val::Px(panel_w),
+                    height: Val::Px(panel_h),
+                    ..default()
+                },
+            ));
+            panel.spawn((
+                StatusText,
+                Text::new(""),
+                TextFont {
+                    font_size: FontSize::Px(15.0),
+                    ..default()
+                },
+                TextColor(Color::srgb(0.85, 0.9, 0.95)),
+            ));
+        });
+    let hand_keys = if desktop_hand.is_some() {
+        format!("\ndesktop hand: {}", keys::line(&keys::DESKTOP_HAND_KEYS))
+    } else {
+        String::new()
+    };
+    commands.spawn((
+        Text::new(format!(
+            "Robot twin (from joint states)\n{}{hand_keys}",
+            keys::line(&keys::PREVIEW_KEYS)
+        )),
+        TextFont {
+            font_size: FontSize::Px(16.0),
+            ..default()
+        },
+        TextColor(Color::WHITE),
+        Node {
+            position_type: PositionType::Absolute,
+            right: Val::Px(12.0),
+            bottom: Val::Px(10.0),
+            ..default()
+        },
+    ));
+}
+
+fn show_panel(
+    state: Res<PreviewState>,
+    cameras: Res<SimCameras>,
+    interaction: Option<Res<InteractionTargets>>,
+    erase: Option<Res<EraseTargets>>,
+    image: Query<&MaterialNode<PanelMaterial>, With<PanelImage>>,
+    mut materials: ResMut<Assets<PanelMaterial>>,
+    mut title: Query<&mut Text, With<PanelTitle>>,
+) {
+    let handle = match state.view {
+        PanelView::Interaction => interaction.map(|t| t.view.clone()),
+        PanelView::Feed => Some(cameras.real.clone()),
+        PanelView::Mask => erase.as_ref().map(|t| t.mask.clone()),
+    };
+    let tint = if state.mask_overlay && state.view != PanelView::Mask {
+        MASK_TINT
+    } else {
+        Vec4::ZERO
+    };
+    if let (Some(handle), Some(erase)) = (handle, erase) {
+        for node in &image {
+            let unchanged = materials
+                .get(&node.0)
+                .is_some_and(|m| m.image == handle && m.tint == tint && m.mask == erase.mask);
+            if !unchanged && let Some(mut m) = materials.get_mut(&node.0) {
+                m.image = handle.clone();
+                m.mask = erase.mask.clone();
+                m.tint = tint;
+            }
+        }
+    }
+    for mut text in &mut title {
+        if text.0 != state.view.title() {
+            text.0 = state.view.title().to_owned();
+        }
+    }
+}
+
+/// What the status line shows of a live teleoperation.
+#[derive(bevy::ecs::system::SystemParam)]
+struct LiveTeleopStatus<'w, 's> {
+    live: Option<Res<'w, crate::teleop::LiveTask>>,
+    teleop: Option<Res<'w, avatarm_mapping::Teleop>>,
+    contacts: Option<Res<'w, avatarm_hand::ObjectContacts>>,
+    held: Option<Res<'w, avatarm_hand::HeldObject>>,
+    twin: Query<'w, 's, &'static Transform, With<avatarm_hand::GraspTarget>>,
+}
+
+impl LiveTeleopStatus<'_, '_> {
+    /// The end-of-run summary, or nothing without a teleoperation.
+    fn summary(&self) -> Option<String> {
+        let (Some(live), Some(teleop), Some(held)) = (&self.live, &self.teleop, &self.held) else {
+            return None;
+        };
+        let twin = self.twin.single().ok().map(avatarm_twin::transform_to_iso);
+        Some(crate::teleop::summary(live, teleop, held, twin))
+    }
+
+    /// The teleoperation's line and a line break, or nothing without one.
+    fn line(&self) -> String {
+        match (&self.live, &self.teleop, &self.contacts, &self.held) {
+            (Some(live), Some(teleop), Some(contacts), Some(held)) => {
+                let twin = self.twin.single().ok().map(avatarm_twin::transform_to_iso);
+                format!(
+                    "{}\n",
+                    crate::teleop::status_line(live, teleop, contacts, held, twin)
+                )
+            }
+            _ => String::new(),
+        }
+    }
+}
+
+#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
+fn update_status(
+    mut text: Query<&mut Text, With<StatusText>>,
+    robot: Option<Res<avatarm_sim::SimRobotState>>,
+    twin: Option<Res<crate::AppTwin>>,
+    twins: Query<&avatarm_twin::RobotTwin>,
+    erase: (
+        Res<EraseConfig>,
+        Res<EraseState>,
+        Res<LiveVideo>,
+        Res<avatarm_erase::GpuPassTimes>,
+    ),
+    live_dr: Option<Res<LiveDr>>,
+    time: Res<Time<Real>>,
+    teleop: LiveTeleopStatus,
+) {
+    let (config, erase_state, live, gpu_times) = erase;
+    let (Some(robot), Some(twin)) = (robot, twin) else {
+        return;
+    };
+    let Ok(twin) = twins.get(twin.0) else { return };
+    let t = robot.0.time_s();
+    let age_ms = twin.stamp_s.map_or(f64::NAN, |s| (t - s) * 1e3);
+    let frame_age_ms = erase_state
+        .frame_capture_s
+        .map_or(f64::NAN, |s| (t - s) * 1e3);
+    let erasing = match (config.settings.enabled, &erase_state.background_origin) {
+        (false, _) => "erase off".to_owned(),
+        (true, None) => "erase on, no background yet (B captures one)".to_owned(),
+        (true, Some(origin)) => format!("erase on; background: {origin}"),
+    };
+    let stale = if live.stale { "   CAMERA STALE" } else { "" };
+    let per_frame = erase_state.renders[0] as f64 / erase_state.frames_in.max(1) as f64;
+    let gpu = gpu_pass_times(&gpu_times).map_or(String::new(), |g| format!("\n{g}"));
+    let scores = match live_dr.as_deref().and_then(LiveDr::means) {
+        Some((iou, leak, psnr)) => format!(
+            "\nlive vs truth (last {} scored): IoU {iou:.3}   leak {leak:.2} %   PSNR {}",
+            live_dr.as_ref().map_or(0, |l| l.recent.len()),
+            psnr.map_or("-".to_owned(), |p| format!("{p:.1} dB"))
+        ),
+        None if live_dr.is_some() => "\nlive vs truth: waiting for a scored frame".to_owned(),
+        None => String::new(),
+    };
+    let teleop_line = teleop.line();
+    for mut line in &mut text {
+        **line = format!(
+            "{teleop_line}sim {t:6.2} s   frame {:5.1} ms   refused joint states {}{stale}\ncamera frame age {frame_age_ms:5.1} ms   joint state age {age_ms:5.1} ms\nmask renders per camera frame {per_frame:.2}{gpu}\n{erasing}{scores}",
+            time.delta_secs_f64() * 1e3,
+            twin.rejected
+        );
+    }
+}
+
+fn handle_keys(
+    keys: Res<ButtonInput<KeyCode>>,
+    mut commands: Commands,
+    mut state: ResMut<PreviewState>,
+    mut config: ResMut<EraseConfig>,
+    mut capture: MessageWriter<CaptureBackground>,
+    #[cfg(feature = "xr")] mut recenter: MessageWriter<crate::preview::xr::RecenterXrPanel>,
+    twin_meshes: Query<(Entity, &RenderLayers), With<Mesh3d>>,
+) {
+    if keys.just_pressed(KeyCode::Escape) {
+        state.quit_in.get_or_insert(QUIT_DRAIN);
+    }
+    if keys.just_pressed(KeyCode::KeyV) {
+        state.view = state.view.next();
+        info!("panel: {}", state.view.title());
+    }
+    if keys.just_pressed(KeyCode::KeyE) {
+        let on = toggle_erasure(&mut config);
+        info!("robot erasure {}", if on { "on" } else { "off" });
+    }
+    if keys.just_pressed(KeyCode::KeyB) {
+        info!("capturing the background from the live frame");
+        capture.write(CaptureBackground);
+    }
+    if keys.just_pressed(KeyCode::KeyM) {
+        state.mask_overlay = !state.mask_overlay;
+        info!(
+            "mask overlay {}",
+            if state.mask_overlay { "on" } else { "off" }
+        );
+    }
+    if keys.just_pressed(KeyCode::KeyW) {
+        state.wireframe = !state.wireframe;
+        info!(
+            "twin wireframe {}",
+            if state.wireframe { "on" } else { "off" }
+        );
+        let twin_layer = RenderLayers::layer(layers::TWIN);
+        for (e, layers) in &twin_meshes {
+            if *layers != twin_layer {
+                continue;
+            }
+            if state.wireframe {
+                commands.entity(e).insert((
+                    Wireframe,
+                    WireframeColor {
+                        color: Color::srgb(0.2, 1.0, 0.4),
+                    },
+                ));
+            } else {
+                commands.entity(e).remove::<(Wireframe, WireframeColor)>();
+            }
+        }
+    }
+    if keys.just_pressed(KeyCode::KeyR) {
+        #[cfg(feature = "xr")]
+        recenter.write_default();
+        #[cfg(not(feature = "xr"))]
+        info!("R: this build has no XR mode");
+    }
+    if keys.just_pressed(KeyCode::F12) {
+        state.shots += 1;
+        let path = format!("avatarm_screenshot_{:03}.png", state.shots);
+        info!("screenshot: {path}");
+        commands
+            .spawn(Screenshot::primary_window())
+            .observe(save_to_disk(path));
+    }
+}
+
+/// The erase passes' recent GPU times (median of the last 30 renders) for the status line and
+/// the run's summary; nothing before the first times arrive.
+fn gpu_pass_times(gpu: &avatarm_erase::GpuPassTimes) -> Option<String> {
+    match (gpu.recent_medians(30), gpu.unavailable()) {
+        ([Some(mask), Some(threshold), Some(composite)], _) => Some(format!(
+            "GPU ms: mask camera {mask:.1} + threshold {threshold:.1}, composite {composite:.1}"
+        )),
+        (_, Some(_)) => Some("GPU ms: no timestamp queries on this device".to_owned()),
+        _ => None,
+    }
+}
+
+fn count_frames(
+    mut commands: Commands,
+    mut state: ResMut<PreviewState>,
+    erase: Res<EraseState>,
+    gpu_times: Res<avatarm_erase::GpuPassTimes>,
+    live_dr: Option<Res<LiveDr>>,
+    teleop: LiveTeleopStatus,
+) {
+    state.frame += 1;
+    let last = match (state.options.frames, &state.options.screenshot) {
+        (Some(n), _) => n,
+        (None, Some(_)) => 120,
+        (None, None) => return,
+    };
+    if state.frame == last
+        && let Some(path) = state.options.screenshot.clone()
+    {
+        commands
+            .spawn(Screenshot::primary_window())
+            .observe(save_to_disk(path));
+    }
+    // Leave a few frames for the screenshot to be read back and written.
+    let grace = if state.options.screenshot.is_some() {
+        10
+    } else {
+        0
+    };
+    if state.frame == last + grace {
+        // One line for scripted runs (and the tests that run them).
+        let scores = live_dr
+            .as_deref()
+            .and_then(|l| l.means().map(|m| (l.scored, m)))
+            .map_or(String::new(), |(n, (iou, leak, _))| {
+                format!("; {n} frames scored live, last IoU {iou:.3}, leak {leak:.2} %")
+            });
+        let gpu = gpu_pass_times(&gpu_times).map_or(String::new(), |g| format!("; {g}"));
+        info!(
+            "preview: {} frames rendered, {} camera frames, mask rendered {} times, composite {} times{scores}{gpu}",
+            state.frame, erase.frames_in, erase.renders[0], erase.renders[2]
+        );
+        if let Some(line) = teleop.summary() {
+            info!("{line}");
+        }
+        state.quit_in.get_or_insert(QUIT_DRAIN);
+    }
+}
+
+/// Quits [`QUIT_DRAIN`] updates after being asked to, asking for no new read-backs meanwhile.
+fn quit_when_drained(
+    mut state: ResMut<PreviewState>,
+    room: Option<ResMut<avatarm_sim::SimRoomConfig>>,
+    live_dr: Option<ResMut<LiveDr>>,
+    mut exit: MessageWriter<AppExit>,
+) {
+    let Some(left) = state.quit_in else { return };
+    if left == QUIT_DRAIN {
+        if let Some(mut room) = room {
+            room.video = None;
+        }
+        if let Some(mut live) = live_dr {
+            live.stop();
+        }
+    }
+    if left == 0 {
+        exit.write(AppExit::Success);
+    } else {
+        state.quit_in = Some(left - 1);
+    }
+}

@@ -1,0 +1,568 @@
+//! Live teleoperation in `avatarm run`: a scene with a `[task]` runs its trial in the preview,
+//! the hand from any source grasping the object's twin in physics and the simulated arm
+//! carrying the real object, with the robot erased from the video.
+//!
+//! The trial's world ([`TrialParts`]: the simulated arm around the real bottle, the mapping,
+//! the limiter, the twin's bodies) runs in this app's `FixedUpdate` at the scene's control
+//! rate, with Rapier, the hand and the mapping plugins; the simulated room renders the arm
+//! (it is driven externally: [`SimRoomConfig::external_drive`]) and the real bottle where the
+//! arm carries it, and the app's twin receives the joint states the controller received. The
+//! bottle's twin in the interaction view follows the physics twin mapped into the real world,
+//! and the hand is drawn as a skeleton there and in the 3-D view.
+//!
+//! Hand sources ([`HandChoice`], `--hand` or `hand = "..."` in the scene): the trial's scripted
+//! hand (default), the desktop hand (keys and mouse, [`crate::preview::keys::DESKTOP_HAND_KEYS`]), OpenXR hand tracking
+//! (`--xr`), Leap Motion (feature `leap`), or a recorded `.hand.jsonl` file.
+
+use avatarm_core::teleop::hand::{HandFrame, Handedness, SKELETON, skeleton};
+use avatarm_core::teleop::mapping::MappingMode;
+use avatarm_erase::InteractionConfig;
+use avatarm_erase::interaction::twin_transform;
+use avatarm_hand::openxr::HandInbox;
+use avatarm_hand::{ActiveHand, GraspTarget, HandPlugin, HeldObject, ObjectContacts, ScriptedHand};
+use avatarm_mapping::pouring::{TrialParts, prepare};
+use avatarm_mapping::{MappingPlugin, Teleop};
+use avatarm_scene::hand::HandChoice;
+use avatarm_scene::prop::find_prop;
+use avatarm_sim::{SimPropPart, SimRobotState, SimRoomConfig};
+use avatarm_twin::{JointStateMessage, iso_to_transform, layers, transform_to_iso};
+use bevy::camera::visibility::RenderLayers;
+use bevy::input::mouse::{AccumulatedMouseMotion, AccumulatedMouseScroll};
+use bevy::prelude::*;
+use bevy_rapier3d::prelude::{NoUserData, RapierPhysicsPlugin, Velocity};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+
+use crate::{AppError, AppTwin, AvatarmSystems};
+use avatarm_scene::Scene;
+
+/// The live trial's fixed parts, for the systems.
+#[derive(Resource, Debug, Clone)]
+pub struct LiveTask {
+    /// The hand source's name.
+    pub source: String,
+    /// Index of the carried object in the room's props.
+    pub prop: usize,
+    /// Index of its twin in the interaction layer's objects.
+    pub object_twin: Option<usize>,
+    /// The real object's base pose (the prop's pose) from its centre (the carried frame).
+    pub centre_to_base: Isometry3<f64>,
+    /// The mapping mode.
+    pub mode: MappingMode,
+    /// Height of the real object's centre at the start (m).
+    pub start_z: f64,
+    /// The object twin's start (virtual scene), where Home puts it back.
+    pub twin_start: Transform,
+}
+
+/// The desktop hand's state: wrist pose (virtual scene), grip, and its start.
+#[derive(Resource, Debug, Clone)]
+pub struct DesktopHand {
+    inbox: HandInbox,
+    start: Isometry3<f64>,
+    wrist: Isometry3<f64>,
+    grip: f64,
+    closing: bool,
+}
+
+/// Hand skeletons in the preview's 3-D view (real world).
+#[derive(Default, Reflect, GizmoConfigGroup)]
+struct HandViewGizmos;
+
+/// Hand skeletons in the interaction view, in front with the object twins.
+#[derive(Default, Reflect, GizmoConfigGroup)]
+struct HandInteractionGizmos;
+
+/// The live trial of a scene's `[task]` with a hand source, prepared before any window or app
+/// exists: every way the set-up can fail (no task, no grasp the arm can reach, a recording that
+/// cannot be read, a device that cannot start) fails in [`LiveTeleop::prepare`], so that
+/// `avatarm run` refuses it at start-up with a non-zero exit.
+pub struct LiveTeleop {
+    scene_name: String,
+    object: String,
+    mode: MappingMode,
+    parts: TrialParts,
+    /// `None` for OpenXR hand tracking, which comes from the app's XR view.
+    hand: Option<ActiveHand>,
+    desktop: Option<DesktopHand>,
+    start: Isometry3<f64>,
+    prop: usize,
+    object_twin: Option<usize>,
+    centre_to_base: Isometry3<f64>,
+    start_z: f64,
+}
+
+impl LiveTeleop {
+    /// Sets up the trial of `scene`'s `[task]` driven by `choice`. Errors when the scene has no
+    /// task, the task cannot be set up (no reachable grasp, bad settings) or the hand source is
+    /// unavailable (a recording that cannot be read, a device, a feature left out of this
+    /// build).
+    pub fn prepare(scene: &Scene, choice: &HandChoice) -> Result<Self, AppError> {
+        let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
+            return Err(AppError::flag(
+                "--hand",
+                format!(
+                    "the scene '{}' has no [task] to teleoperate",
+                    scene.file.name
+                ),
+            ));
+        };
+        let prepared = prepare(task, setup)?;
+        let mode = if task.modes.contains(&MappingMode::ClosedLoop) {
+            MappingMode::ClosedLoop
+        } else {
+            task.modes
+                .first()
+                .copied()
+                .unwrap_or(MappingMode::ClosedLoop)
+        };
+        let parts = TrialParts::new(task, setup, &prepared, mode, 0)?;
+        let start = parts.script.wrist_at(0.0).0;
+        let (hand, desktop) = match choice {
+            HandChoice::Scripted => (
+                Some(ActiveHand::new(ScriptedHand::new(
+                    parts.script.clone(),
+                    task.hand_rate_hz,
+                ))),
+                None,
+            ),
+            HandChoice::Desktop => {
+                let inbox = HandInbox::new("desktop hand");
+                (
+                    Some(ActiveHand::new(inbox.clone())),
+                    Some(DesktopHand {
+                        inbox,
+                        start,
+                        wrist: start,
+                        grip: 0.0,
+                        closing: false,
+                    }),
+                )
+            }
+            HandChoice::Xr => (None, None),
+            HandChoice::Leap => (Some(leap_hand(&start)?), None),
+            HandChoice::File(path) => (
+                Some(ActiveHand::new(avatarm_hand::RecordedHand::open(path)?)),
+                None,
+            ),
+        };
+        let (prop, _) = find_prop(&scene.props, &task.object).ok_or_else(|| {
+            avatarm_scene::SceneError::field(
+                "task.object",
+                format!("no prop named '{}'", task.object),
+            )
+        })?;
+        let object_twin = scene
+            .file
+            .props
+            .iter()
+            .zip(&scene.props)
+            .filter(|(spec, _)| spec.object)
+            .position(|(_, p)| p.name == task.object);
+        Ok(Self {
+            scene_name: scene.file.name.clone(),
+            object: task.object.clone(),
+            mode,
+            parts,
+            hand,
+            desktop,
+            start,
+            prop,
+            object_twin,
+            centre_to_base: setup.bottle_centre().inverse() * setup.bottle_base,
+            start_z: setup.bottle_centre().translation.z,
+        })
+    }
+
+    /// Adds the trial to a preview app built by [`crate::build_app`] (the simulated room drives
+    /// nothing then: the trial's arm does). Errors only for OpenXR hand tracking without the
+    /// XR view.
+    pub fn install(self, app: &mut App) -> Result<(), AppError> {
+        let (hand, desktop) = match self.hand {
+            Some(hand) => (hand, self.desktop),
+            None => xr_hand(app, &self.start)?,
+        };
+        info!(
+            "live teleoperation: '{}' with the {} ({} mode); the arm starts around the {}",
+            self.scene_name,
+            hand.name(),
+            self.mode.name(),
+            self.object
+        );
+        let parts = self.parts;
+        let spawn = parts.spawn_bodies();
+        {
+            let mut room = app.world_mut().resource_mut::<SimRoomConfig>();
+            room.external_drive = true;
+            room.q0 = prepared_q0(&parts.teleop).unwrap_or_else(|| room.q0.clone());
+        }
+        app.add_plugins((
+            RapierPhysicsPlugin::<NoUserData>::default().in_fixed_schedule(),
+            HandPlugin,
+            MappingPlugin,
+        ))
+        .insert_resource(LiveTask {
+            source: hand.name().to_owned(),
+            prop: self.prop,
+            object_twin: self.object_twin,
+            centre_to_base: self.centre_to_base,
+            mode: self.mode,
+            start_z: self.start_z,
+            twin_start: avatarm_twin::iso_to_transform(&parts.twin_start),
+        })
+        .insert_resource(hand)
+        .insert_resource(parts.hand_drive)
+        .insert_resource(parts.teleop)
+        .init_gizmo_group::<HandViewGizmos>()
+        .init_gizmo_group::<HandInteractionGizmos>()
+        .add_systems(
+            Startup,
+            (spawn, configure_gizmos).in_set(AvatarmSystems::Teleop),
+        )
+        .add_systems(FixedUpdate, mirror_room.in_set(AvatarmSystems::Mirror))
+        .add_systems(
+            Update,
+            (follow_twin, draw_hand)
+                .chain()
+                .in_set(AvatarmSystems::Teleop),
+        );
+        if let Some(desktop) = desktop {
+            app.insert_resource(desktop).add_systems(
+                Update,
+                drive_desktop_hand
+                    .before(follow_twin)
+                    .in_set(AvatarmSystems::Teleop),
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Adds the live trial of the scene's `[task]` to a preview app, driven by `choice`
+/// ([`LiveTeleop::prepare`] then [`LiveTeleop::install`]).
+pub fn add_live_teleop(app: &mut App, scene: &Scene, choice: &HandChoice) -> Result<(), AppError> {
+    LiveTeleop::prepare(scene, choice)?.install(app)
+}
+
+/// The simulated arm's start (the room shows it there from the first frame).
+fn prepared_q0(teleop: &Teleop) -> Option<nalgebra::DVector<f64>> {
+    teleop
+        .robot()
+        .simulated()
+        .map(|r| r.true_positions().clone())
+}
+
+#[cfg(feature = "xr")]
+fn xr_hand(
+    app: &mut App,
+    start: &Isometry3<f64>,
+) -> Result<(ActiveHand, Option<DesktopHand>), AppError> {
+    let mut xr = app
+        .world_mut()
+        .get_resource_mut::<crate::preview::xr::XrHand>()
+        .ok_or_else(|| AppError::flag("--hand xr", "needs XR mode (--xr or xr = true)"))?;
+    // A hand held 35 cm ahead at 1 m above the tracking origin (seated, stage space) lands
+    // on the trial's start pose.
+    let rest = Vector3::new(0.0, 1.0, -0.35);
+    let r = xr.mount.scene_from_xr.rotation;
+    xr.mount.scene_from_xr = Isometry3::from_parts(
+        nalgebra::Translation3::from(start.translation.vector - r * rest),
+        r,
+    );
+    Ok((ActiveHand::new(xr.inbox.clone()), None))
+}
+
+#[cfg(not(feature = "xr"))]
+fn xr_hand(_: &mut App, _: &Isometry3<f64>) -> Result<(ActiveHand, Option<DesktopHand>), AppError> {
+    Err(AppError::flag(
+        "--hand xr",
+        "this avatarm was built without the xr feature",
+    ))
+}
+
+#[cfg(feature = "leap")]
+fn leap_hand(start: &Isometry3<f64>) -> Result<ActiveHand, AppError> {
+    use avatarm_hand::leap::{LeapHand, LeapMount, LeapOptions};
+    // A hand 20 cm above the device lands on the trial's start pose.
+    let r = LeapMount::default().scene_from_leap.rotation;
+    let rest = Vector3::new(0.0, 0.2, 0.0);
+    let mount = LeapMount {
+        scene_from_leap: Isometry3::from_parts(
+            nalgebra::Translation3::from(start.translation.vector - r * rest),
+            r,
+        ),
+    };
+    let hand = LeapHand::start(LeapOptions {
+        mount,
+        ..LeapOptions::default()
+    })?;
+    Ok(ActiveHand::new(hand))
+}
+
+#[cfg(not(feature = "leap"))]
+fn leap_hand(_: &Isometry3<f64>) -> Result<ActiveHand, AppError> {
+    Err(AppError::flag(
+        "--hand leap",
+        "this avatarm was built without the leap feature; rebuild with `cargo build --features \
+         leap` (needs the Ultraleap SDK, docs/hardware.md)",
+    ))
+}
+
+fn configure_gizmos(mut store: ResMut<GizmoConfigStore>) {
+    let (view, _) = store.config_mut::<HandViewGizmos>();
+    view.render_layers = RenderLayers::layer(layers::TWIN);
+    view.line.width = 3.0;
+    let (interaction, _) = store.config_mut::<HandInteractionGizmos>();
+    interaction.render_layers = RenderLayers::layer(layers::INTERACTION);
+    interaction.line.width = 4.0;
+}
+
+/// After each control tick: the room's arm is the controller's simulated arm, the app's twin
+/// gets the joint states the controller got, and the real object is where the arm holds it.
+fn mirror_room(
+    teleop: Res<Teleop>,
+    live: Res<LiveTask>,
+    twin: Option<Res<AppTwin>>,
+    room: Res<SimRoomConfig>,
+    mut robot: ResMut<SimRobotState>,
+    mut states: MessageWriter<JointStateMessage>,
+    mut parts: Query<(&SimPropPart, &mut Transform)>,
+) {
+    let arm = teleop.robot();
+    if let Some(sim) = arm.simulated() {
+        robot.0.clone_from(sim);
+    }
+    if let Some(twin) = twin {
+        for s in teleop.received() {
+            states.write(JointStateMessage::full(
+                twin.0,
+                &room.model,
+                &s.positions,
+                &s.velocities,
+                s.stamp_s,
+            ));
+        }
+    }
+    if let Some(centre) = arm.true_object_pose() {
+        let base = iso_to_transform(&(centre * live.centre_to_base));
+        for (part, mut t) in &mut parts {
+            if part.prop == live.prop {
+                let next = base * part.local;
+                if *t != next {
+                    *t = next;
+                }
+            }
+        }
+    }
+}
+
+/// The object's twin in the interaction view shows the physics twin mapped into the real
+/// world (it moves under the hand, the real one follows through the robot).
+fn follow_twin(
+    live: Res<LiveTask>,
+    teleop: Res<Teleop>,
+    twin: Query<&Transform, With<GraspTarget>>,
+    mut config: ResMut<InteractionConfig>,
+) {
+    let (Some(i), Ok(t)) = (live.object_twin, twin.single()) else {
+        return;
+    };
+    let centre = teleop.v2r().pose(&transform_to_iso(t));
+    let pose = centre * live.centre_to_base;
+    if let Some(object) = config.objects.get(i)
+        && object.world_from_object != pose
+    {
+        config.objects[i].world_from_object = pose;
+    }
+}
+
+/// The hand as a skeleton: in the 3-D view where the mapping puts it in the real world, and
+/// in the interaction view around the object's twin as drawn there.
+fn draw_hand(
+    hand: Res<ActiveHand>,
+    held: Res<HeldObject>,
+    live: Res<LiveTask>,
+    teleop: Res<Teleop>,
+    config: Res<InteractionConfig>,
+    mut view: Gizmos<HandViewGizmos>,
+    mut interaction: Gizmos<HandInteractionGizmos>,
+) {
+    let Some(frame) = hand
+        .latest
+        .as_ref()
+        .filter(|f| f.tracked && f.joints.len() == 26)
+    else {
+        return;
+    };
+    let colour = if held.held.is_some() {
+        Color::srgb(1.0, 0.55, 0.2)
+    } else {
+        Color::srgb(0.95, 0.85, 0.7)
+    };
+    let v2r = teleop.v2r();
+    let real: Vec<Vector3<f64>> = frame
+        .joints
+        .iter()
+        .map(|j| v2r.point(&j.pose.translation.vector))
+        .collect();
+    let v = |p: &Vector3<f64>| Vec3::new(p.x as f32, p.y as f32, p.z as f32);
+    for (a, b) in SKELETON {
+        view.line(v(&real[a]), v(&real[b]), colour);
+    }
+    // Interaction view: real world -> the twin's drawn frame (the placement's similarity).
+    let Some(i) = live.object_twin else { return };
+    let Some(object) = config.objects.get(i) else {
+        return;
+    };
+    // Where the interaction layer draws the twin for the pose `follow_twin` set this update.
+    let Ok((drawn, _)) = twin_transform(&config, object) else {
+        return;
+    };
+    let from_object = object.world_from_object.inverse();
+    for (a, b) in SKELETON {
+        let map = |p: &Vector3<f64>| {
+            drawn.transform_point(v(&(from_object * nalgebra::Point3::from(*p)).coords))
+        };
+        interaction.line(map(&real[a]), map(&real[b]), colour);
+    }
+}
+
+/// Keys and mouse move the desktop hand (virtual scene; speeds are the hand's, before the
+/// mapping's scale). Home puts the hand, open, and the twin (when the hand does not hold it,
+/// e.g. knocked over) back at the start.
+#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
+fn drive_desktop_hand(
+    live: Res<LiveTask>,
+    held: Res<HeldObject>,
+    mut twin: Query<(&mut Transform, &mut Velocity), With<GraspTarget>>,
+    keys: Res<ButtonInput<KeyCode>>,
+    buttons: Res<ButtonInput<MouseButton>>,
+    motion: Res<AccumulatedMouseMotion>,
+    scroll: Res<AccumulatedMouseScroll>,
+    time: Res<Time<Real>>,
+    fixed: Res<Time<Fixed>>,
+    mut hand: ResMut<DesktopHand>,
+) {
+    let dt = time.delta_secs_f64().min(0.1);
+    let speed = 0.15;
+    let mut step = Vector3::zeros();
+    for (key, dir) in [
+        (KeyCode::ArrowUp, Vector3::x()),
+        (KeyCode::ArrowDown, -Vector3::x()),
+        (KeyCode::ArrowLeft, Vector3::y()),
+        (KeyCode::ArrowRight, -Vector3::y()),
+        (KeyCode::PageUp, Vector3::z()),
+        (KeyCode::PageDown, -Vector3::z()),
+    ] {
+        if keys.pressed(key) {
+            step += dir * speed * dt;
+        }
+    }
+    if buttons.pressed(MouseButton::Left) {
+        // 1 mm per pixel; screen right is the scene's -y, screen up its +x (the preview looks
+        // along the table).
+        let d = motion.delta;
+        step += Vector3::new(-f64::from(d.y), -f64::from(d.x), 0.0) * 0.001;
+    }
+    step.z += f64::from(scroll.delta.y) * 0.01;
+    let mut roll = 0.0;
+    if keys.pressed(KeyCode::KeyZ) {
+        roll -= 1.2 * dt;
+    }
+    if keys.pressed(KeyCode::KeyX) {
+        roll += 1.2 * dt;
+    }
+    if keys.just_pressed(KeyCode::Space) {
+        hand.closing = !hand.closing;
+    }
+    if keys.just_pressed(KeyCode::Home) {
+        hand.wrist = hand.start;
+        hand.closing = false;
+        hand.grip = 0.0;
+        if held.held.is_none()
+            && let Ok((mut t, mut v)) = twin.single_mut()
+        {
+            *t = live.twin_start;
+            *v = Velocity::zero();
+        }
+    }
+    let h = &mut *hand;
+    h.wrist.translation.vector += step;
+    // Tilt about the hand's own forward axis, as one pours.
+    let forward = h.wrist.rotation * Vector3::x_axis();
+    h.wrist.rotation = UnitQuaternion::from_axis_angle(&forward, roll) * h.wrist.rotation;
+    let target = if h.closing { 1.0 } else { 0.0 };
+    h.grip += (target - h.grip).clamp(-2.0 * dt, 2.0 * dt);
+    h.inbox.push(HandFrame {
+        t_s: fixed.elapsed_secs_f64(),
+        hand: Handedness::Right,
+        tracked: true,
+        joints: skeleton(&h.wrist, h.grip, Handedness::Right),
+    });
+}
+
+/// How far the real object is from its twin mapped into the real world (mm), where the robot
+/// backend knows the real object (simulation).
+fn object_error_mm(teleop: &Teleop, twin: Option<Isometry3<f64>>) -> Option<f64> {
+    let truth = teleop.robot().true_object_pose()?;
+    let target = teleop.v2r().pose(&twin?);
+    Some((target.translation.vector - truth.translation.vector).norm() * 1e3)
+}
+
+fn holding(held: &HeldObject) -> &'static str {
+    if held.held.is_some() {
+        "holding"
+    } else {
+        "not holding"
+    }
+}
+
+/// One line for the end of a scripted run: grasps, how high the real object was lifted, and
+/// how far it is from its twin mapped into the real world.
+pub fn summary(
+    live: &LiveTask,
+    teleop: &Teleop,
+    held: &HeldObject,
+    twin: Option<Isometry3<f64>>,
+) -> String {
+    let lifted_mm = teleop
+        .robot()
+        .true_object_pose()
+        .map_or(f64::NAN, |t| (t.translation.z - live.start_z) * 1e3);
+    let off_mm = object_error_mm(teleop, twin).unwrap_or(f64::NAN);
+    format!(
+        "teleop: {} ticks, {} grasps, {}, real object lifted {lifted_mm:.1} mm, {off_mm:.1} mm from its twin, max TCP speed {:.3} m/s",
+        teleop.status.ticks,
+        held.grasps,
+        holding(held),
+        teleop.status.max_tcp_speed
+    )
+}
+
+/// The live trial's status for the preview's status line; `twin` is the physics twin's pose
+/// (virtual scene), for the error between it mapped into the real world and the real object.
+pub fn status_line(
+    live: &LiveTask,
+    teleop: &Teleop,
+    contacts: &ObjectContacts,
+    held: &HeldObject,
+    twin: Option<Isometry3<f64>>,
+) -> String {
+    let s = &teleop.status;
+    let error = match object_error_mm(teleop, twin) {
+        Some(mm) if held.held.is_some() => format!("; real object {mm:.1} mm off its twin"),
+        _ => String::new(),
+    };
+    let refused = if s.errors > 0 {
+        format!(", {} ticks refused", s.errors)
+    } else {
+        String::new()
+    };
+    format!(
+        "teleop ({}, {}): {}, {} contacts, max TCP {:.3} m/s{refused}{error}",
+        live.source,
+        live.mode.name(),
+        holding(held),
+        contacts.contacts.len(),
+        s.max_tcp_speed,
+    )
+}
