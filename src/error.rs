@@ -25,6 +25,20 @@ pub enum AppError {
         /// What is wrong.
         message: String,
     },
+    /// A value given on the command line that cannot be used (clap names the flag around it).
+    #[error("'{text}': {message}")]
+    Value {
+        /// The text given.
+        text: String,
+        /// What was expected.
+        message: String,
+    },
+    /// The live teleoperation of the scene's `[task]` could not be set up.
+    #[error("live teleoperation: {source} (--hand none runs the preview without it)")]
+    Teleop {
+        /// Why.
+        source: Box<AppError>,
+    },
     /// A file or folder that could not be read, written or created.
     #[error("{path}: cannot {action}: {source}")]
     Io {
@@ -36,10 +50,12 @@ pub enum AppError {
         source: std::io::Error,
     },
     /// An image file that could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}: cannot {action} image: {source}")]
     Image {
         /// The file.
         path: PathBuf,
+        /// `read` or `write`.
+        action: &'static str,
         /// The image library's error.
         source: image::ImageError,
     },

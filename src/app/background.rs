@@ -53,6 +53,7 @@ pub struct BackgroundProgress {
 pub fn load_rgba(path: &std::path::Path) -> Result<(u32, u32, Vec<u8>), AppError> {
     let img = image::open(path).map_err(|source| AppError::Image {
         path: path.to_owned(),
+        action: "read",
         source,
     })?;
     let rgba = img.to_rgba8();

@@ -52,7 +52,11 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
         Mode::Preview(options) => options
             .hand
             .as_ref()
-            .map(|choice| teleop::LiveTeleop::prepare(scene, choice))
+            .map(|choice| {
+                teleop::LiveTeleop::prepare(scene, choice).map_err(|e| AppError::Teleop {
+                    source: Box::new(e),
+                })
+            })
             .transpose()?,
         Mode::Headless(_) => None,
     };

@@ -118,6 +118,7 @@ pub fn save_chart(
         .save(png)
         .map_err(|source| AppError::Image {
             path: png.to_owned(),
+            action: "write",
             source,
         })
 }

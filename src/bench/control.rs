@@ -440,11 +440,6 @@ mod tests {
         assert_eq!(o.points.len(), 4);
         let base = &o.points[o.baseline];
         assert_eq!((base.rate_hz, base.mode), (100.0, MappingMode::ClosedLoop));
-        // Every ratio is against the baseline measured in the same run.
-        for p in &o.points {
-            let expected = p.wall_ms_per_sim_s / base.wall_ms_per_sim_s;
-            assert!((p.cost_ratio - expected).abs() < 1e-9, "{p:?}");
-        }
         assert!(o.points.iter().any(|p| p.pareto));
         for p in &o.points {
             assert!(

@@ -463,15 +463,16 @@ fn run(cli: Cli) -> Result<(), AppError> {
 /// `--step-ms`: a time step in milliseconds, more than 0 and at most 250 (Bevy clamps a longer
 /// update).
 fn step_ms(s: &str) -> Result<f64, AppError> {
-    let ms: f64 = s
-        .parse()
-        .map_err(|_| AppError::flag(s, "expected a number of milliseconds"))?;
+    let ms: f64 = s.parse().map_err(|_| AppError::Value {
+        text: s.to_owned(),
+        message: "expected a number of milliseconds".into(),
+    })?;
     if ms.is_finite() && ms > 0.0 && ms <= 250.0 {
         Ok(ms)
     } else {
-        Err(AppError::flag(
-            s,
-            "expected more than 0 and at most 250 ms (a longer step is clamped)",
-        ))
+        Err(AppError::Value {
+            text: s.to_owned(),
+            message: "expected more than 0 and at most 250 ms (a longer step is clamped)".into(),
+        })
     }
 }

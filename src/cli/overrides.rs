@@ -45,7 +45,10 @@ pub fn on_off(s: &str) -> Result<bool, AppError> {
     match s {
         "on" | "true" | "1" => Ok(true),
         "off" | "false" | "0" => Ok(false),
-        _ => Err(AppError::flag(s, "expected on or off")),
+        _ => Err(AppError::Value {
+            text: s.to_owned(),
+            message: "expected on or off".into(),
+        }),
     }
 }
 

@@ -33,6 +33,14 @@ pub fn line(keys: &[(&str, &str)]) -> String {
         .join(", ")
 }
 
+/// `keys` as lines of `per_line` entries, for the on-screen help.
+pub fn lines(keys: &[(&str, &str)], per_line: usize) -> String {
+    keys.chunks(per_line.max(1))
+        .map(line)
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 /// The keys as `avatarm run --help` shows them.
 pub fn help() -> String {
     format!(

@@ -238,14 +238,17 @@ fn setup_preview(
             ));
         });
     let hand_keys = if desktop_hand.is_some() {
-        format!("\ndesktop hand: {}", keys::line(&keys::DESKTOP_HAND_KEYS))
+        format!(
+            "\ndesktop hand:\n{}",
+            keys::lines(&keys::DESKTOP_HAND_KEYS, 3)
+        )
     } else {
         String::new()
     };
     commands.spawn((
         Text::new(format!(
             "Robot twin (from joint states)\n{}{hand_keys}",
-            keys::line(&keys::PREVIEW_KEYS)
+            keys::lines(&keys::PREVIEW_KEYS, 3)
         )),
         TextFont {
             font_size: FontSize::Px(16.0),

@@ -427,6 +427,7 @@ fn score_ready(mut replay: ResMut<Replay>, scene: Res<SceneResource>) {
                 }
                 replay.scores.push(score);
             }
+            Err(AppError::Replay { message }) => replay.errors.push(message),
             Err(e) => replay.errors.push(e.to_string()),
         }
     }
@@ -530,7 +531,11 @@ fn score_frame(replay: &Replay, scene: &SceneResource, p: Pending) -> Result<Fra
             image::DynamicImage::ImageRgba8(img)
                 .to_rgb8()
                 .save(&path)
-                .map_err(|source| AppError::Image { path, source })
+                .map_err(|source| AppError::Image {
+                    path,
+                    action: "write",
+                    source,
+                })
         };
         save_rgba(format!("frame_{i:05}.png"), &inputs.live)?;
         save_rgba(format!("erased_{i:05}.png"), &gpu)?;
@@ -543,8 +548,11 @@ fn score_frame(replay: &Replay, scene: &SceneResource, p: Pending) -> Result<Fra
                     width: w,
                     height: h,
                 })?;
-            img.save(&path)
-                .map_err(|source| AppError::Image { path, source })
+            img.save(&path).map_err(|source| AppError::Image {
+                path,
+                action: "write",
+                source,
+            })
         };
         gray(&gpu_mask, format!("mask_{i:05}.png"))?;
         gray(&truth, format!("gt_silhouette_{i:05}.png"))?;
@@ -744,7 +752,11 @@ fn finish(
                 height: k.height,
             })?
             .save(&path)
-            .map_err(|source| AppError::Image { path, source })?;
+            .map_err(|source| AppError::Image {
+                path,
+                action: "write",
+                source,
+            })?;
     }
     write("report.json", &report)?;
     Ok(report)

@@ -32,6 +32,25 @@ pub enum SceneError {
         /// What is wrong.
         message: String,
     },
+    /// A field whose value the core refused (an unknown joint or link, impossible intrinsics,
+    /// a setting out of range); the core's error is the cause.
+    #[error("{path}: {field}: {source}")]
+    Value {
+        /// The scene file.
+        path: PathBuf,
+        /// The field, dotted.
+        field: String,
+        /// The core's error.
+        source: Box<avatarm_core::Error>,
+    },
+    /// As [`SceneError::Value`], for a part of a scene checked on its own (no file).
+    #[error("{field}: {source}")]
+    FieldValue {
+        /// The field, dotted.
+        field: String,
+        /// The core's error.
+        source: Box<avatarm_core::Error>,
+    },
     /// The robot description failed to load.
     #[error("{path}: robot.urdf: {source}")]
     Robot {
@@ -52,6 +71,25 @@ pub enum SceneError {
 }
 
 impl SceneError {
+    /// A [`SceneError::FieldValue`]: the core refused the value of `field`.
+    pub fn value(field: impl Into<String>, source: avatarm_core::Error) -> Self {
+        Self::FieldValue {
+            field: field.into(),
+            source: Box::new(source),
+        }
+    }
+
+    /// The dotted field at fault, where the error names one.
+    pub fn field_name(&self) -> Option<&str> {
+        match self {
+            Self::Invalid { field, .. }
+            | Self::Value { field, .. }
+            | Self::Field { field, .. }
+            | Self::FieldValue { field, .. } => Some(field),
+            Self::Io { .. } | Self::Parse { .. } | Self::Robot { .. } => None,
+        }
+    }
+
     /// A [`SceneError::Field`].
     pub fn field(field: impl Into<String>, message: impl Into<String>) -> Self {
         Self::Field {
@@ -61,13 +99,19 @@ impl SceneError {
     }
 
     /// This error placed in the scene file `path`: a [`SceneError::Field`] becomes
-    /// [`SceneError::Invalid`]; the others already name their file.
+    /// [`SceneError::Invalid`], a [`SceneError::FieldValue`] [`SceneError::Value`]; the others
+    /// already name their file.
     pub fn in_file(self, path: &std::path::Path) -> Self {
         match self {
             Self::Field { field, message } => Self::Invalid {
                 path: path.to_owned(),
                 field,
                 message,
+            },
+            Self::FieldValue { field, source } => Self::Value {
+                path: path.to_owned(),
+                field,
+                source,
             },
             other => other,
         }

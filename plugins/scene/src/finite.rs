@@ -5,7 +5,7 @@
 use toml::{Table, Value};
 
 /// The dotted path (`camera.pose.eye[2]`) and value of the first non-finite float in `table`,
-/// in document order of the keys as parsed.
+/// tables walked in key order (alphabetical), arrays in index order.
 pub fn first_non_finite(table: &Table) -> Option<(String, f64)> {
     table
         .iter()

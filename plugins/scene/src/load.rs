@@ -38,7 +38,10 @@ pub struct Scene {
     pub props: Vec<Prop>,
     /// The background image file, resolved (`[background] source = "file"`).
     pub background_path: Option<PathBuf>,
-    /// The `[task]`'s real side, resolved against the robot and the props.
+    /// The `[task]`'s real side, resolved against the robot and the props when the scene
+    /// loads (`None` without a `[task]`). Code that changes `file.task`, the robot or the props
+    /// afterwards resolves it again with [`TrialSetup::resolve`]; readers take the task from
+    /// `file.task` and its set-up from here, and run it only when both are there.
     pub trial: Option<TrialSetup>,
 }
 
@@ -154,7 +157,7 @@ impl Scene {
 
         file.erase
             .validate("erase")
-            .map_err(|e| invalid("erase", e.to_string()))?;
+            .map_err(|e| SceneError::value("erase", e).in_file(path))?;
         let i = &file.interaction;
         if !(i.panel_distance_m.is_finite()
             && i.panel_distance_m > 0.0
@@ -226,7 +229,7 @@ impl Scene {
                     for (name, value) in map {
                         let i = model
                             .dof_index(name)
-                            .map_err(|e| invalid(field, e.to_string()))?;
+                            .map_err(|e| SceneError::value(field, e).in_file(path))?;
                         q[i] = *value;
                     }
                 }
@@ -244,7 +247,7 @@ impl Scene {
             }
             model
                 .check_q(&q)
-                .map_err(|e| invalid(field, e.to_string()))?;
+                .map_err(|e| SceneError::value(field, e).in_file(path))?;
             Ok(q)
         };
         let q0 = match &file.robot.q0 {
@@ -285,11 +288,11 @@ impl Scene {
         };
         intrinsics
             .validate()
-            .map_err(|e| invalid("camera.intrinsics", e.to_string()))?;
+            .map_err(|e| SceneError::value("camera.intrinsics", e).in_file(path))?;
         let pose = c
             .pose
             .to_isometry()
-            .map_err(|e| invalid("camera.pose", e.to_string()))?;
+            .map_err(|e| SceneError::value("camera.pose", e).in_file(path))?;
         let true_camera = PinholeCamera {
             intrinsics,
             world_from_camera: pose,

@@ -154,24 +154,30 @@ impl PouringTask {
                 ));
             }
         }
-        if self.trials == 0 || self.modes.is_empty() {
-            return Err(SceneError::field(
-                "task",
-                "needs at least one trial and one mode",
-            ));
+        if self.trials == 0 {
+            return Err(SceneError::field("task.trials", "at least one trial"));
         }
-        if !self.virtual_yaw_deg.is_finite() || self.virtual_offset.iter().any(|v| !v.is_finite()) {
+        if self.modes.is_empty() {
+            return Err(SceneError::field("task.modes", "at least one mode"));
+        }
+        if !self.virtual_yaw_deg.is_finite() {
             return Err(SceneError::field(
                 "task.virtual_yaw_deg",
-                "virtual_yaw_deg and virtual_offset must be finite",
+                format!("{} is not finite", self.virtual_yaw_deg),
+            ));
+        }
+        if self.virtual_offset.iter().any(|v| !v.is_finite()) {
+            return Err(SceneError::field(
+                "task.virtual_offset",
+                format!("{:?} is not finite", self.virtual_offset),
             ));
         }
         self.hand_filter
             .validate()
-            .map_err(|e| SceneError::field("task.hand_filter", e.to_string()))?;
+            .map_err(|e| SceneError::value("task.hand_filter", e))?;
         HandScript::new(Handedness::Right, self.hand.clone(), self.noise)
             .map(|_| ())
-            .map_err(|e| SceneError::field("task.hand", e.to_string()))
+            .map_err(|e| SceneError::value("task.hand", e))
     }
 
     /// The virtual scene relative to the real one, for a bottle whose centre is at `centre`.
@@ -239,7 +245,7 @@ impl TrialSetup {
     ) -> Result<Self, SceneError> {
         let tcp = model
             .link_id(&task.tcp_link)
-            .map_err(|e| SceneError::field("task.tcp_link", e.to_string()))?;
+            .map_err(|e| SceneError::value("task.tcp_link", e))?;
         let arm: Vec<usize> = if task.arm_joints.is_empty() {
             model
                 .dof_names()
@@ -254,7 +260,7 @@ impl TrialSetup {
                 .map(|n| {
                     model
                         .dof_index(n)
-                        .map_err(|e| SceneError::field("task.arm_joints", e.to_string()))
+                        .map_err(|e| SceneError::value("task.arm_joints", e))
                 })
                 .collect::<Result<_, _>>()?
         };

@@ -208,7 +208,7 @@ fn the_task_is_validated_at_load() {
         let e = parse(&text.replace(from, to)).expect_err(to);
         let message = e.to_string();
         assert!(
-            matches!(&e, SceneError::Invalid { field: f, .. } if f == field),
+            e.field_name() == Some(field) && !matches!(e, SceneError::Field { .. }),
             "{to}: {message}"
         );
         assert!(message.contains("pouring.toml"), "{message}");

@@ -15,11 +15,15 @@
 //!    photometric compensation ([`fit_photometric`]).
 //!
 //! Pixel maps are row-major, top row first; masks hold 0 or 1 per pixel, images RGBA8.
+//!
+//! Modules (their items are re-exported here): [`mask`] (threshold, dilation, feathering, the
+//! links' bounding spheres), [`composite`] (the composite and the background refresh),
+//! [`photometric`] (the background's gain and offset), [`scores`] (IoU, leak, overmask, PSNR).
 
-mod composite;
-mod mask;
-mod photometric;
-mod scores;
+pub mod composite;
+pub mod mask;
+pub mod photometric;
+pub mod scores;
 
 pub use composite::*;
 pub use mask::*;
