@@ -407,14 +407,69 @@ fn validate_xml(text: &str, origin: &str) -> Result<()> {
     }
     for joint in root.children().filter(|n| n.has_tag_name("joint")) {
         let kind = joint.attribute("type").unwrap_or("");
+        let name = joint.attribute("name").unwrap_or("?");
+        let line = doc.text_pos_at(joint.range().start).row;
         if !matches!(kind, "revolute" | "continuous" | "prismatic" | "fixed") {
-            let line = doc.text_pos_at(joint.range().start).row;
             return Err(Error::UnknownJointType {
                 origin: origin.to_owned(),
                 line,
-                joint: joint.attribute("name").unwrap_or("?").to_owned(),
+                joint: name.to_owned(),
                 kind: kind.to_owned(),
             });
+        }
+        let bad = |line: u32, message: String| Error::BadJoint {
+            origin: format!("{origin}:{line}"),
+            joint: name.to_owned(),
+            message,
+        };
+        // The URDF spec requires a <limit> on revolute and prismatic joints; without one,
+        // urdf-rs reads limits [0, 0] and the joint silently cannot move.
+        if matches!(kind, "revolute" | "prismatic")
+            && !joint.children().any(|n| n.has_tag_name("limit"))
+        {
+            return Err(bad(
+                line,
+                format!(
+                    "a {kind} joint needs a <limit> (lower, upper, effort, velocity); none is given"
+                ),
+            ));
+        }
+        // Every number of the joint's elements, token by token: a decimal comma from a
+        // comma-locale exporter ("0,25") is named here, not as a wrong element count.
+        for child in joint.children().filter(|n| {
+            n.is_element()
+                && matches!(
+                    n.tag_name().name(),
+                    "origin"
+                        | "axis"
+                        | "limit"
+                        | "dynamics"
+                        | "mimic"
+                        | "calibration"
+                        | "safety_controller"
+                )
+        }) {
+            let tag = child.tag_name().name();
+            for attr in child
+                .attributes()
+                .filter(|a| !(tag == "mimic" && a.name() == "joint"))
+            {
+                if let Some(token) = attr
+                    .value()
+                    .split_whitespace()
+                    .find(|t| t.parse::<f64>().is_err())
+                {
+                    let line = doc.text_pos_at(child.range().start).row;
+                    return Err(bad(
+                        line,
+                        format!(
+                            "<{tag} {}=\"{}\">: '{token}' is not a number",
+                            attr.name(),
+                            attr.value()
+                        ),
+                    ));
+                }
+            }
         }
     }
     Ok(())
@@ -837,6 +892,48 @@ mod tests {
         let zero_axis = TREE.replace(r#"<axis xyz="1 0 0"/>"#, r#"<axis xyz="0 0 0"/>"#);
         let e = load(&zero_axis).unwrap_err().to_string();
         assert!(e.contains("j_a2") && e.contains("axis"), "{e}");
+    }
+
+    /// ../shared/cases/05: a revolute joint without `<limit>` used to load with limits
+    /// [0, 0]; ../shared/cases/14: a decimal comma was "wrong vector element count".
+    #[test]
+    fn a_missing_limit_and_a_decimal_comma_are_named() {
+        let no_limit = r#"<robot name="t"><link name="a"/><link name="b"/>
+          <joint name="elbow" type="revolute"><parent link="a"/><child link="b"/>
+          <axis xyz="0 1 0"/></joint></robot>"#;
+        let e = load(no_limit).unwrap_err();
+        let text = e.to_string();
+        assert!(matches!(e, Error::BadJoint { .. }), "{text}");
+        assert!(
+            text.contains("<string>:2") && text.contains("'elbow'") && text.contains("<limit>"),
+            "{text}"
+        );
+        let prismatic = no_limit.replace("revolute", "prismatic");
+        assert!(
+            load(&prismatic)
+                .unwrap_err()
+                .to_string()
+                .contains("<limit>")
+        );
+        // Continuous and fixed joints need none.
+        load(&no_limit.replace("revolute", "continuous")).expect("continuous");
+
+        let comma = r#"<robot name="t"><link name="a"/><link name="b"/>
+          <joint name="j1" type="revolute"><parent link="a"/><child link="b"/>
+          <origin xyz="0,25 0 0,5" rpy="0 0 0"/><axis xyz="0 0 1"/>
+          <limit lower="-1" upper="1" effort="10" velocity="1"/></joint></robot>"#;
+        let e = load(comma).unwrap_err().to_string();
+        assert!(
+            e.contains("'j1'")
+                && e.contains("<origin xyz=")
+                && e.contains("'0,25' is not a number"),
+            "{e}"
+        );
+        let bad_limit = comma
+            .replace("0,25 0 0,5", "0.25 0 0.5")
+            .replace(r#"effort="10""#, r#"effort="ten""#);
+        let e = load(&bad_limit).unwrap_err().to_string();
+        assert!(e.contains("<limit effort=\"ten\">"), "{e}");
     }
 
     #[test]
