@@ -55,31 +55,30 @@ pub fn on_off(s: &str) -> Result<bool, AppError> {
 impl EraseOverrides {
     /// Applies the overrides to `scene` and checks the result; errors name the flag.
     pub fn apply(&self, scene: &mut Scene) -> Result<(), AppError> {
-        let o = self;
         let e = &mut scene.file.erase;
-        if let Some(v) = o.erase {
+        if let Some(v) = self.erase {
             e.enabled = v;
         }
-        if let Some(v) = o.dilate {
+        if let Some(v) = self.dilate {
             e.dilate_px = v;
         }
-        if let Some(v) = o.feather {
+        if let Some(v) = self.feather {
             e.feather_px = v;
         }
-        if let Some(v) = o.latency_compensation {
+        if let Some(v) = self.latency_compensation {
             e.latency_compensation = v;
         }
-        if let Some(v) = o.photometric {
+        if let Some(v) = self.photometric {
             e.photometric = v;
         }
-        if let Some(v) = o.mask_scale {
+        if let Some(v) = self.mask_scale {
             e.resolution_scale = v;
         }
-        if let Some(v) = o.background_refresh {
+        if let Some(v) = self.background_refresh {
             e.background_refresh = v as f32;
         }
         e.validate("command line")?;
-        if let Some(path) = &o.background {
+        if let Some(path) = &self.background {
             if !path.is_file() {
                 return Err(AppError::flag(
                     "--background",
@@ -89,7 +88,7 @@ impl EraseOverrides {
             scene.file.background = BackgroundSpec::File { path: path.clone() };
             scene.background_path = Some(path.clone());
         }
-        if let Some(at_s) = o.capture_background_at {
+        if let Some(at_s) = self.capture_background_at {
             if !(at_s.is_finite() && at_s >= 0.0) {
                 return Err(AppError::flag(
                     "--capture-background-at",

@@ -3,13 +3,11 @@
 //! go. The rendered result is the replay tests' job (`tests/replay.rs`).
 
 use std::path::Path;
-use std::time::Duration;
 
 use avatarm_core::robot::PackagePath;
 use avatarm_core::vision::camera::{CameraPose, Intrinsics};
 use avatarm_twin::RobotTwinPlugin;
 use avatarm_video::{VideoFrame, VideoInbox, VideoPlugin};
-use bevy::time::TimeUpdateStrategy;
 use nalgebra::{Translation3, UnitQuaternion};
 
 use super::*;
@@ -38,15 +36,8 @@ fn app(resolution_scale: f64) -> App {
         Translation3::new(0.6, 0.0, 0.75),
         UnitQuaternion::identity(),
     );
-    let mut app = App::new();
-    app.add_plugins((MinimalPlugins, AssetPlugin::default()))
-        .init_asset::<Mesh>()
-        .init_asset::<StandardMaterial>()
-        .init_asset::<Image>()
-        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(
-            10,
-        )))
-        .insert_resource(avatarm_video::LiveVideo::new("test", 1.0))
+    let mut app = avatarm_twin::headless_app();
+    app.insert_resource(avatarm_video::LiveVideo::new("test", 1.0))
         .insert_resource(EraseConfig {
             settings: EraseSettings {
                 resolution_scale,

@@ -2,13 +2,11 @@
 //! robot moves and reports. Rendering is the replay tests' job (`tests/replay.rs`).
 
 use std::path::Path;
-use std::time::Duration;
 
 use avatarm_core::robot::PackagePath;
 use avatarm_core::robot::trajectory::Keyframe;
 use avatarm_core::vision::camera::{CameraPose, Intrinsics};
 use avatarm_twin::{RobotTwin, RobotTwinPlugin};
-use bevy::time::TimeUpdateStrategy;
 use nalgebra::{Translation3, UnitQuaternion};
 
 use super::*;
@@ -72,15 +70,8 @@ fn config(ground_truth: bool) -> SimRoomConfig {
 }
 
 fn room(config: SimRoomConfig) -> App {
-    let mut app = App::new();
-    app.add_plugins((MinimalPlugins, AssetPlugin::default()))
-        .init_asset::<Mesh>()
-        .init_asset::<StandardMaterial>()
-        .init_asset::<Image>()
-        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(
-            10,
-        )))
-        .insert_resource(config)
+    let mut app = avatarm_twin::headless_app();
+    app.insert_resource(config)
         .add_plugins((RobotTwinPlugin, SimRoomPlugin));
     app
 }

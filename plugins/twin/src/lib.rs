@@ -213,6 +213,21 @@ impl RobotTwin {
     }
 }
 
+/// An app without a renderer or window (`MinimalPlugins`, assets, 10 ms per update) with the
+/// asset types twins and the room's props are built from (`Mesh`, `StandardMaterial`,
+/// `Image`): for testing a plugin's entities, layers and systems without a GPU.
+pub fn headless_app() -> App {
+    let mut app = App::new();
+    app.add_plugins((MinimalPlugins, AssetPlugin::default()))
+        .init_asset::<Mesh>()
+        .init_asset::<StandardMaterial>()
+        .init_asset::<Image>()
+        .insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
+            std::time::Duration::from_millis(10),
+        ));
+    app
+}
+
 /// Converts a pose to a Bevy transform (f64 -> f32, unit scale). The one conversion of the
 /// workspace, with [`transform_to_iso`] its inverse.
 pub fn iso_to_transform(iso: &Isometry3<f64>) -> Transform {
