@@ -3,7 +3,7 @@
 # already present are not reinstalled, and apt is not touched when nothing is missing.
 set -euo pipefail
 packages=(
-  pkg-config libudev-dev libwayland-dev libxkbcommon-dev libx11-dev libxcursor-dev libxrandr-dev libxi-dev
+  pkg-config g++ libudev-dev libwayland-dev libxkbcommon-dev libx11-dev libxcursor-dev libxrandr-dev libxi-dev
   mesa-vulkan-drivers libvulkan1 xvfb xauth libopenxr-loader1 libopenxr-dev libclang-dev libv4l-dev mold fonts-dejavu-core
 )
 missing=()

@@ -27,6 +27,48 @@ fn out_dir(name: &str) -> PathBuf {
     dir
 }
 
+/// A bench's CSV table, cells found by column name.
+struct Table {
+    header: Vec<String>,
+    rows: Vec<Vec<String>>,
+    text: String,
+}
+
+impl Table {
+    fn read(path: &Path) -> Self {
+        let text =
+            std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let split = |l: &str| l.split(',').map(str::to_owned).collect::<Vec<_>>();
+        let mut lines = text.lines();
+        let header = split(lines.next().unwrap_or_default());
+        let rows = lines.map(split).collect();
+        Self { header, rows, text }
+    }
+
+    fn cell(&self, row: usize, name: &str) -> &str {
+        let i = self.header.iter().position(|h| h == name);
+        let i = i.unwrap_or_else(|| panic!("no column {name}: {}", self.text));
+        &self.rows[row][i]
+    }
+
+    fn number(&self, row: usize, name: &str) -> f64 {
+        self.cell(row, name)
+            .parse()
+            .unwrap_or_else(|_| panic!("{name} of row {row} is not a number: {}", self.text))
+    }
+}
+
+/// The standard output of a command that must have succeeded (else its output in the panic).
+fn succeeded(out: &std::process::Output) -> String {
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
 fn load_rgb(path: &Path) -> image::RgbImage {
     image::open(path)
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
@@ -463,6 +505,141 @@ fn robot_command_prints_fk_poses_as_json() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("nope"));
 }
 
+/// The real robot descriptions (../shared/data/ros): `avatarm robot` prints the tree with the
+/// mimic fingers and each link's meshes, and `--json` the mimic joint's position; a mesh that
+/// cannot be read names the link, the URI and the file.
+#[test]
+fn robot_command_reads_real_descriptions() {
+    let ros = match avatarm_core::shared_data::ros_packages() {
+        Ok(dir) => dir,
+        Err(why) => return eprintln!("skipped: {why}"),
+    };
+    let robot = |urdf: &Path, extra: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+            .arg("robot")
+            .arg(urdf)
+            .arg("--package-path")
+            .arg(&ros)
+            .args(extra)
+            .output()
+            .unwrap();
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let sawyer = ros.join("sawyer_description/urdf/sawyer_electric_gripper.urdf");
+    let (ok, text, err) = robot(&sawyer, &[]);
+    assert!(ok, "{err}");
+    assert!(
+        text.contains("9 movable")
+            && text.contains(
+                "right_gripper_r_finger_joint (prismatic mimic of right_gripper_l_finger_joint ×-1"
+            )
+            && text.contains("-> right_l0 [1 visual mesh, ")
+            && text.contains("l0.DAE ("),
+        "{text}"
+    );
+    let (ok, json, err) = robot(
+        &sawyer,
+        &["--json", "--q", "right_gripper_l_finger_joint=0.01"],
+    );
+    assert!(ok, "{err}");
+    let json: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(
+        json["mimic"]["right_gripper_r_finger_joint"]["position"].as_f64(),
+        Some(-0.01)
+    );
+    let panda = ros.join("example-robot-data/robots/panda_description/urdf/panda.urdf");
+    let (ok, text, err) = robot(&panda, &[]);
+    assert!(
+        ok && text.contains("mimic of panda_finger_joint1"),
+        "{text}{err}"
+    );
+
+    // A Collada file that is not one: the link, the URI and the resolved file are named.
+    let dir = out_dir("broken_mesh");
+    std::fs::create_dir_all(dir.join("meshes")).unwrap();
+    std::fs::write(
+        dir.join("meshes/Wrist.DAE"),
+        "<COLLADA><library_geometries>",
+    )
+    .unwrap();
+    let urdf = dir.join("arm.urdf");
+    std::fs::write(
+        &urdf,
+        r#"<robot name="b"><link name="wrist"><visual><geometry><mesh filename="meshes/Wrist.DAE"/></geometry></visual></link></robot>"#,
+    )
+    .unwrap();
+    let (ok, _, err) = robot(&urdf, &[]);
+    assert!(!ok);
+    assert!(
+        err.contains("link 'wrist'")
+            && err.contains("mesh 'meshes/Wrist.DAE'")
+            && err.contains(&dir.join("meshes/Wrist.DAE").display().to_string()),
+        "{err}"
+    );
+}
+
+/// The real Sawyer (Collada meshes, electric gripper with a mimic finger) as the robot the camera
+/// sees and as the mask twin erases as well as the project's primitive arm does in the default
+/// scene: the same thresholds.
+#[test]
+fn the_real_sawyer_erases_like_the_default_scene() {
+    if let Err(why) = avatarm_core::shared_data::ros_packages() {
+        return eprintln!("skipped: {why}");
+    }
+    let mut scene = scene("sawyer_real");
+    scene.file.duration_s = 3.0;
+    let r = run(&scene, "dr_sawyer_real");
+    // Measured (llvmpipe): IoU 0.9993, leak 0.008 %, PSNR 46.2 dB; the default scene's bounds.
+    assert!(num(&r, "mask.iou_mean") >= 0.9967, "{}", r["mask"]);
+    assert!(num(&r, "mask.leak_pct_mean") <= 0.05, "{}", r["mask"]);
+    assert!(num(&r, "dr.psnr_robot_db_mean") >= 43.0, "{}", r["dr"]);
+}
+
+/// `avatarm bench twin` on two twins: the table, the chart, and the simplified twin lighter.
+#[test]
+fn bench_twin_writes_the_chart_and_the_table() {
+    if let Err(why) = avatarm_core::shared_data::ros_packages() {
+        return eprintln!("skipped: {why}");
+    }
+    let out = out_dir("bench_twin");
+    let run = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["bench", "twin", "--out"])
+        .arg(&out)
+        .args([
+            "--variants",
+            "visual,keep:0.1",
+            "--duration",
+            "0.8",
+            "--frames-every",
+            "3",
+        ])
+        .output()
+        .expect("runs avatarm");
+    let stdout = succeeded(&run);
+    assert!(stdout.contains("ratios against 'visual'"), "{stdout}");
+    let table = Table::read(&out.join("twin_detail.csv"));
+    assert_eq!(table.rows.len(), 2, "{}", table.text);
+    let cell = |row: usize, name: &str| table.number(row, name);
+    let csv = &table.text;
+    let (full, light) = (cell(0, "triangles"), cell(1, "triangles"));
+    assert!(
+        light < 0.15 * full && light > 0.05 * full,
+        "{light} of {full}: {csv}"
+    );
+    for row in 0..2 {
+        assert!(cell(row, "gpu_mask_camera_ms") > 0.0, "{csv}");
+        assert!(cell(row, "dilate_for_1pct") >= 0.0, "{csv}");
+    }
+    // The full meshes draw the robot's own silhouette.
+    assert!(cell(0, "leak_pct_mean") < 0.1, "{csv}");
+    let svg = std::fs::read_to_string(out.join("twin_detail.svg")).expect("svg");
+    assert!(svg.contains("Pareto front") && svg.contains("keep 10%"));
+}
+
 #[test]
 fn replay_of_a_bad_scene_exits_nonzero_with_a_message() {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR"));
@@ -679,35 +856,20 @@ fn bench_dr_writes_the_chart_and_the_table() {
         ])
         .output()
         .expect("runs avatarm");
-    let stdout = String::from_utf8_lossy(&status.stdout);
-    assert!(
-        status.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&status.stderr)
-    );
+    let stdout = succeeded(&status);
     assert!(stdout.contains("ratios against 'x1 d0 f0 LC'"), "{stdout}");
-    let csv = std::fs::read_to_string(out.join("dr_speed_accuracy.csv")).expect("csv");
-    let header: Vec<&str> = csv.lines().next().unwrap_or_default().split(',').collect();
-    let rows: Vec<Vec<&str>> = csv
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').collect())
-        .collect();
-    assert_eq!(rows.len(), 2, "{csv}");
-    let cell = |r: &[&str], name: &str| {
-        let i = header.iter().position(|h| *h == name).expect(name);
-        r[i].to_string()
-    };
-    let leak = |r: &[&str]| cell(r, "leak_pct_mean").parse::<f64>().expect("leak");
-    assert!(leak(&rows[1]) > leak(&rows[0]) + 0.5, "{csv}");
+    let table = Table::read(&out.join("dr_speed_accuracy.csv"));
+    let csv = &table.text;
+    assert_eq!(table.rows.len(), 2, "{csv}");
+    let leak = |row: usize| table.number(row, "leak_pct_mean");
+    assert!(leak(1) > leak(0) + 0.5, "{csv}");
     // The full-resolution point is the least leaky, so it is on both leak fronts.
-    assert_eq!(cell(&rows[0], "pareto_leak"), "true", "{csv}");
-    assert_eq!(cell(&rows[0], "pareto_leak_gpu"), "true", "{csv}");
+    assert_eq!(table.cell(0, "pareto_leak"), "true", "{csv}");
+    assert_eq!(table.cell(0, "pareto_leak_gpu"), "true", "{csv}");
     // Each setting's passes were timed on the GPU (llvmpipe has timestamp queries).
-    for r in &rows {
+    for row in 0..2 {
         for column in ["gpu_mask_ms", "gpu_composite_ms"] {
-            let ms: f64 = cell(r, column).parse().expect(column);
-            assert!(ms > 0.0, "{column}: {csv}");
+            assert!(table.number(row, column) > 0.0, "{column}: {csv}");
         }
     }
     let svg = std::fs::read_to_string(out.join("dr_speed_accuracy.svg")).expect("svg");

@@ -8,6 +8,7 @@ pub mod background;
 
 use std::time::Duration;
 
+use avatarm_core::robot::JointMap;
 use avatarm_erase::interaction::ObjectTwinSpec;
 use avatarm_erase::{EraseConfig, ErasePlugin, InteractionConfig, InteractionPlugin};
 use avatarm_sim::{SimRoomConfig, SimRoomPlugin, SimVideo};
@@ -254,7 +255,9 @@ impl Plugin for AvatarmSetupPlugin {
             .insert_resource(EraseConfig {
                 settings: scene.file.erase,
                 camera: scene.believed_camera,
-                model: scene.model.clone(),
+                joint_map: JointMap::new(&scene.model, &scene.twin_model),
+                model: scene.twin_model.clone(),
+                detail: twin_detail(&scene.file.twin),
                 base: scene.robot_base(),
                 source_twin: None,
                 occluders: scene
@@ -338,6 +341,17 @@ fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupBuilder, xr:
     app.add_plugins(plugins);
 }
 
+/// The mask twin's detail as the scene's `[twin]` gives it.
+pub fn twin_detail(spec: &avatarm_scene::TwinSpec) -> TwinDetail {
+    TwinDetail {
+        geometry: match spec.geometry {
+            avatarm_scene::TwinGeometry::Visual => GeometrySource::Visual,
+            avatarm_scene::TwinGeometry::Collision => GeometrySource::Collision,
+        },
+        keep_triangles: spec.keep_triangles as f32,
+    }
+}
+
 /// Spawns the app's twin on the twin layer and points the simulated room's joint states at it.
 fn spawn_app_twin(
     mut commands: Commands,
@@ -351,6 +365,7 @@ fn spawn_app_twin(
         &config.model,
         &config.robot_base,
         TwinAppearance::Urdf,
+        TwinDetail::default(),
         &RenderLayers::layer(layers::TWIN),
         "the app's twin",
     );

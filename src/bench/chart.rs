@@ -187,6 +187,45 @@ where
         .map_err(drawing_error)
 }
 
+/// Draws the Pareto front through `points` as a red line (in order of cost), with its legend
+/// entry.
+pub fn front_line<'a, DB: DrawingBackend + 'a>(
+    chart: &mut Panel<'a, DB>,
+    mut points: Vec<(f64, f64)>,
+) -> Result<(), AppError>
+where
+    DB::ErrorType: 'static,
+{
+    points.sort_by(|a, b| a.0.total_cmp(&b.0));
+    chart
+        .draw_series(LineSeries::new(points, RED.stroke_width(2)))
+        .map_err(drawing_error)?
+        .label("Pareto front")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], RED.stroke_width(2)));
+    Ok(())
+}
+
+/// Writes each label above and right of its point.
+pub fn point_labels<'a, DB: DrawingBackend + 'a>(
+    chart: &mut Panel<'a, DB>,
+    labels: impl IntoIterator<Item = ((f64, f64), String)>,
+) -> Result<(), AppError>
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .draw_series(labels.into_iter().map(|(at, text)| {
+            EmptyElement::at(at)
+                + Text::new(
+                    text,
+                    (10, -18),
+                    ("sans-serif", 13).into_font().color(&BLACK),
+                )
+        }))
+        .map_err(drawing_error)?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

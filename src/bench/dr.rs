@@ -11,7 +11,8 @@ use plotters::prelude::*;
 use serde::Serialize;
 
 use super::chart::{
-    Chart, axes, drawing_error, legend, padded, pareto_front, register_font, save_chart,
+    Chart, axes, drawing_error, front_line, legend, padded, pareto_front, point_labels,
+    register_font, save_chart,
 };
 use crate::AppError;
 use crate::replay::{self, ReplayOptions};
@@ -426,16 +427,8 @@ where
         axis.desc,
         y_desc,
     )?;
-    let mut on_front: Vec<&DrPoint> = finite.iter().copied().filter(|p| front(p)).collect();
-    on_front.sort_by(|a, b| x(a).total_cmp(&x(b)));
-    chart
-        .draw_series(LineSeries::new(
-            on_front.iter().map(|p| (x(p), y(p))),
-            RED.stroke_width(2),
-        ))
-        .map_err(err)?
-        .label("Pareto front")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], RED.stroke_width(2)));
+    let on_front: Vec<&DrPoint> = finite.iter().copied().filter(|p| front(p)).collect();
+    front_line(&mut chart, on_front.iter().map(|p| (x(p), y(p))).collect())?;
     for (on, color, name) in [
         (false, RGBColor(230, 130, 20), "latency compensation off"),
         (true, RGBColor(30, 90, 200), "latency compensation on"),
@@ -458,16 +451,10 @@ where
                 .map(|p| Circle::new((x(p), y(p)), 9, RED.stroke_width(2))),
         )
         .map_err(err)?;
-    chart
-        .draw_series(on_front.iter().map(|p| {
-            EmptyElement::at((x(p), y(p)))
-                + Text::new(
-                    p.label.clone(),
-                    (10, -18),
-                    ("sans-serif", 13).into_font().color(&BLACK),
-                )
-        }))
-        .map_err(err)?;
+    point_labels(
+        &mut chart,
+        on_front.iter().map(|p| ((x(p), y(p)), p.label.clone())),
+    )?;
     legend(&mut chart, legend_at)
 }
 

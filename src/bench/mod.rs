@@ -5,8 +5,11 @@
 //!   compensation) on a scene: frame cost and erase GPU time against leak and PSNR.
 //! - [`control`]: the teleoperation loop (control rate, command latency, TCP speed cap) on a
 //!   scene's pouring task: object RMSE against rate and loop cost.
-//! - [`chart`]: what both share: the Pareto front and the charts' house style.
+//! - [`twin`]: how detailed the mask twin must be (visual, collision, simplified meshes, a
+//!   primitive description): mask GPU time and triangles against leak and needed dilation.
+//! - [`chart`]: what all share: the Pareto front and the charts' house style.
 
 pub mod chart;
 pub mod control;
 pub mod dr;
+pub mod twin;

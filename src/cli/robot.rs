@@ -7,28 +7,70 @@ use avatarm_core::robot::{JointKind, LinkId, RobotModel, Shape};
 use nalgebra::Isometry3;
 use serde_json::{Map, Value, json};
 
-/// Loads every mesh the robot names; returns one line per mesh, or the first error.
-pub fn check_meshes(model: &RobotModel) -> Result<Vec<String>, avatarm_core::Error> {
+/// One mesh file a link names, loaded.
+#[derive(Debug, Clone)]
+pub struct MeshLine {
+    /// The link.
+    pub link: LinkId,
+    /// `visual` or `collision`.
+    pub role: &'static str,
+    /// The resolved file.
+    pub path: std::path::PathBuf,
+    /// Its triangles.
+    pub triangles: usize,
+}
+
+/// Loads every mesh the robot names, or the first error naming the link, the URI and the file.
+pub fn check_meshes(model: &RobotModel) -> Result<Vec<MeshLine>, avatarm_core::Error> {
     let mut lines = Vec::new();
-    for link in &model.links {
-        for g in link.visuals.iter().chain(&link.collisions) {
-            if let Shape::Mesh { path, scale, .. } = &g.shape {
-                let mesh = load_mesh(path, scale)?;
-                lines.push(format!(
-                    "{}: {} ({} triangles)",
-                    link.name,
-                    path.display(),
-                    mesh.triangle_count()
-                ));
+    for (id, link) in model.links.iter().enumerate() {
+        let tagged = link
+            .visuals
+            .iter()
+            .map(|g| ("visual", g))
+            .chain(link.collisions.iter().map(|g| ("collision", g)));
+        for (role, g) in tagged {
+            if let Shape::Mesh { uri, path, scale } = &g.shape {
+                let mesh =
+                    load_mesh(path, scale).map_err(|source| avatarm_core::Error::LinkMesh {
+                        link: link.name.clone(),
+                        uri: uri.clone(),
+                        source: Box::new(source),
+                    })?;
+                lines.push(MeshLine {
+                    link: id,
+                    role,
+                    path: path.clone(),
+                    triangles: mesh.triangle_count(),
+                });
             }
         }
     }
     Ok(lines)
 }
 
-/// The joint/link tree with limits, as text.
-pub fn tree_text(model: &RobotModel) -> String {
+/// `mesh LINK (ROLE): FILE (N triangles)` lines, one per mesh.
+pub fn mesh_text(model: &RobotModel, meshes: &[MeshLine]) -> String {
     let mut out = String::new();
+    for m in meshes {
+        let _ = writeln!(
+            out,
+            "mesh {} ({}): {} ({} triangles)",
+            model.links[m.link].name,
+            m.role,
+            m.path.display(),
+            m.triangles
+        );
+    }
+    out
+}
+
+/// The joint/link tree with limits, mimic joints and each link's visual meshes, as text.
+pub fn tree_text(model: &RobotModel, meshes: &[MeshLine]) -> String {
+    let mut out = String::new();
+    for note in &model.notes {
+        let _ = writeln!(out, "note: {note}");
+    }
     let _ = writeln!(
         out,
         "robot '{}' ({}): {} links, {} joints, {} movable",
@@ -43,7 +85,24 @@ pub fn tree_text(model: &RobotModel) -> String {
         "movable joints in q order: {}",
         model.dof_names().join(", ")
     );
-    fn walk(model: &RobotModel, link: LinkId, prefix: &str, out: &mut String) {
+    let visual = |link: LinkId| {
+        let (n, triangles) = meshes
+            .iter()
+            .filter(|m| m.link == link && m.role == "visual")
+            .fold((0, 0), |(n, t), m| (n + 1, t + m.triangles));
+        match n {
+            0 => String::new(),
+            1 => format!(" [1 visual mesh, {triangles} triangles]"),
+            n => format!(" [{n} visual meshes, {triangles} triangles]"),
+        }
+    };
+    fn walk(
+        model: &RobotModel,
+        link: LinkId,
+        prefix: &str,
+        visual: &dyn Fn(LinkId) -> String,
+        out: &mut String,
+    ) {
         let children = &model.links[link].child_joints;
         for (k, &ji) in children.iter().enumerate() {
             let last = k + 1 == children.len();
@@ -73,21 +132,29 @@ pub fn tree_text(model: &RobotModel) -> String {
                     )
                 }
             };
-            let dof = j.dof.map(|d| format!(" q[{d}]")).unwrap_or_default();
+            let dof = match (j.dof, &j.mimic) {
+                (Some(d), _) => format!(" q[{d}]"),
+                (None, Some(m)) => format!(
+                    " mimic of {} ×{} {:+}",
+                    model.joints[m.leader].name, m.multiplier, m.offset
+                ),
+                (None, None) => String::new(),
+            };
             let _ = writeln!(
                 out,
-                "{prefix}{} {} ({}{dof}{limits}) -> {}",
+                "{prefix}{} {} ({}{dof}{limits}) -> {}{}",
                 if last { "└─" } else { "├─" },
                 j.name,
                 j.kind.as_str(),
-                model.links[j.child].name
+                model.links[j.child].name,
+                visual(j.child)
             );
             let next = format!("{prefix}{}", if last { "   " } else { "│  " });
-            walk(model, j.child, &next, out);
+            walk(model, j.child, &next, visual, out);
         }
     }
-    let _ = writeln!(out, "{}", model.links[0].name);
-    walk(model, 0, "", &mut out);
+    let _ = writeln!(out, "{}{}", model.links[0].name, visual(0));
+    walk(model, 0, "", &visual, &mut out);
     out
 }
 
@@ -106,10 +173,27 @@ pub fn poses_json(model: &RobotModel, q: &[f64]) -> Value {
             }),
         );
     }
+    let positions = model.joint_positions(q);
+    let mut mimic = Map::new();
+    for (j, position) in model.joints.iter().zip(&positions) {
+        if let Some(m) = &j.mimic {
+            mimic.insert(
+                j.name.clone(),
+                json!({
+                    "leader": model.joints[m.leader].name,
+                    "multiplier": m.multiplier,
+                    "offset": m.offset,
+                    "position": position,
+                }),
+            );
+        }
+    }
     json!({
         "robot": model.name,
         "joints": model.dof_names(),
         "q": q,
+        "mimic": mimic,
+        "notes": model.notes,
         "links": links,
     })
 }

@@ -33,7 +33,7 @@ pub enum Error {
     },
     /// A `<joint>` has a type Avatarm does not model.
     #[error(
-        "{origin}:{line}: joint '{joint}' has type '{kind}'; expected one of revolute, continuous, prismatic, fixed"
+        "{origin}:{line}: joint '{joint}' has type '{kind}'; expected one of revolute, continuous, prismatic, fixed, floating, planar"
     )]
     UnknownJointType {
         /// The file.
@@ -107,7 +107,7 @@ pub enum Error {
     },
     /// A `package://NAME/...` URI names a package that is not on the search path.
     #[error(
-        "{origin}: link '{link}': mesh '{uri}': package '{package}' is not found in the package path [{searched}]; add the folder that holds it with --package-path (or ROS_PACKAGE_PATH)"
+        "{origin}: link '{link}': mesh '{uri}': package '{package}' is not found in the package path [{searched}] (each folder, its subfolder '{package}', and the package.xml files below it); add the folder that holds it with --package-path (or ROS_PACKAGE_PATH)"
     )]
     UnknownPackage {
         /// The file.
@@ -133,6 +133,37 @@ pub enum Error {
         /// Where it was looked for.
         resolved: PathBuf,
     },
+    /// A link's `<visual>` or `<collision>` geometry makes no sense (a mesh scale of 0 or not
+    /// finite, a negative radius, ...).
+    #[error("{origin}: link '{link}': {message}")]
+    BadGeometry {
+        /// The file.
+        origin: String,
+        /// The link.
+        link: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A link's mesh could not be loaded.
+    #[error("link '{link}': mesh '{uri}': {source}")]
+    LinkMesh {
+        /// The link.
+        link: String,
+        /// The URI as written in the URDF.
+        uri: String,
+        /// Why (names the resolved file).
+        source: Box<Error>,
+    },
+    /// A value was given for a `<mimic>` joint, which follows its leader.
+    #[error(
+        "joint '{name}' is a mimic joint (it follows '{leader}'); give a value for '{leader}' instead"
+    )]
+    MimicJoint {
+        /// The mimic joint.
+        name: String,
+        /// The joint it follows.
+        leader: String,
+    },
     /// A mesh URI uses a scheme other than relative paths, `file://` and `package://`.
     #[error(
         "{origin}: link '{link}': mesh '{uri}' uses an unsupported URI scheme; use a relative path, file:// or package://"
@@ -147,7 +178,7 @@ pub enum Error {
     },
     /// A mesh file's format is not one Avatarm loads.
     #[error(
-        "{path}: mesh format '.{extension}' is not supported (STL, OBJ, glTF and GLB are); convert it (e.g. `assimp export {stem}.{extension} {stem}.glb`, or Blender's glTF exporter) or point the link's <visual> at its collision mesh"
+        "{path}: mesh format '.{extension}' is not supported (STL, OBJ, Collada .dae, glTF and GLB are, in any letter case); convert it (e.g. `assimp export {stem}.{extension} {stem}.glb`, or Blender's glTF exporter) or point the link's <visual> at its collision mesh"
     )]
     UnsupportedMesh {
         /// The mesh file.

@@ -11,6 +11,7 @@
 //! - [`sim`]: the simulated robot (command latency, first-order response, limits, delayed joint
 //!   states) that stands in for the real arm.
 //! - [`rng`]: a small seeded generator so that every replay is reproducible.
+//! - [`shared_data`]: where the real robot descriptions and footage beside the checkout are.
 //! - [`error`]: the crate's error type.
 //!
 //! Nothing here imports Bevy; time is always an argument.
@@ -19,6 +20,7 @@ pub mod dr;
 pub mod error;
 pub mod rng;
 pub mod robot;
+pub mod shared_data;
 pub mod sim;
 pub mod teleop;
 pub mod vision;

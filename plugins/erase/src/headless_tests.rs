@@ -44,7 +44,9 @@ fn app(resolution_scale: f64) -> App {
                 ..EraseSettings::default()
             },
             camera: camera(),
+            joint_map: JointMap::new(&model, &model),
             model,
+            detail: TwinDetail::default(),
             base: Isometry3::translation(0.0, 0.0, 0.75),
             source_twin: None,
             occluders: vec![(Cuboid::new(1.0, 1.0, 0.05).into(), Transform::default())],

@@ -38,7 +38,7 @@ use std::collections::VecDeque;
 use std::sync::Arc;
 
 use avatarm_core::dr::{self, EraseSettings, LinkSphere, Photometric, RgbaView};
-use avatarm_core::robot::RobotModel;
+use avatarm_core::robot::{JointMap, RobotModel};
 use avatarm_core::vision::camera::PinholeCamera;
 use avatarm_twin::camera::{SCENERY_DEPTH_BIAS, spawn_pinhole_camera, target_image};
 use avatarm_twin::layers;
@@ -76,8 +76,12 @@ pub struct EraseConfig {
     pub settings: EraseSettings,
     /// The camera as the app believes it is (intrinsics + calibrated pose).
     pub camera: PinholeCamera,
-    /// The robot.
+    /// The mask twin's description: the robot's own, or a lighter one of the same robot.
     pub model: Arc<RobotModel>,
+    /// From the joint states' vectors (the robot's description) to `model`'s.
+    pub joint_map: JointMap,
+    /// Which geometry of `model` the mask twin draws, and how simplified.
+    pub detail: TwinDetail,
     /// The robot's base pose in the world.
     pub base: Isometry3<f64>,
     /// The twin that receives the robot's joint states (its history drives the mask twin).
@@ -422,6 +426,7 @@ fn setup(
         &config.model,
         &config.base,
         TwinAppearance::Unlit(Color::WHITE),
+        config.detail,
         &RenderLayers::layer(layers::MASK_TWIN),
         "mask twin",
     );
@@ -640,6 +645,7 @@ fn prepare_frame(
         && let Ok(mut twin) = twins.get_mut(mask_twin.0)
         && twin.stamp_s != Some(stamp)
     {
+        let q = config.joint_map.apply(q.as_slice());
         let limits = config.model.dof_limits();
         let q = DVector::from_iterator(
             q.len(),

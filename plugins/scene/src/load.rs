@@ -26,6 +26,8 @@ pub struct Scene {
     pub file: SceneFile,
     /// The robot.
     pub model: Arc<RobotModel>,
+    /// The mask twin's description: `[twin] urdf`, else the robot's own (the same `Arc`).
+    pub twin_model: Arc<RobotModel>,
     /// Initial joint positions.
     pub q0: DVector<f64>,
     /// The robot timeline.
@@ -215,12 +217,53 @@ impl Scene {
         packages
             .0
             .extend(file.robot.package_path.iter().map(|p| dir.join(p)));
-        let model = RobotModel::from_urdf_file(&dir.join(&file.robot.urdf), &packages).map_err(
-            |source| SceneError::Robot {
+        // A description in a ROS package may be named by package://, as its meshes are.
+        let resolve = |field: &str, urdf: &Path| -> Result<PathBuf, SceneError> {
+            let text = urdf.to_string_lossy();
+            let Some(rest) = text.strip_prefix("package://") else {
+                return Ok(dir.join(urdf));
+            };
+            let (package, file) = rest.split_once('/').unwrap_or((rest, ""));
+            packages
+                .find_package(package)
+                .map(|d| d.join(file))
+                .ok_or_else(|| {
+                    invalid(
+                        field,
+                        format!(
+                            "package '{package}' is not found in the package path [{}] (each folder, its subfolder '{package}', and the package.xml files below it); add the folder that holds it with --package-path (or ROS_PACKAGE_PATH)",
+                            packages
+                                .0
+                                .iter()
+                                .map(|p| p.display().to_string())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    )
+                })
+        };
+        let urdf = resolve("robot.urdf", &file.robot.urdf)?;
+        let model =
+            RobotModel::from_urdf_file(&urdf, &packages).map_err(|source| SceneError::Robot {
                 path: path.to_owned(),
                 source: Box::new(source),
-            },
-        )?;
+            })?;
+
+        let model = Arc::new(model);
+        let keep = file.twin.keep_triangles;
+        if !(keep.is_finite() && keep > 0.0 && keep <= 1.0) {
+            return Err(invalid(
+                "twin.keep_triangles",
+                format!("{keep} must be in (0, 1]"),
+            ));
+        }
+        let twin_model = match &file.twin.urdf {
+            None => Arc::clone(&model),
+            Some(urdf) => Arc::new(
+                RobotModel::from_urdf_file(&resolve("twin.urdf", urdf)?, &packages)
+                    .map_err(|e| SceneError::value("twin.urdf", e).in_file(path))?,
+            ),
+        };
 
         let values = |field: &str, v: &JointValues, previous: &DVector<f64>| {
             let mut q = previous.clone();
@@ -328,7 +371,6 @@ impl Scene {
                 rgba: p.rgba,
             });
         }
-        let model = Arc::new(model);
         let base = file.robot.base.to_isometry();
         let trial = match &file.task {
             Some(task) => {
@@ -353,6 +395,7 @@ impl Scene {
             trial,
             background_path,
             model,
+            twin_model,
             q0,
             trajectory: JointTrajectory::new(keyframes),
             true_camera,

@@ -214,3 +214,65 @@ fn the_task_is_validated_at_load() {
         assert!(message.contains("pouring.toml"), "{message}");
     }
 }
+
+/// `[twin]` and a description named by `package://`: a bad fraction, a missing package, a mimic
+/// joint given a value, and the real Sawyer's scene, each as the user would meet it.
+#[test]
+fn the_twin_and_package_descriptions_are_checked() {
+    let path = root().join("assets/scenes/default.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let parse = |t: &str| Scene::parse(t, &path, &PackagePath::default());
+    let e = parse(&format!("{text}\n[twin]\nkeep_triangles = 0.0\n"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("twin.keep_triangles") && e.contains("(0, 1]"),
+        "{e}"
+    );
+    let e = parse(&format!("{text}\n[twin]\nurdf = \"nowhere.urdf\"\n"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("twin.urdf") && e.contains("nowhere.urdf"), "{e}");
+    let twin = parse(&format!(
+        "{text}\n[twin]\nurdf = \"../robots/sawyer_lite/sawyer_lite.urdf\"\ngeometry = \"collision\"\n"
+    ))
+    .unwrap();
+    assert!(!std::sync::Arc::ptr_eq(&twin.model, &twin.twin_model));
+    let plain = parse(&text).unwrap();
+    assert!(std::sync::Arc::ptr_eq(&plain.model, &plain.twin_model));
+
+    let e = parse(&text.replace(
+        "urdf = \"../robots/sawyer_lite/sawyer_lite.urdf\"",
+        "urdf = \"package://no_such_description/urdf/arm.urdf\"",
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("robot.urdf") && e.contains("'no_such_description'"),
+        "{e}"
+    );
+
+    let (real, text) = scene_text("sawyer_real.toml");
+    match avatarm_core::shared_data::ros_packages() {
+        Err(why) => eprintln!("skipped the real Sawyer: {why}"),
+        Ok(_) => {
+            let scene = Scene::parse(&text, &real, &PackagePath::default()).unwrap();
+            assert_eq!(scene.model.name, "sawyer");
+            let e = Scene::parse(
+                &text.replace(
+                    "right_gripper_l_finger_joint = 0.02,",
+                    "right_gripper_l_finger_joint = 0.02, right_gripper_r_finger_joint = 0.02,",
+                ),
+                &real,
+                &PackagePath::default(),
+            )
+            .unwrap_err()
+            .to_string();
+            assert!(
+                e.contains("robot.q0")
+                    && e.contains("'right_gripper_r_finger_joint' is a mimic joint"),
+                "{e}"
+            );
+        }
+    }
+}

@@ -228,6 +228,7 @@ fn setup_room(
         &config.model,
         &config.robot_base,
         TwinAppearance::Urdf,
+        TwinDetail::default(),
         &RenderLayers::layer(layers::SIM_ROBOT),
         "simulated room",
     )
@@ -239,6 +240,7 @@ fn setup_room(
             &config.model,
             &config.robot_base,
             TwinAppearance::Unlit(Color::WHITE),
+            TwinDetail::default(),
             &RenderLayers::layer(layers::SIM_SILHOUETTE),
             "simulated room's silhouette",
         )

@@ -31,8 +31,8 @@ use bevy::transform::TransformSystems;
 use nalgebra::{DVector, Isometry3};
 
 pub use spawn::{
-    GeometrySource, TwinAppearance, TwinAssets, TwinEntities, TwinMeshCache, attach_visuals,
-    spawn_twin, spawn_twin_with_visuals, to_bevy_mesh,
+    GeometrySource, TwinAppearance, TwinAssets, TwinDetail, TwinEntities, TwinMeshCache,
+    attach_visuals, spawn_twin, spawn_twin_with_visuals, to_bevy_mesh, twin_triangles,
 };
 
 /// What most users of the twin need.
@@ -40,8 +40,8 @@ pub mod prelude {
     pub use crate::camera::PinholeProjection;
     pub use crate::{
         GeometrySource, JointStateMessage, RobotTwin, RobotTwinPlugin, RobotTwinSystems,
-        TwinAppearance, TwinAssets, TwinLink, attach_visuals, iso_to_transform, spawn_twin,
-        spawn_twin_with_visuals, transform_to_iso,
+        TwinAppearance, TwinAssets, TwinDetail, TwinLink, attach_visuals, iso_to_transform,
+        spawn_twin, spawn_twin_with_visuals, transform_to_iso,
     };
 }
 
@@ -49,7 +49,7 @@ pub mod prelude {
 #[derive(Debug, thiserror::Error)]
 pub enum TwinError {
     /// A link's mesh could not be loaded.
-    #[error("robot '{robot}', link '{link}': {source}")]
+    #[error("robot '{robot}': {source}")]
     Mesh {
         /// The robot.
         robot: String,
@@ -193,6 +193,9 @@ impl RobotTwin {
         for (k, name) in msg.names.iter().enumerate() {
             let index = match self.model.dof_index(name) {
                 Ok(i) => i,
+                // A mimic joint (a gripper's second finger) follows its leader; ROS joint states
+                // name it too.
+                Err(avatarm_core::Error::MimicJoint { .. }) => continue,
                 Err(_) if !self.strict_names => continue,
                 Err(e) => return Err(bad(e.to_string())),
             };
@@ -365,5 +368,120 @@ mod tests {
         let state = app.world().get::<RobotTwin>(twin).unwrap();
         assert_eq!(state.positions[0], -0.5);
         assert_eq!(state.positions[1], 0.2);
+    }
+
+    /// ../shared/cases/09: the follower is posed from its leader; a joint state naming it (as
+    /// ROS's do) is not refused.
+    #[test]
+    fn a_mimic_joint_follows_and_its_state_is_skipped() {
+        let urdf = r#"<robot name="m"><link name="base"/><link name="l1"/><link name="l2"/>
+          <joint name="lead" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/>
+            <limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+          <joint name="follow" type="revolute"><parent link="l1"/><child link="l2"/>
+            <origin xyz="0.3 0 0"/><axis xyz="0 0 1"/><limit lower="-4" upper="4" effort="1" velocity="1"/>
+            <mimic joint="lead" multiplier="2" offset="0.1"/></joint></robot>"#;
+        let model =
+            Arc::new(RobotModel::from_urdf_str(urdf, None, &PackagePath::default()).unwrap());
+        let mut app = App::new();
+        app.add_plugins((MinimalPlugins, TransformPlugin, RobotTwinPlugin));
+        let twin = spawn_twin(
+            &mut app.world_mut().commands(),
+            model.clone(),
+            &Isometry3::identity(),
+        )
+        .root;
+        app.update();
+        send(
+            &mut app,
+            JointStateMessage {
+                twin,
+                names: vec!["lead".into(), "follow".into()],
+                positions: vec![0.3, 0.7],
+                velocities: vec![],
+                stamp_s: 1.0,
+            },
+        );
+        let state = app.world().get::<RobotTwin>(twin).unwrap();
+        assert_eq!(
+            (state.rejected, state.positions.as_slice()),
+            (0, &[0.3][..])
+        );
+        let l2 = state.links[model.link_id("l2").unwrap()];
+        let rotation = app.world().get::<GlobalTransform>(l2).unwrap().rotation();
+        // The follower at 2 * 0.3 + 0.1 on top of the leader's 0.3.
+        let (axis, angle) = rotation.to_axis_angle();
+        assert!((axis.z * angle - 1.0).abs() < 1e-5, "{axis} {angle}");
+    }
+
+    /// The preview twin wears the mesh file's material colours where the URDF gives none (and
+    /// the URDF's where it does); the mask twin draws no colour at all.
+    #[test]
+    fn the_preview_twin_wears_the_mesh_colours_and_the_mask_twin_white() {
+        use bevy::ecs::system::RunSystemOnce;
+        let dir = std::env::temp_dir().join(format!("avatarm_twin_colours_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(
+            dir.join("part.dae"),
+            r##"<?xml version="1.0"?><COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+<asset><unit meter="1"/><up_axis>Z_UP</up_axis></asset>
+<library_effects><effect id="fx"><profile_COMMON><technique sid="c"><phong><diffuse><color>0.9 0.5 0.1 1</color></diffuse></phong></technique></profile_COMMON></effect></library_effects>
+<library_materials><material id="orange"><instance_effect url="#fx"/></material></library_materials>
+<library_geometries><geometry id="g"><mesh>
+<source id="p"><float_array id="pa" count="9">0 0 0 0.1 0 0 0 0.1 0</float_array><technique_common><accessor source="#pa" count="3" stride="3"><param name="X" type="float"/><param name="Y" type="float"/><param name="Z" type="float"/></accessor></technique_common></source>
+<vertices id="v"><input semantic="POSITION" source="#p"/></vertices>
+<triangles material="m" count="1"><input semantic="VERTEX" source="#v" offset="0"/><p>0 1 2</p></triangles>
+</mesh></geometry></library_geometries>
+<library_visual_scenes><visual_scene id="s"><node id="n"><instance_geometry url="#g"><bind_material><technique_common><instance_material symbol="m" target="#orange"/></technique_common></bind_material></instance_geometry></node></visual_scene></library_visual_scenes>
+<scene><instance_visual_scene url="#s"/></scene></COLLADA>"##,
+        )
+        .unwrap();
+        let urdf = r#"<robot name="c">
+          <link name="plain"><visual><geometry><mesh filename="part.dae"/></geometry></visual></link>
+          <link name="painted"><visual><geometry><mesh filename="part.dae"/></geometry>
+            <material name="blue"><color rgba="0 0 1 1"/></material></visual></link>
+          <joint name="j" type="fixed"><parent link="plain"/><child link="painted"/></joint></robot>"#;
+        let model =
+            Arc::new(RobotModel::from_urdf_str(urdf, Some(&dir), &PackagePath::default()).unwrap());
+        for (appearance, plain_coloured) in [
+            (TwinAppearance::Urdf, true),
+            (TwinAppearance::Unlit(Color::WHITE), false),
+        ] {
+            let mut app = headless_app();
+            app.init_resource::<TwinMeshCache>();
+            let m = model.clone();
+            let twin = app
+                .world_mut()
+                .run_system_once(move |mut commands: Commands, mut assets: TwinAssets| {
+                    spawn_twin_with_visuals(
+                        &mut commands,
+                        &mut assets,
+                        &m,
+                        &Isometry3::identity(),
+                        appearance,
+                        TwinDetail::default(),
+                        &bevy::camera::visibility::RenderLayers::layer(1),
+                        "test twin",
+                    )
+                })
+                .unwrap();
+            app.update();
+            let world = app.world_mut();
+            let mut parts = world.query::<(&Mesh3d, &ChildOf)>();
+            let world = &*world;
+            let mut coloured = |link: usize| {
+                let (mesh, _) = parts
+                    .iter(world)
+                    .find(|(_, parent)| parent.parent() == twin.links[link])
+                    .expect("the link's mesh");
+                world
+                    .resource::<Assets<Mesh>>()
+                    .get(&mesh.0)
+                    .expect("mesh asset")
+                    .contains_attribute(Mesh::ATTRIBUTE_COLOR)
+            };
+            assert_eq!(coloured(0), plain_coloured, "{appearance:?}: plain");
+            assert!(!coloured(1), "{appearance:?}: the URDF's material wins");
+        }
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -21,6 +21,8 @@ pub enum TwinAppearance {
     Urdf,
     /// Unlit, one flat colour: white for the mask, black for occluders.
     Unlit(Color),
+    /// Lit, in the mesh file's own material colours (where the URDF gives none).
+    VertexColors,
 }
 
 /// Which geometry of each link to draw.
@@ -33,10 +35,39 @@ pub enum GeometrySource {
     Collision,
 }
 
+/// How much of a description a twin draws: which geometry, and what fraction of each mesh's
+/// triangles (simplified by [`TriMesh::simplified`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TwinDetail {
+    /// `<visual>` or `<collision>` elements.
+    pub geometry: GeometrySource,
+    /// Fraction of each mesh's triangles kept, in (0, 1].
+    pub keep_triangles: f32,
+}
+
+impl Default for TwinDetail {
+    fn default() -> Self {
+        Self {
+            geometry: GeometrySource::Visual,
+            keep_triangles: 1.0,
+        }
+    }
+}
+
+impl TwinDetail {
+    /// The geometry elements of `link` this detail draws.
+    pub fn geometry_of<'a>(&self, link: &'a avatarm_core::robot::Link) -> &'a [Geometry] {
+        match self.geometry {
+            GeometrySource::Visual => &link.visuals,
+            GeometrySource::Collision => &link.collisions,
+        }
+    }
+}
+
 /// Meshes and materials already built, shared by all twins (a robot's mesh files load once).
 #[derive(Resource, Default, Debug)]
 pub struct TwinMeshCache {
-    meshes: HashMap<String, Handle<Mesh>>,
+    meshes: HashMap<String, (Handle<Mesh>, bool)>,
     materials: HashMap<String, Handle<StandardMaterial>>,
 }
 
@@ -106,21 +137,33 @@ pub fn attach_visuals(
     model: &RobotModel,
     twin: &TwinEntities,
     appearance: TwinAppearance,
-    source: GeometrySource,
+    detail: TwinDetail,
     layers: &RenderLayers,
 ) -> Result<(), TwinError> {
     for (link, &entity) in model.links.iter().zip(&twin.links) {
-        let geometry = match source {
-            GeometrySource::Visual => &link.visuals,
-            GeometrySource::Collision => &link.collisions,
-        };
-        for g in geometry {
-            let (mesh, transform) =
-                mesh_for(meshes, cache, g).map_err(|source| TwinError::Mesh {
-                    robot: model.name.clone(),
-                    link: link.name.clone(),
-                    source: Box::new(source),
-                })?;
+        for g in detail.geometry_of(link) {
+            // The file's own colours only where the URDF gives none, and never on a flat twin.
+            let vertex_colors = appearance == TwinAppearance::Urdf && g.rgba.is_none();
+            let (mesh, transform, coloured) =
+                mesh_for(meshes, cache, g, vertex_colors, detail.keep_triangles).map_err(
+                    |source| TwinError::Mesh {
+                        robot: model.name.clone(),
+                        link: link.name.clone(),
+                        source: Box::new(match &g.shape {
+                            Shape::Mesh { uri, .. } => avatarm_core::Error::LinkMesh {
+                                link: link.name.clone(),
+                                uri: uri.clone(),
+                                source: Box::new(source),
+                            },
+                            _ => source,
+                        }),
+                    },
+                )?;
+            let appearance = match appearance {
+                // White under the vertex colours, which Bevy multiplies in.
+                TwinAppearance::Urdf if coloured => TwinAppearance::VertexColors,
+                other => other,
+            };
             let material = material_for(materials, cache, g, appearance);
             commands.spawn((
                 Mesh3d(mesh),
@@ -145,17 +188,22 @@ pub struct TwinAssets<'w> {
     pub cache: ResMut<'w, TwinMeshCache>,
 }
 
-/// Spawns a twin of `model` at `base` with its visual geometry on `layers`: the one way every
-/// twin of the app is made (the app's twin, the mask twin, the simulated robot and its
+/// Spawns a twin of `model` at `base` with its geometry at `detail` on `layers`: the one way
+/// every twin of the app is made (the app's twin, the mask twin, the simulated robot and its
 /// silhouette). A mesh that cannot be loaded is the same clear error everywhere: logged naming
-/// the `role`, the robot, the link and the file, and the app exits with an error (a twin with
-/// a missing link would erase the wrong pixels).
+/// the `role`, the robot, the link, the URI and the file, and the app exits with an error (a
+/// twin with a missing link would erase the wrong pixels).
+#[expect(
+    clippy::too_many_arguments,
+    reason = "where, how it looks and how detailed are separate inputs"
+)]
 pub fn spawn_twin_with_visuals(
     commands: &mut Commands,
     assets: &mut TwinAssets,
     model: &Arc<RobotModel>,
     base: &Isometry3<f64>,
     appearance: TwinAppearance,
+    detail: TwinDetail,
     layers: &RenderLayers,
     role: &str,
 ) -> TwinEntities {
@@ -168,7 +216,7 @@ pub fn spawn_twin_with_visuals(
         model,
         &twin,
         appearance,
-        GeometrySource::Visual,
+        detail,
         layers,
     ) {
         error!("{role}: {e}");
@@ -194,16 +242,25 @@ fn material_for(
                     base_color: Color::srgba(r, gr, b, a),
                     perceptual_roughness: 0.55,
                     metallic: 0.05,
-                    ..default()
+                    ..double_sided()
                 },
             )
         }
+        TwinAppearance::VertexColors => (
+            "vertex colours".to_owned(),
+            StandardMaterial {
+                base_color: Color::WHITE,
+                perceptual_roughness: 0.55,
+                metallic: 0.05,
+                ..double_sided()
+            },
+        ),
         TwinAppearance::Unlit(color) => (
             format!("unlit {color:?}"),
             StandardMaterial {
                 base_color: color,
                 unlit: true,
-                ..default()
+                ..double_sided()
             },
         ),
     };
@@ -214,34 +271,107 @@ fn material_for(
         .clone()
 }
 
+/// The mesh of a geometry (built once per shape and colouring), its transform in the link, and
+/// whether it carries the file's vertex colours (only when asked and the file has some).
+/// No back-face culling: real description meshes often mix triangle windings (and a link seen
+/// through a gap shows its inside), so a culled twin has holes where the robot has none, in
+/// the silhouette the mask is made of as much as in the picture.
+fn double_sided() -> StandardMaterial {
+    StandardMaterial {
+        double_sided: true,
+        cull_mode: None,
+        ..default()
+    }
+}
+
 fn mesh_for(
     meshes: &mut Assets<Mesh>,
     cache: &mut TwinMeshCache,
     g: &Geometry,
-) -> Result<(Handle<Mesh>, Transform), avatarm_core::Error> {
+    vertex_colors: bool,
+    keep_triangles: f32,
+) -> Result<(Handle<Mesh>, Transform, bool), avatarm_core::Error> {
     let origin = iso_to_transform(&g.origin);
     // Bevy's cylinders and capsules run along y; URDF's along z.
     let z_up = Transform::from_rotation(Quat::from_rotation_x(FRAC_PI_2));
-    let (key, transform) = match &g.shape {
-        Shape::Cylinder { .. } | Shape::Capsule { .. } => (format!("{:?}", g.shape), origin * z_up),
-        _ => (format!("{:?}", g.shape), origin),
+    let transform = match &g.shape {
+        Shape::Cylinder { .. } | Shape::Capsule { .. } => origin * z_up,
+        _ => origin,
     };
-    if let Some(h) = cache.meshes.get(&key) {
-        return Ok((h.clone(), transform));
+    let vertex_colors = vertex_colors && matches!(g.shape, Shape::Mesh { .. });
+    let key = format!(
+        "{:?} colours {vertex_colors} keep {keep_triangles}",
+        g.shape
+    );
+    if let Some((h, coloured)) = cache.meshes.get(&key) {
+        return Ok((h.clone(), transform, *coloured));
     }
-    let mesh: Mesh = match &g.shape {
-        Shape::Box { size } => Cuboid::new(size.x as f32, size.y as f32, size.z as f32).into(),
-        Shape::Cylinder { radius, length } => Cylinder::new(*radius as f32, *length as f32).into(),
-        Shape::Capsule { radius, length } => Capsule3d::new(*radius as f32, *length as f32).into(),
-        Shape::Sphere { radius } => Sphere::new(*radius as f32).into(),
-        Shape::Mesh { path, scale, .. } => to_bevy_mesh(load_mesh(path, scale)?),
+    let (mesh, coloured): (Mesh, bool) = match &g.shape {
+        Shape::Box { size } => (
+            Cuboid::new(size.x as f32, size.y as f32, size.z as f32).into(),
+            false,
+        ),
+        Shape::Cylinder { radius, length } => {
+            (Cylinder::new(*radius as f32, *length as f32).into(), false)
+        }
+        Shape::Capsule { radius, length } => {
+            (Capsule3d::new(*radius as f32, *length as f32).into(), false)
+        }
+        Shape::Sphere { radius } => (Sphere::new(*radius as f32).into(), false),
+        Shape::Mesh { path, scale, .. } => {
+            let mut tri = load_mesh(path, scale)?.simplified(keep_triangles);
+            if !vertex_colors {
+                tri.colors = None;
+            }
+            let coloured = tri.colors.is_some();
+            (to_bevy_mesh(tri), coloured)
+        }
     };
     let handle = meshes.add(mesh);
-    cache.meshes.insert(key, handle.clone());
-    Ok((handle, transform))
+    cache.meshes.insert(key, (handle.clone(), coloured));
+    Ok((handle, transform, coloured))
 }
 
-/// Converts a loaded triangle mesh; flat normals are computed when the file has none.
+/// Triangles a twin at `detail` draws (meshes loaded and simplified, primitives as Bevy
+/// tessellates them), or the first mesh error naming the link and URI.
+pub fn twin_triangles(
+    model: &RobotModel,
+    detail: TwinDetail,
+) -> Result<usize, avatarm_core::Error> {
+    let mut total = 0;
+    for link in &model.links {
+        for g in detail.geometry_of(link) {
+            let mesh: Mesh = match &g.shape {
+                Shape::Mesh { uri, path, scale } => {
+                    let tri =
+                        load_mesh(path, scale).map_err(|source| avatarm_core::Error::LinkMesh {
+                            link: link.name.clone(),
+                            uri: uri.clone(),
+                            source: Box::new(source),
+                        })?;
+                    total += tri.simplified(detail.keep_triangles).triangle_count();
+                    continue;
+                }
+                Shape::Box { size } => {
+                    Cuboid::new(size.x as f32, size.y as f32, size.z as f32).into()
+                }
+                Shape::Cylinder { radius, length } => {
+                    Cylinder::new(*radius as f32, *length as f32).into()
+                }
+                Shape::Capsule { radius, length } => {
+                    Capsule3d::new(*radius as f32, *length as f32).into()
+                }
+                Shape::Sphere { radius } => Sphere::new(*radius as f32).into(),
+            };
+            total += mesh.indices().map_or(0, |i| i.len() / 3);
+        }
+    }
+    Ok(total)
+}
+
+/// Converts a loaded triangle mesh; flat normals are computed when the file has none. The
+/// file's colours (sRGB, as URDF's) become the linear vertex colours Bevy multiplies the
+/// material's base colour by.
 pub fn to_bevy_mesh(tri: TriMesh) -> Mesh {
     let mut mesh = Mesh::new(
         PrimitiveTopology::TriangleList,
@@ -249,6 +379,13 @@ pub fn to_bevy_mesh(tri: TriMesh) -> Mesh {
     )
     .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, tri.positions)
     .with_inserted_indices(Indices::U32(tri.indices));
+    if let Some(colors) = tri.colors {
+        let linear: Vec<[f32; 4]> = colors
+            .iter()
+            .map(|&[r, g, b, a]| Color::srgba(r, g, b, a).to_linear().to_f32_array())
+            .collect();
+        mesh.insert_attribute(Mesh::ATTRIBUTE_COLOR, linear);
+    }
     match tri.normals {
         Some(n) => mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, n),
         None => {

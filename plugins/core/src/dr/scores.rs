@@ -52,6 +52,96 @@ pub fn mask_scores(erased: &[u8], truth: &[u8]) -> Option<MaskScores> {
     })
 }
 
+/// Chebyshev (8-neighbour) distance, in pixels, from every pixel to the nearest non-zero pixel
+/// of `mask` (`width` × `height`, row-major): 0 on the mask, `u32::MAX` everywhere when the
+/// mask is empty. A pixel at distance `d` is covered by [`crate::dr::dilate`] with radius
+/// `d`. Two-pass chamfer transform with unit weights, which is exact for this metric
+/// (Rosenfeld & Pfaltz, "Distance functions on digital pictures", 1968).
+pub fn chebyshev_distance(mask: &[u8], width: u32, height: u32) -> Vec<u32> {
+    let (w, h) = (width as usize, height as usize);
+    let far = u32::MAX;
+    let mut d: Vec<u32> = mask.iter().map(|&m| if m != 0 { 0 } else { far }).collect();
+    if d.len() != w * h || !d.contains(&0) {
+        return vec![far; mask.len()];
+    }
+    let step = |v: u32| v.saturating_add(1);
+    for y in 0..h {
+        for x in 0..w {
+            let mut best = d[y * w + x];
+            if x > 0 {
+                best = best.min(step(d[y * w + x - 1]));
+            }
+            if y > 0 {
+                let up = (y - 1) * w;
+                best = best.min(step(d[up + x]));
+                if x > 0 {
+                    best = best.min(step(d[up + x - 1]));
+                }
+                if x + 1 < w {
+                    best = best.min(step(d[up + x + 1]));
+                }
+            }
+            d[y * w + x] = best;
+        }
+    }
+    for y in (0..h).rev() {
+        for x in (0..w).rev() {
+            let mut best = d[y * w + x];
+            if x + 1 < w {
+                best = best.min(step(d[y * w + x + 1]));
+            }
+            if y + 1 < h {
+                let down = (y + 1) * w;
+                best = best.min(step(d[down + x]));
+                if x + 1 < w {
+                    best = best.min(step(d[down + x + 1]));
+                }
+                if x > 0 {
+                    best = best.min(step(d[down + x - 1]));
+                }
+            }
+            d[y * w + x] = best;
+        }
+    }
+    d
+}
+
+/// Leak (% of `truth`'s robot pixels not covered) of `mask` dilated by each radius
+/// `0..=max_radius` (square dilation, as [`crate::dr::dilate`]); `None` when the sizes differ
+/// or `truth` has no robot pixel.
+pub fn leak_by_dilation(
+    mask: &[u8],
+    truth: &[u8],
+    width: u32,
+    height: u32,
+    max_radius: u32,
+) -> Option<Vec<f64>> {
+    if mask.len() != truth.len() || mask.len() != (width as usize) * (height as usize) {
+        return None;
+    }
+    let robot = truth.iter().filter(|&&t| t != 0).count();
+    if robot == 0 {
+        return None;
+    }
+    let distance = chebyshev_distance(mask, width, height);
+    // uncovered[r] = robot pixels at distance > r.
+    let mut at = vec![0usize; max_radius as usize + 2];
+    for (&t, &d) in truth.iter().zip(&distance) {
+        if t != 0 {
+            at[(d.min(max_radius + 1)) as usize] += 1;
+        }
+    }
+    let mut left = robot;
+    Some(
+        (0..=max_radius as usize)
+            .map(|r| {
+                left -= at[r];
+                100.0 * left as f64 / robot as f64
+            })
+            .collect(),
+    )
+}
+
 /// PSNR (dB) of the RGB channels of two RGBA8 images over the pixels where `region[i] != 0`,
 /// capped at 100 dB; `None` when the region is empty or the sizes differ.
 pub fn psnr_in(a: &[u8], b: &[u8], region: &[u8]) -> Option<f64> {
@@ -78,4 +168,28 @@ pub fn psnr_in(a: &[u8], b: &[u8], region: &[u8]) -> Option<f64> {
     } else {
         (10.0 * (255.0f64 * 255.0 / mse).log10()).min(100.0)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn leak_by_dilation_matches_dilating() {
+        let (w, h) = (40u32, 30u32);
+        let mut rng = crate::rng::Rng::new(3);
+        let mask: Vec<u8> = (0..w * h).map(|_| u8::from(rng.uniform() < 0.02)).collect();
+        let truth: Vec<u8> = (0..w * h).map(|_| u8::from(rng.uniform() < 0.5)).collect();
+        let leaks = leak_by_dilation(&mask, &truth, w, h, 12).unwrap();
+        for (r, leak) in leaks.iter().enumerate() {
+            let dilated = crate::dr::dilate(&mask, w, h, r as u32);
+            let expected = mask_scores(&dilated, &truth).unwrap().leak_pct;
+            assert!(
+                (leak - expected).abs() < 1e-9,
+                "radius {r}: {leak} vs {expected}"
+            );
+        }
+        assert!(leak_by_dilation(&mask, &vec![0; mask.len()], w, h, 3).is_none());
+        assert_eq!(chebyshev_distance(&[0; 4], 2, 2), vec![u32::MAX; 4]);
+    }
 }

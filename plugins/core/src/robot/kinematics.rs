@@ -35,8 +35,7 @@ impl RobotModel {
         let mut poses = vec![*base; self.links.len()];
         // Joints are depth-first, so a joint's parent pose is always computed before it.
         for joint in &self.joints {
-            let qi = joint.dof.and_then(|d| q.get(d).copied()).unwrap_or(0.0);
-            poses[joint.child] = poses[joint.parent] * joint.transform(qi);
+            poses[joint.child] = poses[joint.parent] * joint.transform(joint.position(q));
         }
         poses
     }
@@ -44,7 +43,8 @@ impl RobotModel {
     /// Geometric Jacobian (6 × dof) of a point fixed on `link` (given in the link frame).
     ///
     /// Column `i` is the twist `[v; ω]` of that point for a unit velocity of movable joint `i`;
-    /// joints that are not ancestors of `link` give zero columns.
+    /// joints that are not ancestors of `link` give zero columns. A mimic joint on the chain adds
+    /// its own twist times its gain to its leader's column (chain rule).
     pub fn jacobian(
         &self,
         base: &Isometry3<f64>,
@@ -70,7 +70,7 @@ impl RobotModel {
         let mut current = link;
         while let Some(ji) = self.links[current].parent_joint {
             let joint = &self.joints[ji];
-            if let Some(col) = joint.dof {
+            if let Some((col, gain)) = joint.drive() {
                 let joint_frame = poses[joint.parent] * joint.origin;
                 let z = joint_frame.rotation * joint.axis.into_inner();
                 let (v, w) = match joint.kind {
@@ -81,8 +81,8 @@ impl RobotModel {
                     JointKind::Prismatic => (z, Vector3::zeros()),
                     JointKind::Fixed => (Vector3::zeros(), Vector3::zeros()),
                 };
-                jac.fixed_view_mut::<3, 1>(0, col).copy_from(&v);
-                jac.fixed_view_mut::<3, 1>(3, col).copy_from(&w);
+                let mut column = jac.fixed_view_mut::<6, 1>(0, col);
+                column += nalgebra::Vector6::new(v.x, v.y, v.z, w.x, w.y, w.z) * gain;
             }
             current = joint.parent;
         }
@@ -215,6 +215,51 @@ pub(crate) mod tests {
             assert!((v - world.fixed_view::<3, 1>(0, c)).norm() < 1e-12);
             assert!((w - world.fixed_view::<3, 1>(3, c)).norm() < 1e-12);
         }
+    }
+
+    /// A leader, a follower that mimics it (×2, +0.1) and a fixed tip, as in
+    /// ../shared/cases/09-mimic-joint.
+    const MIMIC: &str = r#"<robot name="mimic_pair">
+      <link name="base_link"/><link name="l1"/><link name="l2"/><link name="tip"/>
+      <joint name="j_leader" type="revolute"><parent link="base_link"/><child link="l1"/>
+        <origin xyz="0 0 0.1"/><axis xyz="0 0 1"/><limit lower="-1.5" upper="1.5" effort="10" velocity="1"/></joint>
+      <joint name="j_follower" type="revolute"><parent link="l1"/><child link="l2"/>
+        <origin xyz="0.3 0 0"/><axis xyz="0 0 1"/><limit lower="-3.2" upper="3.2" effort="10" velocity="2"/>
+        <mimic joint="j_leader" multiplier="2.0" offset="0.1"/></joint>
+      <joint name="tip_joint" type="fixed"><parent link="l2"/><child link="tip"/><origin xyz="0.2 0 0"/></joint>
+    </robot>"#;
+
+    #[test]
+    fn a_mimic_joint_follows_its_leader_in_fk_and_the_jacobian() {
+        let r = RobotModel::from_urdf_str(MIMIC, None, &PackagePath::default()).unwrap();
+        assert_eq!(r.dof_names(), ["j_leader"]);
+        let (l2, tip) = (r.link_id("l2").unwrap(), r.link_id("tip").unwrap());
+        for a in [0.3, -0.7, 1.2] {
+            // Hand-computed chain: l2 at 0.3·(cos a, sin a), the follower at 2a + 0.1.
+            let b = 2.0 * a + 0.1;
+            let poses = r.forward_kinematics(&Isometry3::identity(), &[a]);
+            let p2 = Vector3::new(0.3 * a.cos(), 0.3 * a.sin(), 0.1);
+            let pt = p2 + Vector3::new(0.2 * (a + b).cos(), 0.2 * (a + b).sin(), 0.0);
+            assert!((poses[l2].translation.vector - p2).norm() < 1e-12);
+            assert!((poses[tip].translation.vector - pt).norm() < 1e-12);
+            let follower = r.joints.iter().find(|j| j.name == "j_follower").unwrap();
+            assert!((follower.position(&[a]) - b).abs() < 1e-15);
+            let jac = r.jacobian(
+                &Isometry3::identity(),
+                &[a],
+                tip,
+                &Vector3::zeros(),
+                Frame::World,
+            );
+            let numeric = finite_difference_jacobian(&r, &[a], tip);
+            assert!((&jac - &numeric).abs().max() < 1e-7);
+            // ∂(tip angle)/∂a = 1 + 2.
+            assert!((numeric[(5, 0)] - 3.0).abs() < 1e-7);
+        }
+        // The case's numbers at a = 0.3.
+        let poses = r.forward_kinematics(&Isometry3::identity(), &[0.3]);
+        let want = Vector3::new(0.394661407911, 0.256950258960, 0.1);
+        assert!((poses[tip].translation.vector - want).norm() < 1e-9);
     }
 
     proptest! {

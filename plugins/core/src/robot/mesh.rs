@@ -1,20 +1,32 @@
-//! Triangle meshes from STL, OBJ and glTF/GLB files, for the robot twin's link geometry.
+//! Triangle meshes from STL, OBJ, Collada and glTF/GLB files, for the robot twin's link geometry.
+//!
+//! STL, OBJ and Collada are read by `mesh-loader` (openrr), glTF by `gltf`. What a file carries
+//! is honoured: Collada's `<unit meter>` and node transforms (by `mesh-loader`) and its
+//! `<up_axis>` (here: `Y_UP` and `X_UP` are turned to ROS's Z-up, as assimp and RViz do), every
+//! geometry of a file, and each material's diffuse colour as per-vertex colours. Extensions
+//! match in any letter case (`.DAE`, `.STL`). A binary STL is recognised by its size (84 + 50 ×
+//! its triangle count bytes) whatever its header says: CAD exporters often begin the 80-byte
+//! header with `solid`, the ASCII keyword.
 
 use std::path::Path;
 
-use nalgebra::{Matrix4, Point3, Vector3};
+use nalgebra::{Matrix3, Matrix4, Point3, Vector3};
 
 use crate::error::{Error, Result};
 
-/// An indexed triangle mesh in the file's units times the URDF scale.
+/// An indexed triangle mesh in metres (the file's units converted) times the URDF scale, in the
+/// file's frame turned Z-up.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct TriMesh {
     /// Vertex positions.
     pub positions: Vec<[f32; 3]>,
-    /// Per-vertex normals, when the file has them.
+    /// Per-vertex unit normals, when the file has them.
     pub normals: Option<Vec<[f32; 3]>>,
-    /// Triangle list, three indices per triangle.
+    /// Triangle list, three indices per triangle, counter-clockwise seen from outside.
     pub indices: Vec<u32>,
+    /// Per-vertex RGBA (0..1, the same sRGB-like convention as URDF `<color rgba>`) from the
+    /// file's materials, when any material gives a colour.
+    pub colors: Option<Vec<[f32; 4]>>,
 }
 
 impl TriMesh {
@@ -33,6 +45,70 @@ impl TriMesh {
             )
         }))
     }
+
+    /// Appends `other`, renumbering its indices; colours and normals are kept only where both
+    /// have them (missing colours become white when one side has some).
+    fn append(&mut self, mut other: TriMesh) {
+        let base = self.positions.len() as u32;
+        let (n_self, n_other) = (self.positions.len(), other.positions.len());
+        self.normals = match (self.normals.take(), other.normals.take()) {
+            (Some(mut a), Some(b)) => {
+                a.extend(b);
+                Some(a)
+            }
+            (None, Some(b)) if n_self == 0 => Some(b),
+            (a, None) if n_other == 0 => a,
+            _ => None,
+        };
+        self.colors = match (self.colors.take(), other.colors.take()) {
+            (None, None) => None,
+            (a, b) => {
+                let mut a = a.unwrap_or_else(|| vec![[1.0; 4]; n_self]);
+                a.extend(b.unwrap_or_else(|| vec![[1.0; 4]; n_other]));
+                Some(a)
+            }
+        };
+        self.positions.extend(other.positions);
+        self.indices.extend(other.indices.iter().map(|i| i + base));
+    }
+}
+
+impl TriMesh {
+    /// The mesh simplified to about `keep` (0 < `keep` ≤ 1) of its triangles, for a lighter
+    /// twin: vertices that share a position are welded first (Collada and STL files repeat them
+    /// per triangle), then meshoptimizer's edge-collapse simplifier (quadric error metric,
+    /// Garland & Heckbert, SIGGRAPH 1997) removes triangles, pruning small disconnected parts
+    /// when that is what reaches the target. Normals are dropped (the renderer recomputes
+    /// them); colours follow their welded vertex. `keep` ≥ 1 (or not finite) returns a copy.
+    pub fn simplified(&self, keep: f32) -> TriMesh {
+        if !(keep.is_finite() && keep < 1.0) || self.indices.is_empty() {
+            return self.clone();
+        }
+        let (count, remap) = meshopt::generate_vertex_remap(&self.positions, Some(&self.indices));
+        let positions = meshopt::remap_vertex_buffer(&self.positions, count, &remap);
+        let indices =
+            meshopt::remap_index_buffer(Some(&self.indices), self.positions.len(), &remap);
+        let colors = self
+            .colors
+            .as_ref()
+            .map(|c| meshopt::remap_vertex_buffer(c, count, &remap));
+        let target = ((self.triangle_count() as f32 * keep.max(0.0)).round() as usize).max(1) * 3;
+        let indices = meshopt::simplify_decoder(
+            &indices,
+            &positions,
+            target,
+            // Relative to the mesh's extent: any error, so that the target count decides.
+            1.0,
+            meshopt::SimplifyOptions::Prune,
+            None,
+        );
+        TriMesh {
+            positions,
+            normals: None,
+            indices,
+            colors,
+        }
+    }
 }
 
 /// The mesh formats Avatarm loads.
@@ -40,14 +116,17 @@ impl TriMesh {
 pub enum MeshFormat {
     /// STL, ASCII or binary.
     Stl,
-    /// Wavefront OBJ.
+    /// Wavefront OBJ (with its `.mtl` colours).
     Obj,
+    /// Collada (`.dae`), as most ROS descriptions' visual meshes are.
+    Collada,
     /// glTF 2.0, `.gltf` or `.glb`.
     Gltf,
 }
 
 impl MeshFormat {
-    /// The format of a file by its extension, or an error naming the file and suggesting a fix.
+    /// The format of a file by its extension (any letter case), or an error naming the file and
+    /// suggesting a fix.
     pub fn of(path: &Path) -> Result<Self> {
         let ext = path
             .extension()
@@ -57,6 +136,7 @@ impl MeshFormat {
         match ext.as_str() {
             "stl" => Ok(Self::Stl),
             "obj" => Ok(Self::Obj),
+            "dae" => Ok(Self::Collada),
             "gltf" | "glb" => Ok(Self::Gltf),
             _ => Err(Error::UnsupportedMesh {
                 path: path.to_owned(),
@@ -71,82 +151,366 @@ impl MeshFormat {
     }
 }
 
-/// Loads a mesh file and applies a per-axis scale.
+/// Loads a mesh file and applies a per-axis scale (the URDF `<mesh scale>`).
+///
+/// A scale with an odd number of negative components mirrors the mesh: the triangles' winding
+/// is reversed so that they still face outwards, and normals transform by the inverse scale.
+///
+/// # Errors
+/// [`Error::Io`] when the file cannot be read, [`Error::UnsupportedMesh`] for an unknown
+/// extension, [`Error::BadMesh`] (naming the file) when it cannot be parsed, has an index out of
+/// range or a non-finite vertex, or the scale is 0 or not finite.
 pub fn load_mesh(path: &Path, scale: &Vector3<f64>) -> Result<TriMesh> {
     let bad = |message: String| Error::BadMesh {
         path: path.to_owned(),
         message,
     };
-    let mut mesh = match MeshFormat::of(path)? {
-        MeshFormat::Stl => {
-            let mut file = std::fs::File::open(path).map_err(|source| Error::Io {
+    if scale.iter().any(|v| !v.is_finite() || *v == 0.0) {
+        return Err(bad(format!(
+            "scale [{} {} {}] must be finite and non-zero on every axis",
+            scale.x, scale.y, scale.z
+        )));
+    }
+    let format = MeshFormat::of(path)?;
+    let mut mesh = match format {
+        MeshFormat::Gltf => load_gltf(path)?,
+        MeshFormat::Stl | MeshFormat::Obj | MeshFormat::Collada => {
+            let bytes = std::fs::read(path).map_err(|source| Error::Io {
                 path: path.to_owned(),
                 source,
             })?;
-            let stl = stl_io::read_stl(&mut file).map_err(|e| bad(e.to_string()))?;
-            let positions = stl.vertices.iter().map(|v| [v[0], v[1], v[2]]).collect();
-            let mut indices = Vec::with_capacity(stl.faces.len() * 3);
-            for f in &stl.faces {
-                for &i in &f.vertices {
-                    indices.push(u32::try_from(i).map_err(|_| bad("too many vertices".into()))?);
-                }
-            }
-            TriMesh {
-                positions,
-                normals: None,
-                indices,
-            }
+            load_with_mesh_loader(path, format, &bytes).map_err(bad)?
         }
-        MeshFormat::Obj => {
-            let options = tobj::LoadOptions {
-                triangulate: true,
-                single_index: true,
-                ..Default::default()
-            };
-            let (models, _) = tobj::load_obj(path, &options).map_err(|e| bad(e.to_string()))?;
-            let mut out = TriMesh::default();
-            let mut normals = Vec::new();
-            let mut all_have_normals = true;
-            for m in models {
-                let base = out.positions.len() as u32;
-                let m = m.mesh;
-                out.positions
-                    .extend(m.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
-                if m.normals.len() == m.positions.len() {
-                    normals.extend(m.normals.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
-                } else {
-                    all_have_normals = false;
-                }
-                out.indices.extend(m.indices.iter().map(|i| i + base));
-            }
-            out.normals = all_have_normals.then_some(normals);
-            out
-        }
-        MeshFormat::Gltf => load_gltf(path)?,
     };
-    if mesh
-        .indices
-        .iter()
-        .any(|&i| i as usize >= mesh.positions.len())
+    if mesh.indices.len() % 3 != 0
+        || mesh
+            .indices
+            .iter()
+            .any(|&i| i as usize >= mesh.positions.len())
     {
         return Err(bad("a triangle index is out of range".into()));
     }
     if mesh.positions.iter().flatten().any(|v| !v.is_finite()) {
         return Err(bad("a vertex position is not finite".into()));
     }
+    if mesh.indices.is_empty() {
+        return Err(bad("the file has no triangles".into()));
+    }
+    if mesh.normals.as_ref().is_some_and(|n| {
+        n.len() != mesh.positions.len() || n.iter().flatten().any(|v| !v.is_finite())
+    }) {
+        // Broken normals are recomputed from the faces rather than refused.
+        mesh.normals = None;
+    }
     let s = scale.map(|v| v as f32);
     for p in &mut mesh.positions {
         *p = [p[0] * s.x, p[1] * s.y, p[2] * s.z];
     }
     if let Some(normals) = &mut mesh.normals {
-        // Normals transform by the inverse scale, then renormalise.
+        // Normals transform by the inverse transpose (here: inverse) scale, then renormalise.
         for n in normals.iter_mut() {
             let v = Vector3::new(n[0] / s.x, n[1] / s.y, n[2] / s.z);
             let v = v.try_normalize(1e-12).unwrap_or(Vector3::z());
             *n = [v.x, v.y, v.z];
         }
     }
+    if s.x * s.y * s.z < 0.0 {
+        for tri in mesh.indices.chunks_exact_mut(3) {
+            tri.swap(1, 2);
+        }
+    }
     Ok(mesh)
+}
+
+/// STL, OBJ or Collada through `mesh-loader`, every mesh of the file merged into one with its
+/// material colours. A panic inside the parser (a malformed file it does not check) is caught
+/// and reported as an error, so a bad file cannot crash the app.
+///
+/// Collada's scene graph is placed here, not by `mesh-loader` (0.1.13 multiplies node transforms
+/// in child-then-parent order and scales by `<unit>` before translating, which misplaces nested
+/// or translated nodes of files not in metres): the copy it parses has the visual scene's
+/// transform elements and `<unit>` blanked, and [`ColladaScene`] gives each geometry's instances.
+fn load_with_mesh_loader(
+    path: &Path,
+    format: MeshFormat,
+    bytes: &[u8],
+) -> std::result::Result<TriMesh, String> {
+    let collada = match format {
+        MeshFormat::Collada => Some(ColladaScene::parse(bytes)?),
+        _ => None,
+    };
+    let parse = || -> std::io::Result<mesh_loader::Scene> {
+        let loader = mesh_loader::Loader::default();
+        match format {
+            MeshFormat::Stl => match binary_stl_with_text_header(bytes) {
+                // Blank the header so the parser cannot mistake it for ASCII.
+                Some(mut copy) => {
+                    copy[..80].fill(0);
+                    loader.load_stl_from_slice(&copy, path)
+                }
+                None => loader.load_stl_from_slice(bytes, path),
+            },
+            MeshFormat::Obj => loader.load_obj_from_slice(bytes, path),
+            _ => loader.load_collada_from_slice(
+                collada.as_ref().map_or(bytes, |c| &c.untransformed),
+                path,
+            ),
+        }
+    };
+    let scene = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(parse)) {
+        Ok(Ok(scene)) => scene,
+        Ok(Err(e)) => return Err(e.to_string()),
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| panic.downcast_ref::<&str>().copied())
+                .unwrap_or("no message");
+            return Err(format!("the parser failed on this file ({what})"));
+        }
+    };
+    let mut out = TriMesh::default();
+    let any_colour = scene.materials.iter().any(|m| m.color.diffuse.is_some())
+        || scene.meshes.iter().any(|m| !m.colors[0].is_empty());
+    for (i, m) in scene.meshes.into_iter().enumerate() {
+        let n = m.vertices.len();
+        let colors = any_colour.then(|| {
+            if m.colors[0].len() == n {
+                m.colors[0].clone()
+            } else {
+                let c = scene
+                    .materials
+                    .get(i)
+                    .and_then(|mat| mat.color.diffuse)
+                    .unwrap_or([1.0; 4]);
+                vec![c; n]
+            }
+        });
+        let part = TriMesh {
+            normals: (m.normals.len() == n).then_some(m.normals),
+            indices: m.faces.iter().flatten().copied().collect(),
+            positions: m.vertices,
+            colors,
+        };
+        match &collada {
+            None => out.append(part),
+            Some(c) => {
+                for world in c.instances_of(&m.name) {
+                    let mut placed = part.clone();
+                    placed.transform(&world);
+                    out.append(placed);
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// What `mesh-loader` is not trusted with in a Collada file: where each geometry is instanced.
+struct ColladaScene {
+    /// The file with the visual scene's transform elements and `<unit>` blanked out.
+    untransformed: Vec<u8>,
+    /// World transforms (metres, Z-up) of the instances of each geometry id.
+    instances: std::collections::HashMap<String, Vec<Matrix4<f32>>>,
+    /// `<up_axis>` and `<unit>`: the transform of geometry that no node instances.
+    root: Matrix4<f32>,
+}
+
+impl ColladaScene {
+    /// Reads `<asset>` (`<unit meter>`, `<up_axis>`) and the node tree of the visual scene that
+    /// `<scene>` names (else the first): node transforms compose parent-first, and each node's
+    /// `<matrix>` (row-major), `<translate>`, `<rotate>` (axis, degrees) and `<scale>` apply in
+    /// document order (COLLADA 1.4.1 spec, chapter 5, "Transform elements"). `<up_axis>` Y_UP is
+    /// +90° about x (y → z) and X_UP is −90° about y (x → z), as assimp's importer does.
+    fn parse(bytes: &[u8]) -> std::result::Result<Self, String> {
+        let text = std::str::from_utf8(bytes).map_err(|e| format!("not UTF-8 text: {e}"))?;
+        let options = roxmltree::ParsingOptions {
+            allow_dtd: true,
+            ..Default::default()
+        };
+        let doc = roxmltree::Document::parse_with_options(text, options)
+            .map_err(|e| format!("malformed XML: {e}"))?;
+        let root = doc.root_element();
+        let mut blank: Vec<std::ops::Range<usize>> = Vec::new();
+        let mut unit = 1.0f32;
+        let mut up = Matrix4::identity();
+        if let Some(asset) = root.children().find(|n| n.has_tag_name("asset")) {
+            if let Some(u) = asset.children().find(|n| n.has_tag_name("unit")) {
+                let meter = u.attribute("meter").unwrap_or("1");
+                unit = meter
+                    .trim()
+                    .parse::<f32>()
+                    .ok()
+                    .filter(|v| v.is_finite() && *v > 0.0)
+                    .ok_or_else(|| format!("<unit meter=\"{meter}\"> is not a positive number"))?;
+                blank.push(u.range());
+            }
+            if let Some(axis) = asset.children().find(|n| n.has_tag_name("up_axis")) {
+                up = match axis.text().unwrap_or("").trim() {
+                    "Z_UP" => Matrix4::identity(),
+                    "Y_UP" => Matrix4::new(
+                        1.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                        1.0,
+                    ),
+                    "X_UP" => Matrix4::new(
+                        0.0, 0.0, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                        1.0,
+                    ),
+                    other => return Err(format!("<up_axis> '{other}' is not X_UP, Y_UP or Z_UP")),
+                };
+            }
+        }
+        let root_transform = up * Matrix4::new_scaling(unit);
+        let scenes = root
+            .children()
+            .find(|n| n.has_tag_name("library_visual_scenes"));
+        let wanted = root
+            .children()
+            .find(|n| n.has_tag_name("scene"))
+            .and_then(|s| {
+                s.children()
+                    .find(|n| n.has_tag_name("instance_visual_scene"))
+            })
+            .and_then(|i| i.attribute("url"))
+            .map(|u| u.trim_start_matches('#').to_owned());
+        let scene = scenes.and_then(|lib| {
+            let mut all = lib.children().filter(|n| n.has_tag_name("visual_scene"));
+            match &wanted {
+                Some(id) => all.find(|n| n.attribute("id") == Some(id.as_str())),
+                None => all.next(),
+            }
+        });
+        let mut instances: std::collections::HashMap<String, Vec<Matrix4<f32>>> =
+            Default::default();
+        if let Some(scene) = scene {
+            let mut stack: Vec<(roxmltree::Node<'_, '_>, Matrix4<f32>)> = scene
+                .children()
+                .filter(|n| n.has_tag_name("node"))
+                .map(|n| (n, root_transform))
+                .collect();
+            while let Some((node, parent)) = stack.pop() {
+                let mut world = parent;
+                for t in node.children().filter(|n| n.is_element()) {
+                    let numbers = || -> std::result::Result<Vec<f32>, String> {
+                        t.text()
+                            .unwrap_or("")
+                            .split_whitespace()
+                            .map(|v| v.parse::<f32>().ok().filter(|v| v.is_finite()))
+                            .collect::<Option<Vec<f32>>>()
+                            .ok_or_else(|| {
+                                format!(
+                                    "node '{}': <{}> has a value that is not a finite number",
+                                    node.attribute("id").unwrap_or("?"),
+                                    t.tag_name().name()
+                                )
+                            })
+                    };
+                    let local = match (t.tag_name().name(), numbers()?.as_slice()) {
+                        ("matrix", m) if m.len() == 16 => Matrix4::from_row_slice(m),
+                        ("translate", &[x, y, z]) => {
+                            Matrix4::new_translation(&Vector3::new(x, y, z))
+                        }
+                        ("rotate", &[x, y, z, degrees]) => {
+                            let axis = nalgebra::Unit::try_new(Vector3::new(x, y, z), 1e-12)
+                                .unwrap_or(Vector3::z_axis());
+                            Matrix4::from_axis_angle(&axis, degrees.to_radians())
+                        }
+                        ("scale", &[x, y, z]) => {
+                            Matrix4::new_nonuniform_scaling(&Vector3::new(x, y, z))
+                        }
+                        (name @ ("matrix" | "translate" | "rotate" | "scale"), values) => {
+                            return Err(format!(
+                                "node '{}': <{name}> has {} numbers",
+                                node.attribute("id").unwrap_or("?"),
+                                values.len()
+                            ));
+                        }
+                        (name @ ("lookat" | "skew"), _) => {
+                            return Err(format!(
+                                "node '{}': the <{name}> transform is not supported",
+                                node.attribute("id").unwrap_or("?")
+                            ));
+                        }
+                        _ => continue,
+                    };
+                    world *= local;
+                    blank.push(t.range());
+                }
+                for child in node.children() {
+                    if child.has_tag_name("instance_geometry")
+                        && let Some(url) = child.attribute("url")
+                    {
+                        instances
+                            .entry(url.trim_start_matches('#').to_owned())
+                            .or_default()
+                            .push(world);
+                    } else if child.has_tag_name("node") {
+                        stack.push((child, world));
+                    }
+                }
+            }
+        }
+        let mut untransformed = bytes.to_vec();
+        for r in blank {
+            untransformed[r].fill(b' ');
+        }
+        Ok(Self {
+            untransformed,
+            instances,
+            root: root_transform,
+        })
+    }
+
+    /// Where to draw geometry `id`: each of its instances, or (when no node instances it, as in
+    /// files without a visual scene) once at the root transform.
+    fn instances_of(&self, id: &str) -> Vec<Matrix4<f32>> {
+        if self.instances.is_empty() {
+            return vec![self.root];
+        }
+        self.instances.get(id).cloned().unwrap_or_default()
+    }
+}
+
+impl TriMesh {
+    /// Applies an affine transform: positions by `m`, normals by its inverse transpose, and the
+    /// winding reversed when `m` mirrors (negative determinant).
+    fn transform(&mut self, m: &Matrix4<f32>) {
+        for p in &mut self.positions {
+            let q = m.transform_point(&Point3::from(*p));
+            *p = [q.x, q.y, q.z];
+        }
+        let linear = m.fixed_view::<3, 3>(0, 0).into_owned();
+        if let Some(normals) = &mut self.normals {
+            let nm = linear
+                .try_inverse()
+                .map(|i| i.transpose())
+                .unwrap_or_else(Matrix3::identity);
+            for n in normals.iter_mut() {
+                let v = (nm * Vector3::from(*n))
+                    .try_normalize(1e-12)
+                    .unwrap_or(Vector3::z());
+                *n = [v.x, v.y, v.z];
+            }
+        }
+        if linear.determinant() < 0.0 {
+            for tri in self.indices.chunks_exact_mut(3) {
+                tri.swap(1, 2);
+            }
+        }
+    }
+}
+
+/// `Some(bytes)` when an STL file's size is exactly that of a binary STL of the triangle count
+/// in its header (84 + 50·count) but its header begins with `solid`, the ASCII keyword.
+fn binary_stl_with_text_header(bytes: &[u8]) -> Option<Vec<u8>> {
+    let count = u32::from_le_bytes(bytes.get(80..84)?.try_into().ok()?) as usize;
+    let binary = bytes.len() == 84 + 50 * count;
+    let text_header = bytes
+        .iter()
+        .skip_while(|b| b.is_ascii_whitespace())
+        .take(5)
+        .eq(b"solid".iter());
+    (binary && text_header).then(|| bytes.to_vec())
 }
 
 fn load_gltf(path: &Path) -> Result<TriMesh> {
@@ -157,6 +521,7 @@ fn load_gltf(path: &Path) -> Result<TriMesh> {
     let mut out = TriMesh::default();
     let mut normals = Vec::new();
     let mut all_have_normals = true;
+    let mut colors = Vec::new();
     let scene = doc.default_scene().or_else(|| doc.scenes().next());
     let mut stack: Vec<(gltf::Node<'_>, Matrix4<f32>)> = scene
         .map(|s| s.nodes().map(|n| (n, Matrix4::identity())).collect())
@@ -185,6 +550,15 @@ fn load_gltf(path: &Path) -> Result<TriMesh> {
                     [v.x, v.y, v.z]
                 }));
                 let added = out.positions.len() - count_before;
+                // glTF base colours are linear; TriMesh colours follow URDF's sRGB convention.
+                let linear = prim.material().pbr_metallic_roughness().base_color_factor();
+                let c = [
+                    linear_to_srgb(linear[0]),
+                    linear_to_srgb(linear[1]),
+                    linear_to_srgb(linear[2]),
+                    linear[3],
+                ];
+                colors.extend(std::iter::repeat_n(c, added));
                 match reader.read_normals() {
                     Some(ns) => normals.extend(ns.map(|n| {
                         let v = (normal_matrix * Vector3::new(n[0], n[1], n[2]))
@@ -203,7 +577,19 @@ fn load_gltf(path: &Path) -> Result<TriMesh> {
         stack.extend(node.children().map(|c| (c, world)));
     }
     out.normals = (all_have_normals && normals.len() == out.positions.len()).then_some(normals);
+    let coloured = colors.iter().any(|c| *c != [1.0; 4]);
+    out.colors = (coloured && colors.len() == out.positions.len()).then_some(colors);
     Ok(out)
+}
+
+/// The sRGB transfer function (IEC 61966-2-1) of a linear value in 0..1.
+fn linear_to_srgb(v: f32) -> f32 {
+    let v = v.clamp(0.0, 1.0);
+    if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
 }
 
 #[cfg(test)]
@@ -257,17 +643,207 @@ mod tests {
         assert_eq!(m.positions[1], [1.0, 0.0, 1.0]);
     }
 
+    /// Two triangles in millimetres, Y up, the second moved by its node's `<translate>`; one
+    /// red and one blue material.
+    fn collada(up: &str) -> String {
+        let geometry = |id: &str, material: &str| {
+            format!(
+                r##"<geometry id="{id}"><mesh>
+  <source id="{id}-pos"><float_array id="{id}-arr" count="9">0 0 0 100 0 0 0 100 0</float_array>
+    <technique_common><accessor source="#{id}-arr" count="3" stride="3"><param name="X" type="float"/><param name="Y" type="float"/><param name="Z" type="float"/></accessor></technique_common></source>
+  <vertices id="{id}-vtx"><input semantic="POSITION" source="#{id}-pos"/></vertices>
+  <triangles material="{material}" count="1"><input semantic="VERTEX" source="#{id}-vtx" offset="0"/><p>0 1 2</p></triangles>
+</mesh></geometry>"##
+            )
+        };
+        let effect = |id: &str, rgba: &str| {
+            format!(
+                r#"<effect id="{id}-fx"><profile_COMMON><technique sid="common"><phong><diffuse><color>{rgba}</color></diffuse></phong></technique></profile_COMMON></effect>"#
+            )
+        };
+        let instance = |url: &str, symbol: &str, target: &str| {
+            format!(
+                r##"<instance_geometry url="#{url}"><bind_material><technique_common><instance_material symbol="{symbol}" target="#{target}"/></technique_common></bind_material></instance_geometry>"##
+            )
+        };
+        format!(
+            r##"<?xml version="1.0" encoding="utf-8"?>
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+<asset><unit name="millimeter" meter="0.001"/><up_axis>{up}</up_axis></asset>
+<library_effects>{}{}</library_effects>
+<library_materials><material id="red" name="red"><instance_effect url="#red-fx"/></material><material id="blue" name="blue"><instance_effect url="#blue-fx"/></material></library_materials>
+<library_geometries>{}{}</library_geometries>
+<library_visual_scenes><visual_scene id="scene">
+  <node id="a">{}</node>
+  <node id="b"><translate>0 0 50</translate>{}</node>
+  <node id="c"><rotate>0 0 1 90</rotate><node id="c1"><translate>200 0 0</translate>{}</node></node>
+</visual_scene></library_visual_scenes>
+<scene><instance_visual_scene url="#scene"/></scene>
+</COLLADA>"##,
+            effect("red", "1 0 0 1"),
+            effect("blue", "0 0 1 1"),
+            geometry("tri_a", "ma"),
+            geometry("tri_b", "mb"),
+            instance("tri_a", "ma", "red"),
+            instance("tri_b", "mb", "blue"),
+            instance("tri_a", "ma", "red"),
+        )
+    }
+
+    fn close(a: [f32; 3], b: [f32; 3]) -> bool {
+        a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-6)
+    }
+
+    #[test]
+    fn collada_units_up_axis_nodes_and_materials() {
+        // Upper-case extension, as the Sawyer's meshes are.
+        let path = tmp("Y_UP.DAE");
+        std::fs::write(&path, collada("Y_UP")).unwrap();
+        let m = load_mesh(&path, &Vector3::repeat(1.0)).unwrap();
+        // tri_a twice (nodes a and c1), tri_b once.
+        assert_eq!(m.triangle_count(), 3);
+        let find = |p: [f32; 3]| m.positions.iter().position(|q| close(*q, p));
+        // Millimetres to metres; Y up turned to Z up: (x, y, z) -> (x, -z, y).
+        let a1 = find([0.1, 0.0, 0.0]).expect("x vertex of a");
+        let a2 = find([0.0, 0.0, 0.1]).expect("y vertex of a, now up");
+        // Node b's <translate> 50 mm along its z, which is -y in Z-up.
+        let b2 =
+            find([0.0, -0.05, 0.1]).unwrap_or_else(|| panic!("y vertex of b in {:?}", m.positions));
+        let colors = m.colors.as_ref().expect("material colours");
+        assert_eq!(colors[a1], [1.0, 0.0, 0.0, 1.0]);
+        assert_eq!(colors[a2], [1.0, 0.0, 0.0, 1.0]);
+        assert_eq!(colors[b2], [0.0, 0.0, 1.0, 1.0]);
+
+        let path = tmp("z_up.dae");
+        std::fs::write(&path, collada("Z_UP")).unwrap();
+        let m = load_mesh(&path, &Vector3::repeat(2.0)).unwrap();
+        assert!(m.positions.iter().any(|p| close(*p, [0.0, 0.2, 0.0])));
+        assert!(m.positions.iter().any(|p| close(*p, [0.0, 0.2, 0.1])));
+        // Nested nodes compose parent-first: c1's 200 mm along x, then c's 90° about z.
+        assert!(
+            m.positions.iter().any(|p| close(*p, [0.0, 0.4, 0.0])),
+            "{:?}",
+            m.positions
+        );
+
+        let path = tmp("x_up.dae");
+        std::fs::write(&path, collada("X_UP")).unwrap();
+        let m = load_mesh(&path, &Vector3::repeat(1.0)).unwrap();
+        // X up: (x, y, z) -> (-z, y, x): the x vertex of a points up.
+        assert!(m.positions.iter().any(|p| close(*p, [0.0, 0.0, 0.1])));
+
+        let path = tmp("sideways.dae");
+        std::fs::write(&path, collada("W_UP")).unwrap();
+        let e = load_mesh(&path, &Vector3::repeat(1.0))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("sideways.dae") && e.contains("W_UP"), "{e}");
+    }
+
+    /// ../shared/cases/01: a binary STL whose header starts with `solid`.
+    #[test]
+    fn a_binary_stl_with_a_solid_header_is_binary() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/fixtures/cases/01-binary-stl-solid-header/meshes/gripper_base.STL");
+        let m = load_mesh(&path, &Vector3::repeat(1.0)).unwrap();
+        assert_eq!(m.triangle_count(), 10);
+        let (lo, hi) = m.bounds().unwrap();
+        assert!(close(lo, [-0.032361, -0.038042, -0.05]), "{lo:?}");
+        assert!(close(hi, [0.04, 0.038042, 0.05]), "{hi:?}");
+    }
+
+    #[test]
+    fn a_negative_scale_mirrors_with_outward_faces_and_zero_is_refused() {
+        let stl = tmp("mirror.stl");
+        std::fs::write(
+            &stl,
+            "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid t\n",
+        )
+        .unwrap();
+        for scale in [
+            Vector3::new(-1.0, 1.0, 1.0),
+            Vector3::new(1.0, -2.0, -1.0),
+            Vector3::new(-1.0, -1.0, -1.0),
+        ] {
+            let m = load_mesh(&stl, &scale).unwrap();
+            let p = |i: usize| Vector3::from(m.positions[m.indices[i] as usize]);
+            let face = (p(1) - p(0)).cross(&(p(2) - p(0)));
+            // The facet's normal, transformed by the inverse scale.
+            let n = Vector3::new(0.0, 0.0, 1.0 / scale.z as f32);
+            assert!(
+                face.dot(&n) > 0.0,
+                "scale {scale:?}: face {face:?} against {n:?}"
+            );
+            if let Some(normals) = &m.normals {
+                assert!(Vector3::from(normals[0]).dot(&n) > 0.0);
+            }
+        }
+        for scale in [
+            Vector3::new(0.0, 1.0, 1.0),
+            Vector3::new(1.0, f64::NAN, 1.0),
+        ] {
+            let e = load_mesh(&stl, &scale).unwrap_err().to_string();
+            assert!(e.contains("mirror.stl") && e.contains("scale"), "{e}");
+        }
+    }
+
+    #[test]
+    fn simplification_keeps_the_shape_with_fewer_triangles() {
+        // A 16 x 16 grid of unwelded quads (each triangle its own vertices, as Collada gives).
+        let mut m = TriMesh::default();
+        for i in 0..16 {
+            for j in 0..16 {
+                let (x, y) = (i as f32 / 16.0, j as f32 / 16.0);
+                let d = 1.0 / 16.0;
+                for tri in [
+                    [[x, y], [x + d, y], [x + d, y + d]],
+                    [[x, y], [x + d, y + d], [x, y + d]],
+                ] {
+                    for [px, py] in tri {
+                        m.indices.push(m.positions.len() as u32);
+                        m.positions.push([px, py, 0.0]);
+                    }
+                }
+            }
+        }
+        assert_eq!(m.triangle_count(), 512);
+        let s = m.simplified(0.1);
+        assert!(
+            s.triangle_count() <= 52 && s.triangle_count() >= 2,
+            "{}",
+            s.triangle_count()
+        );
+        // A flat square stays the unit square.
+        assert_eq!(s.bounds(), m.bounds());
+        let area: f32 = s
+            .indices
+            .chunks_exact(3)
+            .map(|t| {
+                let p = |k: usize| Vector3::from(s.positions[t[k] as usize]);
+                (p(1) - p(0)).cross(&(p(2) - p(0))).norm() / 2.0
+            })
+            .sum();
+        assert!((area - 1.0).abs() < 1e-4, "area {area}");
+        assert_eq!(m.simplified(1.0), m);
+    }
+
     #[test]
     fn unsupported_and_broken_files_name_the_file() {
-        let dae = tmp("arm.dae");
+        let ply = tmp("arm.ply");
+        std::fs::write(&ply, "ply\n").unwrap();
+        let e = load_mesh(&ply, &Vector3::repeat(1.0))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("arm.ply") && e.contains("collision") && e.contains("glb"),
+            "{e}"
+        );
+        let dae = tmp("empty.dae");
         std::fs::write(&dae, "<COLLADA/>").unwrap();
         let e = load_mesh(&dae, &Vector3::repeat(1.0))
             .unwrap_err()
             .to_string();
-        assert!(
-            e.contains("arm.dae") && e.contains("collision") && e.contains("glb"),
-            "{e}"
-        );
+        assert!(e.contains("empty.dae"), "{e}");
         let broken = tmp("broken.obj");
         std::fs::write(&broken, "f 1 2 3\n").unwrap();
         let e = load_mesh(&broken, &Vector3::repeat(1.0))

@@ -1,8 +1,12 @@
 //! Robot descriptions: URDF -> a tree of links and joints, in depth-first order.
 //!
 //! Links and joints are stored depth-first from the root link, children in the order the file
-//! lists their joints. Movable joints (revolute, continuous, prismatic) are numbered in that same
-//! order: that numbering is the order of every joint vector `q` in Avatarm.
+//! lists their joints. Independent movable joints (revolute, continuous, prismatic without
+//! `<mimic>`) are numbered in that same order: that numbering is the order of every joint vector
+//! `q` in Avatarm. A `<mimic>` joint is not in `q`: its position is `multiplier · leader +
+//! offset` (URDF spec, `<mimic>`), followed down a chain of mimics to an independent joint.
+//! `floating` and `planar` joints are read as fixed at their origin (a twin stands on a table;
+//! nothing tracks a base's motion), with a note in [`RobotModel::notes`].
 //!
 //! Mesh URIs may be relative to the URDF file, `file://` absolute paths, or `package://NAME/...`,
 //! resolved through a [`PackagePath`] the way ROS resolves them through `ROS_PACKAGE_PATH`.
@@ -94,11 +98,50 @@ pub struct Joint {
     pub axis: Unit<Vector3<f64>>,
     /// Limits.
     pub limits: JointLimits,
-    /// Index into joint vectors, for movable joints.
+    /// Index into joint vectors, for independent movable joints (not for mimic joints).
     pub dof: Option<usize>,
+    /// The joint this one follows, for a `<mimic>` joint.
+    pub mimic: Option<Mimic>,
+}
+
+/// A `<mimic>` joint's drive: `position = multiplier · position(leader) + offset` (URDF spec).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mimic {
+    /// The joint named in `<mimic joint=...>`.
+    pub leader: JointId,
+    /// `multiplier` (default 1).
+    pub multiplier: f64,
+    /// `offset` (rad or m, default 0).
+    pub offset: f64,
+    /// The independent joint at the end of the mimic chain, as its index in joint vectors.
+    pub dof: usize,
+    /// The chain composed: `position = gain · q[dof] + bias`.
+    pub gain: f64,
+    /// See `gain` (rad or m).
+    pub bias: f64,
 }
 
 impl Joint {
+    /// The joint's position in the joint vector `q` (0 for fixed joints and for entries that
+    /// `q` is too short to hold); a mimic joint's comes from its leader.
+    pub fn position(&self, q: &[f64]) -> f64 {
+        if let Some(d) = self.dof {
+            return q.get(d).copied().unwrap_or(0.0);
+        }
+        match &self.mimic {
+            Some(m) => m.gain * q.get(m.dof).copied().unwrap_or(0.0) + m.bias,
+            None => 0.0,
+        }
+    }
+
+    /// The joint-vector entry that drives this joint and `∂position/∂q[entry]`: `(dof, 1)` for an
+    /// independent joint, `(leader's dof, gain)` for a mimic joint, `None` for a fixed joint.
+    pub fn drive(&self) -> Option<(usize, f64)> {
+        self.dof
+            .map(|d| (d, 1.0))
+            .or_else(|| self.mimic.map(|m| (m.dof, m.gain)))
+    }
+
     /// The child link frame relative to the parent link frame at joint position `q`.
     pub fn transform(&self, q: f64) -> Isometry3<f64> {
         match self.kind {
@@ -179,8 +222,9 @@ pub struct Link {
 
 /// Folders searched for `package://NAME/...` mesh URIs, in order.
 ///
-/// For each folder `D`, `package://NAME/rest` resolves to `D/NAME/rest`, or to `D/rest` when `D`
-/// itself is named `NAME`.
+/// For each folder `D`, `package://NAME/rest` resolves to `D/rest` when `D` itself is named
+/// `NAME`, to `D/NAME/rest`, or to `P/rest` for the first folder `P` below `D` whose
+/// `package.xml` names `NAME` (see [`PackagePath::find_package`]).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct PackagePath(pub Vec<PathBuf>);
 
@@ -191,18 +235,64 @@ impl PackagePath {
             .extend(list.split(':').filter(|s| !s.is_empty()).map(PathBuf::from));
     }
 
-    fn find_package(&self, package: &str) -> Option<PathBuf> {
+    /// The folder of package `package`: for each entry `D` in order, `D` itself when it is that
+    /// package, then `D/package`, then the folders below `D` searched for a `package.xml` whose
+    /// `<name>` is `package`, as ROS does (rospack, REP 128): a search does not descend below a
+    /// folder that is a package, nor into one holding `CATKIN_IGNORE`, `COLCON_IGNORE` or
+    /// `AMENT_IGNORE`, nor into hidden folders.
+    pub fn find_package(&self, package: &str) -> Option<PathBuf> {
         self.0.iter().find_map(|dir| {
             let nested = dir.join(package);
-            if nested.is_dir() {
-                Some(nested)
-            } else if dir.file_name().is_some_and(|n| n == package) && dir.is_dir() {
+            if dir.file_name().is_some_and(|n| n == package) && dir.is_dir() {
                 Some(dir.clone())
+            } else if nested.is_dir() {
+                Some(nested)
             } else {
-                None
+                find_package_below(dir, package, 0)
             }
         })
     }
+}
+
+/// The `<name>` of the package whose `package.xml` is in `dir`, if there is one.
+fn package_name(dir: &Path) -> Option<String> {
+    let text = std::fs::read_to_string(dir.join("package.xml")).ok()?;
+    let doc = roxmltree::Document::parse(&text).ok()?;
+    doc.root_element()
+        .children()
+        .find(|n| n.has_tag_name("name"))
+        .and_then(|n| n.text())
+        .map(|t| t.trim().to_owned())
+}
+
+/// Depth-first search below `dir` for the folder of package `package` (see
+/// [`PackagePath::find_package`]); folders are visited in name order, 16 levels at most.
+fn find_package_below(dir: &Path, package: &str, depth: usize) -> Option<PathBuf> {
+    const MAX_DEPTH: usize = 16;
+    if depth > MAX_DEPTH {
+        return None;
+    }
+    if dir.join("package.xml").is_file() {
+        // A package: it is the one or the search stops here.
+        return (package_name(dir).as_deref() == Some(package)).then(|| dir.to_owned());
+    }
+    if ["CATKIN_IGNORE", "COLCON_IGNORE", "AMENT_IGNORE"]
+        .iter()
+        .any(|f| dir.join(f).exists())
+    {
+        return None;
+    }
+    let mut children: Vec<PathBuf> = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| e.ok())
+        .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
+        .map(|e| e.path())
+        .filter(|p| p.is_dir())
+        .collect();
+    children.sort();
+    children
+        .iter()
+        .find_map(|c| find_package_below(c, package, depth + 1))
 }
 
 /// A robot: links and joints in depth-first order from the root link (index 0).
@@ -218,12 +308,17 @@ pub struct RobotModel {
     pub dofs: Vec<JointId>,
     /// Where it was loaded from (a path or `<string>`), for messages.
     pub origin: String,
+    /// What was read other than as written (a `floating` or `planar` joint read as fixed), one
+    /// line each, for the user to see.
+    pub notes: Vec<String>,
 }
 
 struct Raw<'a> {
     origin: &'a str,
     base_dir: Option<&'a Path>,
     packages: &'a PackagePath,
+    /// Packages already looked for (a search may walk a whole workspace).
+    found: std::cell::RefCell<HashMap<String, Option<PathBuf>>>,
 }
 
 impl RobotModel {
@@ -240,6 +335,7 @@ impl RobotModel {
                 origin: &origin,
                 base_dir: path.parent(),
                 packages,
+                found: Default::default(),
             },
         )
     }
@@ -256,6 +352,7 @@ impl RobotModel {
                 origin: "<string>",
                 base_dir,
                 packages,
+                found: Default::default(),
             },
         )
     }
@@ -284,15 +381,33 @@ impl RobotModel {
             })
     }
 
-    /// Finds a movable joint's index in joint vectors by name.
+    /// Finds a movable joint's index in joint vectors by name; a mimic joint's name is an
+    /// [`Error::MimicJoint`] naming its leader.
     pub fn dof_index(&self, name: &str) -> Result<usize> {
-        self.dofs
+        if let Some(i) = self.dofs.iter().position(|&j| self.joints[j].name == name) {
+            return Ok(i);
+        }
+        if let Some(m) = self
+            .joints
             .iter()
-            .position(|&j| self.joints[j].name == name)
-            .ok_or_else(|| Error::UnknownJoint {
+            .find(|j| j.name == name)
+            .and_then(|j| j.mimic)
+        {
+            return Err(Error::MimicJoint {
                 name: name.to_owned(),
-                known: self.dof_names().join(", "),
-            })
+                leader: self.joints[m.leader].name.clone(),
+            });
+        }
+        Err(Error::UnknownJoint {
+            name: name.to_owned(),
+            known: self.dof_names().join(", "),
+        })
+    }
+
+    /// Positions of every joint (index = [`JointId`]) at joint vector `q`, mimic joints from
+    /// their leaders.
+    pub fn joint_positions(&self, q: &[f64]) -> Vec<f64> {
+        self.joints.iter().map(|j| j.position(q)).collect()
     }
 
     /// Names of the movable joints, in joint-vector order.
@@ -375,6 +490,70 @@ impl RobotModel {
     }
 }
 
+/// How to fill another description's joint vector from this one's, by joint name: for a twin
+/// built from a different description of the same robot (a lighter one for the mask, say).
+///
+/// Each movable joint of the target takes the position of the source's joint of the same name
+/// (an independent joint, or a mimic joint through its leader); a target joint the source does
+/// not have stays at 0 clamped into its limits.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointMap {
+    /// Per target movable joint: `(source dof, gain, bias)`, or `None` for a joint the source
+    /// does not have.
+    drives: Vec<Option<(usize, f64, f64)>>,
+    /// Per target movable joint, the value used when the source has none.
+    rest: Vec<f64>,
+    /// Target joints the source does not have, by name.
+    pub missing: Vec<String>,
+}
+
+impl JointMap {
+    /// The map from `source`'s joint vectors to `target`'s.
+    pub fn new(source: &RobotModel, target: &RobotModel) -> Self {
+        let mut drives = Vec::with_capacity(target.dof());
+        let mut rest = Vec::with_capacity(target.dof());
+        let mut missing = Vec::new();
+        for &j in &target.dofs {
+            let joint = &target.joints[j];
+            let found = source.joints.iter().find(|s| s.name == joint.name);
+            let drive = found.and_then(|s| match (s.dof, s.mimic) {
+                (Some(d), _) => Some((d, 1.0, 0.0)),
+                (None, Some(m)) => Some((m.dof, m.gain, m.bias)),
+                (None, None) => None,
+            });
+            if drive.is_none() {
+                missing.push(joint.name.clone());
+            }
+            drives.push(drive);
+            rest.push(joint.limits.clamp_position(0.0));
+        }
+        Self {
+            drives,
+            rest,
+            missing,
+        }
+    }
+
+    /// Whether the target's joint vector is the source's itself (same joints, same order).
+    pub fn is_identity(&self) -> bool {
+        self.drives
+            .iter()
+            .enumerate()
+            .all(|(i, d)| *d == Some((i, 1.0, 0.0)))
+    }
+
+    /// The target's joint vector at the source's `q` (entries `q` lacks read as 0).
+    pub fn apply(&self, q: &[f64]) -> DVector<f64> {
+        DVector::from_iterator(
+            self.drives.len(),
+            self.drives.iter().zip(&self.rest).map(|(d, rest)| match d {
+                Some((dof, gain, bias)) => gain * q.get(*dof).copied().unwrap_or(0.0) + bias,
+                None => *rest,
+            }),
+        )
+    }
+}
+
 fn parse_finite(text: &str, what: &str) -> Result<f64> {
     let v: f64 = text.parse().map_err(|_| Error::NotANumber {
         what: what.to_owned(),
@@ -409,7 +588,10 @@ fn validate_xml(text: &str, origin: &str) -> Result<()> {
         let kind = joint.attribute("type").unwrap_or("");
         let name = joint.attribute("name").unwrap_or("?");
         let line = doc.text_pos_at(joint.range().start).row;
-        if !matches!(kind, "revolute" | "continuous" | "prismatic" | "fixed") {
+        if !matches!(
+            kind,
+            "revolute" | "continuous" | "prismatic" | "fixed" | "floating" | "planar"
+        ) {
             return Err(Error::UnknownJointType {
                 origin: origin.to_owned(),
                 line,
@@ -602,6 +784,7 @@ fn build(urdf: urdf_rs::Robot, raw: &Raw<'_>) -> Result<RobotModel> {
 
     let mut joints = Vec::with_capacity(joint_order.len());
     let mut dofs = Vec::new();
+    let mut notes = Vec::new();
     for &old in &joint_order {
         let j = &urdf.joints[old];
         let kind = match &j.joint_type {
@@ -609,6 +792,19 @@ fn build(urdf: urdf_rs::Robot, raw: &Raw<'_>) -> Result<RobotModel> {
             urdf_rs::JointType::Continuous => JointKind::Continuous,
             urdf_rs::JointType::Prismatic => JointKind::Prismatic,
             urdf_rs::JointType::Fixed => JointKind::Fixed,
+            urdf_rs::JointType::Floating | urdf_rs::JointType::Planar => {
+                notes.push(format!(
+                    "joint '{}' is {}: read as fixed at its <origin> (the twin stands still; \
+                     nothing tracks that motion)",
+                    j.name,
+                    if matches!(j.joint_type, urdf_rs::JointType::Floating) {
+                        "floating"
+                    } else {
+                        "planar"
+                    }
+                ));
+                JointKind::Fixed
+            }
             other => {
                 return Err(Error::BadJoint {
                     origin,
@@ -658,7 +854,8 @@ fn build(urdf: urdf_rs::Robot, raw: &Raw<'_>) -> Result<RobotModel> {
             },
             JointKind::Fixed => JointLimits::UNLIMITED,
         };
-        let dof = kind.is_movable().then(|| {
+        let is_mimic = kind.is_movable() && j.mimic.is_some();
+        let dof = (kind.is_movable() && !is_mimic).then(|| {
             dofs.push(joints.len());
             dofs.len() - 1
         });
@@ -671,8 +868,10 @@ fn build(urdf: urdf_rs::Robot, raw: &Raw<'_>) -> Result<RobotModel> {
             axis,
             limits,
             dof,
+            mimic: None,
         });
     }
+    resolve_mimics(&urdf, &joint_order, &mut joints, &origin)?;
 
     let mut links = Vec::with_capacity(link_order.len());
     for &old in &link_order {
@@ -719,7 +918,102 @@ fn build(urdf: urdf_rs::Robot, raw: &Raw<'_>) -> Result<RobotModel> {
         joints,
         dofs,
         origin,
+        notes,
     })
+}
+
+/// Fills [`Joint::mimic`] of every movable `<mimic>` joint: its leader by name, and the chain of
+/// leaders followed to an independent joint with the gains and offsets composed
+/// (`a = m₁·b + o₁`, `b = m₂·c + o₂` ⇒ `a = m₁m₂·c + m₁o₂ + o₁`). A leader that does not
+/// exist or is fixed, a non-finite multiplier or offset, and a chain that loops are errors
+/// naming the joints.
+fn resolve_mimics(
+    urdf: &urdf_rs::Robot,
+    joint_order: &[usize],
+    joints: &mut [Joint],
+    origin: &str,
+) -> Result<()> {
+    let by_name: HashMap<&str, JointId> = joints
+        .iter()
+        .enumerate()
+        .map(|(i, j)| (j.name.as_str(), i))
+        .collect();
+    // Direct links first: (leader, multiplier, offset) per mimic joint.
+    let mut direct: Vec<Option<(JointId, f64, f64)>> = vec![None; joints.len()];
+    for (new, &old) in joint_order.iter().enumerate() {
+        let (Some(m), true) = (&urdf.joints[old].mimic, joints[new].kind.is_movable()) else {
+            continue;
+        };
+        let bad = |message: String| Error::BadJoint {
+            origin: origin.to_owned(),
+            joint: joints[new].name.clone(),
+            message,
+        };
+        let leader = *by_name.get(m.joint.as_str()).ok_or_else(|| {
+            bad(format!(
+                "<mimic joint=\"{}\">: the robot has no joint named '{}'",
+                m.joint, m.joint
+            ))
+        })?;
+        if !joints[leader].kind.is_movable() {
+            return Err(bad(format!(
+                "<mimic joint=\"{}\">: '{}' is a fixed joint, which cannot be followed",
+                m.joint, m.joint
+            )));
+        }
+        let multiplier = m.multiplier.unwrap_or(1.0);
+        let offset = m.offset.unwrap_or(0.0);
+        if !(multiplier.is_finite() && offset.is_finite()) {
+            return Err(bad(format!(
+                "<mimic>: multiplier {multiplier} and offset {offset} must be finite"
+            )));
+        }
+        direct[new] = Some((leader, multiplier, offset));
+    }
+    for i in 0..joints.len() {
+        let Some((leader, multiplier, offset)) = direct[i] else {
+            continue;
+        };
+        let (mut gain, mut bias, mut at) = (1.0, 0.0, i);
+        let mut chain = vec![joints[i].name.clone()];
+        while let Some((next, m, o)) = direct[at] {
+            // position(at) = m · position(next) + o.
+            bias += gain * o;
+            gain *= m;
+            at = next;
+            if chain.len() > joints.len() || at == i {
+                chain.push(joints[at].name.clone());
+                return Err(Error::BadJoint {
+                    origin: origin.to_owned(),
+                    joint: joints[i].name.clone(),
+                    message: format!(
+                        "<mimic> joints follow each other in a loop: {}",
+                        chain.join(" -> ")
+                    ),
+                });
+            }
+            chain.push(joints[at].name.clone());
+        }
+        let Some(dof) = joints[at].dof else {
+            return Err(Error::BadJoint {
+                origin: origin.to_owned(),
+                joint: joints[i].name.clone(),
+                message: format!(
+                    "<mimic> chain {} ends at a joint without a degree of freedom",
+                    chain.join(" -> ")
+                ),
+            });
+        };
+        joints[i].mimic = Some(Mimic {
+            leader,
+            multiplier,
+            offset,
+            dof,
+            gain,
+            bias,
+        });
+    }
+    Ok(())
 }
 
 fn rgba(v: &urdf_rs::Vec4) -> [f32; 4] {
@@ -740,13 +1034,28 @@ fn shape(g: &urdf_rs::Geometry, link: &str, raw: &Raw<'_>) -> Result<Shape> {
             length: *length,
         },
         urdf_rs::Geometry::Sphere { radius } => Shape::Sphere { radius: *radius },
-        urdf_rs::Geometry::Mesh { filename, scale } => Shape::Mesh {
-            uri: filename.clone(),
-            path: resolve_mesh_uri(filename, link, raw)?,
-            scale: scale
+        urdf_rs::Geometry::Mesh { filename, scale } => {
+            let scale = scale
                 .as_ref()
-                .map_or(Vector3::repeat(1.0), |s| Vector3::from(s.0)),
-        },
+                .map_or(Vector3::repeat(1.0), |s| Vector3::from(s.0));
+            // Negative components mirror the mesh (fine: the loader flips the winding); 0 or a
+            // non-finite value flattens or breaks it.
+            if scale.iter().any(|v| !v.is_finite() || *v == 0.0) {
+                return Err(Error::BadGeometry {
+                    origin: raw.origin.to_owned(),
+                    link: link.to_owned(),
+                    message: format!(
+                        "mesh '{filename}': <mesh scale=\"{} {} {}\"> must be finite and non-zero on every axis",
+                        scale.x, scale.y, scale.z
+                    ),
+                });
+            }
+            Shape::Mesh {
+                uri: filename.clone(),
+                path: resolve_mesh_uri(filename, link, raw)?,
+                scale,
+            }
+        }
     })
 }
 
@@ -754,8 +1063,11 @@ fn resolve_mesh_uri(uri: &str, link: &str, raw: &Raw<'_>) -> Result<PathBuf> {
     let path = if let Some(rest) = uri.strip_prefix("package://") {
         let (package, file) = rest.split_once('/').unwrap_or((rest, ""));
         let dir = raw
-            .packages
-            .find_package(package)
+            .found
+            .borrow_mut()
+            .entry(package.to_owned())
+            .or_insert_with(|| raw.packages.find_package(package))
+            .clone()
             .ok_or_else(|| Error::UnknownPackage {
                 origin: raw.origin.to_owned(),
                 link: link.to_owned(),
@@ -853,10 +1165,10 @@ mod tests {
 
     #[test]
     fn rejects_bad_descriptions_naming_the_element() {
-        let unknown = TREE.replace(r#"type="continuous""#, r#"type="floating""#);
+        let unknown = TREE.replace(r#"type="continuous""#, r#"type="spherical""#);
         let e = load(&unknown).unwrap_err().to_string();
         assert!(
-            e.contains("j_a2") && e.contains("floating") && e.contains(":14:"),
+            e.contains("j_a2") && e.contains("spherical") && e.contains(":14:"),
             "{e}"
         );
 
@@ -934,6 +1246,120 @@ mod tests {
             .replace(r#"effort="10""#, r#"effort="ten""#);
         let e = load(&bad_limit).unwrap_err().to_string();
         assert!(e.contains("<limit effort=\"ten\">"), "{e}");
+    }
+
+    #[test]
+    fn floating_and_planar_joints_read_as_fixed_with_a_note() {
+        for kind in ["floating", "planar"] {
+            let r =
+                load(&TREE.replace(r#"type="continuous""#, &format!(r#"type="{kind}""#))).unwrap();
+            assert_eq!(r.dof_names(), ["j_b", "j_a"]);
+            let j = r.joints.iter().find(|j| j.name == "j_a2").unwrap();
+            assert_eq!(j.kind, JointKind::Fixed);
+            assert!(
+                r.notes.len() == 1 && r.notes[0].contains("'j_a2'") && r.notes[0].contains(kind),
+                "{:?}",
+                r.notes
+            );
+        }
+    }
+
+    #[test]
+    fn mimic_joints_are_not_in_q_and_bad_mimics_are_named() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/fixtures/cases/09-mimic-joint/robot.urdf");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let r = load(&text).unwrap();
+        assert_eq!(r.dof(), 1);
+        let e = r.parse_q("j_leader=0.3,j_follower=1.0").unwrap_err();
+        assert!(matches!(e, Error::MimicJoint { .. }), "{e}");
+        assert!(
+            e.to_string().contains("'j_follower' is a mimic joint"),
+            "{e}"
+        );
+        let q = r.parse_q("j_leader=0.3").unwrap();
+        let positions = r.joint_positions(q.as_slice());
+        assert!((positions[1] - 0.7).abs() < 1e-12, "{positions:?}");
+
+        let missing = text.replace(r#"<mimic joint="j_leader""#, r#"<mimic joint="j_ghost""#);
+        let e = load(&missing).unwrap_err().to_string();
+        assert!(e.contains("'j_follower'") && e.contains("j_ghost"), "{e}");
+
+        // A chain: a third joint follows the follower (x3): 3·(2a + 0.1) - 0.2.
+        let chain = text.replace(
+            r#"<joint name="tip_joint" type="fixed">"#,
+            r#"<joint name="tip_joint" type="revolute"><axis xyz="0 0 1"/>
+               <limit lower="-9" upper="9" effort="1" velocity="1"/>
+               <mimic joint="j_follower" multiplier="3" offset="-0.2"/>"#,
+        );
+        let r = load(&chain).unwrap();
+        assert_eq!(r.dof(), 1);
+        let tip = r.joints.iter().find(|j| j.name == "tip_joint").unwrap();
+        assert!((tip.position(&[0.3]) - (3.0 * 0.7 - 0.2)).abs() < 1e-12);
+        assert_eq!(tip.drive(), Some((0, 6.0)));
+
+        let looped = text.replace(r#"<mimic joint="j_leader""#, r#"<mimic joint="j_follower""#);
+        let e = load(&looped).unwrap_err().to_string();
+        assert!(e.contains("loop") && e.contains("j_follower"), "{e}");
+        let two = chain.replace(
+            r#"<mimic joint="j_leader" multiplier="2.0" offset="0.1"/>"#,
+            r#"<mimic joint="tip_joint"/>"#,
+        );
+        let e = load(&two).unwrap_err().to_string();
+        assert!(
+            e.contains("loop") && e.contains("j_follower") && e.contains("tip_joint"),
+            "{e}"
+        );
+    }
+
+    /// ../shared/cases/11: a package two folders below the package-path entry.
+    #[test]
+    fn packages_are_found_below_the_path_by_package_xml() {
+        let case =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/cases/11-package-nested");
+        let urdf = case.join("ws/src/arm_stack/my_arm_description/urdf/arm.urdf");
+        let r = RobotModel::from_urdf_file(&urdf, &PackagePath(vec![case.join("ws/src")])).unwrap();
+        let link1 = r.link_id("link1").unwrap();
+        let Shape::Mesh { path, .. } = &r.links[link1].visuals[0].shape else {
+            panic!("not a mesh")
+        };
+        assert!(
+            path.ends_with("arm_stack/my_arm_description/meshes/link1.stl"),
+            "{path:?}"
+        );
+        // Not found: the error names the package and the folders searched.
+        let e = RobotModel::from_urdf_file(
+            &urdf,
+            &PackagePath(vec![
+                case.join("ws/src/arm_stack/my_arm_description/meshes"),
+            ]),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("'my_arm_description'") && e.contains("meshes") && e.contains("package.xml"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_zero_or_non_finite_mesh_scale_names_the_link() {
+        let dir = std::env::temp_dir().join(format!("avatarm_scale_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("a.stl"), b"solid a\nendsolid a\n").unwrap();
+        for scale in ["0 1 1", "1 nan 1", "1 1 inf"] {
+            let urdf = format!(
+                r#"<robot name="m"><link name="wrist"><visual><geometry><mesh filename="a.stl" scale="{scale}"/></geometry></visual></link></robot>"#
+            );
+            let e =
+                RobotModel::from_urdf_str(&urdf, Some(&dir), &PackagePath::default()).unwrap_err();
+            let text = e.to_string();
+            assert!(matches!(e, Error::BadGeometry { .. }), "{text}");
+            assert!(text.contains("'wrist'") && text.contains("scale"), "{text}");
+        }
+        let mirrored = r#"<robot name="m"><link name="wrist"><visual><geometry><mesh filename="a.stl" scale="-1 1 1"/></geometry></visual></link></robot>"#;
+        assert!(RobotModel::from_urdf_str(mirrored, Some(&dir), &PackagePath::default()).is_ok());
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]
