@@ -10,7 +10,8 @@
 //! - [`teleop`]: live teleoperation of a scene's `[task]` with any hand source.
 //! - [`replay`]: headless scene replay: capture, scores, the report and the task's trials.
 //! - [`score`]: the capture-and-score path shared by the replay and the live scores.
-//! - [`bench`]: `avatarm bench dr` and `avatarm bench control`.
+//! - [`bench`]: `avatarm bench dr`, `avatarm bench twin` and `avatarm bench control`.
+//! - [`import`]: `avatarm import`: a real Leap recording to a `.hand.jsonl`, with a picture.
 //! - [`progress`]: the one progress-bar style.
 //! - [`error`]: the crate's error type ([`AppError`]).
 //!
@@ -21,6 +22,7 @@ pub mod app;
 pub mod bench;
 pub mod cli;
 pub mod error;
+pub mod import;
 pub mod preview;
 pub mod progress;
 pub mod replay;

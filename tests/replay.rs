@@ -640,6 +640,72 @@ fn bench_twin_writes_the_chart_and_the_table() {
     assert!(svg.contains("Pareto front") && svg.contains("keep 10%"));
 }
 
+/// A real Leap recording (../shared/data/real/leap/grab.json.gz): `avatarm import` writes
+/// Avatarm's skeleton and a picture of a frame, and `avatarm run --hand` plays it live on the
+/// pouring task.
+#[test]
+fn a_real_leap_recording_imports_and_drives_the_live_task() {
+    let data = match avatarm_core::shared_data::shared_data() {
+        Ok(dir) => dir,
+        Err(why) => return eprintln!("skipped: {why}"),
+    };
+    let grab = data.join("real/leap/grab.json.gz");
+    let out = out_dir("leap_import");
+    std::fs::create_dir_all(&out).unwrap();
+    let (jsonl, png) = (out.join("grab.hand.jsonl"), out.join("grab.png"));
+    let run = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .arg("import")
+        .arg(&grab)
+        .arg("--out")
+        .arg(&jsonl)
+        .arg("--picture")
+        .arg(&png)
+        .args(["--frame", "60"])
+        .output()
+        .unwrap();
+    let stdout = succeeded(&run);
+    assert!(stdout.contains("374 frames of the right hand"), "{stdout}");
+    let frames =
+        avatarm_core::teleop::hand::parse_frames(&std::fs::read_to_string(&jsonl).unwrap())
+            .expect("the written skeleton reads back");
+    assert_eq!(frames.len(), 374);
+    assert!(frames.windows(2).all(|w| w[1].t_s > w[0].t_s));
+    assert_eq!(load_rgb(&png).dimensions(), (1200, 620));
+    assert!(
+        std::fs::read_to_string(png.with_extension("svg"))
+            .unwrap()
+            .contains("recorded by the Leap")
+    );
+    // A frame past the recording is refused by name.
+    let run = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .arg("import")
+        .arg(&grab)
+        .arg("--out")
+        .arg(&jsonl)
+        .arg("--picture")
+        .arg(&png)
+        .args(["--frame", "9999"])
+        .output()
+        .unwrap();
+    assert!(!run.status.success());
+    assert!(String::from_utf8_lossy(&run.stderr).contains("--frame"));
+
+    let log = run_preview(
+        &[
+            "assets/scenes/pouring.toml",
+            "--hand",
+            grab.to_str().unwrap(),
+            "--frames",
+            "60",
+        ],
+        &out,
+    );
+    assert!(
+        log.contains("live teleoperation: 'pouring' with the Leap recording"),
+        "{log}"
+    );
+}
+
 #[test]
 fn replay_of_a_bad_scene_exits_nonzero_with_a_message() {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR"));

@@ -196,8 +196,9 @@ pub fn peak_link_speed(
         .fold(0.0, f64::max)
 }
 
-/// Runs every variant on `scene` (its timeline retimed so that the TCP peaks at
-/// `sweep.tcp_speed` within the replayed window), writing into `out`.
+/// Runs every variant on `scene` (its timeline retimed so that the TCP's peak over the whole
+/// scene is `sweep.tcp_speed`; the peak within the replayed window is reported beside it),
+/// writing into `out`.
 pub fn run_twin(scene: &Scene, sweep: &TwinSweep, out: &Path) -> Result<TwinOutputs, AppError> {
     if !(sweep.duration_s.is_finite() && sweep.duration_s > 0.0) {
         return Err(AppError::flag(
@@ -282,6 +283,14 @@ pub fn run_twin(scene: &Scene, sweep: &TwinSweep, out: &Path) -> Result<TwinOutp
         let dir = out
             .join("runs")
             .join(v.label.replace([' ', '%'], "_").replace('.', "p"));
+        // A fresh folder: the dilation analysis reads every mask in it.
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir).map_err(|source| AppError::Io {
+                path: dir.clone(),
+                action: "clear",
+                source,
+            })?;
+        }
         let mut options = ReplayOptions::new(dir.clone());
         options.frames_every = sweep.frames_every.max(1);
         let in_setting = |source: AppError| AppError::BenchSetting {
@@ -401,6 +410,14 @@ pub fn leak_by_dilation_in(dir: &Path, max: u32) -> Result<Vec<f64>, AppError> {
                 .map(|p| u8::from(p.0[0] > 127))
                 .collect::<Vec<u8>>()
         };
+        if t.dimensions() != (w, h) {
+            return Err(AppError::replay(format!(
+                "{} is {}x{} but its mask is {w}x{h}",
+                dir.join(&name).display(),
+                t.width(),
+                t.height()
+            )));
+        }
         if let Some(leaks) = dr::leak_by_dilation(&bin(&m), &bin(&t), w, h, max) {
             for (s, l) in sums.iter_mut().zip(leaks) {
                 *s += l;

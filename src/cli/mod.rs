@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use avatarm_core::robot::{PackagePath, RobotModel};
+use avatarm_core::teleop::hand::Handedness;
 use avatarm_scene::hand::HandChoice;
 use avatarm_scene::spec::BackgroundSpec;
 use avatarm_scene::{Scene, SceneError};
@@ -47,6 +48,28 @@ enum Command {
         /// Print link poses at q as JSON instead of the tree.
         #[arg(long)]
         json: bool,
+    },
+    /// Convert a real Leap Motion recording (leapjs-playback JSON, Leap's protocol v6, .json or
+    /// .json.gz) to a .hand.jsonl of Avatarm's 26-joint skeleton, and picture one frame.
+    Import {
+        /// The Leap recording.
+        recording: PathBuf,
+        /// The .hand.jsonl to write.
+        #[arg(long, value_name = "FILE")]
+        out: PathBuf,
+        /// Which hand (default: the first the recording shows).
+        #[arg(long, value_parser = ["left", "right"])]
+        hand: Option<String>,
+        /// Where the Leap device lies in the scene, facing up (m).
+        #[arg(long = "device-at", value_name = "X,Y,Z", value_delimiter = ',', num_args = 3,
+              allow_hyphen_values = true, default_values_t = [0.0, 0.0, 0.0])]
+        device_at: Vec<f64>,
+        /// Draw one frame's skeleton over the recorded joints (PNG, and an SVG beside it).
+        #[arg(long, value_name = "PNG")]
+        picture: Option<PathBuf>,
+        /// The frame to draw (index among the hand's frames).
+        #[arg(long, value_name = "N", default_value_t = 0)]
+        frame: usize,
     },
     /// Open the desktop preview of a scene (default: assets/scenes/default.toml).
     #[command(after_help = crate::preview::keys::help())]
@@ -259,7 +282,7 @@ fn live_hand(scene: &Scene, flag: Option<&str>, xr: bool) -> Result<Option<HandC
              --features leap` (needs the Ultraleap SDK, docs/hardware.md)"
                 .into(),
         )),
-        HandChoice::File(path) if !path.is_file() => {
+        HandChoice::File(path) | HandChoice::LeapRecording(path) if !path.is_file() => {
             Err(refuse(format!("{} does not exist", path.display())))
         }
         _ => Ok(Some(choice)),
@@ -298,6 +321,44 @@ fn run(cli: Cli) -> Result<(), AppError> {
             } else {
                 print!("{}", robot::tree_text(&model, &meshes));
                 print!("{}", robot::mesh_text(&model, &meshes));
+            }
+            Ok(())
+        }
+        Command::Import {
+            recording,
+            out,
+            hand,
+            device_at,
+            picture,
+            frame,
+        } => {
+            let options = crate::import::ImportOptions {
+                recording,
+                out,
+                hand: hand.map(|h| {
+                    if h == "left" {
+                        Handedness::Left
+                    } else {
+                        Handedness::Right
+                    }
+                }),
+                device_at: [device_at[0], device_at[1], device_at[2]],
+                picture,
+                frame,
+            };
+            let summary = crate::import::import_leap(&options)?;
+            println!(
+                "wrote {}: {} frames of the {} hand over {:.2} s",
+                options.out.display(),
+                summary.frames,
+                match summary.hand {
+                    Handedness::Left => "left",
+                    Handedness::Right => "right",
+                },
+                summary.duration_s
+            );
+            if let Some((png, svg)) = summary.picture {
+                println!("picture: {}, {}", png.display(), svg.display());
             }
             Ok(())
         }

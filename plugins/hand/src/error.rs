@@ -22,6 +22,15 @@ pub enum HandError {
         /// What the parser found.
         source: Box<avatarm_core::Error>,
     },
+    /// A tracker recording (a Leap JSON recording) that cannot be used; the message names the
+    /// frame, the hand and the finger.
+    #[error("{path}: {message}")]
+    BadRecording {
+        /// The recording.
+        path: PathBuf,
+        /// What is wrong, and where.
+        message: String,
+    },
     /// A recording with no hand frame in it.
     #[error("{path}: no hand frames")]
     Empty {

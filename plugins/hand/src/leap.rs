@@ -72,6 +72,48 @@ impl Default for LeapMount {
     }
 }
 
+impl LeapMount {
+    /// The mount that puts the wrist of `hand` (a Leap hand in Leap's frame) at `wrist_pose`
+    /// in the scene, in Avatarm's hand-frame convention (+x from the wrist toward the fingers,
+    /// +z out of the back of the hand, as [`avatarm_core::teleop::hand::skeleton`]): how a
+    /// recording is placed where a task's hand starts. The hand's direction is its wrist to the
+    /// middle finger's knuckle, square to Leap's palm normal. Errors name the vector that has
+    /// no direction.
+    pub fn with_wrist_pose(
+        hand: &LeapHandData,
+        wrist_pose: &Isometry3<f64>,
+    ) -> Result<Self, HandError> {
+        let f = |p: [f32; 3]| Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+        let bad = |what: &str| HandError::BadTrackerFrame {
+            tracker: "Leap",
+            what: what.to_owned(),
+            message: "no direction".to_owned(),
+        };
+        let normal = f(hand.palm_normal)
+            .try_normalize(1e-9)
+            .ok_or_else(|| bad("palm normal"))?;
+        let along = f(hand.digits[2][1].prev) - f(hand.arm.next);
+        let along = (along - normal * along.dot(&normal))
+            .try_normalize(1e-9)
+            .ok_or_else(|| bad("palm direction"))?;
+        // Columns: toward the fingers, the third axis, out of the back of the hand.
+        let frame =
+            |x: Vector3<f64>, back: Vector3<f64>| Matrix3::from_columns(&[x, back.cross(&x), back]);
+        let leap = frame(along, -normal);
+        let scene = wrist_pose.rotation.to_rotation_matrix().into_inner();
+        let r = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
+            scene * leap.transpose(),
+        ));
+        let wrist = f(hand.arm.next) * 1e-3;
+        Ok(Self {
+            scene_from_leap: Isometry3::from_parts(
+                Translation3::from(wrist_pose.translation.vector - r * wrist),
+                r,
+            ),
+        })
+    }
+}
+
 /// Converts one Leap hand at app time `t_s` into a frame in the scene. Errors name the bone
 /// when a number is not finite or a bone has no length where one is needed.
 pub fn leap_frame(

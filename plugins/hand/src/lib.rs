@@ -15,10 +15,12 @@
 //!   the hand's velocity at that point, ready for [`avatarm_core::teleop::grasp`].
 //!
 //! Modules: [`leap`] (Leap Motion's bones to the skeleton; the device behind feature `leap`),
+//! [`leap_recording`] (real Leap recordings, protocol v6 JSON, read into the same bones),
 //! [`openxr`] (OpenXR hand joints to the skeleton), [`error`].
 
 pub mod error;
 pub mod leap;
+pub mod leap_recording;
 pub mod openxr;
 
 pub use error::HandError;
@@ -109,6 +111,24 @@ impl RecordedHand {
         }
         Ok(Self {
             name: path.display().to_string(),
+            frames,
+            next: 0,
+        })
+    }
+}
+
+impl RecordedHand {
+    /// Frames already converted (a Leap recording's, say), replayed on their timestamps;
+    /// `name` is the source's name in messages.
+    pub fn from_frames(name: String, frames: Vec<HandFrame>) -> Result<Self, HandError> {
+        if frames.is_empty() {
+            return Err(HandError::Empty { path: name.into() });
+        }
+        for f in &frames {
+            f.validate()?;
+        }
+        Ok(Self {
+            name,
             frames,
             next: 0,
         })
@@ -249,8 +269,10 @@ pub struct ObjectContacts {
 /// friction alone carries its weight). Like most physics hands in VR, the hand therefore takes
 /// the object when two of its bodies touch it from opposing sides (contact normals more than
 /// `opposition` apart), by a fixed joint between the palm and the object at their pose of that
-/// moment, and lets go when the tracked hand opens by `release_opening_m` from its closure at
-/// the grasp. The contacts, their forces and velocities are read as before, so the grasp
+/// moment, and lets go when the tracked hand opens by `release_opening_m` from its tightest
+/// closure since the grasp (a real hand, measured on the Leap `grab` recording, takes the
+/// object as its fingers first meet it and goes on closing: released against its closure at
+/// the grasp, it never let go). The contacts, their forces and velocities are read as before, so the grasp
 /// matrix and the mapping see the hand, not the joint.
 #[derive(Resource, Debug, Clone, Copy, PartialEq)]
 pub struct GraspAssist {
@@ -276,7 +298,9 @@ impl Default for GraspAssist {
 /// The object the hand holds, if any.
 #[derive(Resource, Debug, Clone, Copy, Default, PartialEq)]
 pub struct HeldObject {
-    /// The held body and the hand's closure when it was taken.
+    /// The held body and the hand's tightest closure since it was taken: a hand goes on
+    /// closing after its fingers first meet the object (a real hand does), and it lets go when
+    /// it opens from there.
     pub held: Option<(Entity, f64)>,
     /// Grasps so far.
     pub grasps: u32,
@@ -649,8 +673,11 @@ fn assist_grasp(
         .and_then(|h| h.latest.as_ref())
         .filter(|f| f.tracked);
     let now_closure = tracked.and_then(closure);
-    if let Some((target, at_grasp)) = held.held {
-        let opened = now_closure.is_some_and(|c| c > at_grasp + assist.release_opening_m);
+    if let Some((target, tightest)) = held.held {
+        if let Some(c) = now_closure.filter(|c| *c < tightest) {
+            held.held = Some((target, c));
+        }
+        let opened = now_closure.is_some_and(|c| c > tightest + assist.release_opening_m);
         if opened || !assist.enabled || targets.get(target).is_err() {
             if let Ok(mut e) = commands.get_entity(target) {
                 e.remove::<ImpulseJoint>();

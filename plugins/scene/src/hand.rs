@@ -19,13 +19,17 @@ pub enum HandChoice {
     Leap,
     /// A recorded `.hand.jsonl` file (docs/hand.md).
     File(PathBuf),
+    /// A Leap Motion recording (`.json` or `.json.gz`, Leap's protocol v6 as leapjs-playback
+    /// records it), its first hand placed so that its palm starts at the task's start pose.
+    LeapRecording(PathBuf),
 }
 
 impl FromStr for HandChoice {
     type Err = SceneError;
 
-    /// `scripted`, `desktop` (or `mouse`), `xr` (or `openxr`), `leap`, or a path ending in
-    /// `.jsonl`; anything else is a [`SceneError::Field`] on `hand`.
+    /// `scripted`, `desktop` (or `mouse`), `xr` (or `openxr`), `leap`, a path ending in
+    /// `.jsonl` (a recorded skeleton) or in `.json`/`.json.gz` (a Leap recording); anything else
+    /// is a [`SceneError::Field`] on `hand`.
     fn from_str(s: &str) -> Result<Self, SceneError> {
         Ok(match s {
             "scripted" => Self::Scripted,
@@ -33,11 +37,14 @@ impl FromStr for HandChoice {
             "xr" | "openxr" => Self::Xr,
             "leap" => Self::Leap,
             path if path.ends_with(".jsonl") => Self::File(PathBuf::from(path)),
+            path if path.ends_with(".json") || path.ends_with(".json.gz") => {
+                Self::LeapRecording(PathBuf::from(path))
+            }
             other => {
                 return Err(SceneError::field(
                     "hand",
                     format!(
-                        "'{other}': expected scripted, desktop, xr, leap or a .hand.jsonl file"
+                        "'{other}': expected scripted, desktop, xr, leap, a .hand.jsonl file or a Leap recording (.json, .json.gz)"
                     ),
                 ));
             }
@@ -59,10 +66,14 @@ mod tests {
             "rec/a.hand.jsonl".parse::<HandChoice>().ok(),
             Some(HandChoice::File("rec/a.hand.jsonl".into()))
         );
+        assert_eq!(
+            "rec/grab.json.gz".parse::<HandChoice>().ok(),
+            Some(HandChoice::LeapRecording("rec/grab.json.gz".into()))
+        );
         let err = "glove".parse::<HandChoice>().expect_err("unknown");
         assert_eq!(
             err.to_string(),
-            "hand: 'glove': expected scripted, desktop, xr, leap or a .hand.jsonl file"
+            "hand: 'glove': expected scripted, desktop, xr, leap, a .hand.jsonl file or a Leap recording (.json, .json.gz)"
         );
     }
 }

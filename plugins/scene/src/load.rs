@@ -259,10 +259,25 @@ impl Scene {
         }
         let twin_model = match &file.twin.urdf {
             None => Arc::clone(&model),
-            Some(urdf) => Arc::new(
-                RobotModel::from_urdf_file(&resolve("twin.urdf", urdf)?, &packages)
-                    .map_err(|e| SceneError::value("twin.urdf", e).in_file(path))?,
-            ),
+            Some(urdf) => {
+                let twin = RobotModel::from_urdf_file(&resolve("twin.urdf", urdf)?, &packages)
+                    .map_err(|e| SceneError::value("twin.urdf", e).in_file(path))?;
+                // The twin is posed from the robot's joint states by name: a joint of the
+                // twin that the robot does not have would stay still while the robot moves.
+                let missing = avatarm_core::robot::JointMap::new(&model, &twin).missing;
+                if !missing.is_empty() {
+                    return Err(invalid(
+                        "twin.urdf",
+                        format!(
+                            "'{}' has movable joints that the robot '{}' does not: {} (the twin must be the same robot)",
+                            twin.name,
+                            model.name,
+                            missing.join(", ")
+                        ),
+                    ));
+                }
+                Arc::new(twin)
+            }
         };
 
         let values = |field: &str, v: &JointValues, previous: &DVector<f64>| {

@@ -250,8 +250,8 @@ pub struct TwinSpec {
 impl TwinSpec {
     /// The default fraction of triangles the mask twin keeps: all of them, chosen from `avatarm
     /// bench twin` on the real Sawyer (docs/erase.md, "How much twin the mask needs"). The full
-    /// meshes leak 0.004 % against 0.016 % at half the triangles (PSNR 46.2 against 43.6 dB
-    /// over the reach), for 2.5 % more frame time even on llvmpipe, where triangles cost most.
+    /// meshes leak 0.004 % against 0.016 % at half the triangles (PSNR 46.9 against 44.5 dB),
+    /// for 4 % more frame time even on llvmpipe, where triangles cost most.
     pub const DEFAULT_KEEP: f64 = 1.0;
 }
 

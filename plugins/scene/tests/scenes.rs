@@ -238,6 +238,16 @@ fn the_twin_and_package_descriptions_are_checked() {
     ))
     .unwrap();
     assert!(!std::sync::Arc::ptr_eq(&twin.model, &twin.twin_model));
+    // A twin that is another robot: its joints cannot follow this robot's states.
+    let e = parse(&format!(
+        "{text}\n[twin]\nurdf = \"../../plugins/core/tests/fixtures/cases/09-mimic-joint/robot.urdf\"\n"
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("twin.urdf") && e.contains("j_leader") && e.contains("same robot"),
+        "{e}"
+    );
     let plain = parse(&text).unwrap();
     assert!(std::sync::Arc::ptr_eq(&plain.model, &plain.twin_model));
 

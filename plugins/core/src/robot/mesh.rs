@@ -1,9 +1,10 @@
 //! Triangle meshes from STL, OBJ, Collada and glTF/GLB files, for the robot twin's link geometry.
 //!
 //! STL, OBJ and Collada are read by `mesh-loader` (openrr), glTF by `gltf`. What a file carries
-//! is honoured: Collada's `<unit meter>` and node transforms (by `mesh-loader`) and its
-//! `<up_axis>` (here: `Y_UP` and `X_UP` are turned to ROS's Z-up, as assimp and RViz do), every
-//! geometry of a file, and each material's diffuse colour as per-vertex colours. Extensions
+//! is honoured: Collada's `<unit meter>`, `<up_axis>` (`Y_UP` and `X_UP` turned to ROS's Z-up,
+//! as assimp does) and node transforms, placed here rather than by `mesh-loader` (see
+//! `ColladaScene`); every instance of every geometry the visual scene instances (a file with
+//! no visual scene: every geometry once); each material's diffuse colour as per-vertex colours. Extensions
 //! match in any letter case (`.DAE`, `.STL`). A binary STL is recognised by its size (84 + 50 ×
 //! its triangle count bytes) whatever its header says: CAD exporters often begin the 80-byte
 //! header with `solid`, the ASCII keyword.
@@ -197,9 +198,14 @@ pub fn load_mesh(path: &Path, scale: &Vector3<f64>) -> Result<TriMesh> {
         return Err(bad("the file has no triangles".into()));
     }
     if mesh.normals.as_ref().is_some_and(|n| {
-        n.len() != mesh.positions.len() || n.iter().flatten().any(|v| !v.is_finite())
+        n.len() != mesh.positions.len()
+            || n.iter().any(|v| {
+                let length = Vector3::from(*v).norm();
+                !length.is_finite() || length < 1e-6
+            })
     }) {
-        // Broken normals are recomputed from the faces rather than refused.
+        // Missing, broken or zero normals (many STL exporters write 0 0 0) are recomputed
+        // from the faces rather than refused.
         mesh.normals = None;
     }
     let s = scale.map(|v| v as f32);
@@ -390,7 +396,13 @@ impl ColladaScene {
                 .collect();
             while let Some((node, parent)) = stack.pop() {
                 let mut world = parent;
-                for t in node.children().filter(|n| n.is_element()) {
+                for t in node.children().filter(|n| {
+                    n.is_element()
+                        && matches!(
+                            n.tag_name().name(),
+                            "matrix" | "translate" | "rotate" | "scale" | "lookat" | "skew"
+                        )
+                }) {
                     let numbers = || -> std::result::Result<Vec<f32>, String> {
                         t.text()
                             .unwrap_or("")
@@ -729,8 +741,11 @@ mod tests {
         let path = tmp("x_up.dae");
         std::fs::write(&path, collada("X_UP")).unwrap();
         let m = load_mesh(&path, &Vector3::repeat(1.0)).unwrap();
-        // X up: (x, y, z) -> (-z, y, x): the x vertex of a points up.
+        // X up: (x, y, z) -> (-z, y, x): the x vertex of a points up, and b's origin (50 mm
+        // along its z) goes to -x (Y up would put it at -y).
         assert!(m.positions.iter().any(|p| close(*p, [0.0, 0.0, 0.1])));
+        assert!(m.positions.iter().any(|p| close(*p, [-0.05, 0.0, 0.0])));
+        assert!(!m.positions.iter().any(|p| close(*p, [0.0, -0.05, 0.0])));
 
         let path = tmp("sideways.dae");
         std::fs::write(&path, collada("W_UP")).unwrap();
@@ -778,6 +793,17 @@ mod tests {
                 assert!(Vector3::from(normals[0]).dot(&n) > 0.0);
             }
         }
+        // A facet normal of 0 0 0 (as many exporters write) is recomputed, not used as +z.
+        let zero = tmp("zero_normal.stl");
+        std::fs::write(
+            &zero,
+            "solid t\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid t\n",
+        )
+        .unwrap();
+        assert_eq!(
+            load_mesh(&zero, &Vector3::repeat(1.0)).unwrap().normals,
+            None
+        );
         for scale in [
             Vector3::new(0.0, 1.0, 1.0),
             Vector3::new(1.0, f64::NAN, 1.0),

@@ -248,7 +248,7 @@ impl PackagePath {
             } else if nested.is_dir() {
                 Some(nested)
             } else {
-                find_package_below(dir, package, 0)
+                find_package_below(dir, package, 0, &mut Default::default())
             }
         })
     }
@@ -267,9 +267,15 @@ fn package_name(dir: &Path) -> Option<String> {
 
 /// Depth-first search below `dir` for the folder of package `package` (see
 /// [`PackagePath::find_package`]); folders are visited in name order, 16 levels at most.
-fn find_package_below(dir: &Path, package: &str, depth: usize) -> Option<PathBuf> {
+fn find_package_below(
+    dir: &Path,
+    package: &str,
+    depth: usize,
+    seen: &mut std::collections::HashSet<PathBuf>,
+) -> Option<PathBuf> {
     const MAX_DEPTH: usize = 16;
-    if depth > MAX_DEPTH {
+    // Each folder once: a symbolic link back up the tree is not walked again.
+    if depth > MAX_DEPTH || !seen.insert(dir.canonicalize().ok()?) {
         return None;
     }
     if dir.join("package.xml").is_file() {
@@ -292,7 +298,7 @@ fn find_package_below(dir: &Path, package: &str, depth: usize) -> Option<PathBuf
     children.sort();
     children
         .iter()
-        .find_map(|c| find_package_below(c, package, depth + 1))
+        .find_map(|c| find_package_below(c, package, depth + 1, seen))
 }
 
 /// A robot: links and joints in depth-first order from the root link (index 0).
