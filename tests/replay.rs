@@ -690,11 +690,13 @@ fn a_real_leap_recording_imports_and_drives_the_live_task() {
     assert!(!run.status.success());
     assert!(String::from_utf8_lossy(&run.stderr).contains("--frame"));
 
+    // The hand chosen by name (`#right`), as a two-handed recording needs.
+    let right = format!("{}#right", grab.display());
     let log = run_preview(
         &[
             "assets/scenes/pouring.toml",
             "--hand",
-            grab.to_str().unwrap(),
+            &right,
             "--frames",
             "60",
         ],

@@ -344,10 +344,7 @@ fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupBuilder, xr:
 /// The mask twin's detail as the scene's `[twin]` gives it.
 pub fn twin_detail(spec: &avatarm_scene::TwinSpec) -> TwinDetail {
     TwinDetail {
-        geometry: match spec.geometry {
-            avatarm_scene::TwinGeometry::Visual => GeometrySource::Visual,
-            avatarm_scene::TwinGeometry::Collision => GeometrySource::Collision,
-        },
+        geometry: spec.geometry,
         keep_triangles: spec.keep_triangles as f32,
     }
 }

@@ -187,6 +187,20 @@ where
         .map_err(drawing_error)
 }
 
+/// Writes a bench's CSV table: `header`, then one line per row.
+pub fn write_table(
+    path: &Path,
+    header: &str,
+    rows: impl IntoIterator<Item = String>,
+) -> Result<(), AppError> {
+    let mut text = format!("{header}\n");
+    for row in rows {
+        text.push_str(&row);
+        text.push('\n');
+    }
+    std::fs::write(path, text).map_err(|e| AppError::write(path, e))
+}
+
 /// Draws the Pareto front through `points` as a red line (in order of cost), with its legend
 /// entry.
 pub fn front_line<'a, DB: DrawingBackend + 'a>(

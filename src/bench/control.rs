@@ -16,6 +16,7 @@ use avatarm_scene::Scene;
 
 use super::chart::{
     Chart, axes, drawing_error, legend, padded, pareto_front, register_font, save_chart,
+    write_table,
 };
 use crate::AppError;
 
@@ -245,31 +246,32 @@ pos_rmse_mm_std,roll_rmse_deg,pitch_rmse_deg,yaw_rmse_deg,max_tcp_speed,wall_ms_
 cost_ratio,tick_us,pareto";
 
 fn write_csv(path: &Path, points: &[ControlPoint]) -> Result<(), AppError> {
-    let mut text = String::from(CSV_HEADER);
-    text.push('\n');
-    for p in points {
-        text.push_str(&format!(
-            "{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.2},{:.4},{:.2},{}\n",
-            p.label,
-            p.mode.name(),
-            p.rate_hz,
-            p.latency_ms,
-            p.cap_m_s,
-            p.trials,
-            p.grasped,
-            p.pos_rmse_mm,
-            p.pos_rmse_mm_std,
-            p.roll_rmse_deg,
-            p.pitch_rmse_deg,
-            p.yaw_rmse_deg,
-            p.max_tcp_speed,
-            p.wall_ms_per_sim_s,
-            p.cost_ratio,
-            p.tick_us,
-            p.pareto
-        ));
-    }
-    std::fs::write(path, text).map_err(|e| AppError::write(path, e))
+    write_table(
+        path,
+        CSV_HEADER,
+        points.iter().map(|p| {
+            format!(
+                "{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.2},{:.4},{:.2},{}",
+                p.label,
+                p.mode.name(),
+                p.rate_hz,
+                p.latency_ms,
+                p.cap_m_s,
+                p.trials,
+                p.grasped,
+                p.pos_rmse_mm,
+                p.pos_rmse_mm_std,
+                p.roll_rmse_deg,
+                p.pitch_rmse_deg,
+                p.yaw_rmse_deg,
+                p.max_tcp_speed,
+                p.wall_ms_per_sim_s,
+                p.cost_ratio,
+                p.tick_us,
+                p.pareto
+            )
+        }),
+    )
 }
 
 const CHART_SIZE: (u32, u32) = (1400, 620);

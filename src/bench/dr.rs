@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use super::chart::{
     Chart, axes, drawing_error, front_line, legend, padded, pareto_front, point_labels,
-    register_font, save_chart,
+    register_font, save_chart, write_table,
 };
 use crate::AppError;
 use crate::replay::{self, ReplayOptions};
@@ -281,11 +281,12 @@ leak_pct_mean,leak_pct_max,overmask_pct_mean,psnr_db_mean,pareto_leak,pareto_psn
 pareto_leak_gpu,pareto_psnr_gpu";
 
 fn write_csv(path: &Path, points: &[DrPoint]) -> Result<(), AppError> {
-    let mut text = String::from(CSV_HEADER);
-    text.push('\n');
-    for p in points {
-        text.push_str(&format!(
-            "{},{},{},{},{},{:.3},{:.3},{:.4},{},{},{:.4},{:.4},{:.5},{:.5},{:.5},{:.5},{:.3},{},{},{},{}\n",
+    write_table(
+        path,
+        CSV_HEADER,
+        points.iter().map(|p| {
+            format!(
+            "{},{},{},{},{},{:.3},{:.3},{:.4},{},{},{:.4},{:.4},{:.5},{:.5},{:.5},{:.5},{:.3},{},{},{},{}",
             p.label,
             p.resolution_scale,
             p.dilate_px,
@@ -307,9 +308,9 @@ fn write_csv(path: &Path, points: &[DrPoint]) -> Result<(), AppError> {
             p.pareto_psnr,
             p.pareto_leak_gpu,
             p.pareto_psnr_gpu
-        ));
-    }
-    std::fs::write(path, text).map_err(|e| AppError::write(path, e))
+        )
+        }),
+    )
 }
 
 const CHART_SIZE: (u32, u32) = (1400, 620);

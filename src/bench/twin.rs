@@ -12,15 +12,15 @@ use std::sync::Arc;
 use avatarm_core::dr;
 use avatarm_core::robot::kinematics::pose_difference;
 use avatarm_core::robot::trajectory::{JointTrajectory, Keyframe};
-use avatarm_core::robot::{LinkId, PackagePath, RobotModel};
-use avatarm_scene::{Scene, TwinGeometry, TwinSpec};
+use avatarm_core::robot::{GeometryKind, LinkId, PackagePath, RobotModel};
+use avatarm_scene::{Scene, TwinSpec};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use serde::Serialize;
 
 use super::chart::{
     Chart, axes, drawing_error, front_line, legend, padded, pareto_front, point_labels,
-    register_font, save_chart,
+    register_font, save_chart, write_table,
 };
 use crate::AppError;
 use crate::replay::{self, ReplayOptions};
@@ -45,7 +45,7 @@ impl TwinVariant {
                 ..TwinSpec::default()
             },
             None if text == "collision" => TwinSpec {
-                geometry: TwinGeometry::Collision,
+                geometry: GeometryKind::Collision,
                 keep_triangles: 1.0,
                 ..TwinSpec::default()
             },
@@ -76,11 +76,11 @@ impl TwinVariant {
             (Some(p), _) => p
                 .file_stem()
                 .map_or_else(|| p.display().to_string(), |s| s.to_string_lossy().into()),
-            (None, TwinGeometry::Collision) => "collision".into(),
-            (None, TwinGeometry::Visual) if spec.keep_triangles < 1.0 => {
+            (None, GeometryKind::Collision) => "collision".into(),
+            (None, GeometryKind::Visual) if spec.keep_triangles < 1.0 => {
                 format!("keep {}%", spec.keep_triangles * 100.0)
             }
-            (None, TwinGeometry::Visual) => "visual".into(),
+            (None, GeometryKind::Visual) => "visual".into(),
         };
         Ok(Self { label, spec })
     }
@@ -181,18 +181,14 @@ pub fn peak_link_speed(
 ) -> f64 {
     let dt = 0.01;
     let base = nalgebra::Isometry3::identity();
-    let at = |t: f64| {
-        trajectory
-            .sample(t)
-            .map(|q| model.forward_kinematics(&base, q.as_slice())[link])
-    };
-    let steps = (until_s / dt).ceil() as usize;
-    (0..steps)
-        .filter_map(|k| {
-            let t = k as f64 * dt;
-            let (a, b) = (at(t)?, at(t + dt)?);
-            Some(pose_difference(&a, &b).fixed_rows::<3>(0).norm() / dt)
-        })
+    // One FK per sample; consecutive samples give the speed between them.
+    let poses: Vec<_> = (0..=(until_s / dt).ceil() as usize)
+        .filter_map(|k| trajectory.sample(k as f64 * dt))
+        .map(|q| model.forward_kinematics(&base, q.as_slice())[link])
+        .collect();
+    poses
+        .windows(2)
+        .map(|w| pose_difference(&w[0], &w[1]).fixed_rows::<3>(0).norm() / dt)
         .fold(0.0, f64::max)
 }
 
@@ -220,10 +216,24 @@ pub fn run_twin(scene: &Scene, sweep: &TwinSweep, out: &Path) -> Result<TwinOutp
     for v in &sweep.variants {
         let model = match &v.spec.urdf {
             None => Arc::clone(&scene.model),
-            Some(path) => Arc::new(
-                RobotModel::from_urdf_file(path, &sweep.packages)
-                    .map_err(|e| AppError::flag("--variants", format!("'{}': {e}", v.label)))?,
-            ),
+            Some(path) => {
+                let twin = RobotModel::from_urdf_file(path, &sweep.packages)
+                    .map_err(|e| AppError::flag("--variants", format!("'{}': {e}", v.label)))?;
+                // As the scene's [twin] urdf: posed by the robot's joint names.
+                let missing = avatarm_core::robot::JointMap::new(&scene.model, &twin).missing;
+                if !missing.is_empty() {
+                    return Err(AppError::flag(
+                        "--variants",
+                        format!(
+                            "'{}' has movable joints that the robot '{}' does not: {} (the twin must be the same robot)",
+                            v.label,
+                            scene.model.name,
+                            missing.join(", ")
+                        ),
+                    ));
+                }
+                Arc::new(twin)
+            }
         };
         let detail = crate::app::twin_detail(&v.spec);
         let triangles = avatarm_twin::twin_triangles(&model, detail)
@@ -438,27 +448,28 @@ const CSV_HEADER: &str = "label,triangles,gpu_mask_camera_ms,frame_ms_median,fra
 iou_mean,leak_pct_mean,leak_pct_max,overmask_pct_mean,psnr_db_mean,dilate_for_1pct,pareto";
 
 fn write_csv(path: &Path, points: &[TwinPoint]) -> Result<(), AppError> {
-    let mut text = String::from(CSV_HEADER);
-    text.push('\n');
-    for p in points {
-        text.push_str(&format!(
-            "{},{},{},{:.3},{:.4},{:.5},{:.5},{:.5},{:.5},{:.3},{},{}\n",
-            p.label,
-            p.triangles,
-            p.gpu_mask_camera_ms
-                .map_or(String::new(), |v| format!("{v:.4}")),
-            p.frame_ms_median,
-            p.frame_cost_ratio,
-            p.iou_mean,
-            p.leak_pct_mean,
-            p.leak_pct_max,
-            p.overmask_pct_mean,
-            p.psnr_db_mean,
-            p.dilate_for_1pct.map_or(String::new(), |d| d.to_string()),
-            p.pareto
-        ));
-    }
-    std::fs::write(path, text).map_err(|e| AppError::write(path, e))
+    write_table(
+        path,
+        CSV_HEADER,
+        points.iter().map(|p| {
+            format!(
+                "{},{},{},{:.3},{:.4},{:.5},{:.5},{:.5},{:.5},{:.3},{},{}",
+                p.label,
+                p.triangles,
+                p.gpu_mask_camera_ms
+                    .map_or(String::new(), |v| format!("{v:.4}")),
+                p.frame_ms_median,
+                p.frame_cost_ratio,
+                p.iou_mean,
+                p.leak_pct_mean,
+                p.leak_pct_max,
+                p.overmask_pct_mean,
+                p.psnr_db_mean,
+                p.dilate_for_1pct.map_or(String::new(), |d| d.to_string()),
+                p.pareto
+            )
+        }),
+    )
 }
 
 const CHART_SIZE: (u32, u32) = (1400, 620);
@@ -562,7 +573,7 @@ mod tests {
     fn variants_parse_and_bad_ones_name_the_flag() {
         assert_eq!(TwinVariant::parse("visual").unwrap().label, "visual");
         let c = TwinVariant::parse("collision").unwrap();
-        assert_eq!(c.spec.geometry, TwinGeometry::Collision);
+        assert_eq!(c.spec.geometry, GeometryKind::Collision);
         let k = TwinVariant::parse("keep:0.1").unwrap();
         assert_eq!((k.label.as_str(), k.spec.keep_triangles), ("keep 10%", 0.1));
         assert_eq!(

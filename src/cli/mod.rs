@@ -219,29 +219,22 @@ fn packages(dirs: Vec<PathBuf>) -> PackagePath {
     p
 }
 
-/// A scene shipped in assets/scenes: from the working folder when run from the repository,
-/// else from the source tree this binary was built from.
-fn bundled_scene(file: &str) -> PathBuf {
-    let local = Path::new("assets/scenes").join(file);
+/// A file shipped in `assets/FOLDER` (`scenes`, `robots`): from the working folder when run
+/// from the repository, else from the source tree this binary was built from.
+fn bundled(folder: &str, file: &str) -> PathBuf {
+    let local = Path::new("assets").join(folder).join(file);
     if local.is_file() {
         local
     } else {
         Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("assets/scenes")
+            .join("assets")
+            .join(folder)
             .join(file)
     }
 }
 
-/// A robot description shipped in assets/robots, found as [`bundled_scene`] finds scenes.
-fn bundled_robot(file: &str) -> PathBuf {
-    let local = Path::new("assets/robots").join(file);
-    if local.is_file() {
-        local
-    } else {
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("assets/robots")
-            .join(file)
-    }
+fn bundled_scene(file: &str) -> PathBuf {
+    bundled("scenes", file)
 }
 
 fn default_scene() -> PathBuf {
@@ -282,7 +275,7 @@ fn live_hand(scene: &Scene, flag: Option<&str>, xr: bool) -> Result<Option<HandC
              --features leap` (needs the Ultraleap SDK, docs/hardware.md)"
                 .into(),
         )),
-        HandChoice::File(path) | HandChoice::LeapRecording(path) if !path.is_file() => {
+        HandChoice::File(path) | HandChoice::LeapRecording { path, .. } if !path.is_file() => {
             Err(refuse(format!("{} does not exist", path.display())))
         }
         _ => Ok(Some(choice)),
@@ -517,7 +510,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 ..TwinSweep::default()
             };
             if variants.is_empty() {
-                let lite = bundled_robot("sawyer_lite/sawyer_lite.urdf");
+                let lite = bundled("robots", "sawyer_lite/sawyer_lite.urdf");
                 if scene.model.name == "sawyer" && lite.is_file() {
                     sweep
                         .variants

@@ -2,7 +2,7 @@
 
 use std::fmt::Write;
 
-use avatarm_core::robot::mesh::load_mesh;
+use avatarm_core::robot::mesh::load_shape_mesh;
 use avatarm_core::robot::{JointKind, LinkId, RobotModel, Shape};
 use nalgebra::Isometry3;
 use serde_json::{Map, Value, json};
@@ -30,13 +30,10 @@ pub fn check_meshes(model: &RobotModel) -> Result<Vec<MeshLine>, avatarm_core::E
             .map(|g| ("visual", g))
             .chain(link.collisions.iter().map(|g| ("collision", g)));
         for (role, g) in tagged {
-            if let Shape::Mesh { uri, path, scale } = &g.shape {
-                let mesh =
-                    load_mesh(path, scale).map_err(|source| avatarm_core::Error::LinkMesh {
-                        link: link.name.clone(),
-                        uri: uri.clone(),
-                        source: Box::new(source),
-                    })?;
+            if let (Some(mesh), Shape::Mesh { path, .. }) =
+                (load_shape_mesh(&link.name, &g.shape), &g.shape)
+            {
+                let mesh = mesh?;
                 lines.push(MeshLine {
                     link: id,
                     role,

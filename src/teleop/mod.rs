@@ -144,7 +144,9 @@ impl LiveTeleop {
                 Some(ActiveHand::new(avatarm_hand::RecordedHand::open(path)?)),
                 None,
             ),
-            HandChoice::LeapRecording(path) => (Some(leap_recording(path, &start)?), None),
+            HandChoice::LeapRecording { path, hand } => {
+                (Some(leap_recording(path, *hand, &start)?), None)
+            }
         };
         let (prop, _) = find_prop(&scene.props, &task.object).ok_or_else(|| {
             avatarm_scene::SceneError::field(
@@ -299,18 +301,31 @@ fn leap_hand(start: &Isometry3<f64>) -> Result<ActiveHand, AppError> {
     Ok(ActiveHand::new(hand))
 }
 
-/// A Leap recording's first hand, placed so that its first wrist is at the task's start pose
-/// (position and orientation).
-fn leap_recording(path: &std::path::Path, start: &Isometry3<f64>) -> Result<ActiveHand, AppError> {
+/// A Leap recording's `hand` (default: the first one it shows), placed so that its first wrist
+/// is at the task's start pose (position and orientation).
+fn leap_recording(
+    path: &std::path::Path,
+    hand: Option<avatarm_core::teleop::hand::Handedness>,
+    start: &Isometry3<f64>,
+) -> Result<ActiveHand, AppError> {
     use avatarm_hand::leap::LeapMount;
     use avatarm_hand::leap_recording::LeapRecording;
     let recording = LeapRecording::open(path)?;
     let first = recording
         .frames
         .iter()
-        .find_map(|f| f.hands.first())
+        .find_map(|f| {
+            f.hands
+                .iter()
+                .find(|(_, h)| hand.is_none_or(|side| h.hand == side))
+        })
         .map(|(_, h)| h.clone())
-        .ok_or_else(|| AppError::flag("--hand", format!("{}: no hand", path.display())))?;
+        .ok_or_else(|| {
+            AppError::flag(
+                "--hand",
+                format!("{}: no such hand in the recording", path.display()),
+            )
+        })?;
     let mount = LeapMount::with_wrist_pose(&first, start)?;
     let frames = recording.hand_frames(Some(first.hand), &mount)?;
     Ok(ActiveHand::new(avatarm_hand::RecordedHand::from_frames(

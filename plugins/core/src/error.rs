@@ -106,9 +106,7 @@ pub enum Error {
         origin: String,
     },
     /// A `package://NAME/...` URI names a package that is not on the search path.
-    #[error(
-        "{origin}: link '{link}': mesh '{uri}': package '{package}' is not found in the package path [{searched}] (each folder, its subfolder '{package}', and the package.xml files below it); add the folder that holds it with --package-path (or ROS_PACKAGE_PATH)"
-    )]
+    #[error("{origin}: link '{link}': mesh '{uri}': {why}")]
     UnknownPackage {
         /// The file.
         origin: String,
@@ -118,8 +116,8 @@ pub enum Error {
         uri: String,
         /// The package name.
         package: String,
-        /// The folders searched, comma separated.
-        searched: String,
+        /// Where it was looked for, and what to do ([`crate::robot::PackagePath::not_found`]).
+        why: String,
     },
     /// A mesh URI resolves to a file that does not exist.
     #[error("{origin}: link '{link}': mesh '{uri}' resolves to {resolved}, which does not exist")]

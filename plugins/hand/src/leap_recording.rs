@@ -423,18 +423,48 @@ mod tests {
                 if !sides.contains(&side) {
                     continue;
                 }
-                let frames = rec.hand_frames(Some(side), &LeapMount::default()).unwrap();
+                // In Leap's own axes and millimetres, to compare with the recorded joints.
+                let leap = LeapMount {
+                    scene_from_leap: nalgebra::Isometry3::identity(),
+                };
+                let frames = rec.hand_frames(Some(side), &leap).unwrap();
                 assert!(frames.iter().all(|f| f.hand == side && f.tracked), "{name}");
-                for f in &frames {
-                    for j in &f.joints {
-                        assert!((j.pose.rotation.norm() - 1.0).abs() < 1e-9, "{name}");
-                    }
-                }
+                let recorded: Vec<&Vec<[f32; 3]>> = rec
+                    .frames
+                    .iter()
+                    .filter_map(|f| {
+                        let k = f.hands.iter().position(|(_, h)| h.hand == side)?;
+                        Some(&f.recorded_joints[k])
+                    })
+                    .collect();
+                assert_eq!(recorded.len(), frames.len());
                 // Each finger's chain: metacarpal .. tip, 5 joints (4 for the thumb).
-                let mut worst = 0.0f64;
+                let (mut worst, mut moved, mut off_axis) = (0.0f64, 0.0f64, 0.0f64);
                 let mut start = 2;
-                for len in [4usize, 5, 5, 5, 5] {
+                for (digit, len) in [4usize, 5, 5, 5, 5].into_iter().enumerate() {
+                    // The recorded knuckle, joints and tip against the skeleton's: making the
+                    // bones constant moves them only a little.
+                    let first = if digit == 0 { start } else { start + 1 };
+                    for (f, rec_joints) in frames.iter().zip(&recorded) {
+                        for k in 0..4 {
+                            let r = rec_joints[1 + 4 * digit + k];
+                            let r = nalgebra::Vector3::new(
+                                f64::from(r[0]),
+                                f64::from(r[1]),
+                                f64::from(r[2]),
+                            ) * 1e-3;
+                            let p = f.joints[first + k].pose.translation.vector;
+                            moved = moved.max((p - r).norm() * 1e3);
+                        }
+                    }
                     for b in start..start + len - 1 {
+                        // Each joint's +x runs along its bone toward the tip.
+                        for f in &frames {
+                            let along = f.joints[b + 1].pose.translation.vector
+                                - f.joints[b].pose.translation.vector;
+                            let x = f.joints[b].pose.rotation * nalgebra::Vector3::x();
+                            off_axis = off_axis.max(x.angle(&along).to_degrees());
+                        }
                         let mut l: Vec<f64> =
                             frames.iter().map(|f| length_mm(f, b, b + 1)).collect();
                         l.sort_by(f64::total_cmp);
@@ -446,9 +476,17 @@ mod tests {
                     start += len;
                 }
                 assert_eq!(start, JOINT_NAMES.len());
+                eprintln!(
+                    "{name} {side:?}: bones within {worst:.3} mm of their medians, joints moved at most {moved:.2} mm from the recorded ones, +x at most {off_axis:.3}° off its bone"
+                );
                 assert!(
                     worst <= 2.0,
                     "{name} {side:?}: a bone strays {worst} mm from its median"
+                );
+                assert!(moved <= 10.0, "{name} {side:?}: a joint moved {moved} mm");
+                assert!(
+                    off_axis < 0.01,
+                    "{name} {side:?}: +x {off_axis}° off its bone"
                 );
             }
         }
@@ -559,6 +597,51 @@ mod tests {
             );
             assert!(after < before, "{}: {after} >= {before}", path.display());
             assert!(lag < 0.1, "{}: lag {lag}", path.display());
+        }
+    }
+
+    /// A tracker whose phalanges change length between frames (real Leap v6 recordings do not:
+    /// theirs measure 0.000 mm of spread): each bone ends at its median length, along the
+    /// recorded direction, from the recorded knuckle.
+    #[test]
+    fn bones_that_change_length_are_made_constant() {
+        let frame = |t: u32, stretch: f32| {
+            let fingers: Vec<String> = (0..5)
+                .map(|d| {
+                    let x = 20.0 * d as f32;
+                    let j = |k: f32| format!("[{x}, 200, {}]", -20.0 - k * stretch);
+                    format!(
+                        r#"{{"handId": 1, "type": {d}, "width": 18, "mcpPosition": {}, "pipPosition": {}, "dipPosition": {}, "tipPosition": {}}}"#,
+                        j(0.0),
+                        j(1.0),
+                        j(2.0),
+                        j(3.0)
+                    )
+                })
+                .collect();
+            format!(
+                r#"{{"timestamp": {t}, "hands": [{{"id": 1, "type": "right", "palmPosition": [40, 200, 30], "palmNormal": [0, -1, 0], "direction": [0, 0, -1]}}], "pointables": [{}]}}"#,
+                fingers.join(",")
+            )
+        };
+        // Phalanges of 30, 34 and 31 mm: the median is 31.
+        let text = format!(
+            r#"{{"frames": [{}, {}, {}]}}"#,
+            frame(0, 30.0),
+            frame(10_000, 34.0),
+            frame(20_000, 31.0)
+        );
+        let rec = LeapRecording::parse(&text, Path::new("stretchy.json")).unwrap();
+        for f in &rec.frames {
+            let h = &f.hands[0].1;
+            for digit in &h.digits {
+                for bone in &digit[1..] {
+                    let length = (v(bone.next) - v(bone.prev)).norm();
+                    assert!((length - 31.0).abs() < 1e-3, "{length}");
+                }
+                // From the recorded knuckle, which does not move.
+                assert_eq!(digit[1].prev[2], -20.0);
+            }
         }
     }
 

@@ -26,7 +26,7 @@ pub mod task;
 
 pub use error::SceneError;
 pub use load::Scene;
-pub use spec::{TwinGeometry, TwinSpec};
+pub use spec::TwinSpec;
 
 /// The types most users of scenes need.
 pub mod prelude {
@@ -34,6 +34,6 @@ pub mod prelude {
     pub use crate::hand::HandChoice;
     pub use crate::load::Scene;
     pub use crate::prop::{Prop, PropShape};
-    pub use crate::spec::{BackgroundSpec, SceneFile, TwinGeometry, TwinSpec};
+    pub use crate::spec::{BackgroundSpec, SceneFile, TwinSpec};
     pub use crate::task::{PouringTask, TrialSetup};
 }

@@ -227,20 +227,7 @@ impl Scene {
             packages
                 .find_package(package)
                 .map(|d| d.join(file))
-                .ok_or_else(|| {
-                    invalid(
-                        field,
-                        format!(
-                            "package '{package}' is not found in the package path [{}] (each folder, its subfolder '{package}', and the package.xml files below it); add the folder that holds it with --package-path (or ROS_PACKAGE_PATH)",
-                            packages
-                                .0
-                                .iter()
-                                .map(|p| p.display().to_string())
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    )
-                })
+                .ok_or_else(|| invalid(field, packages.not_found(package)))
         };
         let urdf = resolve("robot.urdf", &file.robot.urdf)?;
         let model =

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use avatarm_core::dr::EraseSettings;
+use avatarm_core::robot::GeometryKind;
 use avatarm_core::sim::SimRobotParams;
 use avatarm_core::vision::camera::{CameraPose, Intrinsics};
 use avatarm_core::vision::sensor::SensorModel;
@@ -221,17 +222,6 @@ pub struct SceneFile {
     pub twin: TwinSpec,
 }
 
-/// Which geometry of a description the mask twin draws.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum TwinGeometry {
-    /// The `<visual>` elements (what the camera sees).
-    #[default]
-    Visual,
-    /// The `<collision>` elements (coarser, often primitives).
-    Collision,
-}
-
 /// `[twin]`: the mask twin, the one the app renders white to make M(t). It can be lighter than
 /// the robot the camera sees: another description of the same robot (joints matched by name),
 /// its collision geometry, or its meshes simplified.
@@ -241,7 +231,7 @@ pub struct TwinSpec {
     /// Another URDF of the robot, relative to the scene file (default: `robot.urdf`).
     pub urdf: Option<PathBuf>,
     /// `visual` or `collision`.
-    pub geometry: TwinGeometry,
+    pub geometry: GeometryKind,
     /// Fraction of each mesh's triangles kept (0 < f <= 1; 1 = the meshes as they are).
     /// Default [`TwinSpec::DEFAULT_KEEP`].
     pub keep_triangles: f64,
@@ -259,7 +249,7 @@ impl Default for TwinSpec {
     fn default() -> Self {
         Self {
             urdf: None,
-            geometry: TwinGeometry::Visual,
+            geometry: GeometryKind::Visual,
             keep_triangles: Self::DEFAULT_KEEP,
         }
     }

@@ -30,16 +30,17 @@ use bevy::prelude::*;
 use bevy::transform::TransformSystems;
 use nalgebra::{DVector, Isometry3};
 
+pub use avatarm_core::robot::GeometryKind;
 pub use spawn::{
-    GeometrySource, TwinAppearance, TwinAssets, TwinDetail, TwinEntities, TwinMeshCache,
-    attach_visuals, spawn_twin, spawn_twin_with_visuals, to_bevy_mesh, twin_triangles,
+    TwinAppearance, TwinAssets, TwinDetail, TwinEntities, TwinMeshCache, attach_visuals,
+    spawn_twin, spawn_twin_with_visuals, to_bevy_mesh, twin_triangles,
 };
 
 /// What most users of the twin need.
 pub mod prelude {
     pub use crate::camera::PinholeProjection;
     pub use crate::{
-        GeometrySource, JointStateMessage, RobotTwin, RobotTwinPlugin, RobotTwinSystems,
+        GeometryKind, JointStateMessage, RobotTwin, RobotTwinPlugin, RobotTwinSystems,
         TwinAppearance, TwinAssets, TwinDetail, TwinLink, attach_visuals, iso_to_transform,
         spawn_twin, spawn_twin_with_visuals, transform_to_iso,
     };

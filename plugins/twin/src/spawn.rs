@@ -4,8 +4,8 @@ use std::collections::HashMap;
 use std::f32::consts::FRAC_PI_2;
 use std::sync::Arc;
 
-use avatarm_core::robot::mesh::{TriMesh, load_mesh};
-use avatarm_core::robot::{Geometry, RobotModel, Shape};
+use avatarm_core::robot::mesh::{TriMesh, load_shape_mesh};
+use avatarm_core::robot::{Geometry, GeometryKind, RobotModel, Shape};
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::visibility::RenderLayers;
 use bevy::mesh::{Indices, PrimitiveTopology};
@@ -25,22 +25,12 @@ pub enum TwinAppearance {
     VertexColors,
 }
 
-/// Which geometry of each link to draw.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum GeometrySource {
-    /// The `<visual>` elements.
-    #[default]
-    Visual,
-    /// The `<collision>` elements (coarser; a fallback for unsupported visual meshes).
-    Collision,
-}
-
 /// How much of a description a twin draws: which geometry, and what fraction of each mesh's
 /// triangles (simplified by [`TriMesh::simplified`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TwinDetail {
     /// `<visual>` or `<collision>` elements.
-    pub geometry: GeometrySource,
+    pub geometry: GeometryKind,
     /// Fraction of each mesh's triangles kept, in (0, 1].
     pub keep_triangles: f32,
 }
@@ -48,18 +38,8 @@ pub struct TwinDetail {
 impl Default for TwinDetail {
     fn default() -> Self {
         Self {
-            geometry: GeometrySource::Visual,
+            geometry: GeometryKind::Visual,
             keep_triangles: 1.0,
-        }
-    }
-}
-
-impl TwinDetail {
-    /// The geometry elements of `link` this detail draws.
-    pub fn geometry_of<'a>(&self, link: &'a avatarm_core::robot::Link) -> &'a [Geometry] {
-        match self.geometry {
-            GeometrySource::Visual => &link.visuals,
-            GeometrySource::Collision => &link.collisions,
         }
     }
 }
@@ -141,24 +121,22 @@ pub fn attach_visuals(
     layers: &RenderLayers,
 ) -> Result<(), TwinError> {
     for (link, &entity) in model.links.iter().zip(&twin.links) {
-        for g in detail.geometry_of(link) {
+        for g in link.geometry(detail.geometry) {
             // The file's own colours only where the URDF gives none, and never on a flat twin.
             let vertex_colors = appearance == TwinAppearance::Urdf && g.rgba.is_none();
-            let (mesh, transform, coloured) =
-                mesh_for(meshes, cache, g, vertex_colors, detail.keep_triangles).map_err(
-                    |source| TwinError::Mesh {
-                        robot: model.name.clone(),
-                        link: link.name.clone(),
-                        source: Box::new(match &g.shape {
-                            Shape::Mesh { uri, .. } => avatarm_core::Error::LinkMesh {
-                                link: link.name.clone(),
-                                uri: uri.clone(),
-                                source: Box::new(source),
-                            },
-                            _ => source,
-                        }),
-                    },
-                )?;
+            let (mesh, transform, coloured) = mesh_for(
+                meshes,
+                cache,
+                &link.name,
+                g,
+                vertex_colors,
+                detail.keep_triangles,
+            )
+            .map_err(|source| TwinError::Mesh {
+                robot: model.name.clone(),
+                link: link.name.clone(),
+                source: Box::new(source),
+            })?;
             let appearance = match appearance {
                 // White under the vertex colours, which Bevy multiplies in.
                 TwinAppearance::Urdf if coloured => TwinAppearance::VertexColors,
@@ -271,8 +249,6 @@ fn material_for(
         .clone()
 }
 
-/// The mesh of a geometry (built once per shape and colouring), its transform in the link, and
-/// whether it carries the file's vertex colours (only when asked and the file has some).
 /// No back-face culling: real description meshes often mix triangle windings (and a link seen
 /// through a gap shows its inside), so a culled twin has holes where the robot has none, in
 /// the silhouette the mask is made of as much as in the picture.
@@ -284,9 +260,24 @@ fn double_sided() -> StandardMaterial {
     }
 }
 
+/// A primitive shape as Bevy tessellates it (`None` for a mesh file).
+fn primitive_mesh(shape: &Shape) -> Option<Mesh> {
+    Some(match shape {
+        Shape::Box { size } => Cuboid::new(size.x as f32, size.y as f32, size.z as f32).into(),
+        Shape::Cylinder { radius, length } => Cylinder::new(*radius as f32, *length as f32).into(),
+        Shape::Capsule { radius, length } => Capsule3d::new(*radius as f32, *length as f32).into(),
+        Shape::Sphere { radius } => Sphere::new(*radius as f32).into(),
+        Shape::Mesh { .. } => return None,
+    })
+}
+
+/// The mesh of a geometry of `link` (built once per shape, colouring and detail), its transform
+/// in the link, and whether it carries the file's vertex colours (only when asked and the file
+/// has some).
 fn mesh_for(
     meshes: &mut Assets<Mesh>,
     cache: &mut TwinMeshCache,
+    link: &str,
     g: &Geometry,
     vertex_colors: bool,
     keep_triangles: f32,
@@ -306,20 +297,13 @@ fn mesh_for(
     if let Some((h, coloured)) = cache.meshes.get(&key) {
         return Ok((h.clone(), transform, *coloured));
     }
-    let (mesh, coloured): (Mesh, bool) = match &g.shape {
-        Shape::Box { size } => (
-            Cuboid::new(size.x as f32, size.y as f32, size.z as f32).into(),
-            false,
-        ),
-        Shape::Cylinder { radius, length } => {
-            (Cylinder::new(*radius as f32, *length as f32).into(), false)
-        }
-        Shape::Capsule { radius, length } => {
-            (Capsule3d::new(*radius as f32, *length as f32).into(), false)
-        }
-        Shape::Sphere { radius } => (Sphere::new(*radius as f32).into(), false),
-        Shape::Mesh { path, scale, .. } => {
-            let mut tri = load_mesh(path, scale)?.simplified(keep_triangles);
+    let (mesh, coloured) = match primitive_mesh(&g.shape) {
+        Some(mesh) => (mesh, false),
+        None => {
+            let mut tri = load_shape_mesh(link, &g.shape)
+                .transpose()?
+                .unwrap_or_default()
+                .simplified(keep_triangles);
             if !vertex_colors {
                 tri.colors = None;
             }
@@ -340,30 +324,15 @@ pub fn twin_triangles(
 ) -> Result<usize, avatarm_core::Error> {
     let mut total = 0;
     for link in &model.links {
-        for g in detail.geometry_of(link) {
-            let mesh: Mesh = match &g.shape {
-                Shape::Mesh { uri, path, scale } => {
-                    let tri =
-                        load_mesh(path, scale).map_err(|source| avatarm_core::Error::LinkMesh {
-                            link: link.name.clone(),
-                            uri: uri.clone(),
-                            source: Box::new(source),
-                        })?;
-                    total += tri.simplified(detail.keep_triangles).triangle_count();
-                    continue;
-                }
-                Shape::Box { size } => {
-                    Cuboid::new(size.x as f32, size.y as f32, size.z as f32).into()
-                }
-                Shape::Cylinder { radius, length } => {
-                    Cylinder::new(*radius as f32, *length as f32).into()
-                }
-                Shape::Capsule { radius, length } => {
-                    Capsule3d::new(*radius as f32, *length as f32).into()
-                }
-                Shape::Sphere { radius } => Sphere::new(*radius as f32).into(),
+        for g in link.geometry(detail.geometry) {
+            total += match primitive_mesh(&g.shape) {
+                Some(mesh) => mesh.indices().map_or(0, |i| i.len() / 3),
+                None => load_shape_mesh(&link.name, &g.shape)
+                    .transpose()?
+                    .map_or(0, |tri| {
+                        tri.simplified(detail.keep_triangles).triangle_count()
+                    }),
             };
-            total += mesh.indices().map_or(0, |i| i.len() / 3);
         }
     }
     Ok(total)

@@ -152,6 +152,20 @@ impl MeshFormat {
     }
 }
 
+/// The mesh of a link's `<visual>` or `<collision>` shape, loaded and scaled, or `None` for a
+/// primitive. Errors are [`Error::LinkMesh`], naming the link, the URI and the file: the one
+/// way the twins, the bench and `avatarm robot` load a link's mesh.
+pub fn load_shape_mesh(link: &str, shape: &crate::robot::Shape) -> Option<Result<TriMesh>> {
+    let crate::robot::Shape::Mesh { uri, path, scale } = shape else {
+        return None;
+    };
+    Some(load_mesh(path, scale).map_err(|source| Error::LinkMesh {
+        link: link.to_owned(),
+        uri: uri.clone(),
+        source: Box::new(source),
+    }))
+}
+
 /// Loads a mesh file and applies a per-axis scale (the URDF `<mesh scale>`).
 ///
 /// A scale with an odd number of negative components mirrors the mesh: the triangles' winding

@@ -205,6 +205,28 @@ pub struct Geometry {
     pub rgba: Option<[f32; 4]>,
 }
 
+/// Which geometry elements of a link: `<visual>` (what a camera sees) or `<collision>`
+/// (coarser, often primitives).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GeometryKind {
+    /// The `<visual>` elements.
+    #[default]
+    Visual,
+    /// The `<collision>` elements.
+    Collision,
+}
+
+impl Link {
+    /// The link's `<visual>` or `<collision>` elements.
+    pub fn geometry(&self, kind: GeometryKind) -> &[Geometry] {
+        match kind {
+            GeometryKind::Visual => &self.visuals,
+            GeometryKind::Collision => &self.collisions,
+        }
+    }
+}
+
 /// A link of the robot.
 #[derive(Debug, Clone)]
 pub struct Link {
@@ -251,6 +273,18 @@ impl PackagePath {
                 find_package_below(dir, package, 0, &mut Default::default())
             }
         })
+    }
+}
+
+impl PackagePath {
+    /// Why `package` was not found, for an error message: the folders searched, how, and what
+    /// to do.
+    pub fn not_found(&self, package: &str) -> String {
+        let searched: Vec<String> = self.0.iter().map(|p| p.display().to_string()).collect();
+        format!(
+            "package '{package}' is not found in the package path [{}] (each folder, its subfolder '{package}', and the package.xml files below it); add the folder that holds it with --package-path (or ROS_PACKAGE_PATH)",
+            searched.join(", ")
+        )
     }
 }
 
@@ -538,14 +572,6 @@ impl JointMap {
             rest,
             missing,
         }
-    }
-
-    /// Whether the target's joint vector is the source's itself (same joints, same order).
-    pub fn is_identity(&self) -> bool {
-        self.drives
-            .iter()
-            .enumerate()
-            .all(|(i, d)| *d == Some((i, 1.0, 0.0)))
     }
 
     /// The target's joint vector at the source's `q` (entries `q` lacks read as 0).
@@ -1079,13 +1105,7 @@ fn resolve_mesh_uri(uri: &str, link: &str, raw: &Raw<'_>) -> Result<PathBuf> {
                 link: link.to_owned(),
                 uri: uri.to_owned(),
                 package: package.to_owned(),
-                searched: raw
-                    .packages
-                    .0
-                    .iter()
-                    .map(|p| p.display().to_string())
-                    .collect::<Vec<_>>()
-                    .join(", "),
+                why: raw.packages.not_found(package),
             })?;
         dir.join(file)
     } else if let Some(rest) = uri.strip_prefix("file://") {
