@@ -5,6 +5,9 @@ set -euo pipefail
 packages=(
   pkg-config g++ libudev-dev libwayland-dev libxkbcommon-dev libx11-dev libxcursor-dev libxrandr-dev libxi-dev
   mesa-vulkan-drivers libvulkan1 xvfb xauth libopenxr-loader1 libopenxr-dev libclang-dev libv4l-dev mold fonts-dejavu-core
+  # The ROS 1 link: TLS for roslibrust's XML-RPC client; a ROS master and rospy (Debian's) for
+  # its tests, which start a master and a simulated Sawyer node themselves.
+  libssl-dev python3-rosmaster python3-rospy python3-sensor-msgs python3-std-msgs python3-genpy
 )
 missing=()
 for p in "${packages[@]}"; do

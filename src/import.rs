@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use avatarm_core::teleop::hand::{HandFrame, Handedness, write_frames};
 use avatarm_hand::leap::LeapMount;
 use avatarm_hand::leap_recording::LeapRecording;
-use nalgebra::{Isometry3, Translation3};
+use nalgebra::{Isometry3, Vector3};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -23,8 +23,10 @@ pub struct ImportOptions {
     pub out: PathBuf,
     /// Which hand (default: the first one the recording shows).
     pub hand: Option<Handedness>,
-    /// Where the Leap device lies in the scene (m), facing up, its cable toward the user (the
-    /// default desk mount, [`LeapMount::default`]).
+    /// The device on a headset ([`LeapMount::head`]) rather than lying on the desk
+    /// ([`LeapMount::desk`]).
+    pub head_mounted: bool,
+    /// Where the Leap device sits in the scene (m).
     pub device_at: [f64; 3],
     /// A picture of one frame (PNG; an SVG is written beside it).
     pub picture: Option<PathBuf>,
@@ -48,7 +50,6 @@ pub struct ImportSummary {
 /// Converts the recording and writes the skeleton, and the picture when asked.
 pub fn import_leap(options: &ImportOptions) -> Result<ImportSummary, AppError> {
     let recording = LeapRecording::open(&options.recording)?;
-    let mut mount = LeapMount::default();
     let [x, y, z] = options.device_at;
     if ![x, y, z].iter().all(|v| v.is_finite()) {
         return Err(AppError::flag(
@@ -56,7 +57,12 @@ pub fn import_leap(options: &ImportOptions) -> Result<ImportSummary, AppError> {
             format!("{x},{y},{z} is not three finite numbers"),
         ));
     }
-    mount.scene_from_leap.translation = Translation3::new(x, y, z);
+    let rotation = if options.head_mounted {
+        LeapMount::head()
+    } else {
+        LeapMount::desk()
+    };
+    let mount = LeapMount::placed(rotation, Vector3::new(x, y, z));
     let frames = recording.hand_frames(options.hand, &mount)?;
     let hand = frames[0].hand;
     std::fs::write(&options.out, write_frames(&frames))

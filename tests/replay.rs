@@ -4,6 +4,10 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+#[cfg(feature = "ros")]
+#[path = "../plugins/ros/tests/support/mod.rs"]
+mod ros_support;
+
 use avatarm::replay::{self, ReplayOptions};
 use avatarm::scene::Scene;
 use avatarm_core::robot::{PackagePath, Shape};
@@ -231,7 +235,13 @@ fn replay_shows_the_robot_where_fk_and_the_camera_model_project_it() {
 /// Runs `avatarm run ARGS` under Xvfb; returns the log (stdout and stderr) after checking it
 /// succeeded without a panic.
 fn run_preview(args: &[&str], out: &Path) -> String {
+    run_preview_with(args, out, &[])
+}
+
+/// [`run_preview`] with environment variables.
+fn run_preview_with(args: &[&str], out: &Path, env: &[(&str, &str)]) -> String {
     let run = Command::new("xvfb-run")
+        .envs(env.iter().copied())
         .args(["-a", "-s", "-screen 0 1280x720x24"])
         .arg(env!("CARGO_BIN_EXE_avatarm"))
         .arg("run")
@@ -697,13 +707,16 @@ fn a_real_leap_recording_imports_and_drives_the_live_task() {
             "assets/scenes/pouring.toml",
             "--hand",
             &right,
+            "--leap-mount",
+            "head",
             "--frames",
             "60",
         ],
         &out,
     );
     assert!(
-        log.contains("live teleoperation: 'pouring' with the Leap recording"),
+        log.contains("live teleoperation: 'pouring' with the Leap recording")
+            && log.contains("(head mount)"),
         "{log}"
     );
 }
@@ -962,6 +975,7 @@ fn the_apps_own_systems_run_in_a_defined_order() {
         fixed_step_s: None,
         webcam: None,
         hand: None,
+        robot: avatarm::teleop::RobotChoice::Sim,
     };
     app.add_plugins((
         avatarm::preview::PreviewPlugin(preview),
@@ -969,8 +983,13 @@ fn the_apps_own_systems_run_in_a_defined_order() {
     ));
     #[cfg(feature = "xr")]
     app.add_plugins(avatarm::preview::xr::XrViewPlugin);
-    avatarm::teleop::add_live_teleop(&mut app, &scene, &avatarm::scene::hand::HandChoice::Desktop)
-        .expect("live teleoperation");
+    avatarm::teleop::add_live_teleop(
+        &mut app,
+        &scene,
+        &avatarm::scene::hand::HandChoice::Desktop,
+        avatarm::teleop::RobotChoice::Sim,
+    )
+    .expect("live teleoperation");
     // Two systems of this test that write the same resource unordered: the check must see them.
     app.init_resource::<Probe>()
         .add_systems(bevy::prelude::Update, (probe_a, probe_b));
@@ -999,4 +1018,54 @@ fn probe_a(mut p: bevy::prelude::ResMut<Probe>) {
 
 fn probe_b(mut p: bevy::prelude::ResMut<Probe>) {
     p.0 += 2;
+}
+
+/// `avatarm run --robot ros`: the live pouring task commands a Sawyer over ROS 1 (a real master
+/// and the simulated Sawyer node of `plugins/ros/tests/support`, its arm where the task starts).
+#[cfg(feature = "ros")]
+#[test]
+fn live_teleoperation_commands_a_sawyer_over_ros() {
+    let _serial = ros_support::serial();
+    let scene = scene("pouring");
+    let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
+        panic!("the pouring scene has a task");
+    };
+    let prepared = avatarm_mapping::pouring::prepare(task, setup).expect("grasp");
+    let start: Vec<String> = setup
+        .arm
+        .iter()
+        .map(|&i| prepared.q0()[i].to_string())
+        .collect();
+    let master = ros_support::Master::start();
+    let sawyer = ros_support::FakeSawyer::start_at(&master, 0.0, &start.join(","));
+    let out = out_dir("ros_live");
+    std::fs::create_dir_all(&out).unwrap();
+    let log = run_preview_with(
+        &[
+            "assets/scenes/pouring.toml",
+            "--robot",
+            "ros",
+            "--frames",
+            "90",
+        ],
+        &out,
+        &[("ROS_MASTER_URI", &master.uri)],
+    );
+    assert!(
+        log.contains("on the ROS robot at http://127.0.0.1"),
+        "{log}"
+    );
+    let r = sawyer.report();
+    eprintln!("fake Sawyer after the live run: {r}");
+    assert!(r["commands"].as_u64().is_some_and(|n| n > 0), "{r}");
+    assert_eq!(r["bad"].as_u64(), Some(0), "{r}");
+    assert_eq!(r["timeout_s"].as_f64(), Some(0.2));
+    // Refused where it cannot work: a scene without a task.
+    let run = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["run", "assets/scenes/default.toml", "--robot", "ros"])
+        .current_dir(root())
+        .output()
+        .unwrap();
+    assert!(!run.status.success());
+    assert!(String::from_utf8_lossy(&run.stderr).contains("--robot ros"));
 }

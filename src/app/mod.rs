@@ -54,8 +54,10 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
             .hand
             .as_ref()
             .map(|choice| {
-                teleop::LiveTeleop::prepare(scene, choice).map_err(|e| AppError::Teleop {
-                    source: Box::new(e),
+                teleop::LiveTeleop::prepare(scene, choice, options.robot).map_err(|e| {
+                    AppError::Teleop {
+                        source: Box::new(e),
+                    }
                 })
             })
             .transpose()?,

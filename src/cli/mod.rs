@@ -13,7 +13,7 @@ use std::process::ExitCode;
 use avatarm_core::robot::{PackagePath, RobotModel};
 use avatarm_core::teleop::hand::Handedness;
 use avatarm_scene::hand::HandChoice;
-use avatarm_scene::spec::BackgroundSpec;
+use avatarm_scene::spec::{BackgroundSpec, LeapMountKind};
 use avatarm_scene::{Scene, SceneError};
 use clap::{Parser, Subcommand};
 
@@ -60,7 +60,11 @@ enum Command {
         /// Which hand (default: the first the recording shows).
         #[arg(long, value_parser = ["left", "right"])]
         hand: Option<String>,
-        /// Where the Leap device lies in the scene, facing up (m).
+        /// How the device was mounted: desk (lying face up) or head (on a headset, facing
+        /// ahead); the operator faces the scene's +x.
+        #[arg(long, value_parser = ["desk", "head"], default_value = "desk")]
+        mount: String,
+        /// Where the Leap device sits in the scene (m).
         #[arg(long = "device-at", value_name = "X,Y,Z", value_delimiter = ',', num_args = 3,
               allow_hyphen_values = true, default_values_t = [0.0, 0.0, 0.0])]
         device_at: Vec<f64>,
@@ -100,6 +104,14 @@ enum Command {
         /// --xr), leap (feature `leap`), a recorded FILE.hand.jsonl, or none.
         #[arg(long, value_name = "SOURCE")]
         hand: Option<String>,
+        /// How the Leap (live or recorded) is mounted: desk, head or first_wrist (the scene's
+        /// [leap] mount otherwise; docs/hand.md).
+        #[arg(long = "leap-mount", value_name = "MOUNT", value_parser = leap_mount)]
+        leap_mount: Option<LeapMountKind>,
+        /// The robot the live task commands: sim (the simulated arm) or ros (the real robot
+        /// through the scene's [robot.link], ROS 1; docs/robot-ros.md).
+        #[arg(long, value_name = "ROBOT", value_parser = ["sim", "ros"], default_value = "sim")]
+        robot: String,
         #[command(flatten)]
         overrides: EraseOverrides,
     },
@@ -237,6 +249,10 @@ fn bundled_scene(file: &str) -> PathBuf {
     bundled("scenes", file)
 }
 
+fn leap_mount(text: &str) -> Result<LeapMountKind, String> {
+    text.parse()
+}
+
 fn default_scene() -> PathBuf {
     bundled_scene("default.toml")
 }
@@ -321,6 +337,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             recording,
             out,
             hand,
+            mount,
             device_at,
             picture,
             frame,
@@ -335,6 +352,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                         Handedness::Right
                     }
                 }),
+                head_mounted: mount == "head",
                 device_at: [device_at[0], device_at[1], device_at[2]],
                 picture,
                 frame,
@@ -364,6 +382,8 @@ fn run(cli: Cli) -> Result<(), AppError> {
             package_path,
             webcam,
             hand,
+            leap_mount,
+            robot,
             overrides,
         } => {
             if webcam.is_some() && !cfg!(feature = "webcam") {
@@ -376,6 +396,16 @@ fn run(cli: Cli) -> Result<(), AppError> {
             let path = scene.unwrap_or_else(default_scene);
             let mut scene = Scene::load(&path, &packages(package_path))?;
             overrides.apply(&mut scene)?;
+            if let Some(mount) = leap_mount {
+                if mount == LeapMountKind::FirstWrist && scene.file.leap.device_at.is_some() {
+                    return Err(AppError::flag(
+                        "--leap-mount",
+                        "first_wrist places a recording by its first wrist, but the scene's \
+                         [leap] gives device_at",
+                    ));
+                }
+                scene.file.leap.mount = mount;
+            }
             if webcam.is_some() && scene.file.background == BackgroundSpec::EmptyRoom {
                 eprintln!(
                     "webcam: the simulated empty room is no background for it; press B with the \
@@ -385,6 +415,17 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             let xr = xr || scene.file.xr;
             let hand = live_hand(&scene, hand.as_deref(), xr)?;
+            let robot = if robot == "ros" {
+                if hand.is_none() {
+                    return Err(AppError::flag(
+                        "--robot ros",
+                        "commands the robot from a live task: the scene needs a [task] and a hand",
+                    ));
+                }
+                crate::teleop::RobotChoice::Ros
+            } else {
+                crate::teleop::RobotChoice::Sim
+            };
             let mode = Mode::Preview(PreviewOptions {
                 frames,
                 screenshot,
@@ -394,6 +435,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     .or_else(|| frames.map(|_| 0.5 / scene.file.camera.fps)),
                 webcam,
                 hand,
+                robot,
             });
             let exit = build_app(&scene, &mode)?.run();
             if exit.is_error() {

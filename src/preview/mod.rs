@@ -52,6 +52,8 @@ pub struct PreviewOptions {
     pub webcam: Option<u32>,
     /// Run the scene's `[task]` live with this hand ([`crate::teleop`]).
     pub hand: Option<avatarm_scene::hand::HandChoice>,
+    /// The robot the live task commands: the simulated arm or the scene's ROS link.
+    pub robot: crate::teleop::RobotChoice,
 }
 
 /// The preview's cameras, panels and keys.

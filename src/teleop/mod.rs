@@ -24,6 +24,7 @@ use avatarm_mapping::pouring::{TrialParts, prepare};
 use avatarm_mapping::{MappingPlugin, Teleop};
 use avatarm_scene::hand::HandChoice;
 use avatarm_scene::prop::find_prop;
+use avatarm_scene::spec::{LeapMountKind, LeapSpec};
 use avatarm_sim::{SimPropPart, SimRobotState, SimRoomConfig};
 use avatarm_twin::{JointStateMessage, iso_to_transform, layers, transform_to_iso};
 use bevy::camera::visibility::RenderLayers;
@@ -96,7 +97,11 @@ impl LiveTeleop {
     /// task, the task cannot be set up (no reachable grasp, bad settings) or the hand source is
     /// unavailable (a recording that cannot be read, a device, a feature left out of this
     /// build).
-    pub fn prepare(scene: &Scene, choice: &HandChoice) -> Result<Self, AppError> {
+    pub fn prepare(
+        scene: &Scene,
+        choice: &HandChoice,
+        robot: RobotChoice,
+    ) -> Result<Self, AppError> {
         let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
             return Err(AppError::flag(
                 "--hand",
@@ -115,7 +120,11 @@ impl LiveTeleop {
                 .copied()
                 .unwrap_or(MappingMode::ClosedLoop)
         };
-        let parts = TrialParts::new(task, setup, &prepared, mode, 0)?;
+        let link = match robot {
+            RobotChoice::Sim => None,
+            RobotChoice::Ros => Some(ros_arm(scene, setup, prepared.q0())?),
+        };
+        let parts = TrialParts::on_robot(task, setup, &prepared, mode, 0, link)?;
         let start = parts.script.wrist_at(0.0).0;
         let (hand, desktop) = match choice {
             HandChoice::Scripted => (
@@ -139,14 +148,15 @@ impl LiveTeleop {
                 )
             }
             HandChoice::Xr => (None, None),
-            HandChoice::Leap => (Some(leap_hand(&start)?), None),
+            HandChoice::Leap => (Some(leap_hand(&start, &scene.file.leap)?), None),
             HandChoice::File(path) => (
                 Some(ActiveHand::new(avatarm_hand::RecordedHand::open(path)?)),
                 None,
             ),
-            HandChoice::LeapRecording { path, hand } => {
-                (Some(leap_recording(path, *hand, &start)?), None)
-            }
+            HandChoice::LeapRecording { path, hand } => (
+                Some(leap_recording(path, *hand, &start, &scene.file.leap)?),
+                None,
+            ),
         };
         let (prop, _) = find_prop(&scene.props, &task.object).ok_or_else(|| {
             avatarm_scene::SceneError::field(
@@ -185,10 +195,11 @@ impl LiveTeleop {
             None => xr_hand(app, &self.start)?,
         };
         info!(
-            "live teleoperation: '{}' with the {} ({} mode); the arm starts around the {}",
+            "live teleoperation: '{}' with the {} ({} mode) on the {}; the arm starts around the {}",
             self.scene_name,
             hand.name(),
             self.mode.name(),
+            self.parts.teleop.robot_name(),
             self.object
         );
         let parts = self.parts;
@@ -242,8 +253,123 @@ impl LiveTeleop {
 
 /// Adds the live trial of the scene's `[task]` to a preview app, driven by `choice`
 /// ([`LiveTeleop::prepare`] then [`LiveTeleop::install`]).
-pub fn add_live_teleop(app: &mut App, scene: &Scene, choice: &HandChoice) -> Result<(), AppError> {
-    LiveTeleop::prepare(scene, choice)?.install(app)
+pub fn add_live_teleop(
+    app: &mut App,
+    scene: &Scene,
+    choice: &HandChoice,
+    robot: RobotChoice,
+) -> Result<(), AppError> {
+    LiveTeleop::prepare(scene, choice, robot)?.install(app)
+}
+
+/// The robot a live task commands (`avatarm run --robot`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RobotChoice {
+    /// The embedded simulated arm (the simulated room's).
+    #[default]
+    Sim,
+    /// The real robot through the scene's `[robot.link]` (ROS 1, feature `ros`).
+    Ros,
+}
+
+/// The scene's `[robot.link]` as the ROS link's settings: Intera's topics by default, the
+/// master from the scene, else `ROS_MASTER_URI`, else `http://localhost:11311`.
+#[cfg(feature = "ros")]
+pub fn link_settings(
+    scene: &Scene,
+    setup: &avatarm_scene::task::TrialSetup,
+) -> Result<avatarm_ros::LinkSettings, AppError> {
+    use avatarm_ros::{CommandKind, LinkSettings};
+    use avatarm_scene::spec::RobotLinkKind;
+    let spec = &scene.file.robot.link;
+    let intera = spec.kind == RobotLinkKind::Intera;
+    let master_uri = spec
+        .master_uri
+        .clone()
+        .or_else(|| std::env::var("ROS_MASTER_URI").ok())
+        .unwrap_or_else(|| "http://localhost:11311".into());
+    let sawyer = LinkSettings::sawyer(&master_uri);
+    // A topic given (or "" for none), else Intera's where the link is Intera's.
+    let topic = |given: &Option<String>, intera_topic: Option<String>| match given {
+        Some(t) if t.is_empty() => None,
+        Some(t) => Some(t.clone()),
+        None if intera => intera_topic,
+        None => None,
+    };
+    let names = setup.model.dof_names();
+    let arm_joints: Vec<String> = if spec.arm_joints.is_empty() {
+        setup.arm.iter().map(|&i| names[i].to_owned()).collect()
+    } else {
+        spec.arm_joints.clone()
+    };
+    let command_topic =
+        topic(&spec.command_topic, Some(sawyer.command_topic.clone())).ok_or_else(|| {
+            AppError::flag(
+                "robot.link.command_topic",
+                "a ros_control link needs its controller's command topic",
+            )
+        })?;
+    Ok(LinkSettings {
+        master_uri,
+        node_name: spec.node_name.clone(),
+        joint_states_topic: spec.joint_states_topic.clone(),
+        command_topic,
+        command: if intera {
+            CommandKind::InteraVelocity
+        } else {
+            CommandKind::GroupVelocity {
+                joints: if spec.controller_joints.is_empty() {
+                    arm_joints.clone()
+                } else {
+                    spec.controller_joints.clone()
+                },
+            }
+        },
+        arm_joints,
+        robot_state_topic: topic(&spec.robot_state_topic, sawyer.robot_state_topic.clone()),
+        command_timeout_topic: topic(
+            &spec.command_timeout_topic,
+            sawyer.command_timeout_topic.clone(),
+        ),
+        command_timeout_s: spec.command_timeout_s,
+        speed_ratio: topic(
+            &spec.speed_ratio_topic,
+            sawyer.speed_ratio.as_ref().map(|(t, _)| t.clone()),
+        )
+        .map(|t| (t, spec.speed_ratio)),
+        gripper_topic: topic(&spec.gripper_topic, sawyer.gripper_topic.clone()),
+        stale_after_s: spec.stale_after_s,
+    })
+}
+
+#[cfg(feature = "ros")]
+fn ros_arm(
+    scene: &Scene,
+    setup: &avatarm_scene::task::TrialSetup,
+    q0: &nalgebra::DVector<f64>,
+) -> Result<Box<dyn avatarm_mapping::robot::RobotInterface>, AppError> {
+    let settings = link_settings(scene, setup)?;
+    let names = setup
+        .model
+        .dof_names()
+        .iter()
+        .map(|s| (*s).to_owned())
+        .collect();
+    let arm = avatarm_ros::RosArm::start(settings, names, q0.clone())
+        .map_err(|e| AppError::flag("--robot ros", e.to_string()))?;
+    Ok(Box::new(arm))
+}
+
+#[cfg(not(feature = "ros"))]
+fn ros_arm(
+    _: &Scene,
+    _: &avatarm_scene::task::TrialSetup,
+    _: &nalgebra::DVector<f64>,
+) -> Result<Box<dyn avatarm_mapping::robot::RobotInterface>, AppError> {
+    Err(AppError::flag(
+        "--robot ros",
+        "this avatarm was built without the ros feature; rebuild with `cargo build --features ros`",
+    ))
 }
 
 /// The simulated arm's start (the room shows it there from the first frame).
@@ -282,31 +408,61 @@ fn xr_hand(_: &mut App, _: &Isometry3<f64>) -> Result<(ActiveHand, Option<Deskto
     ))
 }
 
+/// The scene rotation of a Leap mounted as `kind` (`[leap] mount`); `None` for `first_wrist`.
+fn leap_rotation(kind: LeapMountKind) -> Option<nalgebra::UnitQuaternion<f64>> {
+    use avatarm_hand::leap::LeapMount;
+    match kind {
+        LeapMountKind::Desk => Some(LeapMount::desk()),
+        LeapMountKind::Head => Some(LeapMount::head()),
+        LeapMountKind::FirstWrist => None,
+    }
+}
+
+/// Where a Leap device sits for `spec` (`[leap]`): at `device_at`, else placed so that
+/// `rest_mm` (Leap frame) lands on `start`.
+fn leap_mount(
+    spec: &LeapSpec,
+    rotation: nalgebra::UnitQuaternion<f64>,
+    rest_mm: Vector3<f64>,
+    start: &Isometry3<f64>,
+) -> avatarm_hand::leap::LeapMount {
+    use avatarm_hand::leap::LeapMount;
+    match spec.device_at {
+        Some(at) => LeapMount::placed(rotation, Vector3::from(at)),
+        None => LeapMount::anchored(rotation, rest_mm, start.translation.vector),
+    }
+}
+
 #[cfg(feature = "leap")]
-fn leap_hand(start: &Isometry3<f64>) -> Result<ActiveHand, AppError> {
-    use avatarm_hand::leap::{LeapHand, LeapMount, LeapOptions};
-    // A hand 20 cm above the device lands on the trial's start pose.
-    let r = LeapMount::default().scene_from_leap.rotation;
-    let rest = Vector3::new(0.0, 0.2, 0.0);
-    let mount = LeapMount {
-        scene_from_leap: Isometry3::from_parts(
-            nalgebra::Translation3::from(start.translation.vector - r * rest),
-            r,
-        ),
+fn leap_hand(start: &Isometry3<f64>, spec: &LeapSpec) -> Result<ActiveHand, AppError> {
+    use avatarm_hand::leap::{LeapHand, LeapOptions};
+    let rotation = leap_rotation(spec.mount).ok_or_else(|| {
+        AppError::flag(
+            "leap.mount",
+            "first_wrist places a recording; a live Leap is mounted on the desk or the head",
+        )
+    })?;
+    // A hand at rest: 20 cm above a desk device, 35 cm ahead of and 20 cm below a head-mounted
+    // one (Leap's +y out of the device's face, +z up on the head).
+    let rest = match spec.mount {
+        LeapMountKind::Head => Vector3::new(0.0, 350.0, -200.0),
+        _ => Vector3::new(0.0, 200.0, 0.0),
     };
     let hand = LeapHand::start(LeapOptions {
-        mount,
+        mount: leap_mount(spec, rotation, rest, start),
         ..LeapOptions::default()
     })?;
     Ok(ActiveHand::new(hand))
 }
 
-/// A Leap recording's `hand` (default: the first one it shows), placed so that its first wrist
-/// is at the task's start pose (position and orientation).
+/// A Leap recording's `hand` (default: the first one it shows) from a device mounted as `spec`
+/// says: its first wrist at the task's start position (`desk`, `head`) or pose (`first_wrist`),
+/// or the device at `device_at`.
 fn leap_recording(
     path: &std::path::Path,
     hand: Option<avatarm_core::teleop::hand::Handedness>,
     start: &Isometry3<f64>,
+    spec: &LeapSpec,
 ) -> Result<ActiveHand, AppError> {
     use avatarm_hand::leap::LeapMount;
     use avatarm_hand::leap_recording::LeapRecording;
@@ -326,16 +482,26 @@ fn leap_recording(
                 format!("{}: no such hand in the recording", path.display()),
             )
         })?;
-    let mount = LeapMount::with_wrist_pose(&first, start)?;
+    let mount = match leap_rotation(spec.mount) {
+        None => LeapMount::with_wrist_pose(&first, start)?,
+        Some(rotation) => {
+            let wrist = first.arm.next.map(f64::from);
+            leap_mount(spec, rotation, Vector3::from(wrist), start)
+        }
+    };
     let frames = recording.hand_frames(Some(first.hand), &mount)?;
     Ok(ActiveHand::new(avatarm_hand::RecordedHand::from_frames(
-        format!("Leap recording {}", path.display()),
+        format!(
+            "Leap recording {} ({} mount)",
+            path.display(),
+            spec.mount.name()
+        ),
         frames,
     )?))
 }
 
 #[cfg(not(feature = "leap"))]
-fn leap_hand(_: &Isometry3<f64>) -> Result<ActiveHand, AppError> {
+fn leap_hand(_: &Isometry3<f64>, _: &LeapSpec) -> Result<ActiveHand, AppError> {
     Err(AppError::flag(
         "--hand leap",
         "this avatarm was built without the leap feature; rebuild with `cargo build --features \
@@ -366,6 +532,11 @@ fn mirror_room(
     let arm = teleop.robot();
     if let Some(sim) = arm.simulated() {
         robot.0.clone_from(sim);
+    } else if let Some(s) = teleop.received().last() {
+        // A real robot: the room's arm (the simulated camera's) shows where it is.
+        let params = *robot.0.params();
+        robot.0 =
+            avatarm_core::sim::SimRobot::new(params, room.model.dof_limits(), s.positions.clone());
     }
     if let Some(twin) = twin {
         for s in teleop.received() {

@@ -55,24 +55,58 @@ pub struct LeapMount {
 }
 
 impl Default for LeapMount {
-    /// A device lying on the desk facing up: Leap's +y is the scene's +z, Leap's +z (toward
-    /// the user) the scene's −x (the user faces +x), Leap's +x the scene's −y. At the origin.
+    /// A device lying on the desk facing up at the scene's origin ([`LeapMount::desk`]).
     fn default() -> Self {
-        let r = Matrix3::new(
-            0.0, 0.0, -1.0, //
-            -1.0, 0.0, 0.0, //
-            0.0, 1.0, 0.0,
-        );
-        Self {
-            scene_from_leap: Isometry3::from_parts(
-                Translation3::identity(),
-                UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)),
-            ),
-        }
+        Self::placed(Self::desk(), Vector3::zeros())
     }
 }
 
 impl LeapMount {
+    /// Scene from Leap for a device lying on the desk facing up, the operator facing the
+    /// scene's +x: Leap's +y (out of its face) is the scene's +z, its +z (toward the operator)
+    /// the scene's −x, its +x (the operator's right) the scene's −y.
+    pub fn desk() -> UnitQuaternion<f64> {
+        Self::rotation(Matrix3::new(
+            0.0, 0.0, -1.0, //
+            -1.0, 0.0, 0.0, //
+            0.0, 1.0, 0.0,
+        ))
+    }
+
+    /// Scene from Leap for a device on the front of a headset (the paper's head-mounted Leap),
+    /// the head level and facing the scene's +x: the desk device tipped forward by 90° about
+    /// its +x, so Leap's +y (out of its face) is the scene's +x (ahead), its +z the scene's +z
+    /// (up), its +x still the operator's right (−y).
+    pub fn head() -> UnitQuaternion<f64> {
+        Self::rotation(Matrix3::new(
+            0.0, 1.0, 0.0, //
+            -1.0, 0.0, 0.0, //
+            0.0, 0.0, 1.0,
+        ))
+    }
+
+    fn rotation(m: Matrix3<f64>) -> UnitQuaternion<f64> {
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m))
+    }
+
+    /// The device's frame turned by `scene_from_leap` (a rotation such as [`Self::desk`]) with
+    /// its origin at `device_at` (scene, m).
+    pub fn placed(scene_from_leap: UnitQuaternion<f64>, device_at: Vector3<f64>) -> Self {
+        Self {
+            scene_from_leap: Isometry3::from_parts(Translation3::from(device_at), scene_from_leap),
+        }
+    }
+
+    /// The device turned by `scene_from_leap`, placed so that the Leap-frame point `anchor_mm`
+    /// (millimetres, e.g. a hand at rest above the device) lands on `at` (scene, m).
+    pub fn anchored(
+        scene_from_leap: UnitQuaternion<f64>,
+        anchor_mm: Vector3<f64>,
+        at: Vector3<f64>,
+    ) -> Self {
+        Self::placed(scene_from_leap, at - scene_from_leap * (anchor_mm * 1e-3))
+    }
+
     /// The mount that puts the wrist of `hand` (a Leap hand in Leap's frame) at `wrist_pose`
     /// in the scene, in Avatarm's hand-frame convention (+x from the wrist toward the fingers,
     /// +z out of the back of the hand, as [`avatarm_core::teleop::hand::skeleton`]): how a
@@ -514,5 +548,36 @@ mod tests {
         short.digits[1][3].next = short.digits[1][3].prev;
         let e = leap_frame(&short, &LeapMount::default(), 0.0).expect_err("zero bone");
         assert!(e.to_string().contains("index"), "{e}");
+    }
+
+    #[test]
+    fn desk_and_head_mounts_turn_the_device_as_it_sits() {
+        for r in [LeapMount::desk(), LeapMount::head()] {
+            let m = r.to_rotation_matrix().into_inner();
+            assert!((m.determinant() - 1.0).abs() < 1e-12, "a proper rotation");
+            // Leap's +x is the operator's right, the scene's −y, on either mount.
+            assert!((r * Vector3::x() + Vector3::y()).norm() < 1e-12);
+        }
+        // Desk: out of the device's face is up; head: ahead, with Leap's +z up.
+        assert!((LeapMount::desk() * Vector3::y() - Vector3::z()).norm() < 1e-12);
+        assert!((LeapMount::head() * Vector3::y() - Vector3::x()).norm() < 1e-12);
+        assert!((LeapMount::head() * Vector3::z() - Vector3::z()).norm() < 1e-12);
+        // The same Leap-frame hand seen by a head-mounted device is ahead of the face, its
+        // palm toward the operator (Leap's −y is the scene's −x), its fingers down (Leap's −z).
+        let at = Vector3::new(0.3, -0.1, 1.2);
+        let mount = LeapMount::anchored(LeapMount::head(), Vector3::new(0.0, 200.0, 0.0), at);
+        let f = leap_frame(&flat_hand(), &mount, 0.0).expect("frame");
+        assert!((f.joints[1].pose.translation.vector - at).norm() < 1e-9);
+        let tip = f.joints[10].pose.translation.vector - at;
+        assert!(tip.z < -0.14, "fingers point down: {tip:?}");
+        let back = f.joints[0].pose.rotation * Vector3::z();
+        assert!(
+            (back - Vector3::x()).norm() < 1e-6,
+            "back of the hand ahead: {back:?}"
+        );
+        assert_eq!(
+            LeapMount::default(),
+            LeapMount::placed(LeapMount::desk(), Vector3::zeros())
+        );
     }
 }

@@ -312,6 +312,15 @@ pub struct HeldObject {
     pub released_at: Option<f64>,
 }
 
+/// The most closed frame of `frames` ([`closure`]): where a recorded fist is tightest.
+pub fn tightest(frames: &[HandFrame]) -> Option<&HandFrame> {
+    frames
+        .iter()
+        .filter_map(|f| closure(f).map(|c| (c, f)))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, f)| f)
+}
+
 /// How closed a hand is: the mean distance of its five fingertips to the palm joint (m).
 pub fn closure(frame: &HandFrame) -> Option<f64> {
     let palm = frame.joints.get(PALM)?.pose.translation.vector;

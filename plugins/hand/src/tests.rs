@@ -184,7 +184,7 @@ fn fingers_tracked_deep_inside_do_not_explode_the_object() {
 fn a_real_grab_recording_grasps_and_releases_a_handle() {
     use crate::leap::LeapMount;
     use crate::leap_recording::LeapRecording;
-    use crate::{HeldObject, RecordedHand, closure};
+    use crate::{HeldObject, RecordedHand, tightest};
     use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
     let dir = match avatarm_core::shared_data::shared_data() {
         Ok(dir) => dir,
@@ -203,14 +203,7 @@ fn a_real_grab_recording_grasps_and_releases_a_handle() {
     let frames = rec.hand_frames(Some(first.hand), &mount).expect("frames");
     // The handle stands where the fist is tightest: between the palm and the middle finger's
     // middle joint.
-    let fist = frames
-        .iter()
-        .min_by(|a, b| {
-            closure(a)
-                .unwrap_or(f64::MAX)
-                .total_cmp(&closure(b).unwrap_or(f64::MAX))
-        })
-        .expect("frames");
+    let fist = tightest(&frames).expect("frames");
     let inside =
         (fist.joints[0].pose.translation.vector + fist.joints[13].pose.translation.vector) / 2.0;
     let handle = Vec3::new(inside.x as f32, inside.y as f32, 0.85);

@@ -157,6 +157,14 @@ pub struct TeleopConfig {
 impl Teleop {
     /// The loop for `robot`. Errors when the settings are invalid.
     pub fn new(config: TeleopConfig, robot: impl RobotInterface) -> Result<Self, MappingError> {
+        Self::with_robot(config, Box::new(robot))
+    }
+
+    /// [`Teleop::new`] for a robot chosen at run time (the simulated arm, a ROS link).
+    pub fn with_robot(
+        config: TeleopConfig,
+        robot: Box<dyn RobotInterface>,
+    ) -> Result<Self, MappingError> {
         config.safety.validate()?;
         let n = config.model.dof();
         if let Some(&bad) = config.arm.iter().find(|&&i| i >= n) {
@@ -174,7 +182,7 @@ impl Teleop {
             arm: config.arm,
             tcp_from_object: config.tcp_from_object,
             v2r: config.v2r,
-            robot: Box::new(robot),
+            robot,
             joints: None,
             received: Vec::new(),
             status: TeleopStatus::default(),

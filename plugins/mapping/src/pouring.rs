@@ -26,6 +26,7 @@ use bevy_rapier3d::prelude::*;
 use nalgebra::{DVector, Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
 
+use crate::robot::RobotInterface;
 use crate::{
     CarriedObject, MappingError, MappingPlugin, SimArm, Teleop, TeleopConfig, TeleopSample,
 };
@@ -319,6 +320,14 @@ pub struct Prepared {
     tcp_from_object: Isometry3<f64>,
 }
 
+impl Prepared {
+    /// The arm's joint positions around the bottle (q order): where a real robot is moved
+    /// before a trial.
+    pub fn q0(&self) -> &DVector<f64> {
+        &self.q0
+    }
+}
+
 /// One trial's world before it runs: the teleoperation loop with the simulated arm around the
 /// real bottle, the trial's hand script, and where the twin starts. [`run_trial`] steps it
 /// headless; `avatarm run` steps it live in the preview with any hand source.
@@ -351,13 +360,26 @@ struct TrialBodies {
 }
 
 impl TrialParts {
-    /// Builds trial `trial` in `mode` (the arm placed by [`prepare`]).
+    /// Builds trial `trial` in `mode` (the arm placed by [`prepare`]) on the simulated arm.
     pub fn new(
         task: &PouringTask,
         setup: &TrialSetup,
         prepared: &Prepared,
         mode: MappingMode,
         trial: u32,
+    ) -> Result<Self, MappingError> {
+        Self::on_robot(task, setup, prepared, mode, trial, None)
+    }
+
+    /// [`TrialParts::new`] on `robot` (a real robot's link, already at [`Prepared::q0`]), or
+    /// on the simulated arm when `None`.
+    pub fn on_robot(
+        task: &PouringTask,
+        setup: &TrialSetup,
+        prepared: &Prepared,
+        mode: MappingMode,
+        trial: u32,
+        robot: Option<Box<dyn RobotInterface>>,
     ) -> Result<Self, MappingError> {
         let (q0, tcp_from_object) = (prepared.q0.clone(), prepared.tcp_from_object);
         let centre = setup.bottle_centre();
@@ -366,20 +388,21 @@ impl TrialParts {
         let script = trial_script(task, &twin_start.translation.vector, trial)?;
         let period = Duration::from_secs_f64(1.0 / setup.control_rate_hz);
         let dt = period.as_secs_f64();
-        let robot = SimRobot::new(setup.sim, setup.model.dof_limits(), q0);
-        let arm = SimArm::new(
-            robot,
-            setup.model.clone(),
-            setup.base,
-            setup.tcp,
-            CarriedObject {
-                pose: centre,
-                rest_z: centre.translation.z,
-                grasp_radius_m: 0.02,
-                held: None,
-            },
-        );
-        let teleop = Teleop::new(
+        let arm = robot.unwrap_or_else(|| {
+            Box::new(SimArm::new(
+                SimRobot::new(setup.sim, setup.model.dof_limits(), q0),
+                setup.model.clone(),
+                setup.base,
+                setup.tcp,
+                CarriedObject {
+                    pose: centre,
+                    rest_z: centre.translation.z,
+                    grasp_radius_m: 0.02,
+                    held: None,
+                },
+            ))
+        });
+        let teleop = Teleop::with_robot(
             TeleopConfig {
                 model: setup.model.clone(),
                 base: setup.base,
@@ -476,7 +499,29 @@ pub fn run_trial_with(
     trial: u32,
     hand: impl FnOnce(ScriptedHand) -> ActiveHand,
 ) -> Result<TrialRecord, MappingError> {
-    run_prepared(task, setup, &prepare(task, setup)?, mode, trial, hand)
+    run_prepared(task, setup, &prepare(task, setup)?, mode, trial, hand, None)
+}
+
+/// One trial on a real robot's link (`robot`, already at [`Prepared::q0`] with its gripper
+/// open around the real bottle), stepped in real time: each control tick waits for the wall
+/// clock. With no ground truth, the real bottle is where the measured joint states put it.
+pub fn run_trial_on_robot(
+    task: &PouringTask,
+    setup: &TrialSetup,
+    prepared: &Prepared,
+    mode: MappingMode,
+    trial: u32,
+    robot: Box<dyn RobotInterface>,
+) -> Result<TrialRecord, MappingError> {
+    run_prepared(
+        task,
+        setup,
+        prepared,
+        mode,
+        trial,
+        ActiveHand::new,
+        Some(robot),
+    )
 }
 
 fn run_prepared(
@@ -486,8 +531,10 @@ fn run_prepared(
     mode: MappingMode,
     trial: u32,
     hand: impl FnOnce(ScriptedHand) -> ActiveHand,
+    robot: Option<Box<dyn RobotInterface>>,
 ) -> Result<TrialRecord, MappingError> {
-    let parts = TrialParts::new(task, setup, prepared, mode, trial)?;
+    let realtime = robot.is_some();
+    let parts = TrialParts::on_robot(task, setup, prepared, mode, trial, robot)?;
     let centre = setup.bottle_centre();
     let twin_start = parts.twin_start;
     let period = parts.period;
@@ -505,7 +552,11 @@ fn run_prepared(
     let mut twin = Vec::with_capacity(steps);
     let mut max_contact: f64 = 0.0;
     let started = std::time::Instant::now();
-    for _ in 0..steps {
+    for i in 0..steps {
+        if realtime {
+            let due = started + period.mul_f64(i as f64);
+            std::thread::sleep(due.saturating_duration_since(std::time::Instant::now()));
+        }
         app.update();
         let mut q = app
             .world_mut()
@@ -530,12 +581,24 @@ fn run_prepared(
     let samples = teleop.log;
     let grasp = samples.iter().position(|s| s.gripper_closed);
     let from = grasp.unwrap_or(0);
+    // The real bottle: the truth where the backend knows it (simulation), else where the
+    // measured joint states put it.
+    let real = |s: &TeleopSample| {
+        s.truth.or_else(|| {
+            s.measured
+                .translation
+                .vector
+                .iter()
+                .all(|v| v.is_finite())
+                .then_some(s.measured)
+        })
+    };
     let window: Vec<&TeleopSample> = samples[from..]
         .iter()
-        .filter(|s| s.truth.is_some() && s.target.translation.vector.iter().all(|v| v.is_finite()))
+        .filter(|s| real(s).is_some() && s.target.translation.vector.iter().all(|v| v.is_finite()))
         .collect();
     let targets: Vec<Isometry3<f64>> = window.iter().map(|s| s.target).collect();
-    let truths: Vec<Isometry3<f64>> = window.iter().filter_map(|s| s.truth).collect();
+    let truths: Vec<Isometry3<f64>> = window.iter().filter_map(|s| real(s)).collect();
     let rmse = pose_rmse(&targets, &truths).ok_or_else(|| MappingError::Trial {
         message: "no samples to measure".into(),
     })?;
@@ -551,7 +614,7 @@ fn run_prepared(
         .fold(0.0, f64::max);
     let real_lift_m = samples
         .iter()
-        .filter_map(|s| s.truth)
+        .filter_map(real)
         .map(|p| p.translation.z - centre.translation.z)
         .fold(0.0, f64::max);
     Ok(TrialRecord {
@@ -591,7 +654,7 @@ pub fn run_trials(
         let mut trials = Vec::new();
         for i in 0..task.trials {
             progress(mode, i);
-            let record = run_prepared(task, setup, &prepared, mode, i, ActiveHand::new)?;
+            let record = run_prepared(task, setup, &prepared, mode, i, ActiveHand::new, None)?;
             trials.push(record.result);
         }
         out.push((mode, ModeSummary::of(trials)));

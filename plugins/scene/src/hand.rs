@@ -22,8 +22,9 @@ pub enum HandChoice {
     /// A recorded `.hand.jsonl` file (docs/hand.md).
     File(PathBuf),
     /// A Leap Motion recording (`.json` or `.json.gz`, Leap's protocol v6 as leapjs-playback
-    /// records it), placed so that its first wrist is at the task's start pose; `FILE#left` or
-    /// `FILE#right` chooses the hand (default: the first one the recording shows).
+    /// records it), from a device placed as the scene's `[leap]` says
+    /// ([`crate::spec::LeapSpec`]); `FILE#left` or `FILE#right` chooses the hand (default: the
+    /// first one the recording shows).
     LeapRecording {
         /// The recording.
         path: PathBuf,

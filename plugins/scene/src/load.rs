@@ -179,6 +179,19 @@ impl Scene {
         {
             h.parse::<HandChoice>().map_err(|e| e.in_file(path))?;
         }
+        if let Err((field, message)) = file.robot.link.validate() {
+            return Err(invalid(&field, message));
+        }
+        if file.leap.mount == crate::spec::LeapMountKind::FirstWrist
+            && file.leap.device_at.is_some()
+        {
+            return Err(invalid(
+                "leap.device_at",
+                "first_wrist places a recording by its first wrist; a device position needs \
+                 mount = \"desk\" or \"head\""
+                    .into(),
+            ));
+        }
         let x = &file.xr_layout;
         if !(x.panel_distance_m.is_finite()
             && (0.2..=20.0).contains(&x.panel_distance_m)

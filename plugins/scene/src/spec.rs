@@ -64,6 +64,115 @@ pub struct RobotSpec {
     /// Simulated robot timing and response.
     #[serde(default)]
     pub sim: SimRobotParams,
+    /// The real robot's ROS 1 link (`[robot.link]`), used by `avatarm run --robot ros`.
+    #[serde(default)]
+    pub link: RobotLinkSpec,
+}
+
+/// How commands reach a ROS 1 robot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RobotLinkKind {
+    /// A Rethink Sawyer through Intera: `intera_core_msgs/JointCommand` in velocity mode, the
+    /// robot's enable and e-stop state obeyed, the electric gripper.
+    #[default]
+    Intera,
+    /// Any arm with a ros_control joint group velocity controller: `std_msgs/Float64MultiArray`
+    /// in the controller's joint order.
+    RosControl,
+}
+
+/// `[robot.link]`: the real robot over ROS 1 (docs/robot-ros.md). Topic defaults are
+/// Intera's for a right-arm Sawyer; a `ros_control` link has no robot state, command timeout,
+/// speed ratio or gripper topics unless given.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RobotLinkSpec {
+    /// `intera` or `ros_control`.
+    pub kind: RobotLinkKind,
+    /// The ROS master; default: `ROS_MASTER_URI`, else `http://localhost:11311`.
+    pub master_uri: Option<String>,
+    /// This node's name.
+    pub node_name: String,
+    /// `sensor_msgs/JointState` in.
+    pub joint_states_topic: String,
+    /// Commands out; default `/robot/limb/right/joint_command` (Intera).
+    pub command_topic: Option<String>,
+    /// The joints commanded; default: the task's arm joints (else every movable joint without
+    /// "finger" in its name).
+    pub arm_joints: Vec<String>,
+    /// `ros_control`: the controller's joints, in its order (default: `arm_joints`).
+    pub controller_joints: Vec<String>,
+    /// Intera's robot state (`/robot/state`); `""` for none.
+    pub robot_state_topic: Option<String>,
+    /// Latched command timeout topic (Intera's `/robot/limb/right/joint_command_timeout`);
+    /// `""` for none.
+    pub command_timeout_topic: Option<String>,
+    /// The robot's command timeout (s, 0.01..5).
+    pub command_timeout_s: f64,
+    /// Latched speed ratio topic (Intera's `/robot/limb/right/set_speed_ratio`); `""` for
+    /// none.
+    pub speed_ratio_topic: Option<String>,
+    /// The speed ratio of position moves (0 < r <= 1).
+    pub speed_ratio: f64,
+    /// The electric gripper's command topic (Intera's
+    /// `/io/end_effector/right_gripper/command`); `""` for none.
+    pub gripper_topic: Option<String>,
+    /// No joint state for this long (s) and the link is down: commands stop.
+    pub stale_after_s: f64,
+}
+
+impl Default for RobotLinkSpec {
+    fn default() -> Self {
+        Self {
+            kind: RobotLinkKind::Intera,
+            master_uri: None,
+            node_name: "avatarm".into(),
+            joint_states_topic: "/robot/joint_states".into(),
+            command_topic: None,
+            arm_joints: Vec::new(),
+            controller_joints: Vec::new(),
+            robot_state_topic: None,
+            command_timeout_topic: None,
+            command_timeout_s: 0.2,
+            speed_ratio_topic: None,
+            speed_ratio: 0.3,
+            gripper_topic: None,
+            stale_after_s: 0.2,
+        }
+    }
+}
+
+impl RobotLinkSpec {
+    /// Checks the numbers; the message names the field.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let bad = |field: &str, message: String| Err((format!("robot.link.{field}"), message));
+        if !(0.01..=5.0).contains(&self.command_timeout_s) {
+            return bad(
+                "command_timeout_s",
+                format!("{} s: must be within 0.01..5", self.command_timeout_s),
+            );
+        }
+        if !(self.speed_ratio > 0.0 && self.speed_ratio <= 1.0) {
+            return bad(
+                "speed_ratio",
+                format!("{}: must be in (0, 1]", self.speed_ratio),
+            );
+        }
+        if !(0.01..=5.0).contains(&self.stale_after_s) {
+            return bad(
+                "stale_after_s",
+                format!("{} s: must be within 0.01..5", self.stale_after_s),
+            );
+        }
+        if self.node_name.is_empty() || self.joint_states_topic.is_empty() {
+            return bad(
+                "node_name",
+                "node name and joint_states_topic must not be empty".into(),
+            );
+        }
+        Ok(())
+    }
 }
 
 /// Calibration error between the camera's true pose and the pose the app believes.
@@ -220,6 +329,66 @@ pub struct SceneFile {
     /// How detailed the mask twin is (`[twin]`).
     #[serde(default)]
     pub twin: TwinSpec,
+    /// Where the operator's Leap Motion sits (`[leap]`): for `hand = "leap"` and Leap
+    /// recordings.
+    #[serde(default)]
+    pub leap: LeapSpec,
+}
+
+/// How a Leap Motion is mounted: which way its tracking frame (+y out of its face, +z toward
+/// the cable side) points relative to the operator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LeapMountKind {
+    /// Lying on the desk facing up, the operator on its +z side (Leap's standard desktop
+    /// orientation).
+    #[default]
+    Desk,
+    /// On the front of the operator's headset, its face forward, +z up (the paper's
+    /// head-mounted Leap; the head is taken to be still, looking along the operator's facing).
+    Head,
+    /// No physical mount: a recording's first wrist is put at the task's start pose, position
+    /// and orientation (recordings only).
+    FirstWrist,
+}
+
+impl LeapMountKind {
+    /// The name as written in scenes and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Desk => "desk",
+            Self::Head => "head",
+            Self::FirstWrist => "first_wrist",
+        }
+    }
+}
+
+impl std::str::FromStr for LeapMountKind {
+    type Err = String;
+
+    /// `desk`, `head` or `first_wrist` (`first-wrist` too).
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "desk" => Ok(Self::Desk),
+            "head" => Ok(Self::Head),
+            "first_wrist" | "first-wrist" => Ok(Self::FirstWrist),
+            other => Err(format!("'{other}': expected desk, head or first_wrist")),
+        }
+    }
+}
+
+/// `[leap]`: where the operator's Leap Motion sits in the scene. The operator faces the
+/// scene's +x (as the task's hand does). Without `device_at` the device is placed so that the
+/// operator's hand at rest lands on the task's start: for a live device, a hand 20 cm above a
+/// desk device or 35 cm ahead of and 20 cm below a head-mounted one; for a recording, its
+/// first wrist.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LeapSpec {
+    /// `desk`, `head` or `first_wrist`.
+    pub mount: LeapMountKind,
+    /// The device's origin in the scene (m); not with `first_wrist`.
+    pub device_at: Option<[f64; 3]>,
 }
 
 /// `[twin]`: the mask twin, the one the app renders white to make M(t). It can be lighter than

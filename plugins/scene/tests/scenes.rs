@@ -87,6 +87,39 @@ fn bad_scenes_are_refused_naming_the_field() {
     let xr = parse(&text.replace("duration_s = 10.0", "duration_s = 10.0\nxr = true"))
         .expect("xr = true is a scene setting");
     assert!(xr.file.xr);
+
+    let head = parse(&format!(
+        "{text}\n[leap]\nmount = \"head\"\ndevice_at = [0.2, 0.0, 1.1]\n"
+    ))
+    .expect("a head-mounted Leap");
+    assert_eq!(
+        head.file.leap.mount,
+        avatarm_scene::spec::LeapMountKind::Head
+    );
+    assert_eq!(head.file.leap.device_at, Some([0.2, 0.0, 1.1]));
+    let e = parse(&format!("{text}\n[leap]\nmount = \"chest\"\n"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("leap.mount") || e.contains("chest"), "{e}");
+    let e = parse(&format!(
+        "{text}\n[leap]\nmount = \"first_wrist\"\ndevice_at = [0.0, 0.0, 1.0]\n"
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("leap.device_at"), "{e}");
+
+    let with_link = format!(
+        "{text}\n[robot.link]\nkind = \"ros_control\"\ncommand_topic = \"/c\"\nspeed_ratio = 0.5\n"
+    );
+    let link = parse(&with_link).expect("a ros_control link");
+    assert_eq!(
+        link.file.robot.link.kind,
+        avatarm_scene::spec::RobotLinkKind::RosControl
+    );
+    let e = parse(&with_link.replace("speed_ratio = 0.5", "speed_ratio = 0"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("robot.link.speed_ratio"), "{e}");
 }
 
 /// `../shared/cases/18-scene-nan-camera-pose`: a NaN in the camera pose (found by mutating the
