@@ -132,6 +132,20 @@ impl LinkSettings {
         if self.arm_joints.is_empty() {
             return Err("no arm joints to command".into());
         }
+        if let CommandKind::GroupVelocity { joints } = &self.command {
+            if joints.is_empty() {
+                return Err("the controller has no joints".into());
+            }
+            if let Some((i, j)) = joints
+                .iter()
+                .enumerate()
+                .find(|(i, j)| joints[..*i].contains(j))
+            {
+                return Err(format!(
+                    "the controller's joint '{j}' is listed twice (at {i})"
+                ));
+            }
+        }
         if let CommandKind::GroupVelocity { joints } = &self.command
             && let Some(j) = joints.iter().find(|j| !self.arm_joints.contains(j))
         {
@@ -240,8 +254,17 @@ pub struct LinkStatus {
 }
 
 enum Outbound {
-    Joints(Vec<f64>),
-    Gripper { position_m: f64 },
+    /// Joint velocities handed over at `at`; the client drops them once older than the
+    /// link's command age (a command never goes out late).
+    Joints {
+        values: Vec<f64>,
+        at: Instant,
+    },
+    /// Zero velocities: always sent (the stop Avatarm's watchdog sends first).
+    Stop(Vec<f64>),
+    Gripper {
+        position_m: f64,
+    },
 }
 
 struct Shared {
@@ -274,6 +297,15 @@ pub struct RosArm {
     clock: ClockOffset,
     /// App time at the last `advance` and the instant it was taken.
     now: Option<(f64, Instant)>,
+    /// App clock minus the wall clock (s since `epoch`), averaged over `advance` calls: the
+    /// app's fixed-step clock moves in bursts, so one call's pairing would put an arrival up
+    /// to a frame early, and the minimum filter would keep that error.
+    app_minus_wall: Option<f64>,
+    epoch: Instant,
+    /// For each value of a command, its index in q (the arm's joints, or the controller's).
+    command_index: Vec<usize>,
+    /// A non-zero command went out since the last stop.
+    moving: bool,
     last_state: Option<Instant>,
     lost_said: bool,
     /// The gripper command last handed over, and the connection it went out on.
@@ -334,6 +366,21 @@ impl RosArm {
                     })
             })
             .collect::<Result<Vec<_>, _>>()?;
+        let command_index = match &settings.command {
+            CommandKind::InteraVelocity => arm.clone(),
+            CommandKind::GroupVelocity { joints: controller } => controller
+                .iter()
+                .map(|j| {
+                    joints
+                        .iter()
+                        .position(|k| k == j)
+                        .ok_or_else(|| LinkError::UnknownJoint {
+                            joint: j.clone(),
+                            known: joints.join(", "),
+                        })
+                })
+                .collect::<Result<Vec<_>, _>>()?,
+        };
         let shared = Arc::new(Mutex::new(Shared {
             status: LinkStatus::default(),
             outbound: None,
@@ -360,6 +407,10 @@ impl RosArm {
             last_q: q0,
             clock: ClockOffset::new(200),
             now: None,
+            app_minus_wall: None,
+            epoch: Instant::now(),
+            command_index,
+            moving: false,
             last_state: None,
             lost_said: false,
             gripper_sent: None,
@@ -383,10 +434,15 @@ impl RosArm {
             .is_some_and(|t| t.elapsed().as_secs_f64() <= self.settings.stale_after_s)
     }
 
-    fn refuse(&self, why: String) -> MappingError {
+    fn refuse(&mut self, why: String) -> MappingError {
         if let Ok(mut s) = self.shared.lock() {
             s.status.commands_refused += 1;
+            // Nothing accepted before the refusal goes out after it.
+            if matches!(s.outbound, Some(Outbound::Joints { .. })) {
+                s.outbound = None;
+            }
         }
+        self.stop();
         MappingError::Robot {
             robot: self.name.clone(),
             message: why,
@@ -394,12 +450,8 @@ impl RosArm {
     }
 
     fn app_time(&self, at: Instant) -> Option<f64> {
-        let (now_s, now) = self.now?;
-        Some(if at >= now {
-            now_s + (at - now).as_secs_f64()
-        } else {
-            now_s - (now - at).as_secs_f64()
-        })
+        let wall = at.saturating_duration_since(self.epoch).as_secs_f64();
+        Some(wall + self.app_minus_wall?)
     }
 
     fn hand_over(&self, out: Outbound) {
@@ -415,8 +467,18 @@ impl RosArm {
         self.notify.notify_one();
     }
 
+    /// After a non-zero command, zero velocities once: a ros_control velocity controller keeps
+    /// its last command for ever, and Intera's own timeout only acts later.
+    fn stop(&mut self) {
+        if self.moving {
+            self.moving = false;
+            let zeros = vec![0.0; self.command_index.len()];
+            self.hand_over(Outbound::Stop(zeros));
+        }
+    }
+
     /// Checks that a command may leave: the link alive and the robot enabled and running.
-    fn may_command(&self) -> Result<(), MappingError> {
+    fn may_command(&mut self) -> Result<(), MappingError> {
         if !self.alive() {
             return Err(self.refuse(format!(
                 "no joint state for more than {} s: the link is down",
@@ -446,6 +508,7 @@ impl Drop for RosArm {
     /// Tells the client thread to leave (it does within a second, unregistering the node);
     /// not waited for, so a master that does not answer never holds up the app.
     fn drop(&mut self) {
+        self.stop();
         if let Ok(mut s) = self.shared.lock() {
             s.shutdown = true;
         }
@@ -493,15 +556,12 @@ impl RobotInterface for RosArm {
             )));
         }
         self.may_command()?;
-        let values = match &self.settings.command {
-            CommandKind::InteraVelocity => self.arm.iter().map(|&i| qdot[i]).collect(),
-            CommandKind::GroupVelocity { joints } => joints
-                .iter()
-                .filter_map(|j| self.joints.iter().position(|k| k == j))
-                .map(|i| qdot[i])
-                .collect(),
-        };
-        self.hand_over(Outbound::Joints(values));
+        let values: Vec<f64> = self.command_index.iter().map(|&i| qdot[i]).collect();
+        self.moving = values.iter().any(|v| *v != 0.0);
+        self.hand_over(Outbound::Joints {
+            values,
+            at: Instant::now(),
+        });
         Ok(())
     }
 
@@ -531,12 +591,22 @@ impl RobotInterface for RosArm {
     }
 
     fn advance(&mut self, now_s: f64) {
-        self.now = Some((now_s, Instant::now()));
+        let now = Instant::now();
+        self.now = Some((now_s, now));
+        if now_s.is_finite() {
+            let d = now_s - now.saturating_duration_since(self.epoch).as_secs_f64();
+            self.app_minus_wall = Some(match self.app_minus_wall {
+                // A jump (a paused or stepped app clock) is taken at once; jitter is averaged.
+                Some(prev) if (d - prev).abs() < 0.1 => prev + 0.05 * (d - prev),
+                _ => d,
+            });
+        }
         let alive = self.alive();
         if alive {
             self.lost_said = false;
         } else if self.last_state.is_some() && !self.lost_said {
             self.lost_said = true;
+            self.stop();
             if let Ok(mut s) = self.shared.lock() {
                 s.status.losses += 1;
             }
@@ -585,9 +655,16 @@ impl RosArm {
             return Err(format!("no arm joint '{j}' in the joint state"));
         }
         self.last_state = Some(s.arrival);
-        let arrival = self.app_time(s.arrival).unwrap_or(s.stamp_s);
-        self.clock.add(arrival, s.stamp_s);
-        let stamp_s = self.clock.to_app(s.stamp_s).unwrap_or(arrival);
+        // Before the first `advance` there is no app clock to map onto: the arrival is all
+        // there is. A zero stamp (a driver that does not stamp) is taken as the arrival.
+        let stamp_s = match self.app_time(s.arrival) {
+            Some(arrival) if s.stamp_s > 0.0 => {
+                self.clock.add(arrival, s.stamp_s);
+                self.clock.to_app(s.stamp_s).unwrap_or(arrival)
+            }
+            Some(arrival) => arrival,
+            None => s.stamp_s,
+        };
         self.last_q = q.clone();
         Ok(JointState {
             stamp_s,
@@ -603,6 +680,15 @@ fn ros_time_s(t: &roslibrust::codegen::integral_types::Time) -> f64 {
 
 fn now_time() -> roslibrust::codegen::integral_types::Time {
     std::time::SystemTime::now().try_into().unwrap_or_default()
+}
+
+/// Aborts a task when dropped (a session's helper tasks end with it).
+struct AbortOnDrop(tokio::task::JoinHandle<()>);
+
+impl Drop for AbortOnDrop {
+    fn drop(&mut self) {
+        self.0.abort();
+    }
 }
 
 /// The client thread: a single-threaded runtime that keeps the node connected.
@@ -722,8 +808,43 @@ async fn session(
     if let Ok(mut s) = shared.lock() {
         s.status.connected = true;
         s.status.connects += 1;
+        // A new connection starts from what this robot says now, and never sends a command
+        // accepted before it.
+        s.status.robot = None;
+        s.outbound = None;
     }
-    let mut check = tokio::time::interval(Duration::from_secs(1));
+    // Whether the master still knows this node, checked once a second on its own task (an
+    // unreachable master never holds up joint states or commands); a restarted master has
+    // forgotten it, and the session ends to register again.
+    let (forgotten_tx, mut forgotten) = tokio::sync::oneshot::channel::<()>();
+    let watch = {
+        let (master_uri, topic, node) = (
+            settings.master_uri.clone(),
+            settings.joint_states_topic.clone(),
+            node.clone(),
+        );
+        tokio::spawn(async move {
+            let mut tick = tokio::time::interval(Duration::from_secs(1));
+            loop {
+                tick.tick().await;
+                let check = async {
+                    let master = MasterClient::new(&master_uri, &client_uri, &node)
+                        .await
+                        .ok()?;
+                    let state = master.get_system_state().await.ok()?;
+                    Some(state.is_subscribed(&topic, &node))
+                };
+                if let Ok(Some(false)) = tokio::time::timeout(Duration::from_secs(2), check).await {
+                    let _ = forgotten_tx.send(());
+                    return;
+                }
+            }
+        })
+    };
+    let _abort = AbortOnDrop(watch);
+    // A command older than this is not sent (the robot would already have timed it out, or the
+    // link was down when it was made).
+    let max_age = Duration::from_secs_f64(settings.stale_after_s.min(settings.command_timeout_s));
     let mut seq = 0u32;
     loop {
         tokio::select! {
@@ -771,10 +892,12 @@ async fn session(
                     Ok(mut s) => (s.outbound.take(), s.gripper.take(), s.shutdown),
                     Err(_) => (None, None, true),
                 };
-                if stop {
-                    return Ok(());
-                }
-                if let Some(Outbound::Joints(values)) = out {
+                let values = match out {
+                    Some(Outbound::Joints { values, at }) if at.elapsed() <= max_age => Some(values),
+                    Some(Outbound::Stop(values)) => Some(values),
+                    _ => None,
+                };
+                if let Some(values) = values {
                     seq = seq.wrapping_add(1);
                     let header = std_msgs::Header { seq, stamp: now_time(), frame_id: String::new() };
                     if let Some(p) = &intera {
@@ -804,17 +927,16 @@ async fn session(
                     };
                     p.publish(&m).await.map_err(|e| err("gripper", &e))?;
                 }
-            },
-            _ = check.tick() => {
-                if shared.lock().map_or(true, |s| s.shutdown) {
+                if stop {
                     return Ok(());
                 }
-                // A restarted master has forgotten this node: register again.
-                if let Ok(master) = MasterClient::new(&settings.master_uri, &client_uri, &node).await
-                    && let Ok(state) = master.get_system_state().await
-                    && !state.is_subscribed(&settings.joint_states_topic, &node)
-                {
-                    return Err("the master no longer knows this node (restarted?)".into());
+            },
+            _ = &mut forgotten => {
+                return Err("the master no longer knows this node (restarted?)".into());
+            },
+            () = tokio::time::sleep(Duration::from_secs(1)) => {
+                if shared.lock().map_or(true, |s| s.shutdown) {
+                    return Ok(());
                 }
             },
         }

@@ -132,7 +132,9 @@ fn joint_states_flow_in_commands_reach_the_robot_and_its_clock_is_mapped() {
     let e = arm.send(&bad).expect_err("NaN refused");
     assert!(e.to_string().contains("right_j3"), "{e}");
     pump(&mut arm, 0.3, None);
-    assert_eq!(sawyer.report()["commands"].as_u64(), before);
+    let r = sawyer.report();
+    assert_eq!(r["commands"].as_u64(), before);
+    assert_eq!(r["bad"].as_u64(), Some(0), "{r}");
 
     // The gripper closes (the link pumped first: a report was waited for without it).
     pump(&mut arm, 0.05, None);
@@ -189,7 +191,9 @@ fn a_stopped_or_disabled_robot_gets_no_command() {
     );
     let r = sawyer.report();
     assert_eq!(r["commands"].as_u64(), before);
-    assert_eq!(r["ignored"].as_u64(), Some(0), "nothing was sent: {r}");
+    // The arm was moving: the first refusal sent zero velocities once, nothing else.
+    assert!(r["ignored"].as_u64().is_some_and(|n| n <= 1), "{r}");
+    assert_eq!(r["ignored_max_speed"].as_f64(), Some(0.0), "{r}");
 }
 
 #[test]
@@ -205,6 +209,7 @@ fn a_dead_robot_node_stops_the_commands_and_a_restarted_one_is_taken_back() {
     assert!(refused.is_empty(), "{refused:?}");
 
     // The node dies: commands stop within the link's stale time.
+    let losses = arm.status().losses;
     drop(sawyer);
     let killed = Instant::now();
     let mut stopped_after = None;
@@ -221,9 +226,9 @@ fn a_dead_robot_node_stops_the_commands_and_a_restarted_one_is_taken_back() {
         "commands refused {:.0} ms after the robot node died",
         stopped_after * 1e3
     );
-    assert!(stopped_after <= 0.3, "{stopped_after}");
+    assert!(stopped_after <= 0.5, "{stopped_after}");
     let status = arm.status();
-    assert_eq!(status.losses, 1, "said once: {status:?}");
+    assert_eq!(status.losses, losses + 1, "said once: {status:?}");
 
     // It comes back: joint states and commands flow again, without restarting Avatarm.
     let sawyer = FakeSawyer::start(&master, 0.0);

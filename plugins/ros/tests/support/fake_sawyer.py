@@ -84,10 +84,12 @@ def main():
         "stopped": False,
         "velocity": {n: 0.0 for n in LIMITS},
         "last_command": None,
-        "timeout_s": 0.2,
+        # Not Intera's 0.2 s: the tests check that Avatarm sets it.
+        "timeout_s": 0.5,
         "speed_ratio": None,
         "commands": 0,
         "ignored": 0,
+        "ignored_max_speed": 0.0,
         "bad": 0,
         "latency_ms": [],
         "holds": 0,
@@ -101,6 +103,8 @@ def main():
         with lock:
             if not state["enabled"] or state["stopped"]:
                 state["ignored"] += 1
+                speeds = [abs(v) for v in m.velocity] or [0.0]
+                state["ignored_max_speed"] = max(state["ignored_max_speed"], max(speeds))
                 return
             if m.mode != 2 or len(m.names) != len(m.velocity):
                 state["bad"] += 1
@@ -171,6 +175,7 @@ def main():
                 "stopped": state["stopped"],
                 "commands": state["commands"],
                 "ignored": state["ignored"],
+                "ignored_max_speed": state["ignored_max_speed"],
                 "bad": state["bad"],
                 "holds": state["holds"],
                 "timeout_s": state["timeout_s"],
