@@ -133,8 +133,22 @@ fn joint_states_flow_in_commands_reach_the_robot_and_its_clock_is_mapped() {
     assert!(e.to_string().contains("right_j3"), "{e}");
     pump(&mut arm, 0.3, None);
     let r = sawyer.report();
-    assert_eq!(r["commands"].as_u64(), before);
+    // At most the one zero-velocity stop a refusal after a moving command sends (unless the
+    // link went stale first and sent it then); nothing malformed, nothing moving.
+    assert!(
+        r["commands"]
+            .as_u64()
+            .zip(before)
+            .is_some_and(|(n, b)| n <= b + 1),
+        "{r}"
+    );
     assert_eq!(r["bad"].as_u64(), Some(0), "{r}");
+    assert!(
+        r["velocity"]
+            .as_array()
+            .is_some_and(|v| v.iter().all(|x| x.as_f64() == Some(0.0))),
+        "{r}"
+    );
 
     // The gripper closes (the link pumped first: a report was waited for without it).
     pump(&mut arm, 0.05, None);
