@@ -295,8 +295,6 @@ pub struct RosArm {
     rx: Mutex<Receiver<Sample>>,
     last_q: DVector<f64>,
     clock: ClockOffset,
-    /// App time at the last `advance` and the instant it was taken.
-    now: Option<(f64, Instant)>,
     /// App clock minus the wall clock (s since `epoch`), averaged over `advance` calls: the
     /// app's fixed-step clock moves in bursts, so one call's pairing would put an arrival up
     /// to a frame early, and the minimum filter would keep that error.
@@ -406,7 +404,6 @@ impl RosArm {
             rx: Mutex::new(rx),
             last_q: q0,
             clock: ClockOffset::new(200),
-            now: None,
             app_minus_wall: None,
             epoch: Instant::now(),
             command_index,
@@ -592,7 +589,6 @@ impl RobotInterface for RosArm {
 
     fn advance(&mut self, now_s: f64) {
         let now = Instant::now();
-        self.now = Some((now_s, now));
         if now_s.is_finite() {
             let d = now_s - now.saturating_duration_since(self.epoch).as_secs_f64();
             self.app_minus_wall = Some(match self.app_minus_wall {
