@@ -1031,10 +1031,13 @@ fn live_teleoperation_commands_a_sawyer_over_ros() {
         panic!("the pouring scene has a task");
     };
     let prepared = avatarm_mapping::pouring::prepare(task, setup).expect("grasp");
+    // The real arm left 0.05 rad off the task's start on its first joint: Avatarm moves it
+    // there before the hand drives it.
     let start: Vec<String> = setup
         .arm
         .iter()
-        .map(|&i| prepared.q0()[i].to_string())
+        .enumerate()
+        .map(|(k, &i)| (prepared.q0()[i] + if k == 0 { 0.05 } else { 0.0 }).to_string())
         .collect();
     let master = ros_support::Master::start();
     let sawyer = ros_support::FakeSawyer::start_at(&master, 0.0, &start.join(","));
@@ -1054,6 +1057,22 @@ fn live_teleoperation_commands_a_sawyer_over_ros() {
     assert!(
         log.contains("on the ROS robot at http://127.0.0.1"),
         "{log}"
+    );
+    assert!(
+        log.contains("the arm is at the task's start after"),
+        "{log}"
+    );
+    // The run's last line says the link's state, and that a real object is not measured.
+    let line = log
+        .lines()
+        .find(|l| l.contains("teleop: "))
+        .unwrap_or_default();
+    eprintln!("{line}");
+    assert!(
+        line.contains("ROS link up, robot enabled, joint states")
+            && line.contains("gripper right_gripper")
+            && line.contains("real object not measured"),
+        "{line}"
     );
     let r = sawyer.report();
     eprintln!("fake Sawyer after the live run: {r}");

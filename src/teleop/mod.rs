@@ -124,7 +124,15 @@ impl LiveTeleop {
             RobotChoice::Sim => None,
             RobotChoice::Ros => Some(ros_arm(scene, setup, prepared.q0())?),
         };
-        let parts = TrialParts::on_robot(task, setup, &prepared, mode, 0, link)?;
+        let mut parts = TrialParts::on_robot(task, setup, &prepared, mode, 0, link)?;
+        if robot == RobotChoice::Ros {
+            // A real arm starts wherever it was left: it moves to the grasp's start first, at
+            // the link's speed ratio, before the hand drives it.
+            parts.teleop.approach(avatarm_mapping::Approach {
+                speed_ratio: scene.file.robot.link.speed_ratio,
+                ..avatarm_mapping::Approach::to(prepared.q0().clone())
+            })?;
+        }
         let start = parts.script.wrist_at(0.0).0;
         let (hand, desktop) = match choice {
             HandChoice::Scripted => (
@@ -280,7 +288,7 @@ pub fn link_settings(
     setup: &avatarm_scene::task::TrialSetup,
 ) -> Result<avatarm_ros::LinkSettings, AppError> {
     use avatarm_ros::{CommandKind, LinkSettings};
-    use avatarm_scene::spec::RobotLinkKind;
+    use avatarm_scene::spec::{RobotLinkKind, RosControlController};
     let spec = &scene.file.robot.link;
     let intera = spec.kind == RobotLinkKind::Intera;
     let master_uri = spec
@@ -314,15 +322,16 @@ pub fn link_settings(
         node_name: spec.node_name.clone(),
         joint_states_topic: spec.joint_states_topic.clone(),
         command_topic,
-        command: if intera {
-            CommandKind::InteraVelocity
-        } else {
-            CommandKind::GroupVelocity {
-                joints: if spec.controller_joints.is_empty() {
-                    arm_joints.clone()
-                } else {
-                    spec.controller_joints.clone()
-                },
+        command: {
+            let joints = if spec.controller_joints.is_empty() {
+                arm_joints.clone()
+            } else {
+                spec.controller_joints.clone()
+            };
+            match (intera, spec.controller) {
+                (true, _) => CommandKind::InteraVelocity,
+                (false, RosControlController::Velocity) => CommandKind::GroupVelocity { joints },
+                (false, RosControlController::Position) => CommandKind::GroupPosition { joints },
             }
         },
         arm_joints,
@@ -337,7 +346,18 @@ pub fn link_settings(
             sawyer.speed_ratio.as_ref().map(|(t, _)| t.clone()),
         )
         .map(|t| (t, spec.speed_ratio)),
-        gripper_topic: topic(&spec.gripper_topic, sawyer.gripper_topic.clone()),
+        gripper: match (&spec.gripper_device, intera) {
+            (Some(d), _) if d.is_empty() => None,
+            (Some(d), _) => Some(avatarm_ros::GripperLink {
+                device: Some(d.clone()),
+                ..Default::default()
+            }),
+            (None, true) => Some(avatarm_ros::GripperLink::default()),
+            (None, false) => None,
+        },
+        joint_state_rate: spec
+            .joint_state_rate_hz
+            .map(|hz| ("/robot/joint_state_publish_rate".to_owned(), hz)),
         stale_after_s: spec.stale_after_s,
     })
 }
@@ -534,9 +554,7 @@ fn mirror_room(
         robot.0.clone_from(sim);
     } else if let Some(s) = teleop.received().last() {
         // A real robot: the room's arm (the simulated camera's) shows where it is.
-        let params = *robot.0.params();
-        robot.0 =
-            avatarm_core::sim::SimRobot::new(params, room.model.dof_limits(), s.positions.clone());
+        robot.0.place(&s.positions);
     }
     if let Some(twin) = twin {
         for s in teleop.received() {
@@ -731,13 +749,21 @@ pub fn summary(
     held: &HeldObject,
     twin: Option<Isometry3<f64>>,
 ) -> String {
-    let lifted_mm = teleop
+    // Only a simulated robot knows where the real object is; a real one's is not measured.
+    let object = match teleop.robot().true_object_pose() {
+        Some(truth) => format!(
+            "real object lifted {:.1} mm, {:.1} mm from its twin",
+            (truth.translation.z - live.start_z) * 1e3,
+            object_error_mm(teleop, twin).unwrap_or(f64::NAN)
+        ),
+        None => "real object not measured (no ground truth on a real robot)".to_owned(),
+    };
+    let link = teleop
         .robot()
-        .true_object_pose()
-        .map_or(f64::NAN, |t| (t.translation.z - live.start_z) * 1e3);
-    let off_mm = object_error_mm(teleop, twin).unwrap_or(f64::NAN);
+        .status_line()
+        .map_or_else(String::new, |l| format!("; {l}"));
     format!(
-        "teleop: {} ticks, {} grasps, {}, real object lifted {lifted_mm:.1} mm, {off_mm:.1} mm from its twin, max TCP speed {:.3} m/s",
+        "teleop: {} ticks, {} grasps, {}, {object}, max TCP speed {:.3} m/s{link}",
         teleop.status.ticks,
         held.grasps,
         holding(held),
@@ -764,11 +790,20 @@ pub fn status_line(
     } else {
         String::new()
     };
+    let link = teleop
+        .robot()
+        .status_line()
+        .map_or_else(String::new, |l| format!("; {l}"));
+    let doing = if s.approaching {
+        "the arm MOVING TO THE START (the hand takes over there)"
+    } else {
+        holding(held)
+    };
     format!(
-        "teleop ({}, {}): {}, {} contacts, max TCP {:.3} m/s{refused}{error}",
+        "teleop ({}, {}): {}, {} contacts, max TCP {:.3} m/s{refused}{error}{link}",
         live.source,
         live.mode.name(),
-        holding(held),
+        doing,
         contacts.contacts.len(),
         s.max_tcp_speed,
     )

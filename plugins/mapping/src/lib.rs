@@ -20,6 +20,7 @@ pub mod robot;
 
 use std::sync::Arc;
 
+use avatarm_core::robot::kinematics::Frame;
 use avatarm_core::robot::{LinkId, RobotModel};
 use avatarm_core::sim::JointState;
 use avatarm_core::teleop::grasp::Contact;
@@ -38,7 +39,8 @@ pub use robot::{CarriedObject, RobotInterface, SimArm};
 pub mod prelude {
     pub use crate::pouring::{PouringTask, TrialParts, TrialSetup, run_trials};
     pub use crate::{
-        MappingError, MappingPlugin, MappingSystems, RobotInterface, SimArm, Teleop, TeleopConfig,
+        Approach, MappingError, MappingPlugin, MappingSystems, RobotInterface, SimArm, Teleop,
+        TeleopConfig,
     };
 }
 
@@ -110,6 +112,99 @@ pub struct TeleopStatus {
     pub max_tcp_speed: f64,
     /// Wall time spent in the control ticks (s): mapping, limiter, robot interface.
     pub tick_wall_s: f64,
+    /// The arm is moving to the task's start ([`Teleop::approach`]): the hand does not drive
+    /// it yet.
+    pub approaching: bool,
+    /// How long the move to the start took (s of app time), once arrived.
+    pub approach_s: Option<f64>,
+}
+
+/// The move to the task's start before the hand drives the arm: a real robot starts wherever
+/// it was left, and the mapping assumes the tool at the grasp's start.
+///
+/// A straight line in joint space, `q̇ = k (q* − q)` scaled down as a whole so that no arm
+/// joint exceeds `speed_ratio` × its velocity limit (the meaning of Intera's speed ratio), sent
+/// as joint velocities through the same [`SafetyLimiter`] as the hand's commands (tool-point
+/// speed cap, acceleration ramp, stale joint states). Arrived when every arm joint is within
+/// `tolerance_rad` of the start.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Approach {
+    /// The start, all joints in the model's order (only the arm joints are moved).
+    pub target: DVector<f64>,
+    /// Arrival tolerance per arm joint (rad).
+    pub tolerance_rad: f64,
+    /// The fraction of each joint's velocity limit used (0 < r <= 1).
+    pub speed_ratio: f64,
+    /// The gain `k` (1/s): how fast the last stretch closes.
+    pub gain_per_s: f64,
+}
+
+impl Approach {
+    /// To `target` at 30 % of the joints' speed limits (Intera's default speed ratio), within
+    /// 0.01 rad.
+    pub fn to(target: DVector<f64>) -> Self {
+        Self {
+            target,
+            tolerance_rad: 0.01,
+            speed_ratio: 0.3,
+            gain_per_s: 2.0,
+        }
+    }
+
+    /// Joint velocities toward the target from `q` (zero for joints not in `arm`), or `None`
+    /// when every arm joint is within the tolerance. `limits` are the joints' speed limits
+    /// (rad/s; a limit that is not finite and positive counts as 1 rad/s).
+    pub fn velocity(
+        &self,
+        q: &DVector<f64>,
+        arm: &[usize],
+        limits: &[f64],
+    ) -> Option<DVector<f64>> {
+        let error = |i: usize| self.target[i] - q[i];
+        if arm.iter().all(|&i| error(i).abs() <= self.tolerance_rad) {
+            return None;
+        }
+        let mut qdot = DVector::zeros(q.len());
+        let mut scale: f64 = 1.0;
+        for &i in arm {
+            let v = self.gain_per_s * error(i);
+            let limit = limits
+                .get(i)
+                .copied()
+                .filter(|l| l.is_finite() && *l > 0.0)
+                .unwrap_or(1.0)
+                * self.speed_ratio;
+            if v.abs() > limit {
+                scale = scale.min(limit / v.abs());
+            }
+            qdot[i] = v;
+        }
+        Some(qdot * scale)
+    }
+
+    fn validate(&self, n: usize) -> Result<(), MappingError> {
+        let bad = |message: String| Err(MappingError::Setup { message });
+        if self.target.len() != n || !self.target.iter().all(|v| v.is_finite()) {
+            return bad(format!(
+                "approach: the start has {} values ({n} joints), all must be finite",
+                self.target.len()
+            ));
+        }
+        if !(self.speed_ratio > 0.0 && self.speed_ratio <= 1.0) {
+            return bad(format!(
+                "approach: speed ratio {} must be in (0, 1]",
+                self.speed_ratio
+            ));
+        }
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !(positive(self.tolerance_rad) && positive(self.gain_per_s)) {
+            return bad(format!(
+                "approach: tolerance {} rad and gain {} /s must be > 0",
+                self.tolerance_rad, self.gain_per_s
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The teleoperation loop's state: the robot, the mapping and the limiter.
@@ -124,6 +219,7 @@ pub struct Teleop {
     mapper: Mapper,
     limiter: SafetyLimiter,
     robot: Box<dyn RobotInterface>,
+    approach: Option<(Approach, Option<f64>)>,
     joints: Option<JointState>,
     received: Vec<JointState>,
     /// Counters.
@@ -183,12 +279,24 @@ impl Teleop {
             tcp_from_object: config.tcp_from_object,
             v2r: config.v2r,
             robot,
+            approach: None,
             joints: None,
             received: Vec::new(),
             status: TeleopStatus::default(),
             record: false,
             log: Vec::new(),
         })
+    }
+
+    /// Moves the arm to `approach`'s start before the hand drives it ([`Approach`]); the hand
+    /// takes over on the tick the arm arrives. Errors when the start or the settings cannot
+    /// work.
+    pub fn approach(&mut self, approach: Approach) -> Result<(), MappingError> {
+        approach.validate(self.model.dof())?;
+        self.approach = Some((approach, None));
+        self.status.approaching = true;
+        self.status.approach_s = None;
+        Ok(())
     }
 
     /// The robot backend's name.
@@ -278,6 +386,10 @@ fn teleop_tick(
         }
     }
     t.status.ticks += 1;
+    if approach_tick(t, now, dt) {
+        t.status.tick_wall_s += started.elapsed().as_secs_f64();
+        return;
+    }
     let (hand_stamp, hand_tracked) = match hand.as_ref().and_then(|h| h.latest.as_ref()) {
         Some(f) => (Some(f.t_s), f.tracked),
         None => (None, false),
@@ -398,6 +510,58 @@ fn teleop_tick(
         };
         t.log.push(sample);
     }
+}
+
+/// One tick of the move to the start ([`Approach`]): `true` when it commanded the arm (the
+/// tick ends there and is not recorded in [`Teleop::log`]); `false` when there is none, no
+/// joint state yet, or the arm arrived this tick (the hand drives it from this tick on).
+fn approach_tick(t: &mut Teleop, now: f64, dt: f64) -> bool {
+    let Some((approach, started)) = t.approach.as_mut() else {
+        return false;
+    };
+    let Some(joints) = t.joints.as_ref() else {
+        // Nothing known of the arm yet: the ordinary tick refuses to drive it and says so.
+        return false;
+    };
+    let started = *started.get_or_insert(now);
+    let speed: Vec<f64> = t.model.dof_limits().iter().map(|l| l.velocity).collect();
+    let Some(qdot) = approach.velocity(&joints.positions, &t.arm, &speed) else {
+        info!(
+            "mapping: the arm is at the task's start after {:.2} s; the hand drives it now",
+            now - started
+        );
+        t.status.approaching = false;
+        t.status.approach_s = Some(now - started);
+        t.approach = None;
+        return false;
+    };
+    let q: Vec<f64> = joints.positions.iter().copied().collect();
+    let jacobian = t
+        .model
+        .jacobian(&t.base, &q, t.tcp, &Vector3::zeros(), Frame::World);
+    let limited = t.limiter.tick(
+        &safety::TickInputs {
+            now_s: now,
+            qdot: &qdot,
+            q: &q,
+            joints_stamp_s: Some(joints.stamp_s),
+            // No hand drives the approach: the limiter's hand checks do not apply.
+            hand_stamp_s: Some(now),
+            hand_tracked: true,
+            jacobian: &jacobian,
+        },
+        dt,
+    );
+    for &i in &limited.interventions {
+        t.count(i);
+    }
+    t.status.max_tcp_speed = t.status.max_tcp_speed.max(limited.tcp_speed);
+    if let Some(cmd) = &limited.command
+        && let Err(e) = t.robot.send(cmd)
+    {
+        t.fail(e.to_string());
+    }
+    true
 }
 
 #[cfg(test)]

@@ -32,6 +32,12 @@ pub trait RobotInterface: Send + Sync + 'static {
     /// Called once per control tick with the app clock: hardware backends pump their I/O here,
     /// the simulated arm advances its physics to `now_s`.
     fn advance(&mut self, _now_s: f64) {}
+    /// The link's state in one line (connection, robot enabled or stopped, rates, clocks),
+    /// for the preview's status line and the end of a run; `None` where there is no link
+    /// (simulation).
+    fn status_line(&self) -> Option<String> {
+        None
+    }
     /// The real object's true pose, where the backend knows it (simulation only).
     fn true_object_pose(&self) -> Option<Isometry3<f64>> {
         None

@@ -579,3 +579,114 @@ fn a_real_leap_grab_takes_the_bottle_twin_by_its_neck_and_lets_go() {
     let floor = s.bottle_radius_m * task.k - body / 2.0;
     assert!(lowest > floor - 0.003, "{lowest} vs {floor}");
 }
+
+#[test]
+fn an_arm_away_from_the_start_is_brought_there_first_within_the_limits() {
+    use crate::pouring::{TrialParts, prepare};
+    use crate::{Approach, CarriedObject, MappingPlugin, SimArm, Teleop};
+    use avatarm_core::sim::SimRobot;
+    let s = setup();
+    let task = PouringTask::default();
+    let prepared = prepare(&task, &s).expect("prepared");
+    let q0 = prepared.q0().clone();
+    // Where a real arm might have been left: 0.4, 0.3 and 0.2 rad off on three joints.
+    let mut away = q0.clone();
+    away[0] += 0.4;
+    away[3] -= 0.3;
+    away[5] += 0.2;
+    let centre = s.bottle_centre();
+    let arm = SimArm::new(
+        SimRobot::new(s.sim, s.model.dof_limits(), away),
+        s.model.clone(),
+        s.base,
+        s.tcp,
+        CarriedObject {
+            pose: centre,
+            rest_z: centre.translation.z,
+            grasp_radius_m: 0.02,
+            held: None,
+        },
+    );
+    let mut parts = TrialParts::on_robot(
+        &task,
+        &s,
+        &prepared,
+        MappingMode::ClosedLoop,
+        0,
+        Some(Box::new(arm)),
+    )
+    .expect("parts");
+    let approach = Approach::to(q0.clone());
+    parts.teleop.approach(approach.clone()).expect("approach");
+    // A start that cannot work is refused and the one set stays.
+    let e = parts
+        .teleop
+        .approach(Approach::to(DVector::from_element(3, 0.0)))
+        .expect_err("3 values for 9 joints");
+    assert!(e.to_string().contains("3 values"), "{e}");
+    let e = parts
+        .teleop
+        .approach(Approach {
+            speed_ratio: 1.5,
+            ..approach.clone()
+        })
+        .expect_err("ratio");
+    assert!(e.to_string().contains("speed ratio"), "{e}");
+    parts.teleop.record = true;
+    let (period, spawn) = (parts.period, parts.spawn_bodies());
+    let mut app = avatarm_hand::headless_app(period);
+    app.add_plugins(MappingPlugin)
+        .insert_resource(parts.hand_drive)
+        .insert_resource(ActiveHand::new(ScriptedHand::new(
+            parts.script,
+            task.hand_rate_hz,
+        )))
+        .insert_resource(parts.teleop)
+        .add_systems(bevy::prelude::Startup, spawn);
+    let limits: Vec<f64> = s.model.dof_limits().iter().map(|l| l.velocity).collect();
+    let mut worst_ratio: f64 = 0.0;
+    let mut ticks = 0;
+    loop {
+        app.update();
+        ticks += 1;
+        let t = app.world().resource::<Teleop>();
+        let v = t.robot().simulated().expect("sim").true_velocities();
+        for &i in &s.arm {
+            worst_ratio = worst_ratio.max(v[i].abs() / limits[i]);
+        }
+        if !t.status.approaching {
+            break;
+        }
+        assert!(ticks < 2000, "not there after 20 s: {:?}", t.status);
+    }
+    let t = app.world().resource::<Teleop>();
+    let took = t.status.approach_s.expect("arrival time");
+    let q = t.robot().simulated().expect("sim").true_positions();
+    let off = s
+        .arm
+        .iter()
+        .map(|&i| (q[i] - q0[i]).abs())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "approach: {took:.2} s, {ticks} ticks, within {off:.4} rad, joints at most {:.0} % of their limits, TCP {:.3} m/s",
+        worst_ratio * 1e2,
+        t.status.max_tcp_speed
+    );
+    // The measured joints are within the tolerance; the true ones lag them by a tick at most.
+    assert!(off <= approach.tolerance_rad + 0.01, "{off}");
+    assert!(worst_ratio <= approach.speed_ratio + 0.02, "{worst_ratio}");
+    assert!(t.status.max_tcp_speed <= task.max_tcp_speed + 1e-9);
+    assert!(
+        took > 0.5,
+        "a 0.4 rad move at 30 % speed takes time: {took}"
+    );
+    // Approach ticks are not recorded; the arrival tick is the mapping's first.
+    assert_eq!(t.log.len(), 1);
+    // Then the hand drives it: ticks are the mapping's, recorded.
+    for _ in 0..50 {
+        app.update();
+    }
+    let t = app.world().resource::<Teleop>();
+    assert_eq!(t.log.len(), 51);
+    assert!(!t.status.approaching);
+}

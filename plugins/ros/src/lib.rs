@@ -44,7 +44,8 @@ use msgs::{intera_core_msgs, sensor_msgs, std_msgs};
 /// What most users of the link need.
 pub mod prelude {
     pub use crate::{
-        ClockOffset, CommandKind, LinkError, LinkSettings, LinkStatus, RobotState, RosArm,
+        ClockOffset, CommandKind, GripperLink, GripperState, LinkError, LinkSettings, LinkStatus,
+        RobotState, RosArm,
     };
 }
 
@@ -59,6 +60,25 @@ pub enum CommandKind {
         /// The controller's joints, in its order.
         joints: Vec<String>,
     },
+    /// ros_control's joint group position controller: `std_msgs/Float64MultiArray` of
+    /// position targets, one per joint of `joints`, in that order. The velocities Avatarm
+    /// commands are integrated into the targets (`target += q̇ Δt`, Δt the time between two
+    /// commands, at most the link's stale time), starting from the measured positions after
+    /// every stop; a stop holds the last target.
+    GroupPosition {
+        /// The controller's joints, in its order.
+        joints: Vec<String>,
+    },
+}
+
+impl CommandKind {
+    /// The controller's joints (ros_control), `None` for Intera's.
+    pub fn controller_joints(&self) -> Option<&[String]> {
+        match self {
+            Self::InteraVelocity => None,
+            Self::GroupVelocity { joints } | Self::GroupPosition { joints } => Some(joints),
+        }
+    }
 }
 
 /// Where the robot is on ROS and how Avatarm talks to it.
@@ -87,9 +107,11 @@ pub struct LinkSettings {
     /// Latched `std_msgs/Float64` speed ratio of position moves (Intera:
     /// `/robot/limb/right/set_speed_ratio`), and its value (0..1).
     pub speed_ratio: Option<(String, f64)>,
-    /// `intera_core_msgs/IOComponentCommand` to the electric gripper (Intera:
-    /// `/io/end_effector/right_gripper/command`).
-    pub gripper_topic: Option<String>,
+    /// Intera's electric gripper (an IO device of the end effector's IO node).
+    pub gripper: Option<GripperLink>,
+    /// Latched `std_msgs/UInt16` the robot's joint-state rate is set on (Intera:
+    /// `/robot/joint_state_publish_rate`), and the rate (Hz). `None`: the robot's own rate.
+    pub joint_state_rate: Option<(String, u16)>,
     /// The link is lost when no joint state arrived for this long (s).
     pub stale_after_s: f64,
 }
@@ -109,7 +131,8 @@ impl LinkSettings {
             command_timeout_topic: Some("/robot/limb/right/joint_command_timeout".into()),
             command_timeout_s: 0.2,
             speed_ratio: Some(("/robot/limb/right/set_speed_ratio".into(), 0.3)),
-            gripper_topic: Some("/io/end_effector/right_gripper/command".into()),
+            gripper: Some(GripperLink::default()),
+            joint_state_rate: None,
             stale_after_s: 0.2,
         }
     }
@@ -132,7 +155,19 @@ impl LinkSettings {
         if self.arm_joints.is_empty() {
             return Err("no arm joints to command".into());
         }
-        if let CommandKind::GroupVelocity { joints } = &self.command {
+        if let Some((topic, 0)) = &self.joint_state_rate {
+            return Err(format!("joint-state rate 0 Hz on {topic}: must be > 0"));
+        }
+        if let Some(GripperLink {
+            device: Some(d), ..
+        }) = &self.gripper
+            && (d.is_empty() || d.contains('/'))
+        {
+            return Err(format!(
+                "gripper device '{d}': must be a name (as the IO node's config gives it)"
+            ));
+        }
+        if let Some(joints) = self.command.controller_joints() {
             if joints.is_empty() {
                 return Err("the controller has no joints".into());
             }
@@ -146,7 +181,7 @@ impl LinkSettings {
                 ));
             }
         }
-        if let CommandKind::GroupVelocity { joints } = &self.command
+        if let Some(joints) = self.command.controller_joints()
             && let Some(j) = joints.iter().find(|j| !self.arm_joints.contains(j))
         {
             return Err(format!(
@@ -154,6 +189,64 @@ impl LinkSettings {
             ));
         }
         Ok(())
+    }
+}
+
+/// Intera's electric gripper: an IO device of the end effector's IO node (Intera's IO
+/// framework: `{io_node}/config` is an `intera_core_msgs/IONodeConfiguration` naming the
+/// devices; a device takes `{io_node}/{device}/command` (`IOComponentCommand`) and reports
+/// `{io_node}/{device}/state` (`IODeviceStatus`), as `intera_interface.Gripper` uses them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GripperLink {
+    /// The IO node (Intera: `/io/end_effector`).
+    pub io_node: String,
+    /// The device (Intera's electric gripper: `right_gripper`); `None`: the first device the
+    /// node's config names, found when the config arrives (it is latched).
+    pub device: Option<String>,
+}
+
+impl Default for GripperLink {
+    fn default() -> Self {
+        Self {
+            io_node: "/io/end_effector".into(),
+            device: None,
+        }
+    }
+}
+
+/// The gripper as its last `IODeviceStatus` says (Intera's signal names).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct GripperState {
+    /// The device commanded.
+    pub device: String,
+    /// `position_response_m`: the opening (m, 0 closed .. 0.041667 open).
+    pub position_m: Option<f64>,
+    /// `is_gripping`: the fingers stopped on something.
+    pub gripping: Option<bool>,
+    /// `is_calibrated`: an uncalibrated gripper does not move (calibrate it first).
+    pub calibrated: Option<bool>,
+    /// `has_error`.
+    pub error: Option<bool>,
+}
+
+impl GripperState {
+    /// Reads Intera's signals (each a JSON array of one value, e.g. `"[0.041]"`); signals
+    /// that are missing or unreadable stay `None`.
+    fn read(&mut self, signals: &[intera_core_msgs::IODataStatus]) {
+        let value = |name: &str| {
+            let s = signals.iter().find(|s| s.name == name)?;
+            let v: serde_json::Value = serde_json::from_str(&s.data).ok()?;
+            match v {
+                serde_json::Value::Array(a) => a.into_iter().next(),
+                v => Some(v),
+            }
+        };
+        self.position_m = value("position_response_m")
+            .and_then(|v| v.as_f64())
+            .filter(|v| v.is_finite());
+        self.gripping = value("is_gripping").and_then(|v| v.as_bool());
+        self.calibrated = value("is_calibrated").and_then(|v| v.as_bool());
+        self.error = value("has_error").and_then(|v| v.as_bool());
     }
 }
 
@@ -249,8 +342,71 @@ pub struct LinkStatus {
     pub connects: u64,
     /// The robot's state, when it has one.
     pub robot: Option<RobotState>,
-    /// Avatarm's clock minus the robot's (s), and the jitter of the estimate (s).
+    /// Avatarm's clock (the app clock of [`RobotInterface::advance`]) minus the robot's (s),
+    /// and the jitter of the estimate (s).
     pub clock_offset_s: Option<(f64, f64)>,
+    /// The robot's clock minus this machine's system clock (s), less the smallest transport
+    /// delay: what clock synchronisation (NTP, chrony) between the two machines leaves; and
+    /// the jitter of the arrivals on the system clock (s): the network's and the two nodes'
+    /// (the app clock's own unevenness is not in it).
+    pub robot_minus_local_s: Option<(f64, f64)>,
+    /// Joint states received over the last second (Hz), while the link is alive.
+    pub joint_state_rate_hz: Option<f64>,
+    /// The gripper, once its device is known.
+    pub gripper: Option<GripperState>,
+}
+
+impl LinkStatus {
+    /// One line for the preview's status line and the end of a run, e.g. `ROS link up, robot
+    /// enabled, joint states 100 Hz, robot clock +0.4 ms (jitter 0.2 ms), gripper right_gripper
+    /// 0.041 m`. States that stop commands come first, in capitals.
+    pub fn line(&self) -> String {
+        let mut parts = Vec::new();
+        match (self.connected, self.joint_state_rate_hz) {
+            (false, _) => parts.push("ROS link DOWN (not connected to the master)".to_owned()),
+            (true, None) => parts.push("ROS link DOWN (no joint states)".to_owned()),
+            (true, Some(_)) => parts.push("ROS link up".to_owned()),
+        }
+        match self.robot {
+            Some(r) if r.stopped => {
+                parts.push(format!("robot E-STOPPED (source {})", r.estop_source));
+            }
+            Some(r) if !r.enabled => parts.push("robot DISABLED".to_owned()),
+            Some(r) if r.error => parts.push("robot enabled with an ERROR".to_owned()),
+            Some(_) => parts.push("robot enabled".to_owned()),
+            None => {}
+        }
+        if let Some(hz) = self.joint_state_rate_hz {
+            parts.push(format!("joint states {hz:.0} Hz"));
+        }
+        if let Some((d, jitter)) = self.robot_minus_local_s {
+            parts.push(format!(
+                "robot clock {:+.1} ms from this machine's (jitter {:.1} ms)",
+                d * 1e3,
+                jitter * 1e3
+            ));
+        }
+        if let Some(g) = &self.gripper {
+            let mut s = format!("gripper {}", g.device);
+            if let Some(p) = g.position_m {
+                s += &format!(" {p:.3} m");
+            }
+            if g.gripping == Some(true) {
+                s += " gripping";
+            }
+            if g.calibrated == Some(false) {
+                s += " NOT CALIBRATED";
+            }
+            if g.error == Some(true) {
+                s += " ERROR";
+            }
+            parts.push(s);
+        }
+        if self.commands_refused > 0 {
+            parts.push(format!("{} commands refused", self.commands_refused));
+        }
+        parts.join(", ")
+    }
 }
 
 enum Outbound {
@@ -272,6 +428,8 @@ struct Shared {
     outbound: Option<Outbound>,
     gripper: Option<f64>,
     shutdown: bool,
+    /// The client published its last commands after `shutdown` and left.
+    finished: bool,
 }
 
 struct Sample {
@@ -300,6 +458,12 @@ pub struct RosArm {
     /// to a frame early, and the minimum filter would keep that error.
     app_minus_wall: Option<f64>,
     epoch: Instant,
+    /// The system clock at `epoch` (s since the Unix epoch).
+    epoch_unix_s: f64,
+    /// The same estimate as `clock` on the system clock (arrival times as Unix time).
+    system_clock: ClockOffset,
+    /// Arrivals of the joint states of the last second.
+    arrivals: VecDeque<Instant>,
     /// For each value of a command, its index in q (the arm's joints, or the controller's).
     command_index: Vec<usize>,
     /// A non-zero command went out since the last stop.
@@ -308,6 +472,9 @@ pub struct RosArm {
     lost_said: bool,
     /// The gripper command last handed over, and the connection it went out on.
     gripper_sent: Option<(bool, u64)>,
+    /// A position controller's targets (command order) and when they were last advanced;
+    /// `None` after a stop (the next command starts from the measured positions).
+    position_target: Option<(Vec<f64>, Instant)>,
 }
 
 /// Errors of the link's set-up.
@@ -366,7 +533,8 @@ impl RosArm {
             .collect::<Result<Vec<_>, _>>()?;
         let command_index = match &settings.command {
             CommandKind::InteraVelocity => arm.clone(),
-            CommandKind::GroupVelocity { joints: controller } => controller
+            CommandKind::GroupVelocity { joints: controller }
+            | CommandKind::GroupPosition { joints: controller } => controller
                 .iter()
                 .map(|j| {
                     joints
@@ -384,6 +552,7 @@ impl RosArm {
             outbound: None,
             gripper: None,
             shutdown: false,
+            finished: false,
         }));
         let notify = Arc::new(tokio::sync::Notify::new());
         let (tx, rx) = channel();
@@ -406,11 +575,17 @@ impl RosArm {
             clock: ClockOffset::new(200),
             app_minus_wall: None,
             epoch: Instant::now(),
+            epoch_unix_s: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0.0, |d| d.as_secs_f64()),
+            arrivals: VecDeque::new(),
+            system_clock: ClockOffset::new(200),
             command_index,
             moving: false,
             last_state: None,
             lost_said: false,
             gripper_sent: None,
+            position_target: None,
         })
     }
 
@@ -422,6 +597,18 @@ impl RosArm {
             .map(|s| s.status.clone())
             .unwrap_or_default();
         s.clock_offset_s = self.clock.offset_s().zip(self.clock.jitter_s());
+        s.robot_minus_local_s = self
+            .system_clock
+            .offset_s()
+            .zip(self.system_clock.jitter_s())
+            .map(|(offset, jitter)| (-offset, jitter));
+        s.joint_state_rate_hz = match (self.alive(), self.arrivals.front(), self.arrivals.back()) {
+            (true, Some(first), Some(last)) if self.arrivals.len() > 1 => {
+                let span = last.saturating_duration_since(*first).as_secs_f64();
+                Some((self.arrivals.len() - 1) as f64 / span.max(1e-3))
+            }
+            _ => None,
+        };
         s
     }
 
@@ -469,9 +656,19 @@ impl RosArm {
     fn stop(&mut self) {
         if self.moving {
             self.moving = false;
-            let zeros = vec![0.0; self.command_index.len()];
-            self.hand_over(Outbound::Stop(zeros));
+            // A velocity controller: zeros. A position controller: the last target, held.
+            let hold = match (&self.settings.command, self.position_target.take()) {
+                (CommandKind::GroupPosition { .. }, Some((target, _))) => target,
+                (CommandKind::GroupPosition { .. }, None) => self.measured_command(),
+                _ => vec![0.0; self.command_index.len()],
+            };
+            self.hand_over(Outbound::Stop(hold));
         }
+    }
+
+    /// The measured positions of the commanded joints, in command order.
+    fn measured_command(&self) -> Vec<f64> {
+        self.command_index.iter().map(|&i| self.last_q[i]).collect()
     }
 
     /// Checks that a command may leave: the link alive and the robot enabled and running.
@@ -502,14 +699,24 @@ impl RosArm {
 }
 
 impl Drop for RosArm {
-    /// Tells the client thread to leave (it does within a second, unregistering the node);
-    /// not waited for, so a master that does not answer never holds up the app.
+    /// Tells the client thread to leave (it does within a second, unregistering the node).
+    /// When the arm was moving, waits (at most 0.6 s) for the stop to go out, so that an app
+    /// that exits next does not leave a ros_control velocity controller running its last
+    /// command; otherwise not waited for, so a master that does not answer never holds up
+    /// the app.
     fn drop(&mut self) {
+        let moving = self.moving;
         self.stop();
         if let Ok(mut s) = self.shared.lock() {
             s.shutdown = true;
         }
         self.notify.notify_one();
+        if moving && self.alive() {
+            let until = Instant::now() + Duration::from_millis(600);
+            while Instant::now() < until && !self.shared.lock().map_or(true, |s| s.finished) {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        }
     }
 }
 
@@ -553,8 +760,28 @@ impl RobotInterface for RosArm {
             )));
         }
         self.may_command()?;
-        let values: Vec<f64> = self.command_index.iter().map(|&i| qdot[i]).collect();
-        self.moving = values.iter().any(|v| *v != 0.0);
+        let mut values: Vec<f64> = self.command_index.iter().map(|&i| qdot[i]).collect();
+        if let CommandKind::GroupPosition { .. } = self.settings.command {
+            // Velocities into position targets, from the measured positions after a stop.
+            let now = Instant::now();
+            let (mut target, dt) = match self.position_target.take() {
+                Some((target, at)) => (
+                    target,
+                    now.saturating_duration_since(at)
+                        .as_secs_f64()
+                        .min(self.settings.stale_after_s),
+                ),
+                None => (self.measured_command(), 0.0),
+            };
+            for (t, v) in target.iter_mut().zip(&values) {
+                *t += v * dt;
+            }
+            self.position_target = Some((target.clone(), now));
+            self.moving = true;
+            values = target;
+        } else {
+            self.moving = values.iter().any(|v| *v != 0.0);
+        }
         self.hand_over(Outbound::Joints {
             values,
             at: Instant::now(),
@@ -566,7 +793,7 @@ impl RobotInterface for RosArm {
         if !command.force_n.is_finite() {
             return Err(self.refuse(format!("gripper force {} is not finite", command.force_n)));
         }
-        if self.settings.gripper_topic.is_none() {
+        if self.settings.gripper.is_none() {
             return Ok(());
         }
         self.may_command()?;
@@ -585,6 +812,10 @@ impl RobotInterface for RosArm {
         };
         self.hand_over(Outbound::Gripper { position_m });
         Ok(())
+    }
+
+    fn status_line(&self) -> Option<String> {
+        Some(self.status().line())
     }
 
     fn advance(&mut self, now_s: f64) {
@@ -651,6 +882,21 @@ impl RosArm {
             return Err(format!("no arm joint '{j}' in the joint state"));
         }
         self.last_state = Some(s.arrival);
+        if s.stamp_s > 0.0 {
+            let unix = self.epoch_unix_s
+                + s.arrival
+                    .saturating_duration_since(self.epoch)
+                    .as_secs_f64();
+            self.system_clock.add(unix, s.stamp_s);
+        }
+        self.arrivals.push_back(s.arrival);
+        while self
+            .arrivals
+            .front()
+            .is_some_and(|t| s.arrival.saturating_duration_since(*t) > Duration::from_secs(1))
+        {
+            self.arrivals.pop_front();
+        }
         // Before the first `advance` there is no app clock to map onto: the arrival is all
         // there is. A zero stamp (a driver that does not stamp) is taken as the arrival.
         let stamp_s = match self.app_time(s.arrival) {
@@ -676,6 +922,42 @@ fn ros_time_s(t: &roslibrust::codegen::integral_types::Time) -> f64 {
 
 fn now_time() -> roslibrust::codegen::integral_types::Time {
     std::time::SystemTime::now().try_into().unwrap_or_default()
+}
+
+/// The gripper device's command publisher and state subscription.
+struct GripperIo {
+    command: roslibrust::ros1::Publisher<intera_core_msgs::IOComponentCommand>,
+    state: roslibrust::ros1::Subscriber<intera_core_msgs::IODeviceStatus>,
+}
+
+impl GripperIo {
+    async fn open(
+        nh: &roslibrust::ros1::NodeHandle,
+        io_node: &str,
+        device: &str,
+        shared: &Arc<Mutex<Shared>>,
+    ) -> Result<Self, String> {
+        let base = format!("{}/{device}", io_node.trim_end_matches('/'));
+        let (command_topic, state_topic) = (format!("{base}/command"), format!("{base}/state"));
+        // Latched: a command published before the device's node has connected to this new
+        // publisher (a device found from the config) still reaches it, and so does the newest
+        // command after the gripper's node restarts.
+        let command = nh
+            .advertise(&command_topic, 1, true)
+            .await
+            .map_err(|e| format!("{command_topic}: {e}"))?;
+        let state = nh
+            .subscribe(&state_topic, 1)
+            .await
+            .map_err(|e| format!("{state_topic}: {e}"))?;
+        if let Ok(mut s) = shared.lock() {
+            s.status.gripper = Some(GripperState {
+                device: device.to_owned(),
+                ..GripperState::default()
+            });
+        }
+        Ok(Self { command, state })
+    }
 }
 
 /// Aborts a task when dropped (a session's helper tasks end with it).
@@ -743,6 +1025,9 @@ async fn session(
         .await
         .map_err(|e| format!("cannot register with the master: {e}"))?;
     let err = |what: &str, e: &dyn std::fmt::Display| format!("{what}: {e}");
+    if let Ok(mut s) = shared.lock() {
+        s.status.gripper = None;
+    }
     let mut states = nh
         .subscribe::<sensor_msgs::JointState>(&settings.joint_states_topic, 10)
         .await
@@ -764,19 +1049,48 @@ async fn session(
         _ => None,
     };
     let group = match (&settings.command, &settings.command_topic) {
-        (CommandKind::GroupVelocity { .. }, t) => Some(
+        (CommandKind::GroupVelocity { .. } | CommandKind::GroupPosition { .. }, t) => Some(
             nh.advertise::<std_msgs::Float64MultiArray>(t, 1, false)
                 .await
                 .map_err(|e| err(t, &e))?,
         ),
         _ => None,
     };
-    let gripper = match &settings.gripper_topic {
-        Some(t) => Some(
-            nh.advertise::<intera_core_msgs::IOComponentCommand>(t, 1, false)
+    // The gripper: the device the settings name, else the first one the IO node's (latched)
+    // config names, opened when it arrives.
+    let mut gripper_config = match &settings.gripper {
+        Some(GripperLink {
+            io_node,
+            device: None,
+        }) => {
+            let t = format!("{io_node}/config");
+            Some(
+                nh.subscribe::<intera_core_msgs::IONodeConfiguration>(&t, 1)
+                    .await
+                    .map_err(|e| err(&t, &e))?,
+            )
+        }
+        _ => None,
+    };
+    let mut gripper = match &settings.gripper {
+        Some(GripperLink {
+            io_node,
+            device: Some(d),
+        }) => Some(GripperIo::open(&nh, io_node, d, shared).await?),
+        _ => None,
+    };
+    // The robot's joint-state rate (latched, so a robot node that starts later gets it).
+    let _rate = match &settings.joint_state_rate {
+        Some((topic, hz)) => {
+            let p = nh
+                .advertise::<std_msgs::UInt16>(topic, 1, true)
                 .await
-                .map_err(|e| err(t, &e))?,
-        ),
+                .map_err(|e| err(topic, &e))?;
+            p.publish(&std_msgs::UInt16 { data: *hz })
+                .await
+                .map_err(|e| err(topic, &e))?;
+            Some(p)
+        }
         None => None,
     };
     // Latched settings: the robot's command timeout and speed ratio.
@@ -883,9 +1197,45 @@ async fn session(
                     });
                 }
             },
+            config = async {
+                match gripper_config.as_mut() {
+                    Some(c) => c.next().await,
+                    None => std::future::pending().await,
+                }
+            } => {
+                match config {
+                    Some(Ok(m)) => {
+                        if let (Some(d), Some(g)) = (m.devices.first(), &settings.gripper) {
+                            gripper = Some(GripperIo::open(&nh, &g.io_node, &d.name, shared).await?);
+                            gripper_config = None;
+                            // A gripper command that waited for the device goes out now.
+                            notify.notify_one();
+                        }
+                    }
+                    Some(Err(_)) => {}
+                    None => gripper_config = None,
+                }
+            },
+            state = async {
+                match gripper.as_mut() {
+                    Some(g) => g.state.next().await,
+                    None => std::future::pending().await,
+                }
+            } => {
+                if let Some(Ok(m)) = state
+                    && let Ok(mut s) = shared.lock()
+                    && let Some(g) = s.status.gripper.as_mut()
+                {
+                    g.read(&m.signals);
+                }
+            },
             () = notify.notified() => {
                 let (out, grip, stop) = match shared.lock() {
-                    Ok(mut s) => (s.outbound.take(), s.gripper.take(), s.shutdown),
+                    // A gripper command waits (the newest wins) until the device is known.
+                    Ok(mut s) => {
+                        let grip = if gripper.is_some() { s.gripper.take() } else { None };
+                        (s.outbound.take(), grip, s.shutdown)
+                    }
                     Err(_) => (None, None, true),
                 };
                 let values = match out {
@@ -910,7 +1260,7 @@ async fn session(
                         p.publish(&m).await.map_err(|e| err(&settings.command_topic, &e))?;
                     }
                 }
-                if let (Some(position_m), Some(p)) = (grip, &gripper) {
+                if let (Some(position_m), Some(GripperIo { command: p, .. })) = (grip, &gripper) {
                     let args = serde_json::json!({
                         "signals": {
                             "position_m": { "data": [position_m], "format": { "type": "float" } }
@@ -924,6 +1274,13 @@ async fn session(
                     p.publish(&m).await.map_err(|e| err("gripper", &e))?;
                 }
                 if stop {
+                    // publish() only queues the message for the connections' writer tasks,
+                    // which end with the node: give them time to send the last command (the
+                    // stop a ros_control velocity controller would otherwise never get).
+                    tokio::time::sleep(Duration::from_millis(300)).await;
+                    if let Ok(mut s) = shared.lock() {
+                        s.finished = true;
+                    }
                     return Ok(());
                 }
             },
@@ -960,6 +1317,15 @@ mod tests {
             (
                 intera_core_msgs::IOComponentCommand::DESCRIPTION.md5sum,
                 "ede95ba2953dc221dc82cac20f697530",
+            ),
+            // Published with intera_core_msgs (Intera 5.2+; IOStatus with `id` and `detail`).
+            (
+                intera_core_msgs::IODeviceStatus::DESCRIPTION.md5sum,
+                "0d0c97a2d700848e7ad46e09a77cf896",
+            ),
+            (
+                intera_core_msgs::IONodeConfiguration::DESCRIPTION.md5sum,
+                "66800b32dbb52df00e2454d58668ac33",
             ),
             (
                 sensor_msgs::JointState::DESCRIPTION.md5sum,

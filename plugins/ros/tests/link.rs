@@ -96,6 +96,17 @@ fn joint_states_flow_in_commands_reach_the_robot_and_its_clock_is_mapped() {
         "offset {offset} vs {}",
         -robot_ahead_s
     );
+    // The same against this machine's clock, as the status line says it.
+    let (ahead, _) = status.robot_minus_local_s.expect("robot minus local");
+    assert!((ahead - robot_ahead_s).abs() < 0.002, "{ahead}");
+    let line = status.line();
+    eprintln!("status: {line}");
+    assert!(
+        line.contains("ROS link up")
+            && line.contains("robot enabled")
+            && (line.contains("robot clock +123449") || line.contains("robot clock +123450")),
+        "{line}"
+    );
     let now = wall_s();
     let last = states.last().expect("states").stamp_s;
     assert!(
@@ -273,4 +284,200 @@ fn a_restarted_master_is_registered_with_again() {
     let (_, refused) = pump(&mut arm, 0.5, Some(&velocity(0.1)));
     assert!(refused.len() < 10, "{refused:?}");
     assert!(sawyer.report()["commands"].as_u64().is_some_and(|n| n > 0));
+}
+
+#[test]
+fn the_gripper_is_found_from_the_io_config_and_the_joint_state_rate_is_set() {
+    let _serial = support::serial();
+    let master = Master::start();
+    // A gripper device that is not Intera's default name (a ClickSmart plate's serial).
+    let device = "stp_021709TP00378";
+    let sawyer = FakeSawyer::start_with(&master, 0.0, "", &["--gripper-device", device]);
+    let settings = LinkSettings {
+        joint_state_rate: Some(("/robot/joint_state_publish_rate".into(), 200)),
+        ..LinkSettings::sawyer(&master.uri)
+    };
+    let mut arm = RosArm::start(
+        settings,
+        ARM.iter().map(|s| (*s).to_owned()).collect(),
+        DVector::zeros(7),
+    )
+    .expect("link");
+    // A close command before the device is known waits for it.
+    wait_until(&mut arm, "the robot", |a| {
+        a.alive() && a.status().robot.is_some()
+    });
+    arm.gripper(&avatarm_core::teleop::mapping::GripperCommand {
+        closed: true,
+        force_n: 10.0,
+    })
+    .expect("gripper");
+    wait_until(&mut arm, "the gripper closed on its state", |a| {
+        a.status()
+            .gripper
+            .is_some_and(|g| g.position_m.is_some_and(|p| p < 1e-3) && g.gripping == Some(true))
+    });
+    let g = arm.status().gripper.expect("gripper");
+    assert_eq!(g.device, device);
+    assert_eq!((g.calibrated, g.error), (Some(true), Some(false)));
+    let r = sawyer.report();
+    assert_eq!(r["gripper_commands"].as_u64(), Some(1), "{r}");
+
+    // The joint-state rate Avatarm set, measured on the stamps.
+    assert_eq!(r["rate_hz"].as_f64(), Some(200.0), "{r}");
+    let (states, _) = pump(&mut arm, 2.0, None);
+    let span = states.last().expect("states").stamp_s - states[0].stamp_s;
+    let rate = (states.len() - 1) as f64 / span;
+    let status = arm.status();
+    eprintln!(
+        "joint states at {rate:.1} Hz after setting 200 Hz; status: {}",
+        status.line()
+    );
+    assert!(rate >= 190.0, "{rate} Hz");
+    assert!(
+        status.joint_state_rate_hz.is_some_and(|hz| hz >= 150.0),
+        "{status:?}"
+    );
+    assert!(
+        status
+            .line()
+            .contains(&format!("gripper {device} 0.000 m gripping"))
+    );
+}
+
+#[test]
+fn settings_that_cannot_work_are_refused_before_connecting() {
+    let base = LinkSettings::sawyer("http://localhost:1");
+    let names: Vec<String> = ARM.iter().map(|s| (*s).to_owned()).collect();
+    for (settings, want) in [
+        (
+            LinkSettings {
+                joint_state_rate: Some(("/robot/joint_state_publish_rate".into(), 0)),
+                ..base.clone()
+            },
+            "0 Hz",
+        ),
+        (
+            LinkSettings {
+                gripper: Some(avatarm_ros::GripperLink {
+                    device: Some("/io/end_effector/right_gripper".into()),
+                    ..Default::default()
+                }),
+                ..base.clone()
+            },
+            "must be a name",
+        ),
+    ] {
+        let e = RosArm::start(settings, names.clone(), DVector::zeros(7))
+            .err()
+            .expect("refused");
+        assert!(e.to_string().contains(want), "{e}");
+    }
+}
+
+/// A link to the simulated arm under ros_control (`fake_sawyer.py --ros-control`), its group
+/// controller's joints in the reverse of the arm's order.
+fn ros_control_link(master: &Master, position: bool) -> RosArm {
+    let joints: Vec<String> = ARM.iter().rev().map(|s| (*s).to_owned()).collect();
+    let command = if position {
+        avatarm_ros::CommandKind::GroupPosition { joints }
+    } else {
+        avatarm_ros::CommandKind::GroupVelocity { joints }
+    };
+    RosArm::start(
+        LinkSettings {
+            joint_states_topic: "/joint_states".into(),
+            command_topic: "/arm_controller/command".into(),
+            command,
+            robot_state_topic: None,
+            command_timeout_topic: None,
+            speed_ratio: None,
+            gripper: None,
+            joint_state_rate: None,
+            ..LinkSettings::sawyer(&master.uri)
+        },
+        ARM.iter().map(|s| (*s).to_owned()).collect(),
+        DVector::zeros(7),
+    )
+    .expect("link")
+}
+
+fn j0_and_j6(j0: f64, j6: f64) -> DVector<f64> {
+    let mut v = DVector::zeros(7);
+    v[0] = j0;
+    v[6] = j6;
+    v
+}
+
+#[test]
+fn a_ros_control_velocity_controller_gets_velocities_in_its_order_and_a_stop_at_the_end() {
+    let _serial = support::serial();
+    let master = Master::start();
+    let arm_node = FakeSawyer::start_with(&master, 0.0, "", &["--ros-control", "velocity"]);
+    let mut arm = ros_control_link(&master, false);
+    wait_until(&mut arm, "the arm's joint states", |a| a.alive());
+    let (_, refused) = pump(&mut arm, 1.0, Some(&j0_and_j6(0.2, -0.3)));
+    assert!(refused.is_empty(), "{refused:?}");
+    let r = arm_node.report();
+    eprintln!("ros_control velocity after 1 s: {r}");
+    assert_eq!(r["bad"].as_u64(), Some(0), "{r}");
+    let (j0, j6) = (
+        r["q"][0].as_f64().expect("q"),
+        r["q"][6].as_f64().expect("q"),
+    );
+    assert!(
+        (0.14..=0.26).contains(&j0),
+        "j0 {j0}: by name through the controller's order"
+    );
+    assert!((-0.39..=-0.21).contains(&j6), "j6 {j6}");
+    // The controller keeps its last command for ever: the link's end sends zeros, and the
+    // drop waits for them to go out (an app that exits next would otherwise lose them).
+    drop(arm);
+    let before = arm_node.report();
+    std::thread::sleep(Duration::from_millis(300));
+    let after = arm_node.report();
+    assert!(
+        before["velocity"]
+            .as_array()
+            .is_some_and(|v| v.iter().all(|x| x.as_f64() == Some(0.0))),
+        "{before}"
+    );
+    assert_eq!(before["q"], after["q"], "the arm stays where it stopped");
+}
+
+#[test]
+fn a_ros_control_position_controller_gets_integrated_targets_and_holds_them() {
+    let _serial = support::serial();
+    let master = Master::start();
+    let arm_node = FakeSawyer::start_with(&master, 0.0, "", &["--ros-control", "position"]);
+    let mut arm = ros_control_link(&master, true);
+    wait_until(&mut arm, "the arm's joint states", |a| a.alive());
+    let (_, refused) = pump(&mut arm, 1.0, Some(&j0_and_j6(0.2, -0.3)));
+    assert!(refused.is_empty(), "{refused:?}");
+    let r = arm_node.report();
+    eprintln!("ros_control position after 1 s: {r}");
+    assert_eq!(r["bad"].as_u64(), Some(0), "{r}");
+    let (j0, j6) = (
+        r["q"][0].as_f64().expect("q"),
+        r["q"][6].as_f64().expect("q"),
+    );
+    assert!((0.14..=0.26).contains(&j0), "j0 {j0}");
+    assert!((-0.39..=-0.21).contains(&j6), "j6 {j6}");
+    let t0 = r["target"][0].as_f64().expect("target");
+    assert!(
+        (t0 - j0).abs() < 0.02,
+        "the arm follows its target: {t0} vs {j0}"
+    );
+    // A refused command (NaN) holds the last target; so does the link's end.
+    let mut bad = j0_and_j6(0.2, 0.0);
+    bad[2] = f64::NAN;
+    assert!(arm.send(&bad).is_err());
+    pump(&mut arm, 0.3, None);
+    let held = arm_node.report();
+    drop(arm);
+    std::thread::sleep(Duration::from_millis(400));
+    let end = arm_node.report();
+    let moved = (end["q"][0].as_f64().expect("q") - held["q"][0].as_f64().expect("q")).abs();
+    assert!(moved < 0.01, "held: {held} then {end}");
+    assert_eq!(end["bad"].as_u64(), Some(0), "{end}");
 }

@@ -77,9 +77,20 @@ pub enum RobotLinkKind {
     /// robot's enable and e-stop state obeyed, the electric gripper.
     #[default]
     Intera,
-    /// Any arm with a ros_control joint group velocity controller: `std_msgs/Float64MultiArray`
-    /// in the controller's joint order.
+    /// Any arm with a ros_control joint group velocity or position controller
+    /// (`controller`): `std_msgs/Float64MultiArray` in the controller's joint order.
     RosControl,
+}
+
+/// Which ros_control joint group controller a `ros_control` link commands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RosControlController {
+    /// `JointGroupVelocityController`: joint velocities.
+    #[default]
+    Velocity,
+    /// `JointGroupPositionController`: position targets (the velocities integrated).
+    Position,
 }
 
 /// `[robot.link]`: the real robot over ROS 1 (docs/robot-ros.md). Topic defaults are
@@ -103,6 +114,8 @@ pub struct RobotLinkSpec {
     pub arm_joints: Vec<String>,
     /// `ros_control`: the controller's joints, in its order (default: `arm_joints`).
     pub controller_joints: Vec<String>,
+    /// `ros_control`: a `velocity` (default) or `position` joint group controller.
+    pub controller: RosControlController,
     /// Intera's robot state (`/robot/state`); `""` for none.
     pub robot_state_topic: Option<String>,
     /// Latched command timeout topic (Intera's `/robot/limb/right/joint_command_timeout`);
@@ -115,9 +128,13 @@ pub struct RobotLinkSpec {
     pub speed_ratio_topic: Option<String>,
     /// The speed ratio of position moves (0 < r <= 1).
     pub speed_ratio: f64,
-    /// The electric gripper's command topic (Intera's
-    /// `/io/end_effector/right_gripper/command`); `""` for none.
-    pub gripper_topic: Option<String>,
+    /// Intera's gripper: the device of the end effector's IO node (`/io/end_effector`),
+    /// e.g. `right_gripper`; default for `intera`: the first device the node's config names;
+    /// `""` for none (the default for `ros_control`).
+    pub gripper_device: Option<String>,
+    /// Intera: the joint-state rate to set (Hz, 1..800, on `/robot/joint_state_publish_rate`);
+    /// default: the robot's own (100 Hz).
+    pub joint_state_rate_hz: Option<u16>,
     /// No joint state for this long (s) and the link is down: commands stop.
     pub stale_after_s: f64,
 }
@@ -132,12 +149,14 @@ impl Default for RobotLinkSpec {
             command_topic: None,
             arm_joints: Vec::new(),
             controller_joints: Vec::new(),
+            controller: RosControlController::Velocity,
             robot_state_topic: None,
             command_timeout_topic: None,
             command_timeout_s: 0.2,
             speed_ratio_topic: None,
             speed_ratio: 0.3,
-            gripper_topic: None,
+            gripper_device: None,
+            joint_state_rate_hz: None,
             stale_after_s: 0.2,
         }
     }
@@ -163,6 +182,35 @@ impl RobotLinkSpec {
             return bad(
                 "stale_after_s",
                 format!("{} s: must be within 0.01..5", self.stale_after_s),
+            );
+        }
+        if let Some(hz) = self.joint_state_rate_hz {
+            if !(1..=800).contains(&hz) {
+                return bad(
+                    "joint_state_rate_hz",
+                    format!("{hz} Hz: must be within 1..800"),
+                );
+            }
+            if self.kind != RobotLinkKind::Intera {
+                return bad(
+                    "joint_state_rate_hz",
+                    "only an Intera robot takes its joint-state rate from a topic".into(),
+                );
+            }
+        }
+        if let Some(d) = &self.gripper_device
+            && d.contains('/')
+        {
+            return bad(
+                "gripper_device",
+                format!("'{d}': a device name (as /io/end_effector/config gives it), not a topic"),
+            );
+        }
+        if self.kind == RobotLinkKind::Intera && self.controller != RosControlController::Velocity {
+            return bad(
+                "controller",
+                "only a ros_control link has a group controller to choose (Intera takes velocities)"
+                    .into(),
             );
         }
         if self.node_name.is_empty() || self.joint_states_topic.is_empty() {

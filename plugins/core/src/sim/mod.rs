@@ -121,6 +121,20 @@ impl SimRobot {
         &self.params
     }
 
+    /// Puts the robot at rest at `q` (clamped into its limits; a value that is missing or not
+    /// finite keeps the joint where it is), forgetting commands in flight: a simulated room
+    /// that shows where a real robot is, in place of a new robot every tick.
+    pub fn place(&mut self, q: &DVector<f64>) {
+        for i in 0..self.q.len() {
+            if let Some(v) = q.get(i).copied().filter(|v| v.is_finite()) {
+                self.q[i] = self.limits[i].clamp_position(v);
+            }
+        }
+        self.qdot.fill(0.0);
+        self.pending.clear();
+        self.active = None;
+    }
+
     /// Sends a command now; it acts after the command latency.
     pub fn send(&mut self, command: JointCommand) -> Result<()> {
         let (what, values) = match &command {
@@ -271,6 +285,25 @@ mod tests {
         }
         assert_eq!(r.true_positions()[1], 1.0, "stops at the position limit");
         assert_eq!(r.true_velocities()[1], 0.0);
+    }
+
+    #[test]
+    fn placing_the_robot_clamps_keeps_what_is_not_finite_and_drops_commands() {
+        let mut r = robot(SimRobotParams::default());
+        r.send(JointCommand::Velocity(DVector::from_vec(vec![0.4, 0.4])))
+            .unwrap();
+        r.step(0.5);
+        r.place(&DVector::from_vec(vec![2.0, f64::NAN]));
+        let kept = r.true_positions()[1];
+        assert_eq!(r.true_positions()[0], 1.0, "clamped into the limits");
+        assert!(
+            kept.is_finite() && kept > 0.0,
+            "NaN keeps the joint: {kept}"
+        );
+        assert_eq!(r.true_velocities().norm(), 0.0);
+        r.step(0.5);
+        assert_eq!(r.true_positions()[0], 1.0, "no command in flight");
+        assert_eq!(r.true_positions()[1], kept);
     }
 
     #[test]

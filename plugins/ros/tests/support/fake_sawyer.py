@@ -14,8 +14,17 @@ What it does, as the real robot does:
     position when no command came for the command timeout
     (/robot/limb/right/joint_command_timeout, std_msgs/Float64, default 0.2 s);
   - ignores every command while disabled or stopped, and counts them;
-  - takes the electric gripper's /io/end_effector/right_gripper/command (IOComponentCommand,
-    op "set", JSON args with signals.position_m).
+  - sets its joint-state rate from /robot/joint_state_publish_rate (std_msgs/UInt16);
+  - names its gripper device (--gripper-device, default right_gripper) in the latched
+    /io/end_effector/config (IONodeConfiguration), takes the device's command
+    (IOComponentCommand, op "set", JSON args with signals.position_m), moves the fingers there
+    at 0.1 m/s and reports them on the device's state (IODeviceStatus, Intera's signals
+    position_response_m, is_gripping, is_calibrated, has_error) at 10 Hz.
+With --ros-control velocity|position it is instead an arm under ros_control: joint states on
+/joint_states, and a joint group velocity or position controller on /arm_controller/command
+(std_msgs/Float64MultiArray, one value per --controller-joints joint, in that order); the
+velocity controller keeps its last command for ever (as ros_control's does), the position
+controller moves each joint to its target at the joint's speed limit.
 Signals: SIGUSR1 toggles the e-stop (stopped), SIGUSR2 toggles enabled.
 Every 0.25 s (and at exit) it prints one JSON line of what it saw to stdout.
 """
@@ -32,7 +41,7 @@ import time
 import genpy.dynamic
 import rospy
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, Float64MultiArray, UInt16
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 MSG = os.path.join(HERE, "..", "..", "msg")
@@ -52,15 +61,33 @@ NAMES = ["head_pan"] + sorted(LIMITS) + ["torso_t0"]
 
 def intera_types():
     """The Intera message classes, generated from Avatarm's own definitions."""
-    header = open(os.path.join(MSG, "std_msgs", "msg", "Header.msg")).read()
     sep = "\n" + "=" * 80 + "\n"
+
+    def text(package, name):
+        return open(os.path.join(MSG, package, "msg", name + ".msg")).read()
+
+    # Each type with the definitions it embeds, as a ROS 1 connection carries them.
+    depends = {
+        "JointCommand": [("std_msgs", "Header")],
+        "RobotAssemblyState": [],
+        "IOComponentCommand": [],
+        "IODeviceStatus": [
+            ("intera_core_msgs", "IOComponentStatus"),
+            ("intera_core_msgs", "IOStatus"),
+            ("intera_core_msgs", "IODataStatus"),
+        ],
+        "IONodeConfiguration": [("intera_core_msgs", "IOComponentConfiguration")],
+    }
     out = {}
-    for name in ("JointCommand", "RobotAssemblyState", "IOComponentCommand"):
-        text = open(os.path.join(MSG, "intera_core_msgs", "msg", name + ".msg")).read()
-        if "Header header" in text:
-            text += sep + "MSG: std_msgs/Header\n" + header
+    for name, deps in depends.items():
         full = "intera_core_msgs/" + name
-        out[name] = genpy.dynamic.generate_dynamic(full, text)[full]
+        definition = text("intera_core_msgs", name)
+        for package, dep in deps:
+            definition += sep + "MSG: %s/%s\n" % (package, dep) + text(package, dep)
+        classes = genpy.dynamic.generate_dynamic(full, definition)
+        out[name] = classes[full]
+        for package, dep in deps:
+            out.setdefault(dep, classes["%s/%s" % (package, dep)])
     return out
 
 
@@ -70,6 +97,9 @@ def main():
     ap.add_argument("--rate", type=float, default=100.0)
     ap.add_argument("--start", type=str, default="", help="right_j0..j6 start values, comma-separated")
     ap.add_argument("--disabled", action="store_true")
+    ap.add_argument("--gripper-device", type=str, default="right_gripper")
+    ap.add_argument("--ros-control", choices=["velocity", "position"], default=None)
+    ap.add_argument("--controller-joints", type=str, default=",".join(reversed(sorted(LIMITS))))
     args = ap.parse_args()
 
     types = intera_types()
@@ -94,7 +124,11 @@ def main():
         "latency_ms": [],
         "holds": 0,
         "gripper_m": None,
+        "gripper_target_m": 0.041667,
+        "gripper_at_m": 0.041667,
         "gripper_commands": 0,
+        "rate_hz": args.rate,
+        "target": None,
         "md5": types["JointCommand"]._md5sum,
     }
 
@@ -142,13 +176,68 @@ def main():
                 state["bad"] += 1
                 return
             state["gripper_m"] = min(max(float(p), 0.0), 0.041667)
+            state["gripper_target_m"] = state["gripper_m"]
             state["gripper_commands"] += 1
+
+    controller = args.controller_joints.split(",")
+
+    def on_group(m):
+        now = time.time()
+        with lock:
+            data = list(m.data)
+            if len(data) != len(controller) or any(v != v or abs(v) == float("inf") for v in data):
+                state["bad"] += 1
+                return
+            if args.ros_control == "velocity":
+                for n, v in zip(controller, data):
+                    state["velocity"][n] = v
+            else:
+                state["target"] = dict(zip(controller, data))
+            state["last_command"] = now
+            state["commands"] += 1
+
+    def on_rate(m):
+        with lock:
+            if 1 <= m.data <= 800:
+                state["rate_hz"] = float(m.data)
 
     rospy.Subscriber("/robot/limb/right/joint_command", types["JointCommand"], on_command, queue_size=1)
     rospy.Subscriber("/robot/limb/right/joint_command_timeout", Float64, on_timeout)
     rospy.Subscriber("/robot/limb/right/set_speed_ratio", Float64, on_ratio)
-    rospy.Subscriber("/io/end_effector/right_gripper/command", types["IOComponentCommand"], on_gripper)
-    js_pub = rospy.Publisher("/robot/joint_states", JointState, queue_size=10)
+    device = "/io/end_effector/" + args.gripper_device
+    rospy.Subscriber(device + "/command", types["IOComponentCommand"], on_gripper)
+    rospy.Subscriber("/robot/joint_state_publish_rate", UInt16, on_rate)
+    config_pub = rospy.Publisher("/io/end_effector/config", types["IONodeConfiguration"], queue_size=1, latch=True)
+    config = types["IONodeConfiguration"]()
+    config.time = rospy.Time.now()
+    config.node = types["IOComponentConfiguration"](name="end_effector", config="{}")
+    config.devices = [types["IOComponentConfiguration"](name=args.gripper_device, config="{}")]
+    config_pub.publish(config)
+    gripper_pub = rospy.Publisher(device + "/state", types["IODeviceStatus"], queue_size=1, latch=True)
+
+    def gripper_state(at_m, target_m):
+        m = types["IODeviceStatus"]()
+        m.time = rospy.Time.now()
+        m.device = types["IOComponentStatus"](name=args.gripper_device)
+        m.device.status.tag = "ready"
+
+        def signal_(name, kind, value):
+            d = types["IODataStatus"](name=name, format=json.dumps({"type": kind}), data=json.dumps([value]))
+            d.status.tag = "ready"
+            return d
+
+        m.signals = [
+            signal_("position_response_m", "float", at_m),
+            # Closed on the commanded opening (the fake has no object to stop on).
+            signal_("is_gripping", "bool", target_m < 0.01 and at_m <= target_m + 1e-4),
+            signal_("is_calibrated", "bool", True),
+            signal_("has_error", "bool", False),
+        ]
+        return m
+    if args.ros_control:
+        rospy.Subscriber("/arm_controller/command", Float64MultiArray, on_group, queue_size=1)
+    js_topic = "/joint_states" if args.ros_control else "/robot/joint_states"
+    js_pub = rospy.Publisher(js_topic, JointState, queue_size=10)
     st_pub = rospy.Publisher("/robot/state", types["RobotAssemblyState"], queue_size=1, latch=True)
 
     def toggle(key):
@@ -182,14 +271,16 @@ def main():
                 "speed_ratio": state["speed_ratio"],
                 "gripper_m": state["gripper_m"],
                 "gripper_commands": state["gripper_commands"],
+                "gripper_at_m": state["gripper_at_m"],
+                "rate_hz": state["rate_hz"],
                 "latency_ms_median": statistics.median(lat) if lat else None,
                 "latency_ms_p95": sorted(lat)[int(0.95 * (len(lat) - 1))] if lat else None,
                 "q": [q[n] for n in sorted(LIMITS)],
+                "target": None if state["target"] is None else [state["target"][n] for n in sorted(LIMITS)],
                 "velocity": [state["velocity"][n] for n in sorted(LIMITS)],
             }
         print(json.dumps(line), flush=True)
 
-    period = 1.0 / args.rate
     last = time.time()
     due = last
     next_state = 0.0
@@ -206,7 +297,15 @@ def main():
                 and state["enabled"]
                 and not state["stopped"]
             )
-            if not fresh:
+            if args.ros_control == "velocity":
+                # A ros_control velocity controller keeps its last command for ever.
+                pass
+            elif args.ros_control == "position":
+                if state["target"] is not None:
+                    for n, (lo, hi, vmax) in LIMITS.items():
+                        d = state["target"][n] - q[n]
+                        state["velocity"][n] = max(-vmax, min(vmax, d / dt if dt > 0 else 0.0))
+            elif not fresh:
                 if not held:
                     state["holds"] += 1
                 held = True
@@ -219,6 +318,10 @@ def main():
             vel = [0.0 if n not in LIMITS else state["velocity"][n] for n in NAMES]
             positions = [q[n] for n in NAMES]
             enabled, stopped = state["enabled"], state["stopped"]
+            g = state["gripper_at_m"]
+            state["gripper_at_m"] = g + min(max(state["gripper_target_m"] - g, -0.1 * dt), 0.1 * dt)
+            gripper = (state["gripper_at_m"], state["gripper_target_m"])
+            period = 1.0 / state["rate_hz"]
         m = JointState()
         m.header.stamp = rospy.Time.from_sec(now + args.offset)
         m.name = NAMES
@@ -234,6 +337,7 @@ def main():
             s.estop_button = 1 if stopped else 0
             s.estop_source = 1 if stopped else 0
             st_pub.publish(s)
+            gripper_pub.publish(gripper_state(*gripper))
             next_state = now + 0.1
         if now >= next_report:
             report()

@@ -99,6 +99,12 @@ impl FakeSawyer {
 
     /// The node with its arm at `start` (right_j0..right_j6, comma-separated; "" for zeros).
     pub fn start_at(master: &Master, offset_s: f64, start: &str) -> Self {
+        Self::start_with(master, offset_s, start, &[])
+    }
+
+    /// [`FakeSawyer::start_at`] with more of the script's arguments (`--gripper-device`,
+    /// `--rate`, `--disabled`).
+    pub fn start_with(master: &Master, offset_s: f64, start: &str, more: &[&str]) -> Self {
         // From avatarm_ros's tests or from the app's (which include this module too).
         let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
         let script = ["tests/support", "plugins/ros/tests/support"]
@@ -109,6 +115,7 @@ impl FakeSawyer {
         let mut child = Command::new("/usr/bin/python3")
             .arg(&script)
             .args(["--offset", &offset_s.to_string(), "--start", start])
+            .args(more)
             .env("ROS_MASTER_URI", &master.uri)
             .env("ROS_HOME", std::env::temp_dir())
             .stdout(Stdio::piped())
