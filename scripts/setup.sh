@@ -8,6 +8,8 @@ packages=(
   # The ROS 1 link: TLS for roslibrust's XML-RPC client; a ROS master and rospy (Debian's) for
   # its tests, which start a master and a simulated Sawyer node themselves.
   libssl-dev python3-rosmaster python3-rospy python3-sensor-msgs python3-std-msgs python3-genpy
+  # pip, for PyPI's MCAP reader below.
+  python3-pip
 )
 missing=()
 for p in "${packages[@]}"; do
@@ -24,3 +26,10 @@ command -v cargo >/dev/null || {
   echo "error: cargo not found; install Rust 1.95 or newer (https://rustup.rs)" >&2
   exit 1
 }
+# PyPI's MCAP reader: the recording tests read each file back with it too (a second,
+# independent reader). Installed into Avatarm's cache folder, not the system's Python.
+python_dir="$HOME/.cache/avatarm/python"
+if ! PYTHONPATH="$python_dir" python3 -c "import mcap.reader" 2>/dev/null; then
+  echo "installing PyPI's mcap into $python_dir"
+  PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet --target "$python_dir" "mcap>=1.1"
+fi

@@ -17,6 +17,12 @@ pub enum AppError {
     /// A hand source could not be set up (a recording that cannot be read, a device).
     #[error(transparent)]
     Hand(Box<avatarm_hand::HandError>),
+    /// A session recording that could not be written or read.
+    #[error(transparent)]
+    Record(Box<avatarm_record::RecordError>),
+    /// A camera file (intrinsics, distortion, pose) that could not be used.
+    #[error(transparent)]
+    CameraFile(Box<avatarm_record::CameraFileError>),
     /// A command-line flag (or the scene field it stands for) with a value that cannot be used.
     #[error("{flag}: {message}")]
     Flag {
@@ -164,5 +170,17 @@ impl From<avatarm_mapping::MappingError> for AppError {
 impl From<avatarm_hand::HandError> for AppError {
     fn from(e: avatarm_hand::HandError) -> Self {
         Self::Hand(Box::new(e))
+    }
+}
+
+impl From<avatarm_record::RecordError> for AppError {
+    fn from(e: avatarm_record::RecordError) -> Self {
+        Self::Record(Box::new(e))
+    }
+}
+
+impl From<avatarm_record::CameraFileError> for AppError {
+    fn from(e: avatarm_record::CameraFileError) -> Self {
+        Self::CameraFile(Box::new(e))
     }
 }

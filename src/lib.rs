@@ -22,6 +22,7 @@ pub mod app;
 pub mod bench;
 pub mod cli;
 pub mod error;
+pub mod footage;
 pub mod import;
 pub mod preview;
 pub mod progress;

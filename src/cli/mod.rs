@@ -52,11 +52,36 @@ enum Command {
     /// Convert a real Leap Motion recording (leapjs-playback JSON, Leap's protocol v6, .json or
     /// .json.gz) to a .hand.jsonl of Avatarm's 26-joint skeleton, and picture one frame.
     Import {
-        /// The Leap recording.
+        /// The Leap recording, or a folder of camera frames with the robot's joints (a listing
+        /// frames.csv or frames.json, or EasyHeC's color/ qpos/ mask/ K.txt; docs/real-footage.md).
         recording: PathBuf,
-        /// The .hand.jsonl to write.
+        /// The .hand.jsonl to write (a Leap recording), or the .mcap (a folder of frames).
         #[arg(long, value_name = "FILE")]
         out: PathBuf,
+        /// Frames: the listing, when not frames.csv or frames.json in the folder.
+        #[arg(long, value_name = "FILE")]
+        listing: Option<PathBuf>,
+        /// Frames: the camera file (ROS camera_info or OpenCV YAML, or a 3x3 K), when not
+        /// camera_info.yaml, camera.yaml or K.txt in the folder.
+        #[arg(long, value_name = "FILE")]
+        camera: Option<PathBuf>,
+        /// Frames: the camera's pose, under camera_from_base or base_from_camera (a 4x4 matrix,
+        /// translation with quaternion_xyzw / quaternion_wxyz / rotation_vector), when not
+        /// pose.yaml or pose.json in the folder.
+        #[arg(long, value_name = "FILE")]
+        pose: Option<PathBuf>,
+        /// Frames: names of joints given in q order (comma-separated).
+        #[arg(long = "joint-names", value_name = "NAMES", value_delimiter = ',')]
+        joint_names: Vec<String>,
+        /// Frames: a description naming joints given in q order (its movable joints).
+        #[arg(long, value_name = "URDF")]
+        urdf: Option<PathBuf>,
+        /// Frames: folder searched for package://NAME/... URIs of --urdf (repeatable).
+        #[arg(long = "package-path", value_name = "DIR")]
+        package_path: Vec<PathBuf>,
+        /// Frames: frames per second where the source has no stamps (EasyHeC).
+        #[arg(long, value_name = "FPS", default_value_t = 30.0)]
+        fps: f64,
         /// Which hand (default: the first the recording shows).
         #[arg(long, value_parser = ["left", "right"])]
         hand: Option<String>,
@@ -336,11 +361,53 @@ fn run(cli: Cli) -> Result<(), AppError> {
         Command::Import {
             recording,
             out,
+            listing,
+            camera,
+            pose,
+            joint_names,
+            urdf,
+            package_path,
+            fps,
+            ..
+        } if recording.is_dir() => {
+            let summary = crate::footage::import_footage(&crate::footage::FootageOptions {
+                folder: recording,
+                out: out.clone(),
+                listing,
+                camera,
+                pose,
+                joint_names,
+                urdf,
+                packages: packages(package_path),
+                fps,
+            })?;
+            println!(
+                "wrote {} ({}): {} frames {}x{} over {:.2} s, {} reference masks, joints {}, camera pose {}",
+                out.display(),
+                summary.layout,
+                summary.frames,
+                summary.size.0,
+                summary.size.1,
+                summary.duration_s,
+                summary.masks,
+                summary.joints.join(", "),
+                if summary.pose {
+                    "given"
+                } else {
+                    "not given (avatarm calibrate can find it)"
+                }
+            );
+            Ok(())
+        }
+        Command::Import {
+            recording,
+            out,
             hand,
             mount,
             device_at,
             picture,
             frame,
+            ..
         } => {
             let options = crate::import::ImportOptions {
                 recording,

@@ -1,0 +1,890 @@
+//! Avatarm's recorded sessions: one MCAP file per session, each stream on its own channel with
+//! Foxglove's well-known schemas in JSON encoding, so that a user opens the file in Foxglove
+//! (or reads it with any MCAP reader) and sees the session; and the camera files labs have
+//! ([`camera`]).
+//!
+//! Channels (topic: schema, all `jsonschema`/`json`):
+//!
+//! | topic | schema | what |
+//! |---|---|---|
+//! | [`topics::IMAGE`] | `foxglove.CompressedImage` | camera frames (PNG or JPEG), stamped at capture |
+//! | [`topics::CALIBRATION`] | `foxglove.CameraCalibration` | K, D and its model, the image size |
+//! | [`topics::TRANSFORM`] | `foxglove.FrameTransform` | the camera's pose: [`BASE_FRAME`] → [`CAMERA_FRAME`] (OpenCV optical axes) |
+//! | [`topics::JOINT_STATES`] | `avatarm.JointState` | names, positions (rad or m), velocities, stamp |
+//! | [`topics::REFERENCE_MASK`] | `foxglove.CompressedImage` | a reference silhouette (PNG, 255 = robot), where the source has one |
+//!
+//! Times: MCAP log and publish times in ns since the Unix epoch (or since the session's start
+//! where the source has no wall clock); each message's `timestamp` is Foxglove's JSON time
+//! `{sec, nsec}`; bytes are base64 (Foxglove's JSON encoding of `bytes`). Every channel
+//! carries `avatarm_format` ([`FORMAT_VERSION`]) in its metadata; a file of another version is
+//! refused by name.
+
+pub mod camera;
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use base64::Engine;
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+use serde_json::json;
+
+pub use camera::{CameraCalibration, CameraFileError, DistortionModel};
+
+/// The recording format's version (channel metadata `avatarm_format`).
+pub const FORMAT_VERSION: &str = "1";
+/// The robot's base frame.
+pub const BASE_FRAME: &str = "base";
+/// The camera's optical frame (x right, y down, z forward).
+pub const CAMERA_FRAME: &str = "camera_optical";
+
+/// The topics of a recording.
+pub mod topics {
+    /// Camera frames.
+    pub const IMAGE: &str = "/camera/image/compressed";
+    /// The camera's calibration.
+    pub const CALIBRATION: &str = "/camera/calibration";
+    /// The camera's pose in the base frame.
+    pub const TRANSFORM: &str = "/tf";
+    /// The robot's joint states.
+    pub const JOINT_STATES: &str = "/joint_states";
+    /// Reference silhouettes of the robot.
+    pub const REFERENCE_MASK: &str = "/camera/reference_mask/compressed";
+}
+
+/// A compressed image's format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImageFormat {
+    /// PNG.
+    Png,
+    /// JPEG.
+    Jpeg,
+}
+
+impl ImageFormat {
+    /// Foxglove's name (`CompressedImage.format`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Png => "png",
+            Self::Jpeg => "jpeg",
+        }
+    }
+
+    /// The format of encoded bytes, from their magic number.
+    pub fn of_bytes(data: &[u8]) -> Option<Self> {
+        if data.starts_with(b"\x89PNG\r\n\x1a\n") {
+            Some(Self::Png)
+        } else if data.starts_with(&[0xff, 0xd8, 0xff]) {
+            Some(Self::Jpeg)
+        } else {
+            None
+        }
+    }
+}
+
+/// One compressed image and when it was captured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CompressedFrame {
+    /// Capture time (ns).
+    pub stamp_ns: u64,
+    /// The encoding.
+    pub format: ImageFormat,
+    /// The encoded image.
+    pub data: Vec<u8>,
+}
+
+/// The robot's joints at one instant (`sensor_msgs/JointState`'s fields, no effort).
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointStates {
+    /// Sample time (ns).
+    pub stamp_ns: u64,
+    /// Joint names (the description's).
+    pub names: Vec<String>,
+    /// Positions (rad or m), one per name.
+    pub positions: Vec<f64>,
+    /// Velocities (rad/s or m/s), one per name, or none.
+    pub velocities: Vec<f64>,
+}
+
+/// A recording read back.
+#[derive(Debug, Clone, Default)]
+pub struct Recording {
+    /// The camera's calibration (the last one recorded).
+    pub calibration: Option<CameraCalibration>,
+    /// The camera's pose in the base frame (the last one recorded), OpenCV optical axes.
+    pub base_from_camera: Option<Isometry3<f64>>,
+    /// Camera frames, by capture time.
+    pub frames: Vec<CompressedFrame>,
+    /// Reference silhouettes, by capture time.
+    pub reference_masks: Vec<CompressedFrame>,
+    /// Joint states, by sample time.
+    pub joint_states: Vec<JointStates>,
+    /// Messages on topics Avatarm does not read, by topic.
+    pub other_topics: BTreeMap<String, usize>,
+}
+
+/// A recording that cannot be written or read: the file, and where in it.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// The file cannot be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// Not an MCAP file, or a damaged one.
+    #[error("{path}: not a readable MCAP file: {source}")]
+    Mcap {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: mcap::McapError,
+    },
+    /// One message is wrong.
+    #[error("{path}: {topic}, message {index}: {message}")]
+    Message {
+        /// The file.
+        path: PathBuf,
+        /// Its topic.
+        topic: String,
+        /// Its index on the topic (0-based).
+        index: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// A value to write is wrong, or the file as a whole.
+    #[error("{path}: {message}")]
+    Content {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct Time {
+    sec: u32,
+    nsec: u32,
+}
+
+impl Time {
+    fn of(ns: u64) -> Self {
+        Self {
+            sec: u32::try_from(ns / 1_000_000_000).unwrap_or(u32::MAX),
+            nsec: (ns % 1_000_000_000) as u32,
+        }
+    }
+
+    fn ns(&self) -> u64 {
+        u64::from(self.sec) * 1_000_000_000 + u64::from(self.nsec)
+    }
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct WireImage {
+    timestamp: Time,
+    frame_id: String,
+    data: String,
+    format: String,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+#[allow(non_snake_case)]
+struct WireCalibration {
+    timestamp: Time,
+    frame_id: String,
+    width: u32,
+    height: u32,
+    distortion_model: String,
+    D: Vec<f64>,
+    K: Vec<f64>,
+    R: Vec<f64>,
+    P: Vec<f64>,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct WireVector3 {
+    x: f64,
+    y: f64,
+    z: f64,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct WireQuaternion {
+    x: f64,
+    y: f64,
+    z: f64,
+    w: f64,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct WireTransform {
+    timestamp: Time,
+    parent_frame_id: String,
+    child_frame_id: String,
+    translation: WireVector3,
+    rotation: WireQuaternion,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct WireJointState {
+    timestamp: Time,
+    name: Vec<String>,
+    position: Vec<f64>,
+    #[serde(default)]
+    velocity: Vec<f64>,
+}
+
+/// The JSON Schema of each topic's messages, and its name (Foxglove's where it has one).
+fn schema(topic: &str) -> (&'static str, serde_json::Value) {
+    let time = json!({
+        "type": "object",
+        "title": "time",
+        "properties": {"sec": {"type": "integer", "minimum": 0}, "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}}
+    });
+    let numbers = json!({"type": "array", "items": {"type": "number"}});
+    let xyz = json!({"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}}});
+    match topic {
+        topics::IMAGE | topics::REFERENCE_MASK => (
+            "foxglove.CompressedImage",
+            json!({
+                "title": "foxglove.CompressedImage",
+                "description": "A compressed image",
+                "type": "object",
+                "properties": {
+                    "timestamp": time,
+                    "frame_id": {"type": "string"},
+                    "data": {"type": "string", "contentEncoding": "base64"},
+                    "format": {"type": "string"}
+                }
+            }),
+        ),
+        topics::CALIBRATION => (
+            "foxglove.CameraCalibration",
+            json!({
+                "title": "foxglove.CameraCalibration",
+                "description": "Camera calibration parameters",
+                "type": "object",
+                "properties": {
+                    "timestamp": time,
+                    "frame_id": {"type": "string"},
+                    "width": {"type": "integer", "minimum": 0},
+                    "height": {"type": "integer", "minimum": 0},
+                    "distortion_model": {"type": "string"},
+                    "D": numbers, "K": numbers, "R": numbers, "P": numbers
+                }
+            }),
+        ),
+        topics::TRANSFORM => (
+            "foxglove.FrameTransform",
+            json!({
+                "title": "foxglove.FrameTransform",
+                "description": "A transform between two reference frames in 3D space",
+                "type": "object",
+                "properties": {
+                    "timestamp": time,
+                    "parent_frame_id": {"type": "string"},
+                    "child_frame_id": {"type": "string"},
+                    "translation": xyz,
+                    "rotation": {"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}, "w": {"type": "number"}}}
+                }
+            }),
+        ),
+        _ => (
+            "avatarm.JointState",
+            json!({
+                "title": "avatarm.JointState",
+                "description": "The robot's joints at one instant: names, positions (rad or m), velocities (rad/s or m/s)",
+                "type": "object",
+                "properties": {
+                    "timestamp": time,
+                    "name": {"type": "array", "items": {"type": "string"}},
+                    "position": numbers,
+                    "velocity": numbers
+                }
+            }),
+        ),
+    }
+}
+
+/// Writes a recording ([`RecordingWriter::finish`] completes the file; a writer dropped
+/// without it leaves a file that MCAP readers can still read up to the last chunk written).
+pub struct RecordingWriter {
+    path: PathBuf,
+    out: mcap::Writer<BufWriter<File>>,
+    channels: BTreeMap<&'static str, u16>,
+    sequence: u32,
+    messages: u64,
+}
+
+impl RecordingWriter {
+    /// Creates `path` (replacing a file there).
+    pub fn create(path: &Path) -> Result<Self, RecordError> {
+        let io = |source| RecordError::Io {
+            path: path.to_owned(),
+            source,
+        };
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(io)?;
+        }
+        let file = File::create(path).map_err(io)?;
+        let out = mcap::WriteOptions::new()
+            .profile("")
+            .library(concat!("avatarm ", env!("CARGO_PKG_VERSION")))
+            .create(BufWriter::new(file))
+            .map_err(|source| RecordError::Mcap {
+                path: path.to_owned(),
+                source,
+            })?;
+        Ok(Self {
+            path: path.to_owned(),
+            out,
+            channels: BTreeMap::new(),
+            sequence: 0,
+            messages: 0,
+        })
+    }
+
+    fn mcap_error(&self, source: mcap::McapError) -> RecordError {
+        RecordError::Mcap {
+            path: self.path.clone(),
+            source,
+        }
+    }
+
+    fn write(
+        &mut self,
+        topic: &'static str,
+        stamp_ns: u64,
+        message: &impl Serialize,
+    ) -> Result<(), RecordError> {
+        let channel = match self.channels.get(topic) {
+            Some(c) => *c,
+            None => {
+                let (name, schema) = schema(topic);
+                let schema_id = self
+                    .out
+                    .add_schema(name, "jsonschema", schema.to_string().as_bytes())
+                    .map_err(|e| self.mcap_error(e))?;
+                let metadata =
+                    BTreeMap::from([("avatarm_format".to_owned(), FORMAT_VERSION.to_owned())]);
+                let id = self
+                    .out
+                    .add_channel(schema_id, topic, "json", &metadata)
+                    .map_err(|e| self.mcap_error(e))?;
+                self.channels.insert(topic, id);
+                id
+            }
+        };
+        let data = serde_json::to_vec(message).map_err(|e| RecordError::Content {
+            path: self.path.clone(),
+            message: format!("{topic}: {e}"),
+        })?;
+        self.sequence = self.sequence.wrapping_add(1);
+        self.out
+            .write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: channel,
+                    sequence: self.sequence,
+                    log_time: stamp_ns,
+                    publish_time: stamp_ns,
+                },
+                &data,
+            )
+            .map_err(|e| self.mcap_error(e))?;
+        self.messages += 1;
+        Ok(())
+    }
+
+    fn refuse(&self, message: String) -> RecordError {
+        RecordError::Content {
+            path: self.path.clone(),
+            message,
+        }
+    }
+
+    /// The camera's calibration at `stamp_ns`. Refused when it does not validate.
+    pub fn calibration(&mut self, stamp_ns: u64, c: &CameraCalibration) -> Result<(), RecordError> {
+        c.validate()
+            .map_err(|m| self.refuse(format!("camera calibration: {m}")))?;
+        let k = c.k;
+        let message = WireCalibration {
+            timestamp: Time::of(stamp_ns),
+            frame_id: CAMERA_FRAME.into(),
+            width: c.width,
+            height: c.height,
+            distortion_model: c.distortion_model.ros_name().into(),
+            D: c.d.clone(),
+            K: k.to_vec(),
+            R: vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            P: vec![
+                k[0], k[1], k[2], 0.0, k[3], k[4], k[5], 0.0, 0.0, 0.0, 1.0, 0.0,
+            ],
+        };
+        self.write(topics::CALIBRATION, stamp_ns, &message)
+    }
+
+    /// The camera's pose in the base frame at `stamp_ns` (OpenCV optical axes). Refused when
+    /// not finite.
+    pub fn camera_pose(
+        &mut self,
+        stamp_ns: u64,
+        base_from_camera: &Isometry3<f64>,
+    ) -> Result<(), RecordError> {
+        let t = base_from_camera.translation.vector;
+        let q = base_from_camera.rotation;
+        if !(t.iter().all(|v| v.is_finite()) && q.coords.iter().all(|v| v.is_finite())) {
+            return Err(self.refuse(format!("camera pose {base_from_camera:?} is not finite")));
+        }
+        let message = WireTransform {
+            timestamp: Time::of(stamp_ns),
+            parent_frame_id: BASE_FRAME.into(),
+            child_frame_id: CAMERA_FRAME.into(),
+            translation: WireVector3 {
+                x: t.x,
+                y: t.y,
+                z: t.z,
+            },
+            rotation: WireQuaternion {
+                x: q.i,
+                y: q.j,
+                z: q.k,
+                w: q.w,
+            },
+        };
+        self.write(topics::TRANSFORM, stamp_ns, &message)
+    }
+
+    fn image(&mut self, topic: &'static str, f: &CompressedFrame) -> Result<(), RecordError> {
+        if ImageFormat::of_bytes(&f.data) != Some(f.format) {
+            return Err(self.refuse(format!(
+                "{topic}: the image at {} ns is not {} data",
+                f.stamp_ns,
+                f.format.name()
+            )));
+        }
+        let message = WireImage {
+            timestamp: Time::of(f.stamp_ns),
+            frame_id: CAMERA_FRAME.into(),
+            data: base64::engine::general_purpose::STANDARD.encode(&f.data),
+            format: f.format.name().into(),
+        };
+        self.write(topic, f.stamp_ns, &message)
+    }
+
+    /// A camera frame.
+    pub fn frame(&mut self, f: &CompressedFrame) -> Result<(), RecordError> {
+        self.image(topics::IMAGE, f)
+    }
+
+    /// A reference silhouette (PNG, 255 = robot) for the frame captured at `f.stamp_ns`.
+    pub fn reference_mask(&mut self, f: &CompressedFrame) -> Result<(), RecordError> {
+        self.image(topics::REFERENCE_MASK, f)
+    }
+
+    /// The robot's joints. Refused when the lengths do not match or a value is not finite
+    /// (nothing is written).
+    pub fn joint_states(&mut self, s: &JointStates) -> Result<(), RecordError> {
+        if s.positions.len() != s.names.len()
+            || !(s.velocities.is_empty() || s.velocities.len() == s.names.len())
+        {
+            return Err(self.refuse(format!(
+                "joint states at {} ns: {} names, {} positions, {} velocities",
+                s.stamp_ns,
+                s.names.len(),
+                s.positions.len(),
+                s.velocities.len()
+            )));
+        }
+        if let Some((i, v)) = s
+            .positions
+            .iter()
+            .chain(&s.velocities)
+            .enumerate()
+            .find(|(_, v)| !v.is_finite())
+        {
+            let name = &s.names[i % s.names.len()];
+            return Err(self.refuse(format!(
+                "joint states at {} ns: joint '{name}' has {v}",
+                s.stamp_ns
+            )));
+        }
+        let message = WireJointState {
+            timestamp: Time::of(s.stamp_ns),
+            name: s.names.clone(),
+            position: s.positions.clone(),
+            velocity: s.velocities.clone(),
+        };
+        self.write(topics::JOINT_STATES, s.stamp_ns, &message)
+    }
+
+    /// Messages written so far.
+    pub fn messages(&self) -> u64 {
+        self.messages
+    }
+
+    /// Completes the file (its summary and index).
+    pub fn finish(mut self) -> Result<(), RecordError> {
+        self.out.finish().map_err(|e| self.mcap_error(e))?;
+        Ok(())
+    }
+}
+
+impl Recording {
+    /// Reads a recording. Messages are sorted by their stamps. Errors name the file and, for a
+    /// message that cannot be read (not JSON of its schema, a non-finite value, an image whose
+    /// bytes are not its format), its topic and index; a channel of another Avatarm format
+    /// version is refused by name. The whole file is read into memory.
+    pub fn open(path: &Path) -> Result<Self, RecordError> {
+        let bytes = std::fs::read(path).map_err(|source| RecordError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let mut out = Recording::default();
+        let mut counts: BTreeMap<String, usize> = BTreeMap::new();
+        let stream = mcap::MessageStream::new(&bytes).map_err(|source| RecordError::Mcap {
+            path: path.to_owned(),
+            source,
+        })?;
+        for message in stream {
+            let message = message.map_err(|source| RecordError::Mcap {
+                path: path.to_owned(),
+                source,
+            })?;
+            let topic = message.channel.topic.clone();
+            let index = {
+                let n = counts.entry(topic.clone()).or_default();
+                *n += 1;
+                *n - 1
+            };
+            let bad = |message: String| RecordError::Message {
+                path: path.to_owned(),
+                topic: topic.clone(),
+                index,
+                message,
+            };
+            let known = [
+                topics::IMAGE,
+                topics::CALIBRATION,
+                topics::TRANSFORM,
+                topics::JOINT_STATES,
+                topics::REFERENCE_MASK,
+            ];
+            if !known.contains(&topic.as_str()) {
+                *out.other_topics.entry(topic.clone()).or_default() += 1;
+                continue;
+            }
+            if let Some(v) = message.channel.metadata.get("avatarm_format")
+                && v != FORMAT_VERSION
+            {
+                return Err(bad(format!(
+                    "written in Avatarm's recording format {v}; this Avatarm reads format {FORMAT_VERSION}"
+                )));
+            }
+            if message.channel.message_encoding != "json" {
+                return Err(bad(format!(
+                    "encoded as '{}', Avatarm reads 'json'",
+                    message.channel.message_encoding
+                )));
+            }
+            match topic.as_str() {
+                topics::IMAGE | topics::REFERENCE_MASK => {
+                    let m: WireImage = serde_json::from_slice(&message.data)
+                        .map_err(|e| bad(format!("not a foxglove.CompressedImage: {e}")))?;
+                    let data = base64::engine::general_purpose::STANDARD
+                        .decode(m.data.as_bytes())
+                        .map_err(|e| bad(format!("data is not base64: {e}")))?;
+                    let format = match m.format.as_str() {
+                        "png" => ImageFormat::Png,
+                        "jpeg" | "jpg" => ImageFormat::Jpeg,
+                        f => {
+                            return Err(bad(format!(
+                                "image format '{f}': Avatarm reads png and jpeg"
+                            )));
+                        }
+                    };
+                    if ImageFormat::of_bytes(&data) != Some(format) {
+                        return Err(bad(format!("the data is not {}", format.name())));
+                    }
+                    let frame = CompressedFrame {
+                        stamp_ns: m.timestamp.ns(),
+                        format,
+                        data,
+                    };
+                    if topic == topics::IMAGE {
+                        out.frames.push(frame);
+                    } else {
+                        out.reference_masks.push(frame);
+                    }
+                }
+                topics::CALIBRATION => {
+                    let m: WireCalibration = serde_json::from_slice(&message.data)
+                        .map_err(|e| bad(format!("not a foxglove.CameraCalibration: {e}")))?;
+                    let model = DistortionModel::from_ros_name(&m.distortion_model)
+                        .ok_or_else(|| bad(format!("distortion model '{}'", m.distortion_model)))?;
+                    let k: [f64; 9] = m
+                        .K
+                        .try_into()
+                        .map_err(|k: Vec<f64>| bad(format!("K has {} values, not 9", k.len())))?;
+                    let c = CameraCalibration {
+                        width: m.width,
+                        height: m.height,
+                        k,
+                        distortion_model: model,
+                        d: m.D,
+                    };
+                    c.validate().map_err(bad)?;
+                    out.calibration = Some(c);
+                }
+                topics::TRANSFORM => {
+                    let m: WireTransform = serde_json::from_slice(&message.data)
+                        .map_err(|e| bad(format!("not a foxglove.FrameTransform: {e}")))?;
+                    if (m.parent_frame_id.as_str(), m.child_frame_id.as_str())
+                        != (BASE_FRAME, CAMERA_FRAME)
+                    {
+                        *out.other_topics
+                            .entry(format!(
+                                "{topic} {} -> {}",
+                                m.parent_frame_id, m.child_frame_id
+                            ))
+                            .or_default() += 1;
+                        continue;
+                    }
+                    let t = Vector3::new(m.translation.x, m.translation.y, m.translation.z);
+                    let q = Quaternion::new(m.rotation.w, m.rotation.x, m.rotation.y, m.rotation.z);
+                    let norm = q.norm();
+                    if !(t.iter().all(|v| v.is_finite())
+                        && norm.is_finite()
+                        && (norm - 1.0).abs() < 1e-3)
+                    {
+                        return Err(bad(format!(
+                            "translation {t:?}, rotation of norm {norm}: not a pose"
+                        )));
+                    }
+                    out.base_from_camera = Some(Isometry3::from_parts(
+                        Translation3::from(t),
+                        UnitQuaternion::from_quaternion(q),
+                    ));
+                }
+                _ => {
+                    let m: WireJointState = serde_json::from_slice(&message.data)
+                        .map_err(|e| bad(format!("not an avatarm.JointState: {e}")))?;
+                    if m.position.len() != m.name.len()
+                        || !(m.velocity.is_empty() || m.velocity.len() == m.name.len())
+                    {
+                        return Err(bad(format!(
+                            "{} names, {} positions, {} velocities",
+                            m.name.len(),
+                            m.position.len(),
+                            m.velocity.len()
+                        )));
+                    }
+                    if m.position.iter().chain(&m.velocity).any(|v| !v.is_finite()) {
+                        return Err(bad("a position or velocity is not finite".into()));
+                    }
+                    out.joint_states.push(JointStates {
+                        stamp_ns: m.timestamp.ns(),
+                        names: m.name,
+                        positions: m.position,
+                        velocities: m.velocity,
+                    });
+                }
+            }
+        }
+        out.frames.sort_by_key(|f| f.stamp_ns);
+        out.reference_masks.sort_by_key(|f| f.stamp_ns);
+        out.joint_states.sort_by_key(|s| s.stamp_ns);
+        Ok(out)
+    }
+
+    /// The joint states at or just before `stamp_ns` (sample-and-hold), `None` before the first.
+    pub fn joints_at(&self, stamp_ns: u64) -> Option<&JointStates> {
+        let i = self
+            .joint_states
+            .partition_point(|s| s.stamp_ns <= stamp_ns);
+        i.checked_sub(1).map(|i| &self.joint_states[i])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const PNG: &[u8] = b"\x89PNG\r\n\x1a\n(the rest of a png)";
+    const JPEG: &[u8] = &[0xff, 0xd8, 0xff, 0xe0, 1, 2, 3];
+
+    fn temp(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("avatarm_record_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        dir.join(name)
+    }
+
+    fn calibration() -> CameraCalibration {
+        CameraCalibration {
+            width: 640,
+            height: 480,
+            k: [600.0, 0.0, 320.0, 0.0, 601.0, 240.0, 0.0, 0.0, 1.0],
+            distortion_model: DistortionModel::RationalPolynomial,
+            d: vec![0.1, -0.05, 0.001, 0.002, 0.01, 0.0, 0.0, 0.0],
+        }
+    }
+
+    #[test]
+    fn a_recording_reads_back_as_written() {
+        let path = temp("round_trip.mcap");
+        let pose = Isometry3::from_parts(
+            Translation3::new(1.2, -0.1, 0.6),
+            UnitQuaternion::from_euler_angles(-2.0, 0.1, 1.5),
+        );
+        let joints = |i: u64| JointStates {
+            stamp_ns: 1_700_000_000_000_000_000 + i * 10_000_000,
+            names: vec!["j1".into(), "j2".into()],
+            positions: vec![0.1 * i as f64, -0.2],
+            velocities: vec![0.5, 0.0],
+        };
+        let mut w = RecordingWriter::create(&path).expect("create");
+        w.calibration(1_700_000_000_000_000_000, &calibration())
+            .expect("calibration");
+        w.camera_pose(1_700_000_000_000_000_000, &pose)
+            .expect("pose");
+        // Written out of order: read back by stamp.
+        for i in [2u64, 0, 1] {
+            w.joint_states(&joints(i)).expect("joints");
+            let f = CompressedFrame {
+                stamp_ns: 1_700_000_000_000_000_000 + i * 33_333_333,
+                format: if i == 1 {
+                    ImageFormat::Jpeg
+                } else {
+                    ImageFormat::Png
+                },
+                data: if i == 1 { JPEG.to_vec() } else { PNG.to_vec() },
+            };
+            w.frame(&f).expect("frame");
+        }
+        w.reference_mask(&CompressedFrame {
+            stamp_ns: 1_700_000_000_000_000_000,
+            format: ImageFormat::Png,
+            data: PNG.to_vec(),
+        })
+        .expect("mask");
+        assert_eq!(w.messages(), 9);
+        w.finish().expect("finish");
+
+        let r = Recording::open(&path).expect("open");
+        assert_eq!(r.calibration, Some(calibration()));
+        let back = r.base_from_camera.expect("pose");
+        assert!((back.translation.vector - pose.translation.vector).norm() < 1e-12);
+        assert!(back.rotation.angle_to(&pose.rotation) < 1e-12);
+        assert_eq!(r.frames.len(), 3);
+        assert!(r.frames.windows(2).all(|w| w[0].stamp_ns < w[1].stamp_ns));
+        assert_eq!(r.frames[1].format, ImageFormat::Jpeg);
+        assert_eq!(r.frames[1].data, JPEG);
+        assert_eq!(r.reference_masks.len(), 1);
+        assert_eq!(r.joint_states, vec![joints(0), joints(1), joints(2)]);
+        // Sample-and-hold lookup.
+        assert_eq!(r.joints_at(1_700_000_000_015_000_000), Some(&joints(1)));
+        assert_eq!(r.joints_at(1), None);
+        assert!(r.other_topics.is_empty());
+    }
+
+    #[test]
+    fn bad_values_are_refused_before_they_are_written() {
+        let path = temp("refused.mcap");
+        let mut w = RecordingWriter::create(&path).expect("create");
+        let e = w
+            .joint_states(&JointStates {
+                stamp_ns: 1,
+                names: vec!["a".into(), "b".into()],
+                positions: vec![0.0, f64::NAN],
+                velocities: vec![],
+            })
+            .expect_err("NaN");
+        assert!(e.to_string().contains("joint 'b' has NaN"), "{e}");
+        let e = w
+            .joint_states(&JointStates {
+                stamp_ns: 1,
+                names: vec!["a".into()],
+                positions: vec![0.0, 1.0],
+                velocities: vec![],
+            })
+            .expect_err("lengths");
+        assert!(e.to_string().contains("1 names, 2 positions"), "{e}");
+        let e = w
+            .frame(&CompressedFrame {
+                stamp_ns: 1,
+                format: ImageFormat::Jpeg,
+                data: PNG.to_vec(),
+            })
+            .expect_err("not jpeg");
+        assert!(e.to_string().contains("not jpeg"), "{e}");
+        let mut bad = calibration();
+        bad.d.pop();
+        let e = w.calibration(0, &bad).expect_err("7 of 8");
+        assert!(e.to_string().contains("7 coefficients"), "{e}");
+        assert_eq!(w.messages(), 0);
+        w.finish().expect("finish");
+        let r = Recording::open(&path).expect("an empty recording");
+        assert!(r.frames.is_empty() && r.calibration.is_none());
+    }
+
+    #[test]
+    fn damaged_or_foreign_files_are_refused_by_name() {
+        // Not MCAP.
+        let path = temp("not.mcap");
+        std::fs::write(&path, b"hello").expect("write");
+        let e = Recording::open(&path).expect_err("not mcap");
+        assert!(e.to_string().contains("not a readable MCAP file"), "{e}");
+        // Another format version, and a message that is not its schema.
+        let path = temp("foreign.mcap");
+        let file = File::create(&path).expect("create");
+        let mut w = mcap::Writer::new(BufWriter::new(file)).expect("writer");
+        let schema = w
+            .add_schema("avatarm.JointState", "jsonschema", b"{}")
+            .expect("schema");
+        let v2 = BTreeMap::from([("avatarm_format".to_owned(), "2".to_owned())]);
+        let c = w
+            .add_channel(schema, topics::JOINT_STATES, "json", &v2)
+            .expect("channel");
+        let header = mcap::records::MessageHeader {
+            channel_id: c,
+            sequence: 0,
+            log_time: 0,
+            publish_time: 0,
+        };
+        w.write_to_known_channel(&header, b"{}").expect("message");
+        w.finish().expect("finish");
+        drop(w);
+        let e = Recording::open(&path).expect_err("format 2");
+        assert!(e.to_string().contains("format 2"), "{e}");
+        let path = temp("bad_message.mcap");
+        let file = File::create(&path).expect("create");
+        let mut w = mcap::Writer::new(BufWriter::new(file)).expect("writer");
+        let schema = w
+            .add_schema("avatarm.JointState", "jsonschema", b"{}")
+            .expect("schema");
+        let c = w
+            .add_channel(schema, topics::JOINT_STATES, "json", &BTreeMap::new())
+            .expect("channel");
+        w.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: c,
+                ..header
+            },
+            br#"{"timestamp": {"sec": 1, "nsec": 0}, "name": ["a"], "position": [1.0, 2.0]}"#,
+        )
+        .expect("message");
+        w.finish().expect("finish");
+        drop(w);
+        let e = Recording::open(&path).expect_err("sizes");
+        assert!(
+            e.to_string()
+                .contains("/joint_states, message 0: 1 names, 2 positions"),
+            "{e}"
+        );
+    }
+}
