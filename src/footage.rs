@@ -362,8 +362,9 @@ pub fn import_footage(o: &FootageOptions) -> Result<FootageSummary, AppError> {
             format!("stamp_s {} is negative", e.stamp_s),
         ));
     }
-    // The images' size, from the first frame.
-    let (_, _, size) = encoded(&entries[0].file, &entries[0].at)?;
+    // The images' size, from the first frame (read once: it is written first below).
+    let mut first = Some(encoded(&entries[0].file, &entries[0].at)?);
+    let size = first.as_ref().map_or((0, 0), |f| f.2);
     let camera = o
         .camera
         .clone()
@@ -392,7 +393,10 @@ pub fn import_footage(o: &FootageOptions) -> Result<FootageSummary, AppError> {
     let mut masks = 0;
     for e in &entries {
         let stamp_ns = ns(e.stamp_s);
-        let (data, format, s) = encoded(&e.file, &e.at)?;
+        let (data, format, s) = match first.take() {
+            Some(f) => f,
+            None => encoded(&e.file, &e.at)?,
+        };
         if s != size {
             return Err(listing_error(
                 &e.at,

@@ -207,6 +207,14 @@ impl Approach {
     }
 }
 
+/// A move to the start under way: the move, when it started (app clock, s; at the first joint
+/// state), and the joints' speed limits (rad/s, read once).
+struct ApproachRun {
+    approach: Approach,
+    started_s: Option<f64>,
+    speed_limits: Vec<f64>,
+}
+
 /// The teleoperation loop's state: the robot, the mapping and the limiter.
 #[derive(Resource)]
 pub struct Teleop {
@@ -219,7 +227,7 @@ pub struct Teleop {
     mapper: Mapper,
     limiter: SafetyLimiter,
     robot: Box<dyn RobotInterface>,
-    approach: Option<(Approach, Option<f64>)>,
+    approach: Option<ApproachRun>,
     joints: Option<JointState>,
     received: Vec<JointState>,
     /// Counters.
@@ -293,7 +301,11 @@ impl Teleop {
     /// work.
     pub fn approach(&mut self, approach: Approach) -> Result<(), MappingError> {
         approach.validate(self.model.dof())?;
-        self.approach = Some((approach, None));
+        self.approach = Some(ApproachRun {
+            approach,
+            started_s: None,
+            speed_limits: self.model.dof_limits().iter().map(|l| l.velocity).collect(),
+        });
         self.status.approaching = true;
         self.status.approach_s = None;
         Ok(())
@@ -442,27 +454,20 @@ fn teleop_tick(
             )
         }
     };
-    let limited = t.limiter.tick(
+    let joints_stamp_s = t.joints.as_ref().map(|s| s.stamp_s);
+    let limited = limit_and_send(
+        t,
         &safety::TickInputs {
             now_s: now,
             qdot: &qdot,
             q: &q,
-            joints_stamp_s: t.joints.as_ref().map(|s| s.stamp_s),
+            joints_stamp_s,
             hand_stamp_s: hand_stamp,
             hand_tracked,
             jacobian: &jacobian,
         },
         dt,
     );
-    for &i in &limited.interventions {
-        t.count(i);
-    }
-    t.status.max_tcp_speed = t.status.max_tcp_speed.max(limited.tcp_speed);
-    if let Some(cmd) = &limited.command
-        && let Err(e) = t.robot.send(cmd)
-    {
-        t.fail(e.to_string());
-    }
     // The gripper follows σ only while the hand drives the robot: a lost hand or a refused
     // tick keeps it as it is (never drops the real object).
     if let Some(out) = &out
@@ -516,16 +521,18 @@ fn teleop_tick(
 /// tick ends there and is not recorded in [`Teleop::log`]); `false` when there is none, no
 /// joint state yet, or the arm arrived this tick (the hand drives it from this tick on).
 fn approach_tick(t: &mut Teleop, now: f64, dt: f64) -> bool {
-    let Some((approach, started)) = t.approach.as_mut() else {
+    let Some(run) = t.approach.as_mut() else {
         return false;
     };
     let Some(joints) = t.joints.as_ref() else {
         // Nothing known of the arm yet: the ordinary tick refuses to drive it and says so.
         return false;
     };
-    let started = *started.get_or_insert(now);
-    let speed: Vec<f64> = t.model.dof_limits().iter().map(|l| l.velocity).collect();
-    let Some(qdot) = approach.velocity(&joints.positions, &t.arm, &speed) else {
+    let started = *run.started_s.get_or_insert(now);
+    let Some(qdot) = run
+        .approach
+        .velocity(&joints.positions, &t.arm, &run.speed_limits)
+    else {
         info!(
             "mapping: the arm is at the task's start after {:.2} s; the hand drives it now",
             now - started
@@ -539,12 +546,14 @@ fn approach_tick(t: &mut Teleop, now: f64, dt: f64) -> bool {
     let jacobian = t
         .model
         .jacobian(&t.base, &q, t.tcp, &Vector3::zeros(), Frame::World);
-    let limited = t.limiter.tick(
+    let stamp = joints.stamp_s;
+    limit_and_send(
+        t,
         &safety::TickInputs {
             now_s: now,
             qdot: &qdot,
             q: &q,
-            joints_stamp_s: Some(joints.stamp_s),
+            joints_stamp_s: Some(stamp),
             // No hand drives the approach: the limiter's hand checks do not apply.
             hand_stamp_s: Some(now),
             hand_tracked: true,
@@ -552,6 +561,14 @@ fn approach_tick(t: &mut Teleop, now: f64, dt: f64) -> bool {
         },
         dt,
     );
+    true
+}
+
+/// The limiter on `inputs`, its interventions counted, and its command sent to the robot (a
+/// refusal counted as a failed tick): every command of the loop, the hand's and the
+/// approach's, goes through here.
+fn limit_and_send(t: &mut Teleop, inputs: &safety::TickInputs, dt: f64) -> safety::Limited {
+    let limited = t.limiter.tick(inputs, dt);
     for &i in &limited.interventions {
         t.count(i);
     }
@@ -561,7 +578,7 @@ fn approach_tick(t: &mut Teleop, now: f64, dt: f64) -> bool {
     {
         t.fail(e.to_string());
     }
-    true
+    limited
 }
 
 #[cfg(test)]

@@ -359,6 +359,24 @@ struct TrialBodies {
     friction: f32,
 }
 
+/// The task's simulated arm at `q` (all joints, the model's order) with the real bottle
+/// standing where the setup says, not held.
+pub fn simulated_arm(setup: &TrialSetup, q: DVector<f64>) -> SimArm {
+    let centre = setup.bottle_centre();
+    SimArm::new(
+        SimRobot::new(setup.sim, setup.model.dof_limits(), q),
+        setup.model.clone(),
+        setup.base,
+        setup.tcp,
+        CarriedObject {
+            pose: centre,
+            rest_z: centre.translation.z,
+            grasp_radius_m: 0.02,
+            held: None,
+        },
+    )
+}
+
 impl TrialParts {
     /// Builds trial `trial` in `mode` (the arm placed by [`prepare`]) on the simulated arm.
     pub fn new(
@@ -388,20 +406,7 @@ impl TrialParts {
         let script = trial_script(task, &twin_start.translation.vector, trial)?;
         let period = Duration::from_secs_f64(1.0 / setup.control_rate_hz);
         let dt = period.as_secs_f64();
-        let arm = robot.unwrap_or_else(|| {
-            Box::new(SimArm::new(
-                SimRobot::new(setup.sim, setup.model.dof_limits(), q0),
-                setup.model.clone(),
-                setup.base,
-                setup.tcp,
-                CarriedObject {
-                    pose: centre,
-                    rest_z: centre.translation.z,
-                    grasp_radius_m: 0.02,
-                    held: None,
-                },
-            ))
-        });
+        let arm = robot.unwrap_or_else(|| Box::new(simulated_arm(setup, q0)));
         let teleop = Teleop::with_robot(
             TeleopConfig {
                 model: setup.model.clone(),

@@ -582,9 +582,8 @@ fn a_real_leap_grab_takes_the_bottle_twin_by_its_neck_and_lets_go() {
 
 #[test]
 fn an_arm_away_from_the_start_is_brought_there_first_within_the_limits() {
-    use crate::pouring::{TrialParts, prepare};
-    use crate::{Approach, CarriedObject, MappingPlugin, SimArm, Teleop};
-    use avatarm_core::sim::SimRobot;
+    use crate::pouring::{TrialParts, prepare, simulated_arm};
+    use crate::{Approach, MappingPlugin, Teleop};
     let s = setup();
     let task = PouringTask::default();
     let prepared = prepare(&task, &s).expect("prepared");
@@ -594,19 +593,7 @@ fn an_arm_away_from_the_start_is_brought_there_first_within_the_limits() {
     away[0] += 0.4;
     away[3] -= 0.3;
     away[5] += 0.2;
-    let centre = s.bottle_centre();
-    let arm = SimArm::new(
-        SimRobot::new(s.sim, s.model.dof_limits(), away),
-        s.model.clone(),
-        s.base,
-        s.tcp,
-        CarriedObject {
-            pose: centre,
-            rest_z: centre.translation.z,
-            grasp_radius_m: 0.02,
-            held: None,
-        },
-    );
+    let arm = simulated_arm(&s, away);
     let mut parts = TrialParts::on_robot(
         &task,
         &s,

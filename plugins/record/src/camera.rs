@@ -282,7 +282,7 @@ pub fn read_calibration(
         let (width, height) = size.ok_or_else(|| {
             content(
                 path,
-                "a plain matrix has no image size: give it (--size WxH)",
+                "a plain matrix has no image size, and none was given (the images give it on import)",
             )
         })?;
         CameraCalibration::pinhole(width, height, k)
@@ -360,7 +360,7 @@ pub fn read_calibration(
             _ => {
                 return Err(content(
                     path,
-                    "no image_width and image_height: give the size (--size WxH)",
+                    "no image_width and image_height, and no image size was given (the images give it on import)",
                 ));
             }
         };
@@ -579,7 +579,7 @@ mod tests {
     fn a_plain_matrix_needs_the_size_and_bad_files_name_the_field() {
         let k = file("K.txt", "615.0 0.0 320.0\n0.0 615.0 240.0\n0.0 0.0 1.0\n");
         let e = read_calibration(&k, None).expect_err("no size");
-        assert!(e.to_string().contains("--size"), "{e}");
+        assert!(e.to_string().contains("no image size"), "{e}");
         let c = read_calibration(&k, Some((640, 480))).expect("K");
         assert!(c.is_pinhole() && c.k[0] == 615.0);
         for (text, want) in [

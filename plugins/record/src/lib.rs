@@ -832,6 +832,29 @@ mod tests {
         assert!(r.frames.is_empty() && r.calibration.is_none());
     }
 
+    /// A file written by another writer: one message `data` on the joint-state topic, its
+    /// channel's metadata `metadata`.
+    fn raw_joint_states(name: &str, metadata: &BTreeMap<String, String>, data: &[u8]) -> PathBuf {
+        let path = temp(name);
+        let file = File::create(&path).expect("create");
+        let mut w = mcap::Writer::new(BufWriter::new(file)).expect("writer");
+        let schema = w
+            .add_schema("avatarm.JointState", "jsonschema", b"{}")
+            .expect("schema");
+        let channel_id = w
+            .add_channel(schema, topics::JOINT_STATES, "json", metadata)
+            .expect("channel");
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence: 0,
+            log_time: 0,
+            publish_time: 0,
+        };
+        w.write_to_known_channel(&header, data).expect("message");
+        w.finish().expect("finish");
+        path
+    }
+
     #[test]
     fn damaged_or_foreign_files_are_refused_by_name() {
         // Not MCAP.
@@ -840,46 +863,15 @@ mod tests {
         let e = Recording::open(&path).expect_err("not mcap");
         assert!(e.to_string().contains("not a readable MCAP file"), "{e}");
         // Another format version, and a message that is not its schema.
-        let path = temp("foreign.mcap");
-        let file = File::create(&path).expect("create");
-        let mut w = mcap::Writer::new(BufWriter::new(file)).expect("writer");
-        let schema = w
-            .add_schema("avatarm.JointState", "jsonschema", b"{}")
-            .expect("schema");
         let v2 = BTreeMap::from([("avatarm_format".to_owned(), "2".to_owned())]);
-        let c = w
-            .add_channel(schema, topics::JOINT_STATES, "json", &v2)
-            .expect("channel");
-        let header = mcap::records::MessageHeader {
-            channel_id: c,
-            sequence: 0,
-            log_time: 0,
-            publish_time: 0,
-        };
-        w.write_to_known_channel(&header, b"{}").expect("message");
-        w.finish().expect("finish");
-        drop(w);
+        let path = raw_joint_states("foreign.mcap", &v2, b"{}");
         let e = Recording::open(&path).expect_err("format 2");
         assert!(e.to_string().contains("format 2"), "{e}");
-        let path = temp("bad_message.mcap");
-        let file = File::create(&path).expect("create");
-        let mut w = mcap::Writer::new(BufWriter::new(file)).expect("writer");
-        let schema = w
-            .add_schema("avatarm.JointState", "jsonschema", b"{}")
-            .expect("schema");
-        let c = w
-            .add_channel(schema, topics::JOINT_STATES, "json", &BTreeMap::new())
-            .expect("channel");
-        w.write_to_known_channel(
-            &mcap::records::MessageHeader {
-                channel_id: c,
-                ..header
-            },
+        let path = raw_joint_states(
+            "bad_message.mcap",
+            &BTreeMap::new(),
             br#"{"timestamp": {"sec": 1, "nsec": 0}, "name": ["a"], "position": [1.0, 2.0]}"#,
-        )
-        .expect("message");
-        w.finish().expect("finish");
-        drop(w);
+        );
         let e = Recording::open(&path).expect_err("sizes");
         assert!(
             e.to_string()
