@@ -19,11 +19,12 @@ pub fn frame_key(t_s: f64) -> i64 {
 pub enum FramePart {
     /// The simulated room without the robot, at capture (RGBA8).
     NoRobot,
-    /// The robot's true silhouette, white on black, at capture (RGBA8).
+    /// The robot's true silhouette, white on black, at capture (stored as a 0/1 mask).
     Silhouette,
-    /// The mask twin's render before thresholding (RGBA8, the mask camera's resolution).
+    /// The mask twin's flat render before thresholding (stored as RGBA8 `(v, v, v, 255)`, at
+    /// the mask's resolution).
     Raw,
-    /// The mask pass's output M(t) (RGBA8, white where masked).
+    /// The mask pass's output M(t) (stored as a 0/1 mask).
     Mask,
     /// The composite Ĩ(t) (RGBA8).
     Composite,
@@ -34,24 +35,34 @@ pub enum FramePart {
 pub struct FrameImages {
     /// [`FramePart::NoRobot`].
     pub norobot: Option<Vec<u8>>,
-    /// [`FramePart::Silhouette`].
+    /// [`FramePart::Silhouette`]: 0/1 per pixel.
     pub silhouette: Option<Vec<u8>>,
-    /// [`FramePart::Raw`], with its width and height (px).
+    /// [`FramePart::Raw`] (RGBA8), with its width and height (px).
     pub raw: Option<(u32, u32, Vec<u8>)>,
-    /// [`FramePart::Mask`].
+    /// [`FramePart::Mask`]: 0/1 per pixel.
     pub mask: Option<Vec<u8>>,
     /// [`FramePart::Composite`].
     pub composite: Option<Vec<u8>>,
 }
 
 impl FrameImages {
-    /// Stores an arrived image.
-    pub fn put(&mut self, part: FramePart, width: u32, height: u32, data: Vec<u8>) {
+    /// Stores an arrived image of `bytes_per_pixel` channels: masks as 0/1 per pixel, the
+    /// mask twin's render as RGBA8.
+    pub fn put(
+        &mut self,
+        part: FramePart,
+        (width, height): (u32, u32),
+        bytes_per_pixel: usize,
+        data: Vec<u8>,
+    ) {
         match part {
             FramePart::NoRobot => self.norobot = Some(data),
-            FramePart::Silhouette => self.silhouette = Some(data),
+            FramePart::Silhouette => self.silhouette = Some(dr::binarise(&data, bytes_per_pixel)),
+            FramePart::Raw if bytes_per_pixel == 1 => {
+                self.raw = Some((width, height, dr::grey_to_rgba(&data)));
+            }
             FramePart::Raw => self.raw = Some((width, height, data)),
-            FramePart::Mask => self.mask = Some(data),
+            FramePart::Mask => self.mask = Some(dr::binarise(&data, bytes_per_pixel)),
             FramePart::Composite => self.composite = Some(data),
         }
     }
@@ -85,7 +96,12 @@ pub fn request_part<S: FrameStore>(
 ) {
     read_image_once(commands, image).observe(move |read: On<ImageRead>, mut store: ResMut<S>| {
         if let Some(images) = store.arrived(key) {
-            images.put(part, read.width, read.height, read.data.clone());
+            images.put(
+                part,
+                (read.width, read.height),
+                read.bytes_per_pixel,
+                read.data.clone(),
+            );
         }
     });
 }
@@ -102,8 +118,9 @@ pub struct TruthScores {
 }
 
 /// Scores a frame's GPU mask (0/1 per pixel) and composite (RGBA8) against the true
-/// silhouette and the robot-free room (RGBA8, the sensor's gain applied): the erased region
-/// is where the feathered mask times `alpha_h` reaches one half. `None` when the sizes differ.
+/// silhouette (0/1 per pixel) and the robot-free room (RGBA8, the sensor's gain applied): the
+/// erased region is where the feathered mask times `alpha_h` reaches one half. `None` when the
+/// sizes differ.
 pub fn score_against_truth(
     settings: &EraseSettings,
     alpha_h: f32,
@@ -118,7 +135,7 @@ pub fn score_against_truth(
         .iter()
         .map(|&a| u8::from(a * alpha_h >= 0.5))
         .collect();
-    let truth = dr::binarise(silhouette);
+    let truth = silhouette.to_vec();
     let mask = dr::mask_scores(&erased, &truth)?;
     let psnr_db = dr::psnr_in(composite, norobot, &truth);
     Some(TruthScores {

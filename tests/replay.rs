@@ -403,7 +403,8 @@ fn run_with_xr_falls_back_to_the_preview_and_renders_frames() {
     assert!(composite <= camera + 4, "{line}");
     // The passes' GPU times, measured with timestamp queries (llvmpipe has them).
     assert!(
-        line.contains("GPU ms: mask camera") || line.contains("no timestamp queries"),
+        line.contains("GPU ms: erase") && line.contains("mask twin")
+            || line.contains("no timestamp queries"),
         "{line}"
     );
     let img = load_rgb(&shot);
@@ -795,13 +796,22 @@ fn default_scene_erases_the_robot() {
     for stage in ["mask", "composite", "frame"] {
         assert!(num(&r, &format!("timing_ms.{stage}.median")) > 0.0);
     }
+    // The frame the GPU erased is the frame the CPU reference erased, exactly.
+    assert_eq!(
+        num(&r, "gpu_vs_cpu.max_abs_diff"),
+        0.0,
+        "{}",
+        r["gpu_vs_cpu"]
+    );
+    assert_eq!(num(&r, "gpu_vs_cpu.mask_mismatch_px_max"), 0.0);
     // Each pass is timed on the GPU on nearly every camera frame, unless the device has no
     // timestamp queries (then the report says so and gives the CPU reference).
     let source = r["timing_ms"]["source"].as_str().unwrap_or_default();
     if !source.contains("no timestamp queries") {
         assert_eq!(source, "gpu", "{}", r["timing_ms"]);
         let frames = num(&r, "frames_shown");
-        for pass in ["mask camera", "threshold pass", "composite pass"] {
+        // No dilation here: the mask twin's render, then one fused threshold + composite pass.
+        for pass in ["mask twin", "composite"] {
             let timed = r["timing_ms"]["gpu_passes"][pass]["renders_timed"]
                 .as_f64()
                 .unwrap_or_default();
@@ -811,6 +821,17 @@ fn default_scene_erases_the_robot() {
             );
             assert!(r["timing_ms"]["gpu_passes"][pass]["ms"]["median"].as_f64() > Some(0.0));
         }
+        assert!(r["timing_ms"]["gpu_passes"]["dilate rows"].is_null());
+        assert!(num(&r, "timing_ms.erase.median") > 0.0);
+        assert!(num(&r, "timing_ms.upload.median") > 0.0);
+        // The room's views are timed too; the robot-free one renders only when the room
+        // changes (never, after the warm-up, in this scene).
+        let views = &r["timing_ms"]["gpu_views"];
+        assert!(views["real camera"]["renders_timed"].as_f64() >= Some(0.8 * frames));
+        assert_eq!(
+            views["ground truth: no robot"]["renders_timed"].as_f64(),
+            Some(0.0)
+        );
     }
 }
 
@@ -913,6 +934,33 @@ fn dilation_covers_calibration_error() {
         table.windows(2).all(|w| w[1].3 >= w[0].3 - 0.5),
         "{table:?}"
     );
+    // Feathering on top (four separable passes on the GPU, GPU = CPU checked by `run`): the
+    // fully erased core is the 4 px dilation's mask, so it leaks no more than that.
+    scene.file.erase.dilate_px = 4;
+    scene.file.erase.feather_px = 2;
+    let r = run(&scene, "dr_calib_4_feather_2");
+    assert!(
+        num(&r, "mask.leak_pct_mean") <= table[1].1 + 1e-9,
+        "{}",
+        r["mask"]
+    );
+    for pass in [
+        "mask twin",
+        "dilate rows",
+        "dilate columns",
+        "feather rows",
+        "composite",
+    ] {
+        assert!(
+            r["timing_ms"]["gpu_passes"][pass]["renders_timed"].as_f64() > Some(0.0)
+                || !r["timing_ms"]["source"]
+                    .as_str()
+                    .unwrap_or_default()
+                    .eq("gpu"),
+            "{pass}: {}",
+            r["timing_ms"]
+        );
+    }
 }
 
 /// `avatarm bench dr` on a two-point sweep: table, chart and fronts, and a coarser mask that
@@ -957,6 +1005,74 @@ fn bench_dr_writes_the_chart_and_the_table() {
     assert!(svg.contains("Pareto front"));
     let png = image::open(out.join("dr_speed_accuracy.png")).expect("png");
     assert!(png.width() >= 800);
+}
+
+/// `avatarm bench gpu` at two small sizes, one and two cameras, with dilation and feathering
+/// (every pass): a row per point and span, the floor measured in the same run, the chart.
+#[test]
+fn bench_gpu_writes_the_chart_and_the_table() {
+    let out = out_dir("bench_gpu");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["bench", "gpu", "--out"])
+        .arg(&out)
+        .args([
+            "--sizes",
+            "160x120,320x240",
+            "--cameras",
+            "1,2",
+            "--frames",
+            "12",
+            "--dilate",
+            "2",
+            "--feather",
+            "1",
+        ])
+        .output()
+        .expect("runs avatarm");
+    let stdout = succeeded(&status);
+    assert!(stdout.contains("erase/fl"), "{stdout}");
+    let table = Table::read(&out.join("gpu_erase.csv"));
+    let csv = &table.text;
+    let row = |w: &str, cams: &str, span: &str| {
+        (0..table.rows.len()).find(|&r| {
+            table.cell(r, "width") == w
+                && table.cell(r, "cameras") == cams
+                && table.cell(r, "span") == span
+        })
+    };
+    for (w, cams) in [("160", "1"), ("160", "2"), ("320", "1"), ("320", "2")] {
+        for span in [
+            "erase (all cameras)",
+            "passes (all cameras)",
+            "copy floor (all cameras)",
+        ] {
+            let r = row(w, cams, span).unwrap_or_else(|| panic!("{w} x{cams} {span}: {csv}"));
+            assert!(table.number(r, "median_ms") > 0.0, "{csv}");
+            assert!(table.number(r, "ratio_to_floor").is_finite(), "{csv}");
+        }
+    }
+    // Each camera's own passes, by name.
+    for span in [
+        "camera 2: mask twin",
+        "camera 2: feather rows",
+        "camera 2: copy floor",
+    ] {
+        let r = row("320", "2", span).unwrap_or_else(|| panic!("{span}: {csv}"));
+        assert!(table.number(r, "samples") >= 8.0, "{csv}");
+    }
+    assert!(row("320", "1", "dilate columns").is_some(), "{csv}");
+    let svg = std::fs::read_to_string(out.join("gpu_erase.svg")).expect("svg");
+    assert!(svg.contains("copy floor"));
+    let png = image::open(out.join("gpu_erase.png")).expect("png");
+    assert!(png.width() >= 800);
+    // A size that has no pixels is refused by name.
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["bench", "gpu", "--sizes", "0x480", "--out"])
+        .arg(&out)
+        .output()
+        .expect("runs avatarm");
+    assert!(!status.status.success());
+    assert!(String::from_utf8_lossy(&status.stderr).contains("0x480"));
 }
 
 /// No two of the project's own systems touch the same data in an undefined order, in any

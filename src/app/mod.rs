@@ -45,6 +45,23 @@ pub struct AppTwin(pub Entity);
 #[derive(Resource, Debug, Clone)]
 pub struct SceneResource(pub Scene);
 
+/// Bevy's plugins without a window: rendering into images only, pipelines compiled before the
+/// frame that needs them (a replay's first frames are complete), the app kept alive without a
+/// window. For the replay and the benches' own apps.
+pub fn headless_plugins() -> PluginGroupBuilder {
+    DefaultPlugins
+        .set(WindowPlugin {
+            primary_window: None,
+            exit_condition: ExitCondition::DontExit,
+            ..default()
+        })
+        .set(RenderPlugin {
+            synchronous_pipeline_compilation: true,
+            ..default()
+        })
+        .disable::<WinitPlugin>()
+}
+
 /// Builds the app for a scene; shared by `main` and the tests. Errors when the preview's live
 /// teleoperation cannot be set up (the hand source, the task's grasp).
 pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
@@ -68,17 +85,7 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
     match mode {
         Mode::Headless(_) => {
             app.add_plugins((
-                DefaultPlugins
-                    .set(WindowPlugin {
-                        primary_window: None,
-                        exit_condition: ExitCondition::DontExit,
-                        ..default()
-                    })
-                    .set(RenderPlugin {
-                        synchronous_pipeline_compilation: true,
-                        ..default()
-                    })
-                    .disable::<WinitPlugin>(),
+                headless_plugins(),
                 ScheduleRunnerPlugin::run_loop(Duration::ZERO),
             ))
             .insert_resource(TimeUpdateStrategy::ManualDuration(frame_dt));
@@ -116,6 +123,23 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
         live.install(&mut app)?;
     }
     Ok(app)
+}
+
+/// The meshes of the scene's props marked `occluder` (the desk), at their world transforms: what
+/// the mask's view draws in black.
+pub fn scene_occluders(scene: &Scene) -> Vec<(Mesh, Transform)> {
+    scene
+        .file
+        .props
+        .iter()
+        .zip(&scene.props)
+        .filter(|(spec, _)| spec.occluder)
+        .flat_map(|(_, prop)| {
+            avatarm_sim::prop_parts(&prop.shape)
+                .into_iter()
+                .map(|(mesh, local)| (mesh, iso_to_transform(&prop.pose) * local))
+        })
+        .collect()
 }
 
 /// Every plugin of Avatarm for a scene in a mode, on top of Bevy's window or headless
@@ -262,18 +286,7 @@ impl Plugin for AvatarmSetupPlugin {
                 detail: twin_detail(&scene.file.twin),
                 base: scene.robot_base(),
                 source_twin: None,
-                occluders: scene
-                    .file
-                    .props
-                    .iter()
-                    .zip(&scene.props)
-                    .filter(|(spec, _)| spec.occluder)
-                    .flat_map(|(_, prop)| {
-                        avatarm_sim::prop_parts(&prop.shape)
-                            .into_iter()
-                            .map(|(mesh, local)| (mesh, iso_to_transform(&prop.pose) * local))
-                    })
-                    .collect(),
+                occluders: scene_occluders(scene),
             })
             .insert_resource(InteractionConfig {
                 camera: scene.believed_camera,

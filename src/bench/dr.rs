@@ -66,7 +66,7 @@ pub struct DrPoint {
     pub frame_ms_p95: f64,
     /// `frame_ms_median` over that of the baseline setting of the same run.
     pub frame_cost_ratio: f64,
-    /// Median GPU time of the mask camera + threshold pass per camera frame, ms (`None` when
+    /// Median GPU time of the mask twin + dilation passes per camera frame, ms (`None` when
     /// the device has no timestamp queries).
     pub gpu_mask_ms: Option<f64>,
     /// Median GPU time of the composite pass, ms.
@@ -96,7 +96,7 @@ pub struct DrPoint {
 }
 
 impl DrPoint {
-    /// GPU time of the whole erase per camera frame (mask camera, threshold, composite), ms;
+    /// GPU time of the whole erase per camera frame (mask twin, dilation, feathering, composite), ms;
     /// NaN without GPU times.
     pub fn erase_gpu_ms(&self) -> f64 {
         match (self.gpu_mask_ms, self.gpu_composite_ms) {
@@ -353,7 +353,7 @@ where
             fronts: [|p| p.pareto_leak, |p| p.pareto_psnr],
         },
         Axis {
-            desc: "erase GPU time, ms per camera frame (mask camera + threshold + composite)",
+            desc: "erase GPU time, ms per camera frame (mask twin + passes)",
             x: DrPoint::erase_gpu_ms,
             fronts: [|p| p.pareto_leak_gpu, |p| p.pareto_psnr_gpu],
         },

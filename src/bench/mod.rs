@@ -7,9 +7,12 @@
 //!   scene's pouring task: object RMSE against rate and loop cost.
 //! - [`twin`]: how detailed the mask twin must be (visual, collision, simplified meshes, a
 //!   primitive description): mask GPU time and triangles against leak and needed dilation.
+//! - [`gpu`]: the erase's GPU time per pass at several frame sizes and camera counts, against a
+//!   plain copy of the same images (the floor) measured in the same run.
 //! - [`chart`]: what all share: the Pareto front and the charts' house style.
 
 pub mod chart;
 pub mod control;
 pub mod dr;
+pub mod gpu;
 pub mod twin;

@@ -3,7 +3,7 @@
 //! collision geometry, the meshes simplified to a fraction of their triangles, a primitive
 //! description of the same robot) is a headless replay of the scene with the arm moving at the
 //! TCP speed cap, scored against the simulated room's ground truth: mask IoU, leak, overmask,
-//! the dilation that brings the leak to 1 % or less, and the mask camera's GPU time and
+//! the dilation that brings the leak to 1 % or less, and the mask twin's GPU time and
 //! triangle count. Table to CSV, chart (GPU time against leak, Pareto front) to SVG and PNG.
 
 use std::path::{Path, PathBuf};
@@ -129,7 +129,7 @@ pub struct TwinPoint {
     pub label: String,
     /// Triangles the mask twin draws.
     pub triangles: usize,
-    /// Median GPU time of the mask camera's render, ms (`None` without timestamp queries).
+    /// Median GPU time of the mask twin's flat render, ms (`None` without timestamp queries).
     pub gpu_mask_camera_ms: Option<f64>,
     /// Median wall time of one app update, ms.
     pub frame_ms_median: f64,
@@ -316,7 +316,7 @@ pub fn run_twin(scene: &Scene, sweep: &TwinSweep, out: &Path) -> Result<TwinOutp
         };
         let on_gpu = report["timing_ms"]["source"] == "gpu";
         let gpu_mask_camera_ms = on_gpu
-            .then(|| report["timing_ms"]["gpu_passes"]["mask camera"]["ms"]["median"].as_f64())
+            .then(|| report["timing_ms"]["gpu_passes"]["mask twin"]["ms"]["median"].as_f64())
             .flatten();
         let leaks = leak_by_dilation_in(&dir, sweep.max_dilate).map_err(in_setting)?;
         points.push(TwinPoint {
@@ -373,7 +373,7 @@ pub fn run_twin(scene: &Scene, sweep: &TwinSweep, out: &Path) -> Result<TwinOutp
 }
 
 impl TwinPoint {
-    /// The cost axis: the mask camera's GPU time, else the frame's wall time.
+    /// The cost axis: the mask twin's GPU time, else the frame's wall time.
     pub fn cost_ms(&self) -> f64 {
         self.gpu_mask_camera_ms.unwrap_or(self.frame_ms_median)
     }
@@ -490,7 +490,7 @@ impl Chart for TwinChart<'_> {
         let (left, right) = root.split_horizontally(CHART_SIZE.0 / 2);
         let timed = self.points.iter().all(|p| p.gpu_mask_camera_ms.is_some());
         let x_desc = if timed {
-            "mask camera GPU time, ms per frame"
+            "mask twin GPU time, ms per frame"
         } else {
             "frame cost, ms (no GPU timestamps)"
         };

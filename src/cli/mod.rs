@@ -19,6 +19,7 @@ use clap::{Parser, Subcommand};
 
 use crate::bench::control::{self as bench_control, ControlSweep};
 use crate::bench::dr::{self as bench_dr, DrSweep};
+use crate::bench::gpu::{self as bench_gpu, GpuSweep};
 use crate::bench::twin::{self as bench_twin, TwinSweep, TwinVariant};
 use crate::preview::PreviewOptions;
 use crate::replay::ReplayOptions;
@@ -217,6 +218,35 @@ enum BenchCommand {
         /// Score every N-th camera frame for the dilation analysis.
         #[arg(long = "frames-every", value_name = "N", default_value_t = 2)]
         frames_every: u32,
+        /// Folder searched for package:// URIs (repeatable).
+        #[arg(long = "package-path", value_name = "DIR")]
+        package_path: Vec<PathBuf>,
+    },
+    /// Time the erase on the GPU, pass by pass, at several frame sizes and for one or several
+    /// cameras, beside a plain copy of the same images measured in the same run (the floor):
+    /// DIR/gpu_erase.{csv,svg,png}. The scene (default: the default scene) gives the robot,
+    /// the camera's pose and field of view, and the erase settings.
+    Gpu {
+        /// The scene file.
+        scene: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long, value_name = "DIR", default_value = "out/bench_gpu")]
+        out: PathBuf,
+        /// Frame sizes, WIDTHxHEIGHT.
+        #[arg(long, value_delimiter = ',', value_parser = frame_size, default_values = ["640x480", "1280x720", "1920x1080"])]
+        sizes: Vec<(u32, u32)>,
+        /// Cameras erased per update.
+        #[arg(long, value_delimiter = ',', default_values_t = [1, 2])]
+        cameras: Vec<u32>,
+        /// Updates timed per point (after a warm-up).
+        #[arg(long, value_name = "N", default_value_t = 120)]
+        frames: u32,
+        /// Dilation of the mask (px).
+        #[arg(long, value_name = "PX", default_value_t = 0)]
+        dilate: u32,
+        /// Feathering (px).
+        #[arg(long, value_name = "PX", default_value_t = 0)]
+        feather: u32,
         /// Folder searched for package:// URIs (repeatable).
         #[arg(long = "package-path", value_name = "DIR")]
         package_path: Vec<PathBuf>,
@@ -675,6 +705,62 @@ fn run(cli: Cli) -> Result<(), AppError> {
             );
             Ok(())
         }
+        Command::Bench(BenchCommand::Gpu {
+            scene,
+            out,
+            sizes,
+            cameras,
+            frames,
+            dilate,
+            feather,
+            package_path,
+        }) => {
+            let path = scene.unwrap_or_else(default_scene);
+            let scene = Scene::load(&path, &packages(package_path))?;
+            let sweep = GpuSweep {
+                sizes,
+                cameras,
+                frames,
+                dilate_px: dilate,
+                feather_px: feather,
+                progress: true,
+            };
+            let outputs = bench_gpu::run_gpu(&scene, &sweep, &out)?;
+            println!(
+                "{:<11} {:>4} {:>10} {:>10} {:>10} {:>10} {:>9} {:>9} {:>10}  GPU clock",
+                "size",
+                "cams",
+                "erase ms",
+                "passes ms",
+                "twin ms",
+                "floor ms",
+                "erase/fl",
+                "pass/fl",
+                "update ms"
+            );
+            for p in &outputs.points {
+                println!(
+                    "{:<11} {:>4} {:>10.3} {:>10.3} {:>10.3} {:>10.4} {:>9.1} {:>9.1} {:>10.1}  {}",
+                    format!("{}x{}", p.size.0, p.size.1),
+                    p.cameras,
+                    p.erase.median,
+                    p.passes.median,
+                    p.mask_twin.median,
+                    p.floor.median,
+                    p.erase_over_floor(),
+                    p.passes_over_floor(),
+                    p.update_ms,
+                    p.clock.as_deref().unwrap_or("not reported (no nvidia-smi)")
+                );
+            }
+            println!(
+                "table: {}\nchart: {} and {}",
+                outputs.csv.display(),
+                outputs.svg.display(),
+                outputs.png.display()
+            );
+            Ok(())
+        }
         Command::Bench(BenchCommand::Control {
             scene,
             out,
@@ -740,6 +826,24 @@ fn run(cli: Cli) -> Result<(), AppError> {
 
 /// `--step-ms`: a time step in milliseconds, more than 0 and at most 250 (Bevy clamps a longer
 /// update).
+/// `WIDTHxHEIGHT`, both at least 1 and at most 8192.
+pub(crate) fn frame_size(s: &str) -> Result<(u32, u32), AppError> {
+    let bad = || AppError::Value {
+        text: s.to_owned(),
+        message: "expected WIDTHxHEIGHT in pixels, each 1 to 8192 (e.g. 1920x1080)".into(),
+    };
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h): (u32, u32) = (
+        w.trim().parse().map_err(|_| bad())?,
+        h.trim().parse().map_err(|_| bad())?,
+    );
+    if (1..=8192).contains(&w) && (1..=8192).contains(&h) {
+        Ok((w, h))
+    } else {
+        Err(bad())
+    }
+}
+
 fn step_ms(s: &str) -> Result<f64, AppError> {
     let ms: f64 = s.parse().map_err(|_| AppError::Value {
         text: s.to_owned(),

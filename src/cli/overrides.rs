@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use avatarm_core::vision::camera::Intrinsics;
 use avatarm_scene::Scene;
 use avatarm_scene::spec::BackgroundSpec;
 
@@ -38,6 +39,10 @@ pub struct EraseOverrides {
     /// Capture the background H from the live frame at this time (s).
     #[arg(long, value_name = "S")]
     pub capture_background_at: Option<f64>,
+    /// Run the scene's camera at WIDTHxHEIGHT pixels, its pose and vertical field of view kept
+    /// (the principal point at the centre): the same scene at 1080p.
+    #[arg(long = "camera-size", value_name = "WxH", value_parser = super::frame_size)]
+    pub camera_size: Option<(u32, u32)>,
 }
 
 /// Parses `on`/`off` (also `true`/`false`, `1`/`0`) for command-line switches.
@@ -55,6 +60,14 @@ pub fn on_off(s: &str) -> Result<bool, AppError> {
 impl EraseOverrides {
     /// Applies the overrides to `scene` and checks the result; errors name the flag.
     pub fn apply(&self, scene: &mut Scene) -> Result<(), AppError> {
+        if let Some((width, height)) = self.camera_size {
+            let resized = |k: &Intrinsics| Intrinsics::from_fov_y(k.fov_y_rad(), width, height);
+            scene.true_camera.intrinsics = resized(&scene.true_camera.intrinsics);
+            scene.believed_camera.intrinsics = resized(&scene.believed_camera.intrinsics);
+            let c = &mut scene.file.camera;
+            c.intrinsics = Some(scene.true_camera.intrinsics);
+            (c.width, c.height) = (width, height);
+        }
         let e = &mut scene.file.erase;
         if let Some(v) = self.erase {
             e.enabled = v;

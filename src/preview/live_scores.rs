@@ -190,7 +190,6 @@ fn score_parts(mut live: ResMut<LiveDr>, scene: Res<SceneResource>, config: Res<
             continue;
         };
         scene.0.file.camera.sensor.apply_gain(&mut norobot, p.t_s);
-        let mask = avatarm_core::dr::binarise(&mask);
         match score_against_truth(
             &config.settings,
             p.alpha_h.unwrap_or(0.0),

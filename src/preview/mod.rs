@@ -7,6 +7,7 @@
 //! camera frame and joint state, how often the mask was rendered per camera frame and, in the
 //! simulated room, the live erasure scores against its ground truth ([`crate::preview::live_scores`]).
 
+pub mod budget;
 pub mod keys;
 pub mod live_scores;
 #[cfg(feature = "xr")]
@@ -106,11 +107,13 @@ struct PreviewState {
 const QUIT_DRAIN: u32 = 4;
 
 /// The panel's image with the mask tinted over it (`mask_overlay.wgsl`); a tint of alpha 0
-/// shows the image alone.
+/// shows the image alone. `grey.x = 1` shows a one-channel image (the `R8` mask) in grey.
 #[derive(Asset, TypePath, AsBindGroup, Debug, Clone)]
 struct PanelMaterial {
     #[uniform(0)]
     tint: Vec4,
+    #[uniform(5)]
+    grey: Vec4,
     #[texture(1)]
     #[sampler(2)]
     image: Handle<Image>,
@@ -145,6 +148,7 @@ impl Plugin for PreviewPlugin {
         app.add_plugins((
             UiMaterialPlugin::<PanelMaterial>::default(),
             WireframePlugin::default(),
+            budget::FrameBudgetPlugin,
         ))
         .insert_resource(PreviewState {
             options: self.0.clone(),
@@ -185,6 +189,7 @@ fn setup_preview(
     let right = (focus - eye).cross(Vec3::Z).normalize();
     commands.spawn((
         Name::new("preview camera"),
+        avatarm_twin::gpu_timing::GpuTimed("preview camera".to_owned()),
         Camera3d::default(),
         Tonemapping::None,
         Transform::from_translation(eye).looking_at(focus - 0.45 * right, Vec3::Z),
@@ -220,6 +225,7 @@ fn setup_preview(
                 PanelImage,
                 MaterialNode(materials.add(PanelMaterial {
                     tint: Vec4::ZERO,
+                    grey: Vec4::ZERO,
                     image: cameras.real.clone(),
                     mask: cameras.real.clone(),
                 })),
@@ -285,15 +291,21 @@ fn show_panel(
     } else {
         Vec4::ZERO
     };
+    let grey = if state.view == PanelView::Mask {
+        Vec4::X
+    } else {
+        Vec4::ZERO
+    };
     if let (Some(handle), Some(erase)) = (handle, erase) {
         for node in &image {
-            let unchanged = materials
-                .get(&node.0)
-                .is_some_and(|m| m.image == handle && m.tint == tint && m.mask == erase.mask);
+            let unchanged = materials.get(&node.0).is_some_and(|m| {
+                m.image == handle && m.tint == tint && m.mask == erase.mask && m.grey == grey
+            });
             if !unchanged && let Some(mut m) = materials.get_mut(&node.0) {
                 m.image = handle.clone();
                 m.mask = erase.mask.clone();
                 m.tint = tint;
+                m.grey = grey;
             }
         }
     }
@@ -349,7 +361,7 @@ fn update_status(
         Res<EraseConfig>,
         Res<EraseState>,
         Res<LiveVideo>,
-        Res<avatarm_erase::GpuPassTimes>,
+        Res<avatarm_erase::GpuTimes>,
     ),
     live_dr: Option<Res<LiveDr>>,
     time: Res<Time<Real>>,
@@ -371,7 +383,7 @@ fn update_status(
         (true, Some(origin)) => format!("erase on; background: {origin}"),
     };
     let stale = if live.stale { "   CAMERA STALE" } else { "" };
-    let per_frame = erase_state.renders[0] as f64 / erase_state.frames_in.max(1) as f64;
+    let per_frame = erase_state.renders as f64 / erase_state.frames_in.max(1) as f64;
     let gpu = gpu_pass_times(&gpu_times).map_or(String::new(), |g| format!("\n{g}"));
     let scores = match live_dr.as_deref().and_then(LiveDr::means) {
         Some((iou, leak, psnr)) => format!(
@@ -462,23 +474,36 @@ fn handle_keys(
     }
 }
 
-/// The erase passes' recent GPU times (median of the last 30 renders) for the status line and
-/// the run's summary; nothing before the first times arrive.
-fn gpu_pass_times(gpu: &avatarm_erase::GpuPassTimes) -> Option<String> {
-    match (gpu.recent_medians(30), gpu.unavailable()) {
-        ([Some(mask), Some(threshold), Some(composite)], _) => Some(format!(
-            "GPU ms: mask camera {mask:.1} + threshold {threshold:.1}, composite {composite:.1}"
-        )),
-        (_, Some(_)) => Some("GPU ms: no timestamp queries on this device".to_owned()),
-        _ => None,
+/// The erase's recent GPU times (median of the last 30 renders of the mask twin and of each
+/// pass that runs) for the status line and the run's summary; nothing before the first times
+/// arrive.
+fn gpu_pass_times(gpu: &avatarm_erase::GpuTimes) -> Option<String> {
+    let times: Vec<(&str, f64)> = avatarm_erase::PASS_NAMES
+        .iter()
+        .filter_map(|&name| gpu.recent_median(name, 30).map(|ms| (name, ms)))
+        .collect();
+    match (times.first(), gpu.unavailable()) {
+        (Some(_), _) => {
+            let total: f64 = times.iter().map(|(_, ms)| ms).sum();
+            let parts: Vec<String> = times
+                .iter()
+                .map(|(name, ms)| format!("{name} {ms:.2}"))
+                .collect();
+            Some(format!("GPU ms: erase {total:.2} ({})", parts.join(" + ")))
+        }
+        (None, Some(_)) => Some("GPU ms: no timestamp queries on this device".to_owned()),
+        (None, None) => None,
     }
 }
 
+#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn count_frames(
     mut commands: Commands,
     mut state: ResMut<PreviewState>,
     erase: Res<EraseState>,
-    gpu_times: Res<avatarm_erase::GpuPassTimes>,
+    gpu_times: Res<avatarm_erase::GpuTimes>,
+    budget: Res<budget::FrameBudget>,
+    readbacks: Option<Res<avatarm_twin::readback::ReadbackStats>>,
     live_dr: Option<Res<LiveDr>>,
     teleop: LiveTeleopStatus,
 ) {
@@ -512,7 +537,12 @@ fn count_frames(
         let gpu = gpu_pass_times(&gpu_times).map_or(String::new(), |g| format!("; {g}"));
         info!(
             "preview: {} frames rendered, {} camera frames, mask rendered {} times, composite {} times{scores}{gpu}",
-            state.frame, erase.frames_in, erase.renders[0], erase.renders[2]
+            state.frame, erase.frames_in, erase.renders, erase.renders
+        );
+        // "preview frame budget ...", after the line the tests read.
+        info!(
+            "preview {}",
+            budget.summary(&gpu_times, readbacks.as_deref())
         );
         if let Some(line) = teleop.summary() {
             info!("{line}");

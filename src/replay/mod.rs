@@ -25,7 +25,9 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use avatarm_core::dr::{self, MaskScores, Photometric, RgbaView};
-use avatarm_erase::{EraseState, EraseTargets, GpuPassTimes, PASS_NAMES, PassTimes};
+use avatarm_erase::{
+    EraseState, EraseTargets, GpuTimes, PASS_NAMES, SpanTimes, UPLOAD_CPU_SPAN, UPLOAD_SPAN,
+};
 use avatarm_sim::{SimCameras, SimRobotState};
 use avatarm_twin::RobotTwin;
 use avatarm_video::LiveVideo;
@@ -151,7 +153,7 @@ struct Replay {
     errors: Vec<String>,
     started: Option<Instant>,
     /// GPU pass samples measured before time started (warm-up renders, not reported).
-    gpu_measured_at_start: [u64; 3],
+    gpu_measured_at_start: BTreeMap<String, u64>,
     bar: ProgressBar,
 }
 
@@ -200,7 +202,7 @@ impl Plugin for ReplayPlugin {
             last_update: None,
             errors: Vec::new(),
             started: None,
-            gpu_measured_at_start: [0; 3],
+            gpu_measured_at_start: BTreeMap::new(),
             bar,
         })
         .add_systems(Startup, pause_for_warmup)
@@ -249,7 +251,7 @@ fn drive_replay(
         Option<Res<EraseTargets>>,
         Res<EraseState>,
         Res<LiveVideo>,
-        Res<GpuPassTimes>,
+        Res<GpuTimes>,
     ),
     twins: Query<&RobotTwin>,
     scene: Res<SceneResource>,
@@ -281,7 +283,7 @@ fn drive_replay(
         if replay.warmup_left == 0 {
             time.unpause();
             replay.started = Some(Instant::now());
-            replay.gpu_measured_at_start = gpu_times.measured();
+            replay.gpu_measured_at_start = gpu_times.marks();
         }
         return;
     }
@@ -490,7 +492,7 @@ fn score_frame(replay: &Replay, scene: &SceneResource, p: Pending) -> Result<Fra
     };
     let cpu = dr::composite(&live, &background, &alpha, alpha_h, &inputs.photometric)?;
     let cpu_composite_ms = t1.elapsed().as_secs_f64() * 1e3;
-    let gpu_mask = dr::binarise(&mask);
+    let gpu_mask = mask;
     let mismatch = gpu_mask
         .iter()
         .zip(&cpu_mask)
@@ -589,46 +591,68 @@ fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
     (n > 0).then(|| s / n as f64)
 }
 
-/// `timing_ms`: the mask (mask camera + threshold pass) and composite stages timed on the GPU
-/// when the device has timestamp queries, else the CPU reference; the CPU reference and each
-/// GPU pass are reported beside them.
-fn stage_timings(replay: &Replay, gpu: &PassTimes) -> serde_json::Value {
+/// `timing_ms`: the erase's mask (the mask twin's render and the dilation passes) and
+/// composite (feathering and the composite, which thresholds too when nothing dilates) per
+/// camera frame, timed on the GPU when the device has timestamp queries, else the CPU
+/// reference; each pass, the uploads and every other timed view (the room's cameras, the
+/// ground truth, the interaction camera) beside them.
+fn stage_timings(replay: &Replay, gpu: &SpanTimes) -> serde_json::Value {
     let cpu_mask: Vec<f64> = replay.scores.iter().map(|f| f.cpu_mask_ms).collect();
     let cpu_comp: Vec<f64> = replay.scores.iter().map(|f| f.cpu_composite_ms).collect();
-    let passes: Vec<Vec<f64>> = (0..PASS_NAMES.len())
-        .map(|i| gpu.since(i, replay.gpu_measured_at_start[i]))
-        .collect();
-    // The n-th mask render and the n-th threshold render work on the same camera frame.
-    let gpu_mask: Vec<f64> = passes[0]
+    let since = |name: &str| {
+        gpu.since(
+            name,
+            replay.gpu_measured_at_start.get(name).copied().unwrap_or(0),
+        )
+    };
+    let passes: Vec<(&str, Vec<f64>)> = PASS_NAMES
         .iter()
-        .zip(&passes[1])
-        .map(|(a, b)| a + b)
+        .map(|&name| (name, since(name)))
+        .filter(|(_, ms)| !ms.is_empty())
         .collect();
-    let gpu_comp = &passes[2];
+    // The n-th render of each pass works on the same camera frame (a frame's spans arrive
+    // together or not at all).
+    let per_frame = |names: &[&str]| -> Vec<f64> {
+        let chosen: Vec<&Vec<f64>> = passes
+            .iter()
+            .filter(|(n, _)| names.contains(n))
+            .map(|(_, ms)| ms)
+            .collect();
+        let n = chosen.iter().map(|v| v.len()).min().unwrap_or(0);
+        (0..n).map(|i| chosen.iter().map(|v| v[i]).sum()).collect()
+    };
+    let gpu_mask = per_frame(&PASS_NAMES[..3]);
+    let gpu_comp = per_frame(&PASS_NAMES[3..]);
+    let gpu_erase = per_frame(&PASS_NAMES);
     let on_gpu = !gpu_mask.is_empty() && !gpu_comp.is_empty();
     let source = match (&gpu.unavailable, on_gpu) {
         (_, true) => "gpu".to_string(),
         (Some(why), false) => format!("cpu reference: {why}"),
         (None, false) => "cpu reference: no GPU pass time arrived".to_string(),
     };
-    let gpu_passes: serde_json::Map<String, serde_json::Value> = PASS_NAMES
+    let entry = |ms: &[f64]| json!({"ms": spread(ms), "renders_timed": ms.len()});
+    let gpu_passes: serde_json::Map<String, serde_json::Value> = passes
         .iter()
-        .zip(&passes)
-        .map(|(name, ms)| {
-            (
-                name.to_string(),
-                json!({"ms": spread(ms), "renders_timed": ms.len()}),
-            )
-        })
+        .map(|(name, ms)| (name.to_string(), entry(ms)))
+        .collect();
+    let views: serde_json::Map<String, serde_json::Value> = gpu
+        .spans
+        .keys()
+        .filter(|k| !PASS_NAMES.contains(&k.as_str()) && *k != UPLOAD_SPAN && *k != UPLOAD_CPU_SPAN)
+        .map(|name| (name.clone(), entry(&since(name))))
         .collect();
     json!({
         "mask": spread(if on_gpu { &gpu_mask } else { &cpu_mask }),
-        "composite": spread(if on_gpu { gpu_comp } else { &cpu_comp }),
+        "composite": spread(if on_gpu { &gpu_comp } else { &cpu_comp }),
+        "erase": spread(&gpu_erase),
+        "upload": spread(&since(UPLOAD_SPAN)),
+        "upload_cpu": spread(&since(UPLOAD_CPU_SPAN)),
         "frame": spread(&replay.frame_ms),
         "source": source,
         "gpu_passes": gpu_passes,
+        "gpu_views": views,
         "cpu_reference": {"mask": spread(&cpu_mask), "composite": spread(&cpu_comp)},
-        "note": "mask: the mask camera's render plus the threshold pass, composite: the composite pass, each the GPU time between timestamps written before and after the pass camera renders (source \"gpu\"), or the CPU reference of the same steps when the device has no timestamp queries; cpu_reference: avatarm_core::dr on the same frame; frame: wall time per app update, all cameras included",
+        "note": "mask: the mask twin's flat render plus the dilation passes; composite: the feathering and composite passes (the composite thresholds too when nothing dilates); erase: all of them; each the GPU time between timestamps written around the pass (source \"gpu\"), or the CPU reference of the same steps when the device has no timestamp queries; upload: the GPU copies of the live frame and H from their staging buffers, upload_cpu: the CPU copies into them; gpu_views: every other timed render (cameras and flat views) in this replay; cpu_reference: avatarm_core::dr on the same frame; frame: wall time per app update, all cameras included",
     })
 }
 
@@ -639,7 +663,7 @@ fn finish(
     twins: &Query<&RobotTwin>,
     app_twin: Entity,
     erase: &EraseState,
-    gpu: &PassTimes,
+    gpu: &SpanTimes,
 ) -> Result<serde_json::Value, AppError> {
     if !replay.errors.is_empty() {
         return Err(AppError::replay(replay.errors.join("; ")));

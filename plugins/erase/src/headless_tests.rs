@@ -78,93 +78,115 @@ fn frame(index: u64, t_s: f64) -> VideoFrame {
     }
 }
 
-fn active_passes(app: &mut App) -> Vec<usize> {
-    let mut active: Vec<usize> = app
-        .world_mut()
-        .query::<(&ErasePass, &Camera)>()
-        .iter(app.world())
-        .filter(|(_, c)| c.is_active)
-        .map(|(p, _)| p.stage)
-        .collect();
-    active.sort_unstable();
-    active
+/// Whether the mask render and the passes run in this update, and what they upload.
+fn pipeline(app: &mut App) -> (bool, bool, bool, bool) {
+    let entity = app.world().resource::<ErasePipeline>().0;
+    let view = app.world().get::<FlatView>(entity).expect("flat view");
+    let job = app.world().get::<EraseJob>(entity).expect("erase job");
+    (
+        view.active,
+        job.render,
+        job.frame.is_some(),
+        job.background.is_some(),
+    )
 }
 
 #[test]
-fn the_pipeline_spawns_its_twin_passes_and_targets() {
+fn the_pipeline_spawns_its_twin_view_and_targets() {
     let mut app = app(0.5);
     app.update();
-    // The mask twin in unlit white and the occluder in black, alone on the mask twin's layer.
-    let on_mask_layer: Vec<Color> = app
+    // The mask twin in white and the occluder in black, alone on the mask twin's layer, drawn
+    // flat (no material, no camera).
+    let on_mask_layer: Vec<FlatPart> = app
         .world_mut()
-        .query::<(&RenderLayers, &MeshMaterial3d<StandardMaterial>)>()
+        .query::<(
+            &RenderLayers,
+            &FlatPart,
+            Option<&MeshMaterial3d<StandardMaterial>>,
+        )>()
         .iter(app.world())
-        .filter(|(l, _)| **l == RenderLayers::layer(layers::MASK_TWIN))
-        .map(|(_, m)| m.0.clone())
-        .collect::<Vec<_>>()
-        .iter()
-        .map(|h| {
-            let m = app
-                .world()
-                .resource::<Assets<StandardMaterial>>()
-                .get(h)
-                .expect("material");
-            assert!(m.unlit, "the mask twin and occluders are unlit");
-            m.base_color
+        .filter(|(l, _, _)| **l == RenderLayers::layer(layers::MASK_TWIN))
+        .map(|(_, p, m)| {
+            assert!(m.is_none(), "flat parts carry no material");
+            *p
         })
         .collect();
-    let white = on_mask_layer.iter().filter(|c| **c == Color::WHITE).count();
-    let black = on_mask_layer.iter().filter(|c| **c == Color::BLACK).count();
+    let white = on_mask_layer
+        .iter()
+        .filter(|p| **p == FlatPart::ROBOT)
+        .count();
+    let black = on_mask_layer
+        .iter()
+        .filter(|p| **p == FlatPart::OCCLUDER)
+        .count();
     assert!(white >= 9, "every link with a visual, white: {white}");
     assert_eq!(black, 1, "the occluder, black");
-    // Three pass cameras, in render order.
-    let mut stages: Vec<(usize, isize)> = app
-        .world_mut()
-        .query::<(&ErasePass, &Camera)>()
-        .iter(app.world())
-        .map(|(p, c)| (p.stage, c.order))
-        .collect();
-    stages.sort_unstable();
-    assert_eq!(stages.len(), 3);
-    assert!(stages.windows(2).all(|w| w[0].1 < w[1].1), "{stages:?}");
-    // The raw render at the mask scale, the others at the camera's size.
+    assert_eq!(
+        app.world_mut()
+            .query::<&Camera>()
+            .iter(app.world())
+            .filter(|c| c.order < -17)
+            .count(),
+        0,
+        "no camera renders the mask or the passes"
+    );
+    // One view on that layer, rendering the raw target at the mask scale.
+    let entity = app.world().resource::<ErasePipeline>().0;
+    let view = app.world().get::<FlatView>(entity).expect("view").clone();
+    let layer = app.world().get::<RenderLayers>(entity).expect("layer");
+    assert_eq!(*layer, RenderLayers::layer(layers::MASK_TWIN));
     let targets = app.world().resource::<EraseTargets>().clone();
+    assert_eq!(view.target, targets.raw);
+    assert_eq!(
+        (view.camera.intrinsics.width, view.camera.intrinsics.height),
+        (W / 2, H / 2)
+    );
     let images = app.world().resource::<Assets<Image>>();
-    let size = |h: &Handle<Image>| {
+    let format = |h: &Handle<Image>| {
         let i = images.get(h).expect("image");
-        (i.width(), i.height())
+        (i.width(), i.height(), i.texture_descriptor.format)
     };
-    assert_eq!(size(&targets.raw), (W / 2, H / 2));
-    for h in [
-        &targets.mask,
-        &targets.composite,
-        &targets.live,
-        &targets.background,
-    ] {
-        assert_eq!(size(h), (W, H));
-    }
+    assert_eq!(format(&targets.raw), (W / 2, H / 2, TextureFormat::R8Unorm));
+    assert_eq!(format(&targets.mask), (W, H, TextureFormat::R8Unorm));
+    assert_eq!(
+        format(&targets.composite),
+        (W, H, TextureFormat::Rgba8UnormSrgb)
+    );
+    let composite = images.get(&targets.composite).expect("composite");
+    assert_eq!(
+        composite.texture_descriptor.view_formats,
+        [TextureFormat::Rgba8Unorm],
+        "written through a linear view"
+    );
+    let job = app.world().get::<EraseJob>(entity).expect("job");
+    assert_eq!(job.params.raw_size, UVec2::new(W / 2, H / 2));
+    assert_eq!(job.params.size, UVec2::new(W, H));
 }
 
 #[test]
 fn the_passes_render_once_per_camera_frame() {
     let mut app = app(1.0);
-    // The first update (new settings) renders every pass, clearing their targets; the next
-    // brings nothing new and renders none.
+    // The first update (new settings) renders, clearing the targets; the next brings nothing
+    // new and renders nothing.
     app.update();
-    assert_eq!(active_passes(&mut app), [0, 1, 2]);
+    assert_eq!(pipeline(&mut app), (true, true, false, false));
     app.update();
-    assert_eq!(active_passes(&mut app), Vec::<usize>::new());
-    // A frame arrives: the update that takes it renders all three passes, the next one none.
+    assert_eq!(pipeline(&mut app), (false, false, false, false));
+    // A frame arrives: the update that takes it uploads it and renders, the next one nothing.
     let now = app.world().resource::<Time<Fixed>>().elapsed_secs_f64();
     app.world_mut()
         .resource_mut::<VideoInbox>()
         .pending
         .push(frame(1, now));
     app.update();
-    assert_eq!(active_passes(&mut app), [0, 1, 2]);
+    assert_eq!(pipeline(&mut app), (true, true, true, false));
     assert_eq!(app.world().resource::<EraseState>().frames_in, 1);
     app.update();
-    assert_eq!(active_passes(&mut app), Vec::<usize>::new(), "nothing new");
+    assert_eq!(
+        pipeline(&mut app),
+        (false, false, false, false),
+        "nothing new"
+    );
     // A frame of the wrong size is refused and renders nothing.
     let now = app.world().resource::<Time<Fixed>>().elapsed_secs_f64();
     let mut bad = frame(2, now);
@@ -175,13 +197,39 @@ fn the_passes_render_once_per_camera_frame() {
         .pending
         .push(bad);
     app.update();
-    assert_eq!(active_passes(&mut app), Vec::<usize>::new());
+    assert_eq!(pipeline(&mut app), (false, false, false, false));
     let state = app.world().resource::<EraseState>();
     assert_eq!((state.frames_in, state.frames_refused), (1, 1));
+    assert_eq!(state.renders, 2, "once at start, once for the frame");
+}
+
+#[test]
+fn a_new_background_is_uploaded_once_and_turns_the_composite_on() {
+    let mut app = app(1.0);
+    app.update();
+    let alpha = |app: &mut App| {
+        let entity = app.world().resource::<ErasePipeline>().0;
+        app.world()
+            .get::<EraseJob>(entity)
+            .expect("job")
+            .params
+            .alpha_h
+    };
+    assert_eq!(alpha(&mut app), 0.0, "no H: nothing is replaced");
+    app.world_mut().write_message(SetBackground {
+        rgba: Arc::new(vec![200; (W * H * 4) as usize]),
+        width: W,
+        height: H,
+        origin: "a file".into(),
+    });
+    app.update();
+    assert_eq!(pipeline(&mut app), (true, true, false, true));
+    assert_eq!(alpha(&mut app), 1.0);
+    app.update();
     assert_eq!(
-        state.renders,
-        [2, 2, 2],
-        "once at start, once for the frame"
+        pipeline(&mut app),
+        (false, false, false, false),
+        "uploaded once"
     );
 }
 

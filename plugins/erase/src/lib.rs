@@ -2,37 +2,41 @@
 //! layers).
 //!
 //! Per camera frame:
-//! 1. **Mask twin.** A twin of the robot in unlit white on [`layers::MASK_TWIN`] is posed at
-//!    the joint state for the frame: the last received one, or with latency compensation the
-//!    state interpolated (or extrapolated from the joint velocities) at the frame's capture
-//!    time ([`JointHistory::at`]).
-//! 2. **Mask camera.** A camera with the *believed* intrinsics and pose of the real camera
-//!    renders that layer alone, white on black, into [`EraseTargets::raw`] (at
-//!    `resolution_scale` of the camera's size).
-//! 3. **Threshold pass** (`mask.wgsl`): per-channel RGBα ranges give the binary mask M(t),
-//!    dilated by `dilate_px + feather_px`, into [`EraseTargets::mask`].
-//! 4. **Composite pass** (`composite.wgsl`): the live frame with the background panel in front
-//!    at alpha `α_H · a`, `a` the feathered mask, the background after photometric compensation;
+//! 1. **Mask twin.** A twin of the robot on [`layers::MASK_TWIN`], in white
+//!    ([`FlatPart::ROBOT`]), with the scene's occluders in black, is posed at the joint state
+//!    for the frame: the last received one, or with latency compensation the state interpolated
+//!    (or extrapolated from the joint velocities) at the frame's capture time
+//!    ([`JointHistory::at`]).
+//! 2. **Mask render.** A [`FlatView`] with the *believed* intrinsics and pose of the real
+//!    camera draws it, white on black, into [`EraseTargets::raw`] (`R8Unorm`, at
+//!    `resolution_scale` of the camera's size): no Bevy camera, no lighting, tonemapping or
+//!    MSAA ([`avatarm_twin::flat`]).
+//! 3. **Threshold, dilation, feathering, composite** ([`passes`], `erase.wgsl`): per-channel
+//!    RGBα ranges give the binary mask M(t), dilated by `dilate_px + feather_px` into
+//!    [`EraseTargets::mask`] (`R8Unorm`); the live frame with the background panel in front at
+//!    alpha `α_H · a`, `a` the feathered mask, the background after photometric compensation,
 //!    into [`EraseTargets::composite`], which is Ĩ(t) before the hand and object twin are drawn
-//!    in front ([`interaction`]).
+//!    in front ([`interaction`]). One to four full-target passes, by the settings.
 //!
-//! **One update.** The three pass cameras render in camera order (mask camera, threshold,
-//! composite, then the interaction camera), so a frame that arrives in an update is erased and
-//! shown in that update's render. Reading a pass's image back must not use Bevy's
-//! `Screenshot::image`: in the frame of a screenshot the camera renders into a temporary texture
-//! copied into its image only after every camera, so the next pass would see the previous
-//! frame's mask ([`avatarm_twin::readback`] reads an image back without that).
+//! **One update.** The mask render and the passes run in the root render graph before every
+//! camera, so a frame that arrives in an update is erased and shown in that update's render.
+//! Reading a pass's image back must not use Bevy's `Screenshot::image` (it renders a camera
+//! into a temporary texture copied into its image only after every camera);
+//! [`avatarm_twin::readback`] reads an image back after the frame instead.
 //!
-//! Nothing is read back to the CPU on this path. Photometric compensation fits the background
-//! to each frame on the CPU (both images are CPU data anyway) outside a conservative robot
-//! region: the links' bounding spheres projected by FK ([`avatarm_core::dr::sphere_mask`]).
-//! The CPU reference of steps 3–4 is [`avatarm_core::dr`].
+//! Nothing is read back to the CPU on this path. The live frame and H are uploaded into
+//! textures of the passes' own through staging buffers (not Bevy images, which would be
+//! re-created on every change). Photometric compensation fits the background to each frame on
+//! the CPU (both images are CPU data anyway) outside a conservative robot region: the links'
+//! bounding spheres projected by FK ([`avatarm_core::dr::sphere_mask`]). The CPU reference of
+//! step 3 is [`avatarm_core::dr`].
 //!
 //! Modules: [`interaction`] (the panel, the object twins and the interaction camera),
-//! [`gpu_timing`] (each pass timed with GPU timestamp queries).
+//! [`passes`] (the render-world passes and their uploads). GPU times of the mask render and of
+//! each pass are in [`GpuTimes`] ([`avatarm_twin::gpu_timing`]).
 
-pub mod gpu_timing;
 pub mod interaction;
+pub mod passes;
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -40,34 +44,27 @@ use std::sync::Arc;
 use avatarm_core::dr::{self, EraseSettings, LinkSphere, Photometric, RgbaView};
 use avatarm_core::robot::{JointMap, RobotModel};
 use avatarm_core::vision::camera::PinholeCamera;
-use avatarm_twin::camera::{SCENERY_DEPTH_BIAS, spawn_pinhole_camera, target_image};
+use avatarm_twin::camera::rgba8_image;
+use avatarm_twin::flat::{FlatPart, FlatView, add_flat_render, flat_target_image};
 use avatarm_twin::layers;
 use avatarm_twin::prelude::*;
 use avatarm_video::{LiveVideo, VideoSystems};
-use bevy::asset::embedded_asset;
-use bevy::camera::RenderTarget;
 use bevy::camera::visibility::RenderLayers;
-use bevy::camera::{OrthographicProjection, ScalingMode};
-use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
-use bevy::pbr::{Material, MaterialPlugin};
 use bevy::prelude::*;
-use bevy::render::extract_component::ExtractComponent;
-use bevy::render::render_resource::{AsBindGroup, ShaderType, TextureFormat, TextureUsages};
-use bevy::render::view::Msaa;
-use bevy::shader::ShaderRef;
+use bevy::render::render_resource::{TextureFormat, TextureUsages};
 use nalgebra::{DVector, Isometry3};
 
-pub use gpu_timing::{GpuPassTimes, PASS_NAMES, PassTimes};
+pub use avatarm_twin::gpu_timing::{GpuTimes, SpanTimes};
 pub use interaction::{InteractionConfig, InteractionPlugin, InteractionTargets};
+pub use passes::{
+    EraseJob, EraseParams, ErasePassesPlugin, FLOOR_SPAN, PASS_NAMES, UPLOAD_CPU_SPAN, UPLOAD_SPAN,
+};
 
 /// What most users of the erase pipeline need.
 pub mod prelude {
     pub use crate::interaction::{InteractionConfig, InteractionPlugin, ObjectTwinSpec};
     pub use crate::{EraseConfig, ErasePlugin, EraseState, EraseSystems, EraseTargets};
 }
-
-/// Render order of the mask camera; the passes follow it.
-const MASK_CAMERA_ORDER: isize = -20;
 
 /// What the erase plugin needs to know. Insert it before the app starts.
 #[derive(Resource, Debug, Clone)]
@@ -95,21 +92,21 @@ pub struct EraseConfig {
 /// Images of the pipeline, all at the camera's size except `raw`.
 #[derive(Resource, Debug, Clone)]
 pub struct EraseTargets {
-    /// The mask twin rendered white on black (at `resolution_scale`).
+    /// The mask twin rendered white on black (`R8Unorm`, at `resolution_scale`).
     pub raw: Handle<Image>,
-    /// M(t) after threshold and dilation (white = robot).
+    /// M(t) after threshold and dilation (`R8Unorm`, 1 = robot).
     pub mask: Handle<Image>,
-    /// Ĩ(t): the live frame with the robot erased.
+    /// Ĩ(t): the live frame with the robot erased (`Rgba8UnormSrgb`).
     pub composite: Handle<Image>,
-    /// The live frame as uploaded for the composite.
-    pub live: Handle<Image>,
-    /// The background H as uploaded (after refreshes).
-    pub background: Handle<Image>,
 }
 
-/// The mask twin's root entity.
+/// The mask twin's root entity, and the entity carrying its [`FlatView`] and [`EraseJob`].
 #[derive(Resource, Debug, Clone, Copy)]
 pub struct MaskTwin(pub Entity);
+
+/// The entity carrying the pipeline's [`FlatView`] (the mask render) and [`EraseJob`].
+#[derive(Resource, Debug, Clone, Copy)]
+pub struct ErasePipeline(pub Entity);
 
 /// What the pipeline is doing now.
 #[derive(Resource, Debug, Clone, Default)]
@@ -131,22 +128,16 @@ pub struct EraseState {
     pub robot_region: Option<Arc<Vec<u8>>>,
     /// What the passes work on in this update.
     pub current: Option<PassInputs>,
-    /// Renders of each pass so far: mask camera, threshold, composite. Each pass renders
-    /// once per camera frame (and when the settings or H change), however fast the display
-    /// updates: an XR headset at 72-90 Hz over a 30 fps camera does not redo the mask.
-    pub renders: [u64; 3],
+    /// Renders of the pipeline so far (the mask render and every pass). It renders once per
+    /// camera frame (and when the settings or H change), however fast the display updates: an
+    /// XR headset at 72-90 Hz over a 30 fps camera does not redo the mask.
+    pub renders: u64,
     /// Camera frames taken into the pipeline.
     pub frames_in: u64,
     /// H changed since the last update.
     background_changed: bool,
-}
-
-/// Marks a camera of the pipeline with the pass it renders, in render order: 0 the mask
-/// camera, 1 the threshold pass, 2 the composite pass ([`PASS_NAMES`]).
-#[derive(Component, ExtractComponent, Debug, Clone, Copy)]
-pub struct ErasePass {
-    /// The pass.
-    pub stage: usize,
+    /// The H last handed to the passes (they upload it when it changes).
+    uploaded_background: Option<Arc<Vec<u8>>>,
 }
 
 /// What the passes work on in one update: the mask camera renders the twin for `frame`, the
@@ -238,279 +229,121 @@ pub enum EraseSystems {
     Interaction,
 }
 
-/// The threshold pass's material.
-#[derive(Asset, TypePath, AsBindGroup, Debug, Clone)]
-pub struct MaskMaterial {
-    /// Ranges and sizes.
-    #[uniform(0)]
-    pub params: MaskParams,
-    /// The mask twin's render.
-    #[texture(1)]
-    pub raw: Handle<Image>,
-}
-
-/// Uniforms of the threshold pass.
-#[derive(ShaderType, Debug, Clone, Copy)]
-pub struct MaskParams {
-    /// Lower bounds of the RGBα ranges (8-bit levels).
-    pub lo: Vec4,
-    /// Upper bounds.
-    pub hi: Vec4,
-    /// Size of the raw render.
-    pub raw_size: UVec2,
-    /// Size of the mask.
-    pub full_size: UVec2,
-    /// Square dilation radius (px).
-    pub radius: u32,
-}
-
-impl Material for MaskMaterial {
-    fn fragment_shader() -> ShaderRef {
-        "embedded://avatarm_erase/mask.wgsl".into()
-    }
-}
-
-/// The composite pass's material.
-#[derive(Asset, TypePath, AsBindGroup, Debug, Clone)]
-pub struct CompositeMaterial {
-    /// Photometric model, alpha, feathering.
-    #[uniform(0)]
-    pub params: CompositeParams,
-    /// I(t).
-    #[texture(1)]
-    pub live: Handle<Image>,
-    /// H.
-    #[texture(2)]
-    pub background: Handle<Image>,
-    /// M(t).
-    #[texture(3)]
-    pub mask: Handle<Image>,
-}
-
-/// Uniforms of the composite pass.
-#[derive(ShaderType, Debug, Clone, Copy)]
-pub struct CompositeParams {
-    /// Per-channel gain of the background (w unused).
-    pub gain: Vec4,
-    /// Per-channel offset (full scale; w unused).
-    pub offset: Vec4,
-    /// Frame size.
-    pub size: UVec2,
-    /// Background panel opacity; 0 while erasing is off or there is no background.
-    pub alpha_h: f32,
-    /// Feathering radius (px).
-    pub feather: u32,
-}
-
-impl Material for CompositeMaterial {
-    fn fragment_shader() -> ShaderRef {
-        "embedded://avatarm_erase/composite.wgsl".into()
-    }
-}
-
-/// Materials of the two passes.
-#[derive(Resource, Debug, Clone)]
-pub struct EraseMaterials {
-    /// Threshold pass.
-    pub mask: Handle<MaskMaterial>,
-    /// Composite pass.
-    pub composite: Handle<CompositeMaterial>,
-}
-
-/// Adds the mask twin, the mask camera, the two passes and the systems that feed them. Needs
+/// Adds the mask twin, its flat render, the passes and the systems that feed them. Needs
 /// [`RobotTwinPlugin`], [`avatarm_video::VideoPlugin`] and an [`EraseConfig`].
 #[derive(Default)]
 pub struct ErasePlugin;
 
 impl Plugin for ErasePlugin {
     fn build(&self, app: &mut App) {
-        embedded_asset!(app, "mask.wgsl");
-        embedded_asset!(app, "composite.wgsl");
-        app.add_plugins((
-            MaterialPlugin::<MaskMaterial>::default(),
-            MaterialPlugin::<CompositeMaterial>::default(),
-            gpu_timing::PassTimingPlugin,
-        ))
-        .add_message::<SetBackground>()
-        .add_message::<CaptureBackground>()
-        .init_resource::<EraseState>()
-        .init_resource::<JointHistory>()
-        .configure_sets(
-            Update,
-            (
-                EraseSystems::Prepare.after(VideoSystems::Publish),
-                EraseSystems::Interaction.after(EraseSystems::Prepare),
-            ),
-        )
-        .add_systems(Startup, setup)
-        .add_systems(
-            Update,
-            (record_history, set_background, prepare_frame, gate_passes)
-                .chain()
-                .in_set(EraseSystems::Prepare),
-        );
+        add_flat_render(app);
+        app.add_plugins(ErasePassesPlugin)
+            .add_message::<SetBackground>()
+            .add_message::<CaptureBackground>()
+            .init_resource::<EraseState>()
+            .init_resource::<JointHistory>()
+            .configure_sets(
+                Update,
+                (
+                    EraseSystems::Prepare.after(VideoSystems::Publish),
+                    EraseSystems::Interaction.after(EraseSystems::Prepare),
+                ),
+            )
+            .add_systems(Startup, setup)
+            .add_systems(
+                Update,
+                (record_history, set_background, prepare_frame, gate_passes)
+                    .chain()
+                    .in_set(EraseSystems::Prepare),
+            );
     }
 }
 
-/// An RGBA8 image the CPU writes and the GPU samples as raw 8-bit values (not sRGB-decoded).
-pub fn upload_image(width: u32, height: u32) -> Image {
-    avatarm_twin::camera::rgba8_image(
+/// The image Ĩ(t) is rendered into: sRGB for the panels that sample it, written through an
+/// `Rgba8Unorm` view (its bytes are the composite's 8-bit values), read back.
+pub fn composite_image(width: u32, height: u32) -> Image {
+    let mut image = rgba8_image(
         width,
         height,
-        TextureFormat::Rgba8Unorm,
-        TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_DST,
-    )
-}
-
-/// Spawns an orthographic camera that draws one full-target quad with `material` into
-/// `target` as pass `stage` (rendered after the passes before it); the quad's fragment shader
-/// works in pixel coordinates.
-fn spawn_pass<M: Material>(
-    commands: &mut Commands,
-    meshes: &mut Assets<Mesh>,
-    material: Handle<M>,
-    target: Handle<Image>,
-    layer: usize,
-    name: &str,
-    stage: usize,
-) {
-    let layers = RenderLayers::layer(layer);
-    commands.spawn((
-        Name::new(format!("{name} quad")),
-        Mesh3d(meshes.add(Rectangle::new(1.0, 1.0))),
-        MeshMaterial3d(material),
-        Transform::default(),
-        layers.clone(),
-    ));
-    commands.spawn((
-        Name::new(name.to_owned()),
-        Camera3d::default(),
-        Camera {
-            // After the mask camera (order MASK_CAMERA_ORDER) and the passes before it.
-            order: MASK_CAMERA_ORDER + stage as isize,
-            clear_color: ClearColorConfig::Custom(Color::BLACK),
-            ..default()
-        },
-        RenderTarget::Image(target.into()),
-        Projection::Orthographic(OrthographicProjection {
-            scaling_mode: ScalingMode::Fixed {
-                width: 1.0,
-                height: 1.0,
-            },
-            near: -1.0,
-            far: 1.0,
-            ..OrthographicProjection::default_3d()
-        }),
-        Transform::default(),
-        Tonemapping::None,
-        DebandDither::Disabled,
-        Msaa::Off,
-        layers,
-        ErasePass { stage },
-    ));
+        TextureFormat::Rgba8UnormSrgb,
+        TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_SRC | TextureUsages::RENDER_ATTACHMENT,
+    );
+    image.texture_descriptor.view_formats = &[TextureFormat::Rgba8Unorm];
+    image
 }
 
 fn setup(
     mut commands: Commands,
     config: Res<EraseConfig>,
     mut twin_assets: TwinAssets,
-    mut mask_materials: ResMut<Assets<MaskMaterial>>,
-    mut composite_materials: ResMut<Assets<CompositeMaterial>>,
     mut images: ResMut<Assets<Image>>,
 ) {
     let k = config.camera.intrinsics;
     let raw_k = k.scaled(config.settings.resolution_scale);
+    let layer = RenderLayers::layer(layers::MASK_TWIN);
     let twin = spawn_twin_with_visuals(
         &mut commands,
         &mut twin_assets,
         &config.model,
         &config.base,
-        TwinAppearance::Unlit(Color::WHITE),
+        TwinAppearance::Flat(FlatPart::ROBOT),
         config.detail,
-        &RenderLayers::layer(layers::MASK_TWIN),
+        &layer,
         "mask twin",
     );
     commands.insert_resource(MaskTwin(twin.root));
-    let black = twin_assets.materials.add(StandardMaterial {
-        base_color: Color::BLACK,
-        unlit: true,
-        depth_bias: SCENERY_DEPTH_BIAS,
-        ..default()
-    });
     for (mesh, transform) in &config.occluders {
         commands.spawn((
             Name::new("mask occluder"),
             Mesh3d(twin_assets.meshes.add(mesh.clone())),
-            MeshMaterial3d(black.clone()),
+            FlatPart::OCCLUDER,
             *transform,
-            RenderLayers::layer(layers::MASK_TWIN),
+            layer.clone(),
         ));
     }
-
-    let raw = images.add(target_image(raw_k.width, raw_k.height));
-    let mask = images.add(target_image(k.width, k.height));
-    let composite = images.add(target_image(k.width, k.height));
-    let live = images.add(upload_image(k.width, k.height));
-    let background = images.add(upload_image(k.width, k.height));
+    let raw = images.add(flat_target_image(raw_k.width, raw_k.height));
+    let mask = images.add(flat_target_image(k.width, k.height));
+    let composite = images.add(composite_image(k.width, k.height));
     let mask_camera = PinholeCamera {
         intrinsics: raw_k,
         world_from_camera: config.camera.world_from_camera,
     };
-    let mask_camera = spawn_pinhole_camera(
-        &mut commands,
-        &mask_camera,
-        raw.clone(),
-        RenderLayers::layer(layers::MASK_TWIN),
-        Color::BLACK,
-        MASK_CAMERA_ORDER,
-        "mask camera",
-    );
-    commands.entity(mask_camera).insert(ErasePass { stage: 0 });
     let s = &config.settings;
-    let mask_material = mask_materials.add(MaskMaterial {
-        params: MaskParams {
-            lo: Vec4::from_array(s.ranges.map(|r| f32::from(r[0]))),
-            hi: Vec4::from_array(s.ranges.map(|r| f32::from(r[1]))),
-            raw_size: UVec2::new(raw_k.width, raw_k.height),
-            full_size: UVec2::new(k.width, k.height),
-            radius: s.mask_radius(),
-        },
-        raw: raw.clone(),
-    });
-    let composite_material = composite_materials.add(CompositeMaterial {
-        params: composite_params(s, &Photometric::default(), false),
-        live: live.clone(),
-        background: background.clone(),
-        mask: mask.clone(),
-    });
-    spawn_pass(
-        &mut commands,
-        &mut twin_assets.meshes,
-        mask_material.clone(),
-        mask.clone(),
-        layers::MASK_PASS,
-        "threshold pass",
-        1,
-    );
-    spawn_pass(
-        &mut commands,
-        &mut twin_assets.meshes,
-        composite_material.clone(),
-        composite.clone(),
-        layers::COMPOSITE_PASS,
-        "composite pass",
-        2,
-    );
-    commands.insert_resource(EraseMaterials {
-        mask: mask_material,
-        composite: composite_material,
-    });
+    let pipeline = commands
+        .spawn((
+            Name::new("erase pipeline"),
+            FlatView {
+                camera: mask_camera,
+                target: raw.clone(),
+                clear: 0,
+                active: true,
+                name: PASS_NAMES[0].to_owned(),
+            },
+            layer,
+            EraseJob {
+                label: String::new(),
+                raw: raw.clone(),
+                mask: mask.clone(),
+                composite: composite.clone(),
+                params: EraseParams::new(
+                    s,
+                    &Photometric::default(),
+                    false,
+                    UVec2::new(raw_k.width, raw_k.height),
+                    UVec2::new(k.width, k.height),
+                ),
+                render: true,
+                frame: None,
+                background: None,
+                measure_floor: false,
+            },
+        ))
+        .id();
+    commands.insert_resource(ErasePipeline(pipeline));
     commands.insert_resource(EraseTargets {
         raw,
         mask,
         composite,
-        live,
-        background,
     });
     let (spheres, notes) = dr::link_spheres(&config.model);
     for n in notes {
@@ -522,25 +355,6 @@ fn setup(
 /// Bounding spheres of the robot's links, for the conservative robot region.
 #[derive(Resource, Debug, Clone)]
 struct RobotSpheres(Vec<LinkSphere>);
-
-/// The composite uniforms for settings, a photometric model and whether H exists.
-pub fn composite_params(
-    s: &EraseSettings,
-    photometric: &Photometric,
-    have_background: bool,
-) -> CompositeParams {
-    CompositeParams {
-        gain: Vec3::from_array(photometric.gain).extend(1.0),
-        offset: Vec3::from_array(photometric.offset).extend(0.0),
-        size: UVec2::ZERO,
-        alpha_h: if s.enabled && have_background {
-            s.alpha_h
-        } else {
-            0.0
-        },
-        feather: s.feather_px,
-    }
-}
 
 fn record_history(
     config: Res<EraseConfig>,
@@ -606,20 +420,22 @@ fn prepare_frame(
     config: Res<EraseConfig>,
     live: Res<LiveVideo>,
     history: Res<JointHistory>,
-    targets: Option<Res<EraseTargets>>,
-    passes: Option<Res<EraseMaterials>>,
+    pipeline: Option<Res<ErasePipeline>>,
     mask_twin: Option<Res<MaskTwin>>,
     spheres: Option<Res<RobotSpheres>>,
     mut state: ResMut<EraseState>,
     mut twins: Query<&mut RobotTwin>,
-    mut images: ResMut<Assets<Image>>,
-    mut composite_materials: ResMut<Assets<CompositeMaterial>>,
+    mut jobs: Query<&mut EraseJob>,
 ) {
-    let (Some(targets), Some(passes), Some(mask_twin), Some(spheres)) =
-        (targets, passes, mask_twin, spheres)
-    else {
+    let (Some(pipeline), Some(mask_twin), Some(spheres)) = (pipeline, mask_twin, spheres) else {
         return;
     };
+    let Ok(mut job) = jobs.get_mut(pipeline.0) else {
+        return;
+    };
+    // Uploads are handed over for one update only.
+    job.frame = None;
+    job.background = None;
     let s = config.settings;
     let k = config.camera.intrinsics;
     let frame = live.frame.as_ref().filter(|_| live.fresh);
@@ -664,9 +480,7 @@ fn prepare_frame(
     state.background_changed = false;
     if let Some(f) = frame {
         state.frames_in += 1;
-        if let Some(mut image) = images.get_mut(&targets.live) {
-            image.data = Some(f.rgba.as_ref().clone());
-        }
+        job.frame = Some(f.rgba.clone());
         state.frame_capture_s = Some(f.capture_s);
         let mut photometric = state.photometric;
         if let Some(bg) = state.background.clone()
@@ -708,7 +522,7 @@ fn prepare_frame(
         }
         state.photometric = photometric;
     }
-    // This update's inputs: all three passes render them in this update's frame.
+    // This update's inputs: the mask render and the passes work on them in this update.
     let current = PassInputs {
         frame: live
             .frame
@@ -718,35 +532,45 @@ fn prepare_frame(
         background: state.background.clone(),
         dirty,
     };
-    if !dirty {
-        state.current = Some(current);
-        return;
-    }
     if let Some(bg) = &current.background
-        && let Some(mut image) = images.get_mut(&targets.background)
-        && image.data.as_deref() != Some(bg.as_slice())
+        && !state
+            .uploaded_background
+            .as_ref()
+            .is_some_and(|u| Arc::ptr_eq(u, bg))
     {
-        image.data = Some(bg.as_ref().clone());
+        job.background = Some(bg.clone());
+        state.uploaded_background = Some(bg.clone());
     }
-    if let Some(mut m) = composite_materials.get_mut(&passes.composite) {
-        let mut params = composite_params(&s, &current.photometric, current.background.is_some());
-        params.size = UVec2::new(k.width, k.height);
-        m.params = params;
+    if dirty {
+        let raw = config.camera.intrinsics.scaled(s.resolution_scale);
+        job.params = EraseParams::new(
+            &s,
+            &current.photometric,
+            current.background.is_some(),
+            UVec2::new(raw.width, raw.height),
+            UVec2::new(k.width, k.height),
+        );
     }
     state.current = Some(current);
 }
 
-/// Renders the passes only in an update with something new to draw (a camera frame, new
-/// settings or H); before the first update of the pipeline, every pass renders.
-fn gate_passes(mut state: ResMut<EraseState>, mut passes: Query<(&ErasePass, &mut Camera)>) {
+/// Renders the mask and the passes only in an update with something new to draw (a camera
+/// frame, new settings or H); before the first update of the pipeline, they render.
+fn gate_passes(
+    mut state: ResMut<EraseState>,
+    pipeline: Option<Res<ErasePipeline>>,
+    mut views: Query<(&mut FlatView, &mut EraseJob)>,
+) {
+    let Some((mut view, mut job)) = pipeline.and_then(|p| views.get_mut(p.0).ok()) else {
+        return;
+    };
     let active = state.current.as_ref().is_none_or(|s| s.dirty);
-    for (pass, mut camera) in &mut passes {
-        if camera.is_active != active {
-            camera.is_active = active;
-        }
-        if active && let Some(n) = state.renders.get_mut(pass.stage.min(2)) {
-            *n += 1;
-        }
+    if view.active != active {
+        view.active = active;
+    }
+    job.render = active;
+    if active {
+        state.renders += 1;
     }
 }
 

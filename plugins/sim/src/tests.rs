@@ -97,12 +97,31 @@ fn the_room_spawns_props_robot_and_cameras_on_their_layers() {
             robot_meshes >= 9,
             "every link with a visual: {robot_meshes}"
         );
-        // The silhouette view: the props black and the robot white, only with ground truth.
+        // The silhouette view: the props black and the robot white, drawn flat, only with
+        // ground truth.
         let silhouette = on_layer(&mut app, layers::SIM_SILHOUETTE);
         let expected = if ground_truth { 3 + robot_meshes } else { 0 };
         assert_eq!(silhouette, expected, "ground truth {ground_truth}");
+        let flat: Vec<FlatPart> = app
+            .world_mut()
+            .query::<(&RenderLayers, &FlatPart)>()
+            .iter(app.world())
+            .filter(|(l, _)| l.intersects(&RenderLayers::layer(layers::SIM_SILHOUETTE)))
+            .map(|(_, p)| *p)
+            .collect();
+        assert_eq!(flat.len(), expected);
+        assert_eq!(
+            flat.iter().filter(|p| **p == FlatPart::OCCLUDER).count(),
+            if ground_truth { 3 } else { 0 }
+        );
         let cameras = app.world_mut().query::<&Camera>().iter(app.world()).count();
-        assert_eq!(cameras, if ground_truth { 3 } else { 1 });
+        assert_eq!(cameras, if ground_truth { 2 } else { 1 });
+        let views = app
+            .world_mut()
+            .query::<&FlatView>()
+            .iter(app.world())
+            .count();
+        assert_eq!(views, usize::from(ground_truth));
         let sim = app.world().resource::<SimCameras>();
         assert_eq!(sim.no_robot.is_some(), ground_truth);
         assert_eq!(sim.silhouette.is_some(), ground_truth);
@@ -110,6 +129,51 @@ fn the_room_spawns_props_robot_and_cameras_on_their_layers() {
         assert_eq!(twins.silhouette.is_some(), ground_truth);
         assert!(app.world().get::<RobotTwin>(twins.real).is_some());
     }
+}
+
+/// The robot-free view renders while the room changes and until a frame after the change has
+/// rendered completely; then not until a prop moves again.
+#[test]
+fn the_robot_free_view_renders_only_when_the_room_changes() {
+    let mut app = room(config(true));
+    let active = |app: &mut App| {
+        app.world_mut()
+            .query::<(&Name, &Camera)>()
+            .iter(app.world())
+            .find(|(n, _)| n.as_str() == "ground truth: no robot")
+            .map(|(_, c)| c.is_active)
+            .expect("the robot-free camera")
+    };
+    let complete = |app: &mut App| {
+        let frame = app.world().resource::<FrameCount>().0;
+        app.world().resource::<RenderSettled>().note_complete(frame);
+    };
+    app.update();
+    assert!(active(&mut app), "the room is new");
+    app.update();
+    assert!(active(&mut app), "no complete frame yet");
+    complete(&mut app);
+    app.update();
+    assert!(!active(&mut app), "rendered completely, nothing moved");
+    app.update();
+    assert!(!active(&mut app));
+    // The bottle moves (the arm carries it): the view renders again until that is complete.
+    let mut parts = app.world_mut().query::<(&SimPropPart, &mut Transform)>();
+    for (part, mut t) in parts.iter_mut(app.world_mut()) {
+        if part.prop == 1 {
+            t.translation.z += 0.01;
+        }
+    }
+    app.update();
+    assert!(active(&mut app), "a prop moved");
+    app.update();
+    assert!(
+        active(&mut app),
+        "the frame of the move is not complete yet"
+    );
+    complete(&mut app);
+    app.update();
+    assert!(!active(&mut app));
 }
 
 #[test]

@@ -1,4 +1,8 @@
-//! A Bevy camera projection built from pinhole intrinsics.
+//! A Bevy camera projection built from pinhole intrinsics, render targets, and the signal that
+//! a frame rendered completely ([`RenderSettled`]).
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU32, Ordering};
 
 use avatarm_core::vision::camera::PinholeCamera;
 use bevy::asset::RenderAssetUsages;
@@ -6,11 +10,17 @@ use bevy::camera::RenderTarget;
 use bevy::camera::visibility::RenderLayers;
 use bevy::camera::{CameraProjection, SubCameraView};
 use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
+use bevy::diagnostic::FrameCount;
 use bevy::math::Vec3A;
 use bevy::prelude::*;
-use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat, TextureUsages};
+use bevy::render::RenderApp;
+use bevy::render::render_resource::{
+    Extent3d, PipelineCache, TextureDimension, TextureFormat, TextureUsages,
+};
+use bevy::render::renderer::{RenderGraph, RenderGraphSystems};
 use bevy::render::view::Msaa;
 
+use crate::gpu_timing::GpuTimed;
 use crate::iso_to_transform;
 
 /// Projects like [`PinholeCamera::project`]: off-centre principal point, fx ≠ fy allowed.
@@ -53,6 +63,18 @@ pub const SCENERY_DEPTH_BIAS: f32 = 16.0;
 /// A `width × height` 2-D image filled with opaque black, in `format` (one of the RGBA8
 /// formats), usable as `usage` says.
 pub fn rgba8_image(width: u32, height: u32, format: TextureFormat, usage: TextureUsages) -> Image {
+    filled_image(width, height, format, &[0, 0, 0, 255], usage)
+}
+
+/// A `width × height` 2-D image of `format` with every pixel `pixel` (its bytes), usable as
+/// `usage` says.
+pub fn filled_image(
+    width: u32,
+    height: u32,
+    format: TextureFormat,
+    pixel: &[u8],
+    usage: TextureUsages,
+) -> Image {
     let mut image = Image::new_fill(
         Extent3d {
             width,
@@ -60,7 +82,7 @@ pub fn rgba8_image(width: u32, height: u32, format: TextureFormat, usage: Textur
             depth_or_array_layers: 1,
         },
         TextureDimension::D2,
-        &[0, 0, 0, 255],
+        pixel,
         format,
         RenderAssetUsages::default(),
     );
@@ -81,7 +103,8 @@ pub fn target_image(width: u32, height: u32) -> Image {
     )
 }
 
-/// Spawns a camera that renders `layers` of the world through `camera` into `target`.
+/// Spawns a camera that renders `layers` of the world through `camera` into `target`, its
+/// render timed on the GPU under `name` ([`GpuTimed`]).
 pub fn spawn_pinhole_camera(
     commands: &mut Commands,
     camera: &PinholeCamera,
@@ -107,6 +130,7 @@ pub fn spawn_pinhole_camera(
             DebandDither::Disabled,
             Msaa::Off,
             layers,
+            GpuTimed(name.to_owned()),
         ))
         .id()
 }
@@ -152,5 +176,57 @@ impl CameraProjection for PinholeProjection {
         let [a, b, c, d] = ring(z_near);
         let [e, f, g, hh] = ring(z_far);
         [a, b, c, d, e, f, g, hh]
+    }
+}
+
+/// The newest frame (Bevy's [`FrameCount`] as the render world saw it) whose rendering ended
+/// with no pipeline still being compiled: every draw of that frame had its pipeline, so what it
+/// rendered is complete. Shared by the main and the render world ([`RenderSettledPlugin`]).
+#[derive(Resource, Debug, Clone, Default)]
+pub struct RenderSettled(Arc<AtomicU32>);
+
+impl RenderSettled {
+    /// The newest complete frame (0 before the first).
+    pub fn last_complete_frame(&self) -> u32 {
+        self.0.load(Ordering::Acquire)
+    }
+
+    /// Notes that `frame` rendered completely (the render world does, after each frame).
+    pub fn note_complete(&self, frame: u32) {
+        self.0.fetch_max(frame, Ordering::AcqRel);
+    }
+}
+
+/// Keeps [`RenderSettled`] up to date. Added by the plugins that render a view only when what
+/// it shows changes ([`add_render_settled`]).
+pub struct RenderSettledPlugin;
+
+/// Adds [`RenderSettledPlugin`] unless it is there already.
+pub fn add_render_settled(app: &mut App) {
+    if !app.is_plugin_added::<RenderSettledPlugin>() {
+        app.add_plugins(RenderSettledPlugin);
+    }
+}
+
+impl Plugin for RenderSettledPlugin {
+    fn build(&self, app: &mut App) {
+        let settled = RenderSettled::default();
+        app.insert_resource(settled.clone());
+        if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
+            render_app.insert_resource(settled).add_systems(
+                RenderGraph,
+                note_complete_frame.in_set(RenderGraphSystems::Finish),
+            );
+        }
+    }
+}
+
+fn note_complete_frame(
+    cache: Res<PipelineCache>,
+    frame: Res<FrameCount>,
+    settled: Res<RenderSettled>,
+) {
+    if cache.waiting_pipelines().next().is_none() {
+        settled.note_complete(frame.0);
     }
 }

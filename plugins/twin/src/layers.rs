@@ -10,12 +10,8 @@ pub const SIM_ROBOT: usize = 2;
 pub const SIM_SILHOUETTE: usize = 3;
 /// Panels and overlays of the desktop preview and XR view.
 pub const INTERACTION: usize = 4;
-/// The mask twin: the robot in unlit white at the joint state of the frame being erased; the
-/// mask camera renders this layer alone.
+/// The mask twin: the robot in white at the joint state of the frame being erased, and the
+/// occluders in black, drawn flat ([`crate::flat`]) by the mask's view alone.
 pub const MASK_TWIN: usize = 5;
-/// The full-screen quad of the threshold pass.
-pub const MASK_PASS: usize = 6;
-/// The full-screen quad of the composite pass.
-pub const COMPOSITE_PASS: usize = 7;
 /// What the headset's eye cameras see in XR mode: the interaction panel and the tracked hands.
 pub const XR_PANEL: usize = 8;

@@ -12,13 +12,16 @@
 //!   clear error for a mesh that cannot be loaded); [`iso_to_transform`] and
 //!   [`transform_to_iso`] the one conversion between poses and transforms.
 //!
-//! Modules: [`camera`] (pinhole projection, render targets), [`layers`] (the render layers every
-//! plugin uses), [`readback`] (image read-back), `spawn` (twin entities and meshes, re-exported
-//! here).
+//! Modules: [`camera`] (pinhole projection, render targets), [`flat`] (flat silhouettes, the
+//! mask twin's and the ground truth's, without a camera), [`gpu_timing`] (GPU time of cameras
+//! and passes), [`layers`] (the render layers every plugin uses), [`readback`] (image
+//! read-back), `spawn` (twin entities and meshes, re-exported here).
 //!
 //! Frames: Avatarm's world is the robot's world, z up, metres; link transforms are FK poses.
 
 pub mod camera;
+pub mod flat;
+pub mod gpu_timing;
 pub mod layers;
 pub mod readback;
 mod spawn;

@@ -22,6 +22,8 @@ pub struct ImageRead {
     pub width: u32,
     /// Height (px).
     pub height: u32,
+    /// Bytes per pixel of the texture's format (1 for `R8Unorm`, 4 for RGBA8).
+    pub bytes_per_pixel: usize,
     /// The texture's bytes, rows packed (no alignment padding), in its own format.
     pub data: Vec<u8>,
 }
@@ -32,9 +34,19 @@ pub struct ImageReadbackPlugin;
 
 impl Plugin for ImageReadbackPlugin {
     fn build(&self, app: &mut App) {
-        app.add_systems(First, stop_after_one_frame)
+        app.init_resource::<ReadbackStats>()
+            .add_systems(First, stop_after_one_frame)
             .add_observer(deliver_image);
     }
+}
+
+/// Images read back so far, and their bytes (what the read-backs cost the GPU-to-CPU link).
+#[derive(Resource, Debug, Clone, Default)]
+pub struct ReadbackStats {
+    /// Images delivered.
+    pub images: u64,
+    /// Their bytes.
+    pub bytes: u64,
 }
 
 /// A pending one-frame readback of an image.
@@ -73,17 +85,21 @@ fn deliver_image(
     done: On<ReadbackComplete>,
     pending: Query<&ReadOnce>,
     images: Res<Assets<Image>>,
+    mut stats: ResMut<ReadbackStats>,
     mut commands: Commands,
 ) {
     let entity = done.entity;
     let Ok(once) = pending.get(entity) else {
         return;
     };
+    stats.images += 1;
+    stats.bytes += done.data.len() as u64;
     match read_image(&done.data, images.get(&once.image)) {
-        Ok((width, height, data)) => commands.trigger(ImageRead {
+        Ok((width, height, bytes_per_pixel, data)) => commands.trigger(ImageRead {
             entity,
             width,
             height,
+            bytes_per_pixel,
             data,
         }),
         Err(e) => warn!("{e}"),
@@ -92,8 +108,8 @@ fn deliver_image(
     commands.entity(entity).despawn();
 }
 
-/// The image's size and packed bytes out of a readback of it.
-fn read_image(data: &[u8], image: Option<&Image>) -> Result<(u32, u32, Vec<u8>), TwinError> {
+/// The image's size, bytes per pixel and packed bytes out of a readback of it.
+fn read_image(data: &[u8], image: Option<&Image>) -> Result<(u32, u32, usize, Vec<u8>), TwinError> {
     let bad = |message: String| TwinError::Readback { message };
     let image = image.ok_or_else(|| bad("the image was removed before its data arrived".into()))?;
     let descriptor = &image.texture_descriptor;
@@ -112,7 +128,7 @@ fn read_image(data: &[u8], image: Option<&Image>) -> Result<(u32, u32, Vec<u8>),
             size.height
         ))
     })?;
-    Ok((size.width, size.height, packed))
+    Ok((size.width, size.height, pixel, packed))
 }
 
 /// Rows of `width * pixel` bytes out of a copy whose rows are aligned to 256 bytes (wgpu's

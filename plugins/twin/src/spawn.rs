@@ -12,6 +12,7 @@ use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
 use nalgebra::{DVector, Isometry3};
 
+use crate::flat::FlatPart;
 use crate::{RobotTwin, TwinError, TwinLink, iso_to_transform};
 
 /// How the twin looks.
@@ -23,6 +24,9 @@ pub enum TwinAppearance {
     Unlit(Color),
     /// Lit, in the mesh file's own material colours (where the URDF gives none).
     VertexColors,
+    /// No material: drawn by [`crate::flat::FlatView`]s only, in one grey level (the mask
+    /// twin, the ground truth's silhouette).
+    Flat(FlatPart),
 }
 
 /// How much of a description a twin draws: which geometry, and what fraction of each mesh's
@@ -142,14 +146,12 @@ pub fn attach_visuals(
                 TwinAppearance::Urdf if coloured => TwinAppearance::VertexColors,
                 other => other,
             };
-            let material = material_for(materials, cache, g, appearance);
-            commands.spawn((
-                Mesh3d(mesh),
-                MeshMaterial3d(material),
-                transform,
-                layers.clone(),
-                ChildOf(entity),
-            ));
+            let mut part =
+                commands.spawn((Mesh3d(mesh), transform, layers.clone(), ChildOf(entity)));
+            match appearance {
+                TwinAppearance::Flat(flat) => part.insert(flat),
+                lit => part.insert(MeshMaterial3d(material_for(materials, cache, g, lit))),
+            };
         }
     }
     Ok(())
@@ -233,6 +235,10 @@ fn material_for(
                 ..double_sided()
             },
         ),
+        // Flat parts take no material (attach_visuals); asked for one, it is the unlit white.
+        TwinAppearance::Flat(_) => {
+            return material_for(materials, cache, g, TwinAppearance::Unlit(Color::WHITE));
+        }
         TwinAppearance::Unlit(color) => (
             format!("unlit {color:?}"),
             StandardMaterial {

@@ -119,12 +119,19 @@ pub fn feather_alpha(mask: &[u8], width: u32, height: u32, feather: u32) -> Vec<
     out
 }
 
-/// A 0/1 mask from an RGBA8 image that encodes one as black and white (a read-back mask pass,
-/// a silhouette render): 1 where the red channel is above half scale (`> 127`).
-pub fn binarise(rgba: &[u8]) -> Vec<u8> {
-    rgba.chunks_exact(4)
+/// A 0/1 mask from an 8-bit image of `bytes_per_pixel` channels (1: a grey `R8` image, 4:
+/// RGBA8) that encodes one as black and white (a read-back mask, a silhouette render): 1
+/// where the first channel is above half scale (`> 127`).
+pub fn binarise(data: &[u8], bytes_per_pixel: usize) -> Vec<u8> {
+    data.chunks_exact(bytes_per_pixel.max(1))
         .map(|px| u8::from(px[0] > 127))
         .collect()
+}
+
+/// A grey image (one byte per pixel) as the RGBA8 image a flat-shaded render of it is:
+/// `(v, v, v, 255)` per pixel.
+pub fn grey_to_rgba(grey: &[u8]) -> Vec<u8> {
+    grey.iter().flat_map(|&v| [v, v, v, 255]).collect()
 }
 
 /// A bounding sphere of a link's visual geometry, in the link frame.
