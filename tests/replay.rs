@@ -642,7 +642,7 @@ fn bench_twin_writes_the_chart_and_the_table() {
         "{light} of {full}: {csv}"
     );
     for row in 0..2 {
-        assert!(cell(row, "gpu_mask_camera_ms") > 0.0, "{csv}");
+        assert!(cell(row, "gpu_mask_twin_ms") > 0.0, "{csv}");
         assert!(cell(row, "dilate_for_1pct") >= 0.0, "{csv}");
     }
     // The full meshes draw the robot's own silhouette.

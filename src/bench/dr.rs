@@ -69,7 +69,7 @@ pub struct DrPoint {
     /// Median GPU time of the mask twin + dilation passes per camera frame, ms (`None` when
     /// the device has no timestamp queries).
     pub gpu_mask_ms: Option<f64>,
-    /// Median GPU time of the composite pass, ms.
+    /// Median GPU time of the feathering and composite passes, ms.
     pub gpu_composite_ms: Option<f64>,
     /// Median CPU reference threshold + dilation time, ms.
     pub cpu_mask_ms: f64,

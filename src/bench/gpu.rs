@@ -25,7 +25,7 @@ use avatarm_erase::{
     UPLOAD_SPAN, composite_image,
 };
 use avatarm_scene::Scene;
-use avatarm_twin::flat::{FlatPart, FlatView, add_flat_render, flat_target_image};
+use avatarm_twin::flat::{FlatPart, FlatView, flat_target_image};
 use avatarm_twin::layers;
 use avatarm_twin::prelude::*;
 use bevy::app::ScheduleRunnerPlugin;
@@ -286,7 +286,6 @@ fn measure(
         ScheduleRunnerPlugin::run_loop(Duration::ZERO),
         RobotTwinPlugin,
     ));
-    add_flat_render(&mut app);
     app.add_plugins(ErasePassesPlugin)
         .insert_resource(Bench {
             scene: scene.clone(),
@@ -335,16 +334,32 @@ fn summarise(
     let since = |name: &str| times.since(name, marks.get(name).copied().unwrap_or(0));
     // Per update, summed over the spans given (of every camera): the n-th sample of each span
     // is the same update's (a frame's spans arrive together or not at all).
-    let per_update = |names: &[&str]| -> Vec<f64> {
-        let series: Vec<Vec<f64>> = (0..cameras)
-            .flat_map(|i| {
-                names
-                    .iter()
-                    .map(move |n| format!("{}{n}", label(i, cameras)))
-            })
-            .map(|n| since(&n))
-            .filter(|v| !v.is_empty())
-            .collect();
+    // A span that some camera timed and another did not (the frame's spans ran out) would sum
+    // fewer cameras than the point says: refused.
+    let mut missing = Vec::new();
+    let mut per_update = |names: &[&str]| -> Vec<f64> {
+        let mut series = Vec::new();
+        for n in names {
+            let of_each: Vec<(String, Vec<f64>)> = (0..cameras)
+                .map(|i| format!("{}{n}", label(i, cameras)))
+                .map(|name| {
+                    let v = since(&name);
+                    (name, v)
+                })
+                .collect();
+            if of_each.iter().any(|(_, v)| v.is_empty()) {
+                if of_each.iter().any(|(_, v)| !v.is_empty()) {
+                    missing.extend(
+                        of_each
+                            .iter()
+                            .filter(|(_, v)| v.is_empty())
+                            .map(|(name, _)| name.clone()),
+                    );
+                }
+                continue;
+            }
+            series.extend(of_each.into_iter().map(|(_, v)| v));
+        }
         let n = series.iter().map(Vec::len).min().unwrap_or(0);
         (0..n).map(|k| series.iter().map(|s| s[k]).sum()).collect()
     };
@@ -361,6 +376,16 @@ fn summarise(
     let mask_twin = need("mask twin", per_update(&PASS_NAMES[..1]))?;
     let floor = need("copy floor", per_update(&[FLOOR_SPAN]))?;
     let upload = Spread::of(&per_update(&[UPLOAD_SPAN]));
+    if !missing.is_empty() {
+        missing.sort();
+        missing.dedup();
+        return Err(AppError::replay(format!(
+            "bench gpu {}x{} x{cameras}: some cameras were not timed ({})",
+            size.0,
+            size.1,
+            missing.join(", ")
+        )));
+    }
     let spans = times
         .spans
         .keys()

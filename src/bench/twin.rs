@@ -130,7 +130,7 @@ pub struct TwinPoint {
     /// Triangles the mask twin draws.
     pub triangles: usize,
     /// Median GPU time of the mask twin's flat render, ms (`None` without timestamp queries).
-    pub gpu_mask_camera_ms: Option<f64>,
+    pub gpu_mask_twin_ms: Option<f64>,
     /// Median wall time of one app update, ms.
     pub frame_ms_median: f64,
     /// `frame_ms_median` over that of the first variant of the same run.
@@ -315,14 +315,14 @@ pub fn run_twin(scene: &Scene, sweep: &TwinSweep, out: &Path) -> Result<TwinOutp
                 .ok_or_else(|| in_setting(AppError::replay(format!("the report has no {path}"))))
         };
         let on_gpu = report["timing_ms"]["source"] == "gpu";
-        let gpu_mask_camera_ms = on_gpu
+        let gpu_mask_twin_ms = on_gpu
             .then(|| report["timing_ms"]["gpu_passes"]["mask twin"]["ms"]["median"].as_f64())
             .flatten();
         let leaks = leak_by_dilation_in(&dir, sweep.max_dilate).map_err(in_setting)?;
         points.push(TwinPoint {
             label: v.label.clone(),
             triangles,
-            gpu_mask_camera_ms,
+            gpu_mask_twin_ms,
             frame_ms_median: num("timing_ms.frame.median")?,
             frame_cost_ratio: 1.0,
             iou_mean: num("mask.iou_mean")?,
@@ -375,7 +375,7 @@ pub fn run_twin(scene: &Scene, sweep: &TwinSweep, out: &Path) -> Result<TwinOutp
 impl TwinPoint {
     /// The cost axis: the mask twin's GPU time, else the frame's wall time.
     pub fn cost_ms(&self) -> f64 {
-        self.gpu_mask_camera_ms.unwrap_or(self.frame_ms_median)
+        self.gpu_mask_twin_ms.unwrap_or(self.frame_ms_median)
     }
 }
 
@@ -444,7 +444,7 @@ pub fn leak_by_dilation_in(dir: &Path, max: u32) -> Result<Vec<f64>, AppError> {
     Ok(sums.into_iter().map(|s| s / frames as f64).collect())
 }
 
-const CSV_HEADER: &str = "label,triangles,gpu_mask_camera_ms,frame_ms_median,frame_cost_ratio,\
+const CSV_HEADER: &str = "label,triangles,gpu_mask_twin_ms,frame_ms_median,frame_cost_ratio,\
 iou_mean,leak_pct_mean,leak_pct_max,overmask_pct_mean,psnr_db_mean,dilate_for_1pct,pareto";
 
 fn write_csv(path: &Path, points: &[TwinPoint]) -> Result<(), AppError> {
@@ -456,7 +456,7 @@ fn write_csv(path: &Path, points: &[TwinPoint]) -> Result<(), AppError> {
                 "{},{},{},{:.3},{:.4},{:.5},{:.5},{:.5},{:.5},{:.3},{},{}",
                 p.label,
                 p.triangles,
-                p.gpu_mask_camera_ms
+                p.gpu_mask_twin_ms
                     .map_or(String::new(), |v| format!("{v:.4}")),
                 p.frame_ms_median,
                 p.frame_cost_ratio,
@@ -488,7 +488,7 @@ impl Chart for TwinChart<'_> {
         root.fill(&WHITE).map_err(err)?;
         let root = root.titled(self.title, ("sans-serif", 22)).map_err(err)?;
         let (left, right) = root.split_horizontally(CHART_SIZE.0 / 2);
-        let timed = self.points.iter().all(|p| p.gpu_mask_camera_ms.is_some());
+        let timed = self.points.iter().all(|p| p.gpu_mask_twin_ms.is_some());
         let x_desc = if timed {
             "mask twin GPU time, ms per frame"
         } else {
@@ -595,7 +595,7 @@ mod tests {
         let point = |label: &str, tri: usize, ms: f64, leak: f64, d: Option<u32>| TwinPoint {
             label: label.into(),
             triangles: tri,
-            gpu_mask_camera_ms: Some(ms),
+            gpu_mask_twin_ms: Some(ms),
             frame_ms_median: 10.0 * ms,
             frame_cost_ratio: 1.0,
             iou_mean: 0.99,

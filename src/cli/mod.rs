@@ -684,8 +684,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     "{:<14} {:>10} {:>13} {:>9.1} {:>7.3} {:>8.4} {:>8.3} {:>8.3} {:>8.2} {:>13}  {}",
                     p.label,
                     p.triangles,
-                    p.gpu_mask_camera_ms
-                        .map_or("-".into(), |v| format!("{v:.2}")),
+                    p.gpu_mask_twin_ms.map_or("-".into(), |v| format!("{v:.2}")),
                     p.frame_ms_median,
                     p.frame_cost_ratio,
                     p.iou_mean,

@@ -5,7 +5,7 @@
 //!   erased and the object twins in front, the same image as the preview's panel) is shown on
 //!   a quad `[xr_layout]` places in front of the user's head, level, facing them. The headset's
 //!   eye cameras see only that layer ([`layers::XR_PANEL`]); the mask and composite are render
-//!   targets drawn once per camera frame (`avatarm_erase::ErasePass`), not once per eye. R in
+//!   targets drawn once per camera frame (`avatarm_erase::EraseJob::render`), not once per eye. R in
 //!   the preview places the panel in front of the head again.
 //! - **Hands.** The tracked hands' 26 joints are drawn as a skeleton on the same layer and the
 //!   followed hand is pushed, converted to the scene ([`avatarm_hand::openxr`]), into

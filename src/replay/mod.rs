@@ -334,7 +334,7 @@ fn drive_replay(
             }
         }
         // The pipeline's images of the frame it erases in this update (the frame's first: it
-        // is fresh there), read back at the end of the update, after all three passes.
+        // is fresh there), read back at the end of the update, after the mask and the passes.
         if let Some(current) = erase_state.current.as_ref().filter(|c| c.dirty)
             && let Some((t_s, index, rgba)) = current.frame.clone()
         {

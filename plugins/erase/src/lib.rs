@@ -45,7 +45,7 @@ use avatarm_core::dr::{self, EraseSettings, LinkSphere, Photometric, RgbaView};
 use avatarm_core::robot::{JointMap, RobotModel};
 use avatarm_core::vision::camera::PinholeCamera;
 use avatarm_twin::camera::rgba8_image;
-use avatarm_twin::flat::{FlatPart, FlatView, add_flat_render, flat_target_image};
+use avatarm_twin::flat::{FlatPart, FlatView, flat_target_image};
 use avatarm_twin::layers;
 use avatarm_twin::prelude::*;
 use avatarm_video::{LiveVideo, VideoSystems};
@@ -84,7 +84,7 @@ pub struct EraseConfig {
     /// The twin that receives the robot's joint states (its history drives the mask twin).
     pub source_twin: Option<Entity>,
     /// Known static things that can hide the robot from the camera (the desk): drawn black in
-    /// the mask camera so that M(t) follows the robot's *visible* pixels. Meshes with their
+    /// the mask's view so that M(t) follows the robot's *visible* pixels. Meshes with their
     /// world transforms.
     pub occluders: Vec<(Mesh, Transform)>,
 }
@@ -140,8 +140,8 @@ pub struct EraseState {
     uploaded_background: Option<Arc<Vec<u8>>>,
 }
 
-/// What the passes work on in one update: the mask camera renders the twin for `frame`, the
-/// threshold pass its mask and the composite pass erases it, all in that update's render.
+/// What the passes work on in one update: the mask's view draws the twin for `frame`, the
+/// passes threshold it and erase the frame, all in that update's render.
 #[derive(Debug, Clone)]
 pub struct PassInputs {
     /// The newest frame at that update (capture time, index, pixels).
@@ -236,7 +236,6 @@ pub struct ErasePlugin;
 
 impl Plugin for ErasePlugin {
     fn build(&self, app: &mut App) {
-        add_flat_render(app);
         app.add_plugins(ErasePassesPlugin)
             .add_message::<SetBackground>()
             .add_message::<CaptureBackground>()
@@ -438,7 +437,7 @@ fn prepare_frame(
     job.background = None;
     let s = config.settings;
     let k = config.camera.intrinsics;
-    let frame = live.frame.as_ref().filter(|_| live.fresh);
+    let mut frame = live.frame.as_ref().filter(|_| live.fresh);
     if let Some(f) = frame
         && (f.width, f.height) != (k.width, k.height)
     {
@@ -449,7 +448,8 @@ fn prepare_frame(
                 live.source, f.index, f.width, f.height, k.width, k.height, state.frames_refused
             );
         }
-        return;
+        // The update goes on without it (settings or H may still have changed).
+        frame = None;
     }
     // The joint state the mask twin is drawn at.
     let target = match (frame, s.latency_compensation) {
@@ -523,11 +523,12 @@ fn prepare_frame(
         state.photometric = photometric;
     }
     // This update's inputs: the mask render and the passes work on them in this update.
+    // The frame on the panel: this update's, else the last one taken (a refused frame is not).
+    let on_panel = frame
+        .map(|f| (f.capture_s, f.index, f.rgba.clone()))
+        .or_else(|| state.current.as_ref().and_then(|c| c.frame.clone()));
     let current = PassInputs {
-        frame: live
-            .frame
-            .as_ref()
-            .map(|f| (f.capture_s, f.index, f.rgba.clone())),
+        frame: on_panel,
         photometric: state.photometric,
         background: state.background.clone(),
         dirty,

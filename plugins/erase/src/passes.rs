@@ -61,7 +61,8 @@ pub const UPLOAD_CPU_SPAN: &str = "upload (CPU)";
 /// The span of [`EraseJob::measure_floor`]'s copy.
 pub const FLOOR_SPAN: &str = "copy floor";
 
-/// One camera's erase work for this update (main world; extracted every update).
+/// One camera's erase work for this update (main world; extracted in every update that has
+/// something to upload or render).
 #[derive(Component, Debug, Clone)]
 pub struct EraseJob {
     /// Prefix of the job's span names (empty for a single camera).
@@ -223,6 +224,8 @@ pub struct ErasePassesPlugin;
 impl Plugin for ErasePassesPlugin {
     fn build(&self, app: &mut App) {
         embedded_asset!(app, "erase.wgsl");
+        // The mask's view renders first, and the GPU timing must exist before its times are.
+        avatarm_twin::flat::add_flat_render(app);
         let times = app.world().get_resource::<GpuTimes>().cloned();
         let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
             return;
@@ -369,6 +372,8 @@ struct JobGpu {
     floor: Vec<(Texture, Texture)>,
     /// Scratch textures of the floor's copies, kept between frames.
     scratch: Vec<Texture>,
+    /// The last H uploaded: uploaded again when the textures are made anew (a new size).
+    background_data: Option<Arc<Vec<u8>>>,
 }
 
 #[derive(Resource)]
@@ -492,14 +497,23 @@ fn prepare_jobs(
             frame: Vec::new(),
             floor: Vec::new(),
             scratch: Vec::new(),
+            background_data: None,
         });
-        if gpu.size != size {
+        let resized = gpu.size != size;
+        if resized {
             gpu.size = size;
             gpu.live = Upload::new(&device, "erase: live frame", size);
             gpu.background = Upload::new(&device, "erase: background", size);
             gpu.rows = target_view(&device, "erase: row maxima", TextureFormat::R8Unorm, size);
             gpu.sums = target_view(&device, "erase: row sums", TextureFormat::R16Float, size);
         }
+        if let Some(rgba) = &job.background {
+            gpu.background_data = Some(rgba.clone());
+        }
+        let background = job.background.clone().or_else(|| {
+            // New textures (a new size) start black: H again.
+            resized.then(|| gpu.background_data.clone()).flatten()
+        });
         let started = Instant::now();
         let mut bad = Vec::new();
         if let Some(rgba) = &job.frame
@@ -507,12 +521,12 @@ fn prepare_jobs(
         {
             bad.push("live frame");
         }
-        if let Some(rgba) = &job.background
+        if let Some(rgba) = &background
             && !gpu.background.write(&queue, rgba, size)
         {
             bad.push("background");
         }
-        if job.frame.is_some() || job.background.is_some() {
+        if job.frame.is_some() || background.is_some() {
             let ms = started.elapsed().as_secs_f64() * 1e3;
             if let Some(times) = &uploads.0 {
                 times.record(&format!("{}{UPLOAD_CPU_SPAN}", job.label), ms);

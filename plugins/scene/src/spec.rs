@@ -299,7 +299,7 @@ pub struct PropSpec {
     /// One of the real objects the user manipulates (vs. a prop).
     #[serde(default)]
     pub object: bool,
-    /// Known to the app as something that can hide the robot (the desk): the mask camera draws
+    /// Known to the app as something that can hide the robot (the desk): the mask's view draws
     /// it black so that the mask follows the robot's visible pixels.
     #[serde(default)]
     pub occluder: bool,

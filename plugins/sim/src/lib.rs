@@ -25,6 +25,7 @@ use avatarm_twin::prelude::*;
 use avatarm_twin::readback::{ImageRead, ImageReadbackPlugin, read_image_once};
 use avatarm_video::{VideoFrame, VideoInbox};
 use bevy::camera::visibility::RenderLayers;
+use bevy::camera::visibility::VisibilitySystems;
 use bevy::core_pipeline::prepass::DepthPrepass;
 use bevy::diagnostic::FrameCount;
 use bevy::prelude::*;
@@ -159,7 +160,9 @@ impl Plugin for SimRoomPlugin {
             )
             .configure_sets(
                 PostUpdate,
-                SimRoomSystems::GateTruth.after(TransformSystems::Propagate),
+                SimRoomSystems::GateTruth
+                    .after(TransformSystems::Propagate)
+                    .after(VisibilitySystems::VisibilityPropagate),
             )
             .add_systems(PreStartup, setup_room.in_set(SimRoomSystems::Setup))
             .add_systems(
@@ -406,25 +409,27 @@ type PropChanged = (
 struct NoRobotCamera;
 
 /// The room without the robot changes only when a prop moves (the real object the arm
-/// carries) or appears: the robot-free view renders in an update where a prop part's world
-/// transform or visibility changed, and then until a frame at or after that change has
-/// rendered completely (no pipeline still compiling, [`RenderSettled`]); otherwise its image
-/// keeps the last render, which is what the camera would see. Its lights and the camera are
-/// fixed for the room's life. On a software rasteriser this view cost a third of a replay's
-/// update (measured: 90 ms of 326 on llvmpipe at 640x480).
+/// carries), appears or goes: the robot-free view renders from the room's first update and in
+/// an update where a prop part's transform or visibility changed or a part was removed, and
+/// then until a frame after that change has rendered completely (no pipeline still compiling,
+/// [`RenderSettled`]: at least two renders per change); otherwise its image keeps the last
+/// render, which is what the camera would see. Its lights and the camera are fixed for the
+/// room's life. On a software rasteriser this view cost a third of a replay's update (measured:
+/// 90 ms of 326 on llvmpipe at 640x480).
 fn gate_no_robot_view(
     frame: Res<FrameCount>,
     settled: Res<RenderSettled>,
     changed: Query<(), PropChanged>,
-    mut last_change: Local<u32>,
+    mut removed: RemovedComponents<SimPropPart>,
+    mut last_change: Local<Option<u32>>,
     mut cameras: Query<&mut Camera, With<NoRobotCamera>>,
 ) {
     // The frame number this update's render carries (the count goes up in `Last`).
     let this = frame.0.wrapping_add(1);
-    if !changed.is_empty() {
-        *last_change = this;
+    if last_change.is_none() || !changed.is_empty() || removed.read().count() > 0 {
+        *last_change = Some(this);
     }
-    let active = settled.last_complete_frame() < *last_change;
+    let active = last_change.is_some_and(|c| settled.last_complete_frame() <= c);
     for mut camera in &mut cameras {
         if camera.is_active != active {
             camera.is_active = active;

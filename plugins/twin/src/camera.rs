@@ -53,7 +53,7 @@ pub fn camera_transform(camera: &PinholeCamera) -> Transform {
     iso_to_transform(&camera.world_from_view())
 }
 
-/// Depth bias of static scenery (the simulated room's props, the mask camera's occluders):
+/// Depth bias of static scenery (the simulated room's props, the mask's occluders):
 /// they win depth ties with the robot. A robot face lying exactly in a desk's plane (the base's
 /// underside on the desk) otherwise z-fights, speckling the frame, the truth and the mask
 /// differently from run to run (measured: 109 px around the base, IoU 0.992 instead of 1.0 on

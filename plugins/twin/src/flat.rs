@@ -256,7 +256,8 @@ struct ViewGpu {
     size: UVec2,
     depth: TextureView,
     uniform: Buffer,
-    bind_group: Option<BindGroup>,
+    /// The bind group and the draws buffer's generation it binds.
+    bind_group: Option<(BindGroup, u64)>,
 }
 
 /// A draw of this frame: the part's index in the draws buffer and its pipeline.
@@ -273,7 +274,8 @@ struct FlatPipelines {
     shader: Handle<Shader>,
     pipelines: HashMap<(MeshVertexBufferLayoutRef, bool), CachedRenderPipelineId>,
     views: HashMap<Entity, ViewGpu>,
-    draws: Option<(Buffer, u64)>,
+    /// The draws buffer, its size (bytes) and generation (bumped on each reallocation).
+    draws: Option<(Buffer, u64, u64)>,
     /// Per extracted view (same order): its draws.
     frame: Vec<Vec<PreparedDraw>>,
     warned: bool,
@@ -391,21 +393,18 @@ fn prepare_flat(
         bytes.resize(DRAW_BYTES as usize, 0);
     }
     let needed = bytes.len() as u64;
-    let reallocated = match &p.draws {
-        Some((_, size)) if *size >= needed => false,
-        _ => {
-            let size = needed.next_power_of_two().max(DRAW_BYTES * 64);
-            let buffer = device.create_buffer(&BufferDescriptor {
-                label: Some("flat silhouette draws"),
-                size,
-                usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            p.draws = Some((buffer, size));
-            true
-        }
-    };
-    let Some(draws) = p.draws.as_ref().map(|(b, _)| b.clone()) else {
+    if p.draws.as_ref().is_none_or(|(_, size, _)| *size < needed) {
+        let size = needed.next_power_of_two().max(DRAW_BYTES * 64);
+        let buffer = device.create_buffer(&BufferDescriptor {
+            label: Some("flat silhouette draws"),
+            size,
+            usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let generation = p.draws.as_ref().map_or(0, |d| d.2 + 1);
+        p.draws = Some((buffer, size, generation));
+    }
+    let Some((draws, generation)) = p.draws.as_ref().map(|(b, _, g)| (b.clone(), *g)) else {
         return;
     };
     queue.write_buffer(&draws, 0, &bytes);
@@ -439,15 +438,18 @@ fn prepare_flat(
             .flat_map(|v| v.to_le_bytes())
             .collect();
         queue.write_buffer(&state.uniform, 0, &m);
-        if reallocated || state.bind_group.is_none() {
-            state.bind_group = Some(device.create_bind_group(
+        // A view that did not render when the draws buffer was reallocated still binds the old
+        // one: rebuilt by generation, not by this frame's reallocation.
+        if state.bind_group.as_ref().is_none_or(|b| b.1 != generation) {
+            let group = device.create_bind_group(
                 "flat silhouette",
                 &layout,
                 &BindGroupEntries::sequential((
                     state.uniform.as_entire_binding(),
                     draws.as_entire_binding(),
                 )),
-            ));
+            );
+            state.bind_group = Some((group, generation));
         }
         let mut list = Vec::new();
         if size_ok {
@@ -529,7 +531,28 @@ fn render_flat_views(
         else {
             continue;
         };
-        let Some(bind_group) = &state.bind_group else {
+        let Some((bind_group, _)) = &state.bind_group else {
+            continue;
+        };
+        // Every draw's pipeline, mesh and buffers, or nothing: a view missing a part (its
+        // pipeline still compiling) keeps its last image rather than a silhouette with holes.
+        let ready: Option<Vec<_>> = draws
+            .iter()
+            .map(|d| {
+                let pipeline = cache.get_render_pipeline(d.pipeline)?;
+                let mesh = meshes.get(d.mesh)?;
+                let vertices = allocator.mesh_vertex_slice(&d.mesh)?;
+                let indices = match &mesh.buffer_info {
+                    RenderMeshBufferInfo::Indexed {
+                        count,
+                        index_format,
+                    } => Some((allocator.mesh_index_slice(&d.mesh)?, *count, *index_format)),
+                    RenderMeshBufferInfo::NonIndexed => None,
+                };
+                Some((d.part, pipeline, mesh.vertex_count, vertices, indices))
+            })
+            .collect();
+        let Some(ready) = ready else {
             continue;
         };
         let encoder = ctx.command_encoder();
@@ -564,38 +587,23 @@ fn render_flat_views(
                 multiview_mask: None,
             });
             pass.set_bind_group(0, &**bind_group, &[]);
-            for d in draws {
-                let (Some(pipeline), Some(mesh), Some(vertices)) = (
-                    cache.get_render_pipeline(d.pipeline),
-                    meshes.get(d.mesh),
-                    allocator.mesh_vertex_slice(&d.mesh),
-                ) else {
-                    continue;
-                };
+            for (part, pipeline, vertex_count, vertices, indices) in ready {
                 pass.set_pipeline(pipeline);
                 pass.set_vertex_buffer(0, *vertices.buffer.slice(..));
-                let instances = d.part..d.part + 1;
-                match &mesh.buffer_info {
-                    RenderMeshBufferInfo::Indexed {
-                        count,
-                        index_format,
-                    } => {
-                        let Some(indices) = allocator.mesh_index_slice(&d.mesh) else {
-                            continue;
-                        };
-                        pass.set_index_buffer(*indices.buffer.slice(..), *index_format);
+                let instances = part..part + 1;
+                match indices {
+                    Some((indices, count, format)) => {
+                        pass.set_index_buffer(*indices.buffer.slice(..), format);
                         pass.draw_indexed(
                             indices.range.start..indices.range.start + count,
                             vertices.range.start as i32,
                             instances,
                         );
                     }
-                    RenderMeshBufferInfo::NonIndexed => {
-                        pass.draw(
-                            vertices.range.start..vertices.range.start + mesh.vertex_count,
-                            instances,
-                        );
-                    }
+                    None => pass.draw(
+                        vertices.range.start..vertices.range.start + vertex_count,
+                        instances,
+                    ),
                 }
             }
         }

@@ -3,10 +3,11 @@
 //! [`GpuClock::begin`] and closes with [`GpuClock::end`] (the flat silhouettes of
 //! [`crate::flat`], the erase passes).
 //!
-//! A camera is rendered by running its `Core3d` schedule: a system before that schedule's first
-//! set writes a timestamp into the command stream and one after its last set writes another;
-//! the pair's difference is the GPU time of that camera's render (clear, draws, post-processing
-//! and the copy into its target). Bevy's own render diagnostics name their spans by pass type
+//! A camera is rendered by running its `Core3d` schedule: a system before its first system (the
+//! GPU preprocessing's, then the prepass) writes a timestamp into the command stream and one
+//! after its last (post-processing, then the upscaling copy into the target) writes another;
+//! the pair's difference is the GPU time of that camera's render (culling, clear, draws,
+//! post-processing and the copy into its target). Bevy's own render diagnostics name their spans by pass type
 //! (`main_opaque_pass_3d`), the same for every camera, so they cannot tell cameras apart.
 //!
 //! The timestamps are resolved after the frame's rendering and read back without waiting: a
@@ -35,7 +36,7 @@ use bevy::render::{RenderApp, RenderStartup};
 pub const KEPT: usize = 10_000;
 
 /// Spans a frame can time at most; more are not timed that frame.
-pub const MAX_SPANS: usize = 32;
+pub const MAX_SPANS: usize = 256;
 
 /// Read-back buffers in flight at most; a frame whose buffer is not free is not timed.
 const READBACKS: usize = 8;
@@ -168,10 +169,17 @@ impl Plugin for GpuTimingPlugin {
             .insert_resource(times)
             .init_resource::<OpenCamera>()
             .add_systems(RenderStartup, create_clock)
-            .add_systems(Core3d, stamp_camera::<false>.before(Core3dSystems::Prepass))
             .add_systems(
                 Core3d,
-                stamp_camera::<true>.after(Core3dSystems::PostProcess),
+                stamp_camera::<false>
+                    .before(bevy::pbr::clear_indirect_parameters_metadata)
+                    .before(Core3dSystems::Prepass),
+            )
+            .add_systems(
+                Core3d,
+                stamp_camera::<true>
+                    .after(Core3dSystems::PostProcess)
+                    .after(bevy::core_pipeline::upscaling::upscaling),
             )
             .add_systems(
                 RenderGraph,
