@@ -171,6 +171,160 @@ fn the_real_panda_frames_import_from_easyhec_s_layout_and_read_back_in_both_read
     }
 }
 
+/// Imports the real Panda frames with the data README's rough pose into `out/panda.mcap`.
+fn import_panda(data: &Path, out: &Path) -> PathBuf {
+    let pose = out.join("pose.yaml");
+    std::fs::write(
+        &pose,
+        "camera_from_base:\n  - [0.93969262, 0.34202009, 0.0, -0.64085639]\n  - [0.17101002, -0.46984622, -0.86602539, 0.49582830]\n  - [-0.29619810, 0.81379771, -0.49999991, 1.24120010]\n  - [0, 0, 0, 1]\n",
+    )
+    .expect("pose");
+    let file = out.join("panda.mcap");
+    let (ok, log) = import(&[
+        data.join("real/franka_easyhec").to_str().expect("utf-8"),
+        "--out",
+        file.to_str().expect("utf-8"),
+        "--pose",
+        pose.to_str().expect("utf-8"),
+        "--joint-names",
+        "panda_joint1,panda_joint2,panda_joint3,panda_joint4,panda_joint5,panda_joint6,panda_joint7,panda_finger_joint1,panda_finger_joint2",
+    ]);
+    assert!(ok, "{log}");
+    file
+}
+
+/// Runs `avatarm replay ARGS`; (success, stdout + stderr).
+fn replay(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .arg("replay")
+        .args(args)
+        .current_dir(root())
+        .output()
+        .expect("avatarm runs");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.success(), text)
+}
+
+/// The real Panda's frames through the erase: every frame masked at its recorded joints,
+/// erased with a background built from the footage, scored against the reference masks, the
+/// GPU equal to the CPU reference, and everything written (PNGs, an MCAP both readers read).
+/// With the data's rough pose (20-60 px off) the mask lands beside the robot: the IoU measures
+/// the pose, which `avatarm calibrate` is for.
+#[test]
+fn the_real_panda_recording_replays_through_the_erase() {
+    let data = match avatarm_core::shared_data::shared_data() {
+        Ok(d) => d,
+        Err(why) => return eprintln!("skipped: {why}"),
+    };
+    let out = out_dir("panda_replay");
+    let file = import_panda(&data, &out);
+    let urdf = data.join("ros/example-robot-data/robots/panda_description/urdf/panda.urdf");
+    let result = out.join("replay");
+    let (ok, log) = replay(&[
+        "--recording",
+        file.to_str().expect("utf-8"),
+        "--urdf",
+        urdf.to_str().expect("utf-8"),
+        "--package-path",
+        data.join("ros").to_str().expect("utf-8"),
+        "--photometric",
+        "on",
+        "--out",
+        result.to_str().expect("utf-8"),
+    ]);
+    assert!(ok, "{log}");
+    eprintln!("{}", log.lines().last().unwrap_or_default());
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(result.join("report.json")).expect("report"))
+            .expect("json");
+    assert_eq!(report["frames"], 10);
+    assert_eq!(report["robot"], "panda");
+    let vs = &report["mask"]["vs_reference"];
+    assert_eq!(vs["frames_scored"], 10, "{vs}");
+    // Measured with the rough pose: IoU 0.18-0.30 per frame. The mask is the robot's, near
+    // it: some overlap, not none and not all.
+    let iou = vs["iou_mean"].as_f64().expect("iou");
+    assert!(iou > 0.1 && iou < 0.9, "{vs}");
+    let coverage = report["mask"]["coverage_pct_mean"]
+        .as_f64()
+        .expect("coverage");
+    assert!(coverage > 2.0 && coverage < 40.0, "{report}");
+    // The GPU erased exactly what the CPU reference erases on the same inputs.
+    assert!(
+        report["gpu_vs_cpu"]["max_abs_diff"].as_u64() <= Some(1),
+        "{report}"
+    );
+    assert_eq!(report["gpu_vs_cpu"]["mask_mismatch_px_max"], 0);
+    let bg = &report["background"];
+    assert_eq!(bg["source"], "the footage");
+    let seen = bg["robot_region_seen_pct"].as_f64().expect("seen");
+    assert!((0.0..=100.0).contains(&seen), "{bg}");
+    for name in [
+        "erased_00000.png",
+        "mask_00009.png",
+        "background.png",
+        "background_seen.png",
+    ] {
+        assert!(result.join(name).is_file(), "{name}");
+    }
+    // The output recording: the original streams and Avatarm's beside them.
+    let mcap = result.join("erased.mcap");
+    let r = Recording::open(&mcap).expect("read back");
+    assert_eq!(
+        (
+            r.frames.len(),
+            r.erased.len(),
+            r.masks.len(),
+            r.reference_masks.len()
+        ),
+        (10, 10, 10, 10)
+    );
+    assert_eq!(r.joint_states.len(), 10);
+    assert!(r.calibration.is_some() && r.base_from_camera.is_some());
+    let py = python_read(&mcap);
+    for topic in ["/avatarm/erased/compressed", "/avatarm/mask/compressed"] {
+        assert!(
+            py.lines().any(|l| l.starts_with(&format!(
+                "{topic} foxglove.CompressedImage jsonschema json 10 "
+            ))),
+            "{topic} not in\n{py}"
+        );
+    }
+    // Another robot's description is refused naming the joint it lacks.
+    let sawyer = data.join("ros/sawyer_description/urdf/sawyer_electric_gripper.urdf");
+    let (ok, log) = replay(&[
+        "--recording",
+        file.to_str().expect("utf-8"),
+        "--urdf",
+        sawyer.to_str().expect("utf-8"),
+        "--package-path",
+        data.join("ros").to_str().expect("utf-8"),
+        "--out",
+        out.join("wrong").to_str().expect("utf-8"),
+    ]);
+    assert!(!ok);
+    assert!(
+        log.contains("joint 'panda_joint1' is not in the description"),
+        "{log}"
+    );
+    // A scene and a recording at once are refused.
+    let (ok, log) = replay(&[
+        "assets/scenes/default.toml",
+        "--recording",
+        "x.mcap",
+        "--out",
+        "o",
+    ]);
+    assert!(
+        !ok && (log.contains("--recording") || log.contains("--urdf")),
+        "{log}"
+    );
+}
+
 #[test]
 fn csv_and_json_listings_import_with_ros_and_opencv_camera_files() {
     let dir = out_dir("listings");

@@ -141,10 +141,31 @@ enum Command {
         #[command(flatten)]
         overrides: EraseOverrides,
     },
-    /// Replay a scene without a window: frames, ground truth and report.json in --out.
+    /// Replay a scene without a window: frames, ground truth and report.json in --out. With
+    /// --recording: a recorded session (MCAP) through the erase instead (docs/real-footage.md).
     Replay {
-        /// The scene file.
-        scene: PathBuf,
+        /// The scene file (not with --recording).
+        #[arg(required_unless_present = "recording", conflicts_with = "recording")]
+        scene: Option<PathBuf>,
+        /// A recording (MCAP, `avatarm import` writes one): its frames and joint states through
+        /// the erase, with the robot's --urdf.
+        #[arg(long, value_name = "FILE.mcap", requires = "urdf")]
+        recording: Option<PathBuf>,
+        /// With --recording: the robot's description.
+        #[arg(long, value_name = "URDF")]
+        urdf: Option<PathBuf>,
+        /// With --recording: a camera file instead of the recording's calibration (ROS
+        /// camera_info or OpenCV YAML, or a 3x3 K).
+        #[arg(long, value_name = "FILE")]
+        camera: Option<PathBuf>,
+        /// With --recording: a pose file instead of the recording's camera pose (under
+        /// camera_from_base or base_from_camera).
+        #[arg(long, value_name = "FILE")]
+        pose: Option<PathBuf>,
+        /// With --recording and no --background: pixels this far beyond a frame's mask are not
+        /// used for the background built from the footage (px).
+        #[arg(long = "background-margin", value_name = "PX", default_value_t = 8)]
+        background_margin: u32,
         /// Run without a window (replays are always headless; accepted for clarity).
         #[arg(long)]
         headless: bool,
@@ -541,13 +562,64 @@ fn run(cli: Cli) -> Result<(), AppError> {
             Ok(())
         }
         Command::Replay {
+            recording: Some(recording),
+            urdf: Some(urdf),
+            camera,
+            pose,
+            background_margin,
+            out,
+            package_path,
+            overrides,
+            ..
+        } => {
+            let mut settings = avatarm_core::dr::EraseSettings::default();
+            overrides.apply_to_settings(&mut settings)?;
+            let report = crate::replay::recording::run_recording(
+                &crate::replay::recording::RecordingOptions {
+                    recording,
+                    urdf,
+                    packages: packages(package_path),
+                    camera,
+                    pose,
+                    settings,
+                    background: overrides.background.clone(),
+                    background_margin_px: background_margin,
+                    out: out.clone(),
+                    progress: true,
+                },
+            )?;
+            let vs = &report["mask"]["vs_reference"];
+            eprintln!(
+                "replayed {}: {} frames of '{}', mask covering {:.1} % of the frame; against {} reference masks: IoU {}, leak {} %; background: {}; report: {}",
+                report["recording"].as_str().unwrap_or_default(),
+                report["frames"],
+                report["robot"].as_str().unwrap_or_default(),
+                report["mask"]["coverage_pct_mean"]
+                    .as_f64()
+                    .unwrap_or(f64::NAN),
+                vs["frames_scored"],
+                vs["iou_mean"]
+                    .as_f64()
+                    .map_or("-".into(), |v| format!("{v:.3}")),
+                vs["leak_pct_mean"]
+                    .as_f64()
+                    .map_or("-".into(), |v| format!("{v:.2}")),
+                report["background"]["source"].as_str().unwrap_or("none"),
+                out.join("report.json").display()
+            );
+            Ok(())
+        }
+        Command::Replay {
             scene,
             headless: _,
             out,
             frames_every,
             package_path,
             overrides,
+            ..
         } => {
+            let scene =
+                scene.ok_or_else(|| AppError::flag("replay", "give a scene or --recording"))?;
             let mut scene = Scene::load(&scene, &packages(package_path))?;
             overrides.apply(&mut scene)?;
             let mut options = ReplayOptions::new(out.clone());

@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use avatarm_core::dr::EraseSettings;
 use avatarm_core::vision::camera::Intrinsics;
 use avatarm_scene::Scene;
 use avatarm_scene::spec::BackgroundSpec;
@@ -58,17 +59,9 @@ pub fn on_off(s: &str) -> Result<bool, AppError> {
 }
 
 impl EraseOverrides {
-    /// Applies the overrides to `scene` and checks the result; errors name the flag.
-    pub fn apply(&self, scene: &mut Scene) -> Result<(), AppError> {
-        if let Some((width, height)) = self.camera_size {
-            let resized = |k: &Intrinsics| Intrinsics::from_fov_y(k.fov_y_rad(), width, height);
-            scene.true_camera.intrinsics = resized(&scene.true_camera.intrinsics);
-            scene.believed_camera.intrinsics = resized(&scene.believed_camera.intrinsics);
-            let c = &mut scene.file.camera;
-            c.intrinsics = Some(scene.true_camera.intrinsics);
-            (c.width, c.height) = (width, height);
-        }
-        let e = &mut scene.file.erase;
+    /// Applies the `[erase]` overrides alone to `settings` and checks them; errors name the
+    /// flag.
+    pub fn apply_to_settings(&self, e: &mut EraseSettings) -> Result<(), AppError> {
         if let Some(v) = self.erase {
             e.enabled = v;
         }
@@ -91,6 +84,20 @@ impl EraseOverrides {
             e.background_refresh = v as f32;
         }
         e.validate("command line")?;
+        Ok(())
+    }
+
+    /// Applies the overrides to `scene` and checks the result; errors name the flag.
+    pub fn apply(&self, scene: &mut Scene) -> Result<(), AppError> {
+        if let Some((width, height)) = self.camera_size {
+            let resized = |k: &Intrinsics| Intrinsics::from_fov_y(k.fov_y_rad(), width, height);
+            scene.true_camera.intrinsics = resized(&scene.true_camera.intrinsics);
+            scene.believed_camera.intrinsics = resized(&scene.believed_camera.intrinsics);
+            let c = &mut scene.file.camera;
+            c.intrinsics = Some(scene.true_camera.intrinsics);
+            (c.width, c.height) = (width, height);
+        }
+        self.apply_to_settings(&mut scene.file.erase)?;
         if let Some(path) = &self.background {
             if !path.is_file() {
                 return Err(AppError::flag(

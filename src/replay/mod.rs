@@ -16,7 +16,10 @@
 //!
 //! - [`task`]: the scene's `[task]` trials, run headless after the video, summarised under
 //!   `"object"` in the report.
+//! - [`recording`]: `avatarm replay --recording`: a recorded session's frames and joint states
+//!   through the erase, scored against the recording's reference masks.
 
+pub mod recording;
 pub mod task;
 
 use std::collections::BTreeMap;

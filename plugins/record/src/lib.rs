@@ -12,6 +12,8 @@
 //! | [`topics::TRANSFORM`] | `foxglove.FrameTransform` | the camera's pose: [`BASE_FRAME`] → [`CAMERA_FRAME`] (OpenCV optical axes) |
 //! | [`topics::JOINT_STATES`] | `avatarm.JointState` | names, positions (rad or m), velocities, stamp |
 //! | [`topics::REFERENCE_MASK`] | `foxglove.CompressedImage` | a reference silhouette (PNG, 255 = robot), where the source has one |
+//! | [`topics::ERASED`] | `foxglove.CompressedImage` | Avatarm's output Ĩ(t): the frame with the robot erased (PNG) |
+//! | [`topics::MASK`] | `foxglove.CompressedImage` | Avatarm's mask M(t) of that frame (PNG, 255 = robot) |
 //!
 //! Times: MCAP log and publish times in ns since the Unix epoch (or since the session's start
 //! where the source has no wall clock); each message's `timestamp` is Foxglove's JSON time
@@ -52,6 +54,10 @@ pub mod topics {
     pub const JOINT_STATES: &str = "/joint_states";
     /// Reference silhouettes of the robot.
     pub const REFERENCE_MASK: &str = "/camera/reference_mask/compressed";
+    /// Avatarm's erased frames Ĩ(t).
+    pub const ERASED: &str = "/avatarm/erased/compressed";
+    /// Avatarm's masks M(t).
+    pub const MASK: &str = "/avatarm/mask/compressed";
 }
 
 /// A compressed image's format.
@@ -119,6 +125,10 @@ pub struct Recording {
     pub frames: Vec<CompressedFrame>,
     /// Reference silhouettes, by capture time.
     pub reference_masks: Vec<CompressedFrame>,
+    /// Avatarm's erased frames, by the capture time of the frame they erase.
+    pub erased: Vec<CompressedFrame>,
+    /// Avatarm's masks, by the capture time of the frame they mask.
+    pub masks: Vec<CompressedFrame>,
     /// Joint states, by sample time.
     pub joint_states: Vec<JointStates>,
     /// Messages on topics Avatarm does not read, by topic.
@@ -250,7 +260,7 @@ fn schema(topic: &str) -> (&'static str, serde_json::Value) {
     let numbers = json!({"type": "array", "items": {"type": "number"}});
     let xyz = json!({"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}}});
     match topic {
-        topics::IMAGE | topics::REFERENCE_MASK => (
+        topics::IMAGE | topics::REFERENCE_MASK | topics::ERASED | topics::MASK => (
             "foxglove.CompressedImage",
             json!({
                 "title": "foxglove.CompressedImage",
@@ -487,6 +497,16 @@ impl RecordingWriter {
         self.image(topics::REFERENCE_MASK, f)
     }
 
+    /// Avatarm's erased frame for the frame captured at `f.stamp_ns`.
+    pub fn erased(&mut self, f: &CompressedFrame) -> Result<(), RecordError> {
+        self.image(topics::ERASED, f)
+    }
+
+    /// Avatarm's mask (PNG, 255 = robot) for the frame captured at `f.stamp_ns`.
+    pub fn mask(&mut self, f: &CompressedFrame) -> Result<(), RecordError> {
+        self.image(topics::MASK, f)
+    }
+
     /// The robot's joints. Refused when the lengths do not match or a value is not finite
     /// (nothing is written).
     pub fn joint_states(&mut self, s: &JointStates) -> Result<(), RecordError> {
@@ -574,6 +594,8 @@ impl Recording {
                 topics::TRANSFORM,
                 topics::JOINT_STATES,
                 topics::REFERENCE_MASK,
+                topics::ERASED,
+                topics::MASK,
             ];
             if !known.contains(&topic.as_str()) {
                 *out.other_topics.entry(topic.clone()).or_default() += 1;
@@ -593,7 +615,7 @@ impl Recording {
                 )));
             }
             match topic.as_str() {
-                topics::IMAGE | topics::REFERENCE_MASK => {
+                topics::IMAGE | topics::REFERENCE_MASK | topics::ERASED | topics::MASK => {
                     let m: WireImage = serde_json::from_slice(&message.data)
                         .map_err(|e| bad(format!("not a foxglove.CompressedImage: {e}")))?;
                     let data = base64::engine::general_purpose::STANDARD
@@ -616,10 +638,11 @@ impl Recording {
                         format,
                         data,
                     };
-                    if topic == topics::IMAGE {
-                        out.frames.push(frame);
-                    } else {
-                        out.reference_masks.push(frame);
+                    match topic.as_str() {
+                        topics::IMAGE => out.frames.push(frame),
+                        topics::REFERENCE_MASK => out.reference_masks.push(frame),
+                        topics::ERASED => out.erased.push(frame),
+                        _ => out.masks.push(frame),
                     }
                 }
                 topics::CALIBRATION => {
@@ -698,6 +721,8 @@ impl Recording {
         }
         out.frames.sort_by_key(|f| f.stamp_ns);
         out.reference_masks.sort_by_key(|f| f.stamp_ns);
+        out.erased.sort_by_key(|f| f.stamp_ns);
+        out.masks.sort_by_key(|f| f.stamp_ns);
         out.joint_states.sort_by_key(|s| s.stamp_ns);
         Ok(out)
     }

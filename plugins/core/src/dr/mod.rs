@@ -17,14 +17,17 @@
 //! Pixel maps are row-major, top row first; masks hold 0 or 1 per pixel, images RGBA8.
 //!
 //! Modules (their items are re-exported here): [`mask`] (threshold, dilation, feathering, the
-//! links' bounding spheres), [`composite`] (the composite and the background refresh),
+//! links' bounding spheres), [`background`] (a background H built from the footage itself),
+//! [`composite`] (the composite and the background refresh),
 //! [`photometric`] (the background's gain and offset), [`scores`] (IoU, leak, overmask, PSNR).
 
+pub mod background;
 pub mod composite;
 pub mod mask;
 pub mod photometric;
 pub mod scores;
 
+pub use background::*;
 pub use composite::*;
 pub use mask::*;
 pub use photometric::*;

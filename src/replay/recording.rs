@@ -1,0 +1,938 @@
+//! `avatarm replay --recording FILE.mcap --urdf DESCRIPTION`: a recording's frames and joint
+//! states through the erase pipeline, as a lab's own camera saw its own robot.
+//!
+//! Each frame is masked at the joints the robot had at the frame's capture time (linear
+//! interpolation between the recorded joint states around it), through the recording's camera
+//! (its K and its pose, or `--camera` / `--pose`), with every `[erase]` option of the command
+//! line. Recorded robot data rarely has an empty-room photograph, so the background H comes
+//! from the footage itself unless `--background` gives one: a first pass masks every frame;
+//! the pixels the masks (dilated by `--background-margin`) leave uncovered build H
+//! ([`avatarm_core::dr::FootageBackground`]: per-pixel median, never-seen pixels filled from
+//! their surroundings and marked); a second pass erases every frame with it. Written to `--out`:
+//! `erased_NNNNN.png`, `mask_NNNNN.png`, `overlay_NNNNN.png` (the mask tinted red over the frame,
+//! the reference mask's outline in green), `background.png`, `background_seen.png` (white where
+//! a frame showed the pixel), `erased.mcap` (the recording's streams with Avatarm's erased frames
+//! and masks beside them, which Foxglove shows side by side) and `report.json`: timing, mask
+//! coverage, the GPU-vs-CPU-reference check, how much of the robot's region had a seen
+//! background, and — where the recording carries reference masks — IoU, leak and overmask
+//! against them.
+
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use avatarm_core::dr::{self, BackgroundEstimate, EraseSettings, FootageBackground, RgbaView};
+use avatarm_core::robot::{JointMap, PackagePath, RobotModel};
+use avatarm_core::vision::camera::{Intrinsics, PinholeCamera};
+use avatarm_erase::{
+    EraseConfig, ErasePlugin, EraseState, EraseSystems, EraseTargets, GpuTimes, PASS_NAMES,
+    SetBackground, UPLOAD_SPAN,
+};
+use avatarm_record::camera::{CameraCalibration, read_calibration, read_pose};
+use avatarm_record::{CompressedFrame, ImageFormat, Recording, RecordingWriter};
+use avatarm_twin::readback::{ImageRead, ImageReadbackPlugin, read_image_once};
+use avatarm_twin::{RobotTwin, RobotTwinPlugin, TwinDetail};
+use avatarm_video::{LiveVideo, VideoFrame, VideoInbox, VideoPlugin, VideoSystems};
+use bevy::app::ScheduleRunnerPlugin;
+use bevy::prelude::*;
+use bevy::time::TimeUpdateStrategy;
+use nalgebra::{DVector, Isometry3};
+use serde_json::json;
+
+use crate::AppError;
+
+/// What `avatarm replay --recording` is given.
+#[derive(Debug, Clone)]
+pub struct RecordingOptions {
+    /// The recording (MCAP).
+    pub recording: PathBuf,
+    /// The robot's description.
+    pub urdf: PathBuf,
+    /// Folders searched for its `package://` URIs.
+    pub packages: PackagePath,
+    /// A camera file instead of the recording's calibration.
+    pub camera: Option<PathBuf>,
+    /// A pose file instead of the recording's camera pose.
+    pub pose: Option<PathBuf>,
+    /// The erase's settings.
+    pub settings: EraseSettings,
+    /// H from an image file instead of from the footage.
+    pub background: Option<PathBuf>,
+    /// How far beyond the mask a pixel counts as possibly the robot when H is built (px).
+    pub background_margin_px: u32,
+    /// Output folder.
+    pub out: PathBuf,
+    /// Show a progress bar.
+    pub progress: bool,
+}
+
+/// Updates for pipelines to exist before the first frame, and between the passes.
+const SETTLE_UPDATES: u32 = 4;
+
+/// Updates to wait for read-backs before giving up.
+const MAX_WAIT_UPDATES: u32 = 600;
+
+/// Replays the recording; returns the report (also written to `out/report.json`).
+pub fn run_recording(o: &RecordingOptions) -> Result<serde_json::Value, AppError> {
+    let started = Instant::now();
+    let input = Input::load(o)?;
+    std::fs::create_dir_all(&o.out).map_err(|source| AppError::Io {
+        path: o.out.clone(),
+        action: "create",
+        source,
+    })?;
+    let file_background = match &o.background {
+        Some(path) => Some(load_background(path, input.size)?),
+        None => None,
+    };
+    let result = Arc::new(Mutex::new(None));
+    let mut app = App::new();
+    app.add_plugins((
+        crate::app::headless_plugins(),
+        ScheduleRunnerPlugin::run_loop(Duration::ZERO),
+        RobotTwinPlugin,
+        VideoPlugin,
+        ImageReadbackPlugin,
+    ))
+    .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+        1.0 / 30.0,
+    )));
+    let model = input.model.clone();
+    let n = model.dof();
+    let source = app
+        .world_mut()
+        .spawn((
+            Name::new("recorded robot"),
+            RobotTwin {
+                model: model.clone(),
+                positions: DVector::zeros(n),
+                velocities: DVector::zeros(n),
+                stamp_s: None,
+                links: Vec::new(),
+                rejected: 0,
+                strict_names: true,
+            },
+        ))
+        .id();
+    let mut settings = o.settings;
+    // Each frame's joints are interpolated to its capture time here, so the mask twin takes the
+    // newest state as it is.
+    settings.latency_compensation = false;
+    let (w, h) = input.size;
+    app.insert_resource(LiveVideo::new("recording", 1e9))
+        .insert_resource(EraseConfig {
+            settings,
+            camera: input.camera,
+            joint_map: JointMap::new(&model, &model),
+            model: model.clone(),
+            detail: TwinDetail::default(),
+            base: Isometry3::identity(),
+            source_twin: Some(source),
+            occluders: Vec::new(),
+        })
+        .add_plugins(ErasePlugin)
+        .insert_resource(Driver {
+            frames: input.frames.clone(),
+            q: input.q.clone(),
+            source,
+            size: (w, h),
+            margin_px: o.background_margin_px,
+            phase: if file_background.is_some() {
+                Phase::Settle(SETTLE_UPDATES, Pass::Erase)
+            } else {
+                Phase::Settle(SETTLE_UPDATES, Pass::Mask)
+            },
+            pending_background: file_background.map(|rgba| (rgba, "file".to_owned())),
+            background: None,
+            shown: None,
+            outputs: vec![FrameOutput::default(); input.frames.len()],
+            pending: 0,
+            waited: 0,
+            errors: Vec::new(),
+            bar: crate::progress::bar(
+                2 * input.frames.len() as u64,
+                "replay recording",
+                o.progress,
+            ),
+            result: result.clone(),
+        })
+        .add_systems(Update, feed.in_set(VideoSystems::Receive))
+        .add_systems(Update, request.after(EraseSystems::Prepare));
+    app.run();
+    let finished = result
+        .lock()
+        .ok()
+        .and_then(|mut r| r.take())
+        .ok_or_else(|| AppError::replay("the recording's replay stopped before it finished"))?;
+    let Finished {
+        outputs,
+        background,
+        times,
+        errors,
+    } = finished;
+    if !errors.is_empty() {
+        return Err(AppError::replay(errors.join("; ")));
+    }
+    write_outputs(o, &input, &outputs, &background, &times, started)
+}
+
+/// The recording's streams, checked and put in the description's terms.
+struct Input {
+    recording: Recording,
+    model: Arc<RobotModel>,
+    camera: PinholeCamera,
+    calibration: CameraCalibration,
+    size: (u32, u32),
+    /// The frames, by capture time.
+    frames: Vec<CompressedFrame>,
+    /// Each frame's joints (the description's q order) at its capture time.
+    q: Vec<DVector<f64>>,
+    /// Each frame's reference mask (0/1 per pixel), where the recording has one.
+    references: Vec<Option<Vec<u8>>>,
+    /// What the replay could not honour.
+    notes: Vec<String>,
+}
+
+impl Input {
+    fn load(o: &RecordingOptions) -> Result<Self, AppError> {
+        let recording = Recording::open(&o.recording)?;
+        let name = o.recording.display().to_string();
+        let bad = |message: String| AppError::replay(format!("{name}: {message}"));
+        let first = recording
+            .frames
+            .first()
+            .ok_or_else(|| bad("the recording has no camera frames".into()))?;
+        let size = decode(first, &name)?.dimensions();
+        let calibration = match &o.camera {
+            Some(path) => read_calibration(path, Some(size))?,
+            None => recording.calibration.clone().ok_or_else(|| {
+                bad("the recording has no camera calibration: give one with --camera FILE".into())
+            })?,
+        };
+        if (calibration.width, calibration.height) != size {
+            return Err(bad(format!(
+                "the calibration is for {}x{} images, the frames are {}x{}",
+                calibration.width, calibration.height, size.0, size.1
+            )));
+        }
+        let base_from_camera = match &o.pose {
+            Some(path) => read_pose(path)?,
+            None => recording.base_from_camera.ok_or_else(|| {
+                bad("the recording has no camera pose: give one with --pose FILE".into())
+            })?,
+        };
+        let mut notes = Vec::new();
+        if !calibration.is_pinhole() {
+            notes.push(format!(
+                "the camera's {} distortion is not honoured: the mask is a pinhole projection",
+                calibration.distortion_model.ros_name()
+            ));
+        }
+        let k = calibration.k;
+        let camera = PinholeCamera {
+            intrinsics: Intrinsics {
+                fx: k[0],
+                fy: k[4],
+                cx: k[2],
+                cy: k[5],
+                width: size.0,
+                height: size.1,
+            },
+            world_from_camera: base_from_camera,
+        };
+        let model = Arc::new(RobotModel::from_urdf_file(&o.urdf, &o.packages)?);
+        let states = joint_vectors(&recording, &model, &name, &mut notes)?;
+        let frames = recording.frames.clone();
+        let q = frames
+            .iter()
+            .map(|f| interpolate(&states, f.stamp_ns))
+            .collect();
+        let references = frames
+            .iter()
+            .map(|f| {
+                recording
+                    .reference_masks
+                    .iter()
+                    .find(|m| m.stamp_ns.abs_diff(f.stamp_ns) <= 1_000_000)
+                    .map(|m| {
+                        let img = decode(m, &name)?;
+                        if img.dimensions() != size {
+                            return Err(bad(format!(
+                                "the reference mask at {} ns is {}x{}, the frames {}x{}",
+                                m.stamp_ns,
+                                img.width(),
+                                img.height(),
+                                size.0,
+                                size.1
+                            )));
+                        }
+                        Ok(dr::binarise(&img.into_raw(), 4))
+                    })
+                    .transpose()
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(Self {
+            recording,
+            model,
+            camera,
+            calibration,
+            size,
+            frames,
+            q,
+            references,
+            notes,
+        })
+    }
+}
+
+/// The recording's joint states in the description's q order, by stamp. Errors name a joint
+/// the description does not have; joints the recording never names stay at 0 (said in the
+/// notes).
+fn joint_vectors(
+    recording: &Recording,
+    model: &RobotModel,
+    name: &str,
+    notes: &mut Vec<String>,
+) -> Result<Vec<(u64, DVector<f64>)>, AppError> {
+    if recording.joint_states.is_empty() {
+        return Err(AppError::replay(format!(
+            "{name}: the recording has no joint states"
+        )));
+    }
+    let mut named = vec![false; model.dof()];
+    let mut q = DVector::zeros(model.dof());
+    let mut out = Vec::with_capacity(recording.joint_states.len());
+    for s in &recording.joint_states {
+        for (joint, &v) in s.names.iter().zip(&s.positions) {
+            match model.dof_index(joint) {
+                Ok(i) => {
+                    q[i] = v;
+                    named[i] = true;
+                }
+                // A mimic joint follows its leader (ROS names it too).
+                Err(avatarm_core::Error::MimicJoint { .. }) => {}
+                Err(_) => {
+                    return Err(AppError::replay(format!(
+                        "{name}: joint states at {} ns: joint '{joint}' is not in the description '{}'",
+                        s.stamp_ns, model.name
+                    )));
+                }
+            }
+        }
+        out.push((s.stamp_ns, q.clone()));
+    }
+    let never: Vec<&str> = model
+        .dof_names()
+        .into_iter()
+        .zip(&named)
+        .filter(|(_, n)| !**n)
+        .map(|(j, _)| j)
+        .collect();
+    if !never.is_empty() {
+        notes.push(format!(
+            "joints the recording never names, held at 0: {}",
+            never.join(", ")
+        ));
+    }
+    Ok(out)
+}
+
+/// The joints at `stamp_ns`: linear between the two states around it, the first before the
+/// first, the last after the last.
+fn interpolate(states: &[(u64, DVector<f64>)], stamp_ns: u64) -> DVector<f64> {
+    let i = states.partition_point(|s| s.0 <= stamp_ns);
+    match (i.checked_sub(1).map(|j| &states[j]), states.get(i)) {
+        (Some(a), Some(b)) if b.0 > a.0 => {
+            let s = (stamp_ns - a.0) as f64 / (b.0 - a.0) as f64;
+            &a.1 + (&b.1 - &a.1) * s
+        }
+        (Some(a), _) => a.1.clone(),
+        (None, Some(b)) => b.1.clone(),
+        (None, None) => DVector::zeros(0),
+    }
+}
+
+fn decode(f: &CompressedFrame, name: &str) -> Result<image::RgbaImage, AppError> {
+    image::load_from_memory(&f.data)
+        .map(|i| i.to_rgba8())
+        .map_err(|e| {
+            AppError::replay(format!(
+                "{name}: the {} image at {} ns cannot be decoded: {e}",
+                f.format.name(),
+                f.stamp_ns
+            ))
+        })
+}
+
+fn load_background(path: &Path, size: (u32, u32)) -> Result<Arc<Vec<u8>>, AppError> {
+    let img = image::open(path)
+        .map_err(|source| AppError::Image {
+            path: path.to_owned(),
+            action: "read",
+            source,
+        })?
+        .to_rgba8();
+    if img.dimensions() != size {
+        return Err(AppError::flag(
+            "--background",
+            format!(
+                "{} is {}x{}, the frames {}x{}",
+                path.display(),
+                img.width(),
+                img.height(),
+                size.0,
+                size.1
+            ),
+        ));
+    }
+    Ok(Arc::new(img.into_raw()))
+}
+
+/// Which pass the replay is in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Pass {
+    /// Every frame masked (no H yet).
+    Mask,
+    /// Every frame erased with H.
+    Erase,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    /// Updates to wait, then the pass.
+    Settle(u32, Pass),
+    /// The pass, at this frame.
+    Run(Pass, usize),
+    /// Every frame handed over; waiting for the read-backs.
+    Drain(Pass),
+    /// Finished: the results are handed back in this update.
+    Done,
+    /// The results were handed back; the app is quitting.
+    Exited,
+}
+
+/// One frame's read-back images.
+#[derive(Debug, Clone, Default)]
+struct FrameOutput {
+    /// M(t) of the mask pass (0/1), for H.
+    first_mask: Option<Vec<u8>>,
+    /// M(t) of the erase pass (0/1).
+    mask: Option<Vec<u8>>,
+    /// Ĩ(t) (RGBA8).
+    composite: Option<Vec<u8>>,
+    /// The mask twin's render (RGBA8 as the CPU reference reads it), for the reference check.
+    raw: Option<(u32, u32, Vec<u8>)>,
+    /// The live frame and H the passes had (for the CPU reference).
+    inputs: Option<ErasedInputs>,
+}
+
+/// The live frame, H (if any) and the photometric model a frame was erased with.
+type ErasedInputs = (Arc<Vec<u8>>, Option<Arc<Vec<u8>>>, dr::Photometric);
+
+/// What the app hands back.
+struct Finished {
+    outputs: Vec<FrameOutput>,
+    background: Option<(BackgroundEstimate, String)>,
+    times: avatarm_erase::SpanTimes,
+    errors: Vec<String>,
+}
+
+#[derive(Resource)]
+struct Driver {
+    frames: Vec<CompressedFrame>,
+    q: Vec<DVector<f64>>,
+    source: Entity,
+    size: (u32, u32),
+    margin_px: u32,
+    phase: Phase,
+    /// H to hand to the pipeline at the next pass's start, and where it came from.
+    pending_background: Option<(Arc<Vec<u8>>, String)>,
+    background: Option<(BackgroundEstimate, String)>,
+    /// The frame handed over in this update: its index and pass.
+    shown: Option<(usize, Pass)>,
+    outputs: Vec<FrameOutput>,
+    pending: usize,
+    waited: u32,
+    errors: Vec<String>,
+    bar: indicatif::ProgressBar,
+    result: Arc<Mutex<Option<Finished>>>,
+}
+
+/// Hands the next frame to the video and its joints to the recorded robot's twin, and moves
+/// between the passes.
+#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
+fn feed(
+    mut d: ResMut<Driver>,
+    mut inbox: ResMut<VideoInbox>,
+    mut twins: Query<&mut RobotTwin>,
+    mut set_background: MessageWriter<SetBackground>,
+    time: Res<Time<Fixed>>,
+    times: Res<GpuTimes>,
+    mut exit: MessageWriter<AppExit>,
+    targets: Option<Res<EraseTargets>>,
+) {
+    let d = &mut *d;
+    d.shown = None;
+    if targets.is_none() {
+        return;
+    }
+    let now = time.elapsed_secs_f64();
+    match d.phase {
+        Phase::Settle(0, pass) => {
+            if let Some((rgba, origin)) = d.pending_background.take() {
+                set_background.write(SetBackground {
+                    rgba,
+                    width: d.size.0,
+                    height: d.size.1,
+                    origin: format!("{origin} (recording replay)"),
+                });
+                // H reaches the pipeline in the next update.
+                d.phase = Phase::Settle(1, pass);
+                return;
+            }
+            d.phase = Phase::Run(pass, 0);
+            hand_over(d, &mut inbox, &mut twins, now);
+        }
+        Phase::Settle(k, pass) => d.phase = Phase::Settle(k - 1, pass),
+        Phase::Run(..) => hand_over(d, &mut inbox, &mut twins, now),
+        Phase::Drain(pass) => {
+            d.waited += 1;
+            if d.pending > 0 && d.waited < MAX_WAIT_UPDATES {
+                return;
+            }
+            if d.pending > 0 {
+                d.errors
+                    .push(format!("{} frame read-backs never arrived", d.pending));
+            }
+            match pass {
+                Pass::Mask if d.errors.is_empty() => match footage_background(d) {
+                    Ok(estimate) => {
+                        let rgba = Arc::new(estimate.rgba.clone());
+                        d.pending_background = Some((rgba, "the footage".into()));
+                        d.background = Some((estimate, "the footage".into()));
+                        d.phase = Phase::Settle(SETTLE_UPDATES, Pass::Erase);
+                    }
+                    Err(e) => {
+                        d.errors.push(e);
+                        d.phase = Phase::Done;
+                    }
+                },
+                _ => d.phase = Phase::Done,
+            }
+        }
+        Phase::Done | Phase::Exited => {}
+    }
+    if d.phase == Phase::Done {
+        d.phase = Phase::Exited;
+        d.bar.finish_and_clear();
+        if let Ok(mut slot) = d.result.lock() {
+            *slot = Some(Finished {
+                outputs: std::mem::take(&mut d.outputs),
+                background: d.background.take(),
+                times: times.snapshot(),
+                errors: std::mem::take(&mut d.errors),
+            });
+        }
+        exit.write(AppExit::Success);
+    }
+
+    fn hand_over(
+        d: &mut Driver,
+        inbox: &mut VideoInbox,
+        twins: &mut Query<&mut RobotTwin>,
+        now: f64,
+    ) {
+        let Phase::Run(pass, i) = d.phase else {
+            return;
+        };
+        let Some(frame) = d.frames.get(i) else {
+            d.phase = Phase::Drain(pass);
+            d.waited = 0;
+            return;
+        };
+        let image = match image::load_from_memory(&frame.data) {
+            Ok(img) => img.to_rgba8(),
+            Err(e) => {
+                d.errors
+                    .push(format!("frame {i} at {} ns: {e}", frame.stamp_ns));
+                d.phase = Phase::Done;
+                return;
+            }
+        };
+        let (w, h) = image.dimensions();
+        let index = i as u64 + if pass == Pass::Erase { 1 << 32 } else { 0 };
+        let pushed = inbox.push(VideoFrame {
+            index,
+            capture_s: now,
+            arrival_s: now,
+            width: w,
+            height: h,
+            rgba: Arc::new(image.into_raw()),
+        });
+        if let Err(e) = pushed {
+            d.errors.push(format!("frame {i}: {e}"));
+            d.phase = Phase::Done;
+            return;
+        }
+        if let Ok(mut twin) = twins.get_mut(d.source) {
+            twin.positions.clone_from(&d.q[i]);
+            twin.velocities = DVector::zeros(d.q[i].len());
+            twin.stamp_s = Some(now);
+        }
+        d.shown = Some((i, pass));
+        d.phase = Phase::Run(pass, i + 1);
+        d.bar.inc(1);
+    }
+}
+
+/// Builds H from the mask pass: each frame's pixels its mask, grown by the margin, leaves.
+fn footage_background(d: &Driver) -> Result<BackgroundEstimate, String> {
+    let (w, h) = d.size;
+    let keep = d.frames.len().clamp(1, 32);
+    let mut b = FootageBackground::new(w, h, keep).map_err(|e| e.to_string())?;
+    for (i, (frame, out)) in d.frames.iter().zip(&d.outputs).enumerate() {
+        let mask = out
+            .first_mask
+            .as_ref()
+            .ok_or_else(|| format!("frame {i}: its mask never arrived"))?;
+        let image = image::load_from_memory(&frame.data)
+            .map_err(|e| format!("frame {i}: {e}"))?
+            .to_rgba8();
+        let covered = dr::dilate(mask, w, h, d.margin_px);
+        let view = RgbaView::new("frame", w, h, image.as_raw()).map_err(|e| e.to_string())?;
+        b.add(&view, &covered).map_err(|e| e.to_string())?;
+    }
+    Ok(b.estimate())
+}
+
+/// Reads back the pipeline's images of the frame handed over in this update.
+fn request(
+    mut commands: Commands,
+    mut d: ResMut<Driver>,
+    state: Res<EraseState>,
+    targets: Option<Res<EraseTargets>>,
+) {
+    let (Some((i, pass)), Some(targets)) = (d.shown, targets) else {
+        return;
+    };
+    let Some(current) = state.current.as_ref().filter(|c| c.dirty) else {
+        return;
+    };
+    let Some((_, index, live)) = &current.frame else {
+        return;
+    };
+    if *index & ((1 << 32) - 1) != i as u64 {
+        d.errors.push(format!(
+            "frame {i}: the pipeline erased frame {index} instead"
+        ));
+        return;
+    }
+    let parts: &[(Part, &Handle<Image>)] = match pass {
+        Pass::Mask => &[(Part::FirstMask, &targets.mask)],
+        Pass::Erase => &[
+            (Part::Mask, &targets.mask),
+            (Part::Composite, &targets.composite),
+            (Part::Raw, &targets.raw),
+        ],
+    };
+    if pass == Pass::Erase {
+        d.outputs[i].inputs = Some((
+            live.clone(),
+            current.background.clone(),
+            current.photometric,
+        ));
+    }
+    for &(part, handle) in parts {
+        d.pending += 1;
+        read_image_once(&mut commands, handle.clone()).observe(
+            move |read: On<ImageRead>, mut d: ResMut<Driver>| {
+                d.pending = d.pending.saturating_sub(1);
+                let out = &mut d.outputs[i];
+                let data = read.data.clone();
+                match part {
+                    Part::FirstMask => {
+                        out.first_mask = Some(dr::binarise(&data, read.bytes_per_pixel));
+                    }
+                    Part::Mask => out.mask = Some(dr::binarise(&data, read.bytes_per_pixel)),
+                    Part::Composite => out.composite = Some(data),
+                    Part::Raw => {
+                        let rgba = if read.bytes_per_pixel == 1 {
+                            dr::grey_to_rgba(&data)
+                        } else {
+                            data
+                        };
+                        out.raw = Some((read.width, read.height, rgba));
+                    }
+                }
+            },
+        );
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Part {
+    FirstMask,
+    Mask,
+    Composite,
+    Raw,
+}
+
+/// The frame with the mask tinted red over it and the reference mask's outline in green: where
+/// the mask lands against where the robot is, by eye.
+fn overlay(frame: &[u8], mask: &[u8], reference: Option<&[u8]>, width: u32) -> Vec<u8> {
+    let w = width as usize;
+    let mut out = frame.to_vec();
+    for (i, px) in out.chunks_exact_mut(4).enumerate() {
+        if mask[i] > 0 {
+            px[0] = ((u16::from(px[0]) + 255) / 2) as u8;
+            px[1] /= 2;
+            px[2] /= 2;
+        }
+    }
+    if let Some(r) = reference {
+        let h = r.len() / w;
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let edge = r[i] > 0
+                    && [(0, -1), (0, 1), (-1, 0), (1, 0)].iter().any(|(dx, dy)| {
+                        let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                        nx < 0
+                            || ny < 0
+                            || nx >= w as i64
+                            || ny >= h as i64
+                            || r[ny as usize * w + nx as usize] == 0
+                    });
+                if edge {
+                    out[i * 4..i * 4 + 4].copy_from_slice(&[40, 255, 40, 255]);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Median and 95th percentile of some times, or null.
+fn spread(values: &[f64]) -> serde_json::Value {
+    if values.is_empty() {
+        return json!(null);
+    }
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    json!({"median": at(0.5), "p95": at(0.95)})
+}
+
+fn mean(v: &[f64]) -> Option<f64> {
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+fn write_outputs(
+    o: &RecordingOptions,
+    input: &Input,
+    outputs: &[FrameOutput],
+    background: &Option<(BackgroundEstimate, String)>,
+    times: &avatarm_erase::SpanTimes,
+    started: Instant,
+) -> Result<serde_json::Value, AppError> {
+    let (w, h) = input.size;
+    let out = &o.out;
+    let png = |name: String, img: image::DynamicImage| -> Result<Vec<u8>, AppError> {
+        let path = out.join(&name);
+        img.save(&path).map_err(|source| AppError::Image {
+            path: path.clone(),
+            action: "write",
+            source,
+        })?;
+        std::fs::read(&path).map_err(|source| AppError::Io {
+            path,
+            action: "read",
+            source,
+        })
+    };
+    let gray = |m: &[u8]| -> Result<image::DynamicImage, AppError> {
+        image::GrayImage::from_raw(w, h, m.iter().map(|&v| v * 255).collect())
+            .map(image::DynamicImage::ImageLuma8)
+            .ok_or(AppError::ImageSize {
+                what: "mask".into(),
+                width: w,
+                height: h,
+            })
+    };
+    let rgb = |rgba: &[u8]| -> Result<image::DynamicImage, AppError> {
+        image::RgbaImage::from_raw(w, h, rgba.to_vec())
+            .map(|i| image::DynamicImage::ImageRgb8(image::DynamicImage::ImageRgba8(i).to_rgb8()))
+            .ok_or(AppError::ImageSize {
+                what: "erased frame".into(),
+                width: w,
+                height: h,
+            })
+    };
+    let mcap_path = out.join("erased.mcap");
+    let mut mcap = RecordingWriter::create(&mcap_path)?;
+    let first_stamp = input.frames.first().map_or(0, |f| f.stamp_ns);
+    mcap.calibration(first_stamp, &input.calibration)?;
+    mcap.camera_pose(first_stamp, &input.camera.world_from_camera)?;
+    for s in &input.recording.joint_states {
+        mcap.joint_states(s)?;
+    }
+    let settings = o.settings;
+    let (mut coverage, mut max_diff, mut mismatch) = (Vec::new(), 0u8, 0u64);
+    let mut scored = Vec::new();
+    let mut robot_union = vec![0u8; (w * h) as usize];
+    for (i, (frame, result)) in input.frames.iter().zip(outputs).enumerate() {
+        let (Some(mask), Some(composite)) = (&result.mask, &result.composite) else {
+            return Err(AppError::replay(format!(
+                "frame {i}: its mask or erased image never arrived"
+            )));
+        };
+        coverage.push(100.0 * mask.iter().filter(|&&m| m > 0).count() as f64 / mask.len() as f64);
+        // The CPU reference on the same inputs.
+        if let (Some((rw, rh, raw)), Some((live, bg, photometric))) = (&result.raw, &result.inputs)
+        {
+            let raw = RgbaView::new("mask twin render", *rw, *rh, raw)?;
+            let cpu_mask = dr::threshold_mask(&raw, w, h, &settings.ranges, settings.mask_radius());
+            let alpha = dr::feather_alpha(&cpu_mask, w, h, settings.feather_px);
+            let black = vec![0u8; live.len()];
+            let alpha_h = if settings.enabled && bg.is_some() {
+                settings.alpha_h
+            } else {
+                0.0
+            };
+            let live_view = RgbaView::new("live frame", w, h, live)?;
+            let bg_view = RgbaView::new("background", w, h, bg.as_deref().unwrap_or(&black))?;
+            let cpu = dr::composite(&live_view, &bg_view, &alpha, alpha_h, photometric)?;
+            mismatch =
+                mismatch.max(mask.iter().zip(&cpu_mask).filter(|(a, b)| a != b).count() as u64);
+            let diff = composite
+                .chunks_exact(4)
+                .zip(cpu.chunks_exact(4))
+                .flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c])))
+                .max()
+                .unwrap_or(0);
+            max_diff = max_diff.max(diff);
+        }
+        let erased_region: Vec<u8> = dr::feather_alpha(mask, w, h, settings.feather_px)
+            .iter()
+            .map(|&a| u8::from(a >= 0.5))
+            .collect();
+        for (u, &m) in robot_union.iter_mut().zip(mask) {
+            *u |= m;
+        }
+        if let Some(truth) = &input.references[i]
+            && let Some(s) = dr::mask_scores(&erased_region, truth)
+        {
+            scored.push(json!({
+                "frame": i,
+                "stamp_ns": frame.stamp_ns,
+                "iou": s.iou,
+                "leak_pct": s.leak_pct,
+                "overmask_pct": s.overmask_pct,
+                "robot_px": s.robot_px,
+            }));
+        }
+        if let Some(live) = result.inputs.as_ref().map(|x| &x.0) {
+            let picture = overlay(live, mask, input.references[i].as_deref(), w);
+            png(format!("overlay_{i:05}.png"), rgb(&picture)?)?;
+        }
+        let erased_png = png(format!("erased_{i:05}.png"), rgb(composite)?)?;
+        let mask_png = png(format!("mask_{i:05}.png"), gray(mask)?)?;
+        mcap.frame(frame)?;
+        mcap.erased(&CompressedFrame {
+            stamp_ns: frame.stamp_ns,
+            format: ImageFormat::Png,
+            data: erased_png,
+        })?;
+        mcap.mask(&CompressedFrame {
+            stamp_ns: frame.stamp_ns,
+            format: ImageFormat::Png,
+            data: mask_png,
+        })?;
+    }
+    for m in &input.recording.reference_masks {
+        mcap.reference_mask(m)?;
+    }
+    mcap.finish()?;
+    let background_report = match background {
+        Some((estimate, origin)) => {
+            png("background.png".into(), rgb(&estimate.rgba)?)?;
+            png("background_seen.png".into(), gray(&estimate.seen)?)?;
+            json!({
+                "source": origin,
+                "margin_px": o.background_margin_px,
+                "robot_region_seen_pct": estimate.seen_fraction(&robot_union).map(|f| 100.0 * f),
+                "filled_pct_of_frame": 100.0 * estimate.filled_fraction(),
+                "note": "robot_region_seen_pct: of the pixels any frame's mask covered, the share whose background some frame showed; the rest was filled from the surroundings (background_seen.png: white where seen)",
+            })
+        }
+        None => json!({"source": o.background.as_ref().map(|p| p.display().to_string())}),
+    };
+    let get = |key: &str| -> Vec<f64> { scored.iter().filter_map(|s| s[key].as_f64()).collect() };
+    let (iou, leak, over) = (get("iou"), get("leak_pct"), get("overmask_pct"));
+    let span = |name: &str| {
+        spread(
+            &times
+                .spans
+                .get(name)
+                .map_or_else(Vec::new, |s| s.ms.iter().copied().collect::<Vec<_>>()),
+        )
+    };
+    let gpu_passes: serde_json::Map<String, serde_json::Value> = PASS_NAMES
+        .iter()
+        .filter(|n| times.spans.contains_key(**n))
+        .map(|n| (n.to_string(), span(n)))
+        .collect();
+    let k = &input.camera.intrinsics;
+    let report = json!({
+        "recording": o.recording.display().to_string(),
+        "robot": input.model.name,
+        "frames": input.frames.len(),
+        "size": [w, h],
+        "camera": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
+                   "distortion_model": input.calibration.distortion_model.ros_name()},
+        "erase": {"dilate_px": settings.dilate_px, "feather_px": settings.feather_px,
+                  "resolution_scale": settings.resolution_scale, "photometric": settings.photometric},
+        "background": background_report,
+        "mask": {
+            "coverage_pct_mean": mean(&coverage),
+            "vs_reference": {
+                "frames_scored": scored.len(),
+                "iou_mean": mean(&iou),
+                "iou_min": iou.iter().copied().reduce(f64::min),
+                "leak_pct_mean": mean(&leak),
+                "overmask_pct_mean": mean(&over),
+                "per_frame": scored,
+            },
+        },
+        "gpu_vs_cpu": {"max_abs_diff": max_diff, "mask_mismatch_px_max": mismatch},
+        "timing_ms": {"gpu_passes": gpu_passes, "upload": span(UPLOAD_SPAN),
+                      "source": times.unavailable.clone().unwrap_or_else(|| "gpu".into())},
+        "wall_time_s": started.elapsed().as_secs_f64(),
+        "notes": input.notes,
+        "outputs": {"mcap": mcap_path.display().to_string()},
+    });
+    let path = out.join("report.json");
+    let text = serde_json::to_string_pretty(&report)?;
+    std::fs::write(&path, text + "\n").map_err(|e| AppError::write(path, e))?;
+    Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn joints_are_interpolated_to_the_capture_time() {
+        let v = |x: f64| DVector::from_vec(vec![x, -x]);
+        let states = vec![(100, v(0.0)), (200, v(1.0)), (400, v(3.0))];
+        assert_eq!(interpolate(&states, 150), v(0.5));
+        assert_eq!(interpolate(&states, 300), v(2.0));
+        assert_eq!(
+            interpolate(&states, 50),
+            v(0.0),
+            "the first before the first"
+        );
+        assert_eq!(interpolate(&states, 900), v(3.0), "the last after the last");
+        assert_eq!(interpolate(&states, 200), v(1.0));
+    }
+}
