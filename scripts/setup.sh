@@ -8,6 +8,8 @@ packages=(
   # The ROS 1 link: TLS for roslibrust's XML-RPC client; a ROS master and rospy (Debian's) for
   # its tests, which start a master and a simulated Sawyer node themselves.
   libssl-dev python3-rosmaster python3-rospy python3-sensor-msgs python3-std-msgs python3-genpy
+  # The bag import's tests write their bags with Debian's rosbag.
+  python3-rosbag python3-tf2-msgs python3-geometry-msgs
   # pip, for PyPI's MCAP reader below.
   python3-pip
 )

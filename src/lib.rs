@@ -19,7 +19,9 @@
 //! `avatarm_core`, the ECS plugins from the `avatarm_*` plugin crates.
 
 pub mod app;
+pub mod bag;
 pub mod bench;
+pub mod calibrate;
 pub mod cli;
 pub mod error;
 pub mod footage;

@@ -51,12 +51,14 @@ enum Command {
         json: bool,
     },
     /// Convert a real Leap Motion recording (leapjs-playback JSON, Leap's protocol v6, .json or
-    /// .json.gz) to a .hand.jsonl of Avatarm's 26-joint skeleton, and picture one frame.
+    /// .json.gz) to a .hand.jsonl of Avatarm's 26-joint skeleton, and picture one frame; or a
+    /// folder of camera frames, or a ROS 1 bag, to a recording (MCAP).
     Import {
-        /// The Leap recording, or a folder of camera frames with the robot's joints (a listing
-        /// frames.csv or frames.json, or EasyHeC's color/ qpos/ mask/ K.txt; docs/real-footage.md).
+        /// The Leap recording, a folder of camera frames with the robot's joints (a listing
+        /// frames.csv or frames.json, or EasyHeC's color/ qpos/ mask/ K.txt), or a ROS 1 bag
+        /// (.bag: Image or CompressedImage, CameraInfo, JointState, /tf; docs/real-footage.md).
         recording: PathBuf,
-        /// The .hand.jsonl to write (a Leap recording), or the .mcap (a folder of frames).
+        /// The .hand.jsonl to write (a Leap recording), or the .mcap (frames or a bag).
         #[arg(long, value_name = "FILE")]
         out: PathBuf,
         /// Frames: the listing, when not frames.csv or frames.json in the folder.
@@ -83,6 +85,23 @@ enum Command {
         /// Frames: frames per second where the source has no stamps (EasyHeC).
         #[arg(long, value_name = "FPS", default_value_t = 30.0)]
         fps: f64,
+        /// Bag: the camera frames' topic (Image or CompressedImage), when the bag has several.
+        #[arg(long = "image-topic", value_name = "TOPIC")]
+        image_topic: Option<String>,
+        /// Bag: a topic of the robot's reference silhouettes (Image or CompressedImage, non-zero
+        /// = robot), stamped as the frames they belong to.
+        #[arg(long = "mask-topic", value_name = "TOPIC")]
+        mask_topic: Option<String>,
+        /// Bag: the CameraInfo topic, when the bag has several.
+        #[arg(long = "camera-info-topic", value_name = "TOPIC")]
+        camera_info_topic: Option<String>,
+        /// Bag: the JointState topic, when the bag has several.
+        #[arg(long = "joint-states-topic", value_name = "TOPIC")]
+        joint_states_topic: Option<String>,
+        /// Bag: the robot's base frame in /tf; the camera's pose is chained from it to the
+        /// CameraInfo's (optical) frame.
+        #[arg(long = "base-frame", value_name = "FRAME")]
+        base_frame: Option<String>,
         /// Which hand (default: the first the recording shows).
         #[arg(long, value_parser = ["left", "right"])]
         hand: Option<String>,
@@ -166,6 +185,11 @@ enum Command {
         /// used for the background built from the footage (px).
         #[arg(long = "background-margin", value_name = "PX", default_value_t = 8)]
         background_margin: u32,
+        /// With a scene: also write the replay as a recording (MCAP): the frames, the robot's
+        /// joints at each capture, the believed camera, the true silhouettes as reference
+        /// masks, Avatarm's erased frames and masks.
+        #[arg(long, value_name = "FILE.mcap", conflicts_with = "recording")]
+        record: Option<PathBuf>,
         /// Run without a window (replays are always headless; accepted for clarity).
         #[arg(long)]
         headless: bool,
@@ -180,6 +204,57 @@ enum Command {
         package_path: Vec<PathBuf>,
         #[command(flatten)]
         overrides: EraseOverrides,
+    },
+    /// Fit the camera's pose to the robot itself: the pose (and with --intrinsics fx, fy) that
+    /// puts the robot's silhouette at the recorded joints on the recording's reference masks;
+    /// writes DIR/camera_pose.yaml, before/after overlays and report.json (docs/real-footage.md).
+    Calibrate {
+        /// The recording (MCAP) with the robot's reference masks.
+        #[arg(long, value_name = "FILE.mcap")]
+        recording: PathBuf,
+        /// The robot's description.
+        #[arg(long, value_name = "URDF")]
+        urdf: PathBuf,
+        /// Folder searched for package:// URIs (repeatable).
+        #[arg(long = "package-path", value_name = "DIR")]
+        package_path: Vec<PathBuf>,
+        /// A camera file instead of the recording's calibration.
+        #[arg(long, value_name = "FILE")]
+        camera: Option<PathBuf>,
+        /// The rough pose (under camera_from_base or base_from_camera), else the recording's.
+        #[arg(long, value_name = "FILE", conflicts_with = "look_at")]
+        pose: Option<PathBuf>,
+        /// The rough pose as the camera's eye and a point it looks at, in the base frame (m):
+        /// EX,EY,EZ,TX,TY,TZ.
+        #[arg(
+            long = "look-at",
+            value_name = "EX,EY,EZ,TX,TY,TZ",
+            value_delimiter = ',',
+            allow_negative_numbers = true
+        )]
+        look_at: Option<Vec<f64>>,
+        /// The frames the fit uses: FIRST-LAST ranges or single indices, comma-separated (indices
+        /// in the recording, e.g. 0-4 or 0,1,5; the others are held out and only measured).
+        /// Default: every frame with a reference mask.
+        #[arg(long, value_name = "FRAMES", value_parser = frame_range, value_delimiter = ',')]
+        fit: Vec<(usize, usize)>,
+        /// Use only every N-th frame with a reference mask (long recordings).
+        #[arg(long, value_name = "N", default_value_t = 1)]
+        every: usize,
+        /// Also fit the focal lengths fx and fy.
+        #[arg(long)]
+        intrinsics: bool,
+        /// Triangles the robot's silhouette is drawn with (its meshes simplified to about this).
+        #[arg(long, value_name = "N", default_value_t = 6000)]
+        triangles: usize,
+        /// The robot's geometry below this height in its base frame (m) is hidden by the table
+        /// it stands on and left out of its silhouette (e.g. 0 for a mounting plate sunk in the
+        /// desk).
+        #[arg(long = "hidden-below", value_name = "Z", allow_negative_numbers = true)]
+        hidden_below: Option<f64>,
+        /// Output folder.
+        #[arg(long, value_name = "DIR", default_value = "out/calibrate")]
+        out: PathBuf,
     },
     /// Measure speed against accuracy and chart it.
     #[command(subcommand)]
@@ -412,6 +487,52 @@ fn run(cli: Cli) -> Result<(), AppError> {
         Command::Import {
             recording,
             out,
+            camera,
+            pose,
+            image_topic,
+            mask_topic,
+            camera_info_topic,
+            joint_states_topic,
+            base_frame,
+            ..
+        } if recording
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("bag")) =>
+        {
+            let s = crate::bag::import_bag(&crate::bag::BagOptions {
+                bag: recording,
+                out: out.clone(),
+                image_topic,
+                mask_topic,
+                camera_info_topic,
+                joint_states_topic,
+                base_frame,
+                camera,
+                pose,
+            })?;
+            for (topic, kind, n) in &s.topics {
+                println!("  {topic} ({kind}): {n} messages");
+            }
+            for note in &s.notes {
+                eprintln!("note: {note}");
+            }
+            println!(
+                "wrote {} (ROS bag): {} frames {}x{} over {:.2} s, {} reference masks, {} joint states of {}, camera pose {}",
+                out.display(),
+                s.frames,
+                s.size.0,
+                s.size.1,
+                s.duration_s,
+                s.masks,
+                s.joint_states,
+                s.joints.join(", "),
+                s.pose
+            );
+            Ok(())
+        }
+        Command::Import {
+            recording,
+            out,
             listing,
             camera,
             pose,
@@ -616,6 +737,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             frames_every,
             package_path,
             overrides,
+            record,
             ..
         } => {
             let scene =
@@ -625,6 +747,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             let mut options = ReplayOptions::new(out.clone());
             options.frames_every = frames_every;
             options.progress = true;
+            options.record = record;
             let report = crate::replay::run(&scene, options)?;
             eprintln!(
                 "replayed '{}': {} frames, {:.2} s simulated in {:.2} s ({:.2} sim s per wall s); report: {}",
@@ -633,6 +756,94 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 report["sim_time_s"].as_f64().unwrap_or(0.0),
                 report["wall_time_s"].as_f64().unwrap_or(0.0),
                 report["sim_s_per_wall_s"].as_f64().unwrap_or(0.0),
+                out.join("report.json").display()
+            );
+            Ok(())
+        }
+        Command::Calibrate {
+            recording,
+            urdf,
+            package_path,
+            camera,
+            pose,
+            look_at,
+            fit,
+            every,
+            intrinsics,
+            triangles,
+            hidden_below,
+            out,
+        } => {
+            if let Some(z) = hidden_below.filter(|z| !z.is_finite()) {
+                return Err(AppError::flag(
+                    "--hidden-below",
+                    format!("{z} is not a height (m)"),
+                ));
+            }
+            let look_at = match look_at.as_deref() {
+                None => None,
+                Some(v) if v.iter().any(|x| !x.is_finite()) => {
+                    return Err(AppError::flag(
+                        "--look-at",
+                        format!("{v:?}: every coordinate must be a finite number (m)"),
+                    ));
+                }
+                Some([ex, ey, ez, tx, ty, tz]) => Some(([*ex, *ey, *ez], [*tx, *ty, *tz])),
+                Some(v) => {
+                    return Err(AppError::flag(
+                        "--look-at",
+                        format!(
+                            "{} numbers: give the eye's x,y,z then the target's (6)",
+                            v.len()
+                        ),
+                    ));
+                }
+            };
+            let report = crate::calibrate::run_calibrate(&crate::calibrate::CalibrateOptions {
+                recording,
+                urdf,
+                packages: packages(package_path),
+                camera,
+                pose,
+                look_at,
+                fit,
+                every,
+                fit_focal: intrinsics,
+                budget: triangles.max(100),
+                hidden_below,
+                out: out.clone(),
+                progress: true,
+            })?;
+            for note in report["notes"].as_array().into_iter().flatten() {
+                eprintln!("note: {}", note.as_str().unwrap_or_default());
+            }
+            let iou = &report["iou"];
+            let f =
+                |v: &serde_json::Value| v.as_f64().map_or("-".to_owned(), |x| format!("{x:.3}"));
+            println!(
+                "calibrated on {} frames in {:.1} s: IoU {} -> {} on the fit frames, {} -> {} held out; moved {:.2} deg, {:.1} mm from the rough pose; spread over starts {:.2} deg, {:.1} mm",
+                report["frames_fit"],
+                report["wall_time_s"].as_f64().unwrap_or(0.0),
+                f(&iou["fit_before"]),
+                f(&iou["fit_after"]),
+                f(&iou["held_out_before"]),
+                f(&iou["held_out_after"]),
+                report["change_from_rough"]["rotation_deg"]
+                    .as_f64()
+                    .unwrap_or(f64::NAN),
+                report["change_from_rough"]["translation_mm"]
+                    .as_f64()
+                    .unwrap_or(f64::NAN),
+                report["uncertainty"]["spread_deg"]
+                    .as_f64()
+                    .unwrap_or(f64::NAN),
+                report["uncertainty"]["spread_mm"]
+                    .as_f64()
+                    .unwrap_or(f64::NAN),
+            );
+            println!(
+                "pose: {}; report: {}",
+                out.join("camera_pose.yaml").display(),
                 out.join("report.json").display()
             );
             Ok(())
@@ -895,8 +1106,22 @@ fn run(cli: Cli) -> Result<(), AppError> {
     }
 }
 
-/// `--step-ms`: a time step in milliseconds, more than 0 and at most 250 (Bevy clamps a longer
-/// update).
+/// One `--fit` entry: `FIRST-LAST` frame indices (inclusive, FIRST ≤ LAST) or one index.
+fn frame_range(s: &str) -> Result<(usize, usize), AppError> {
+    let bad = || AppError::Value {
+        text: s.to_owned(),
+        message:
+            "expected frame indices: FIRST-LAST or one index, comma-separated (e.g. 0-4 or 0,1,5)"
+                .into(),
+    };
+    let index = |t: &str| t.trim().parse::<usize>().map_err(|_| bad());
+    let (a, b) = match s.split_once('-') {
+        Some((a, b)) => (index(a)?, index(b)?),
+        None => (index(s)?, index(s)?),
+    };
+    if a <= b { Ok((a, b)) } else { Err(bad()) }
+}
+
 /// `WIDTHxHEIGHT`, both at least 1 and at most 8192.
 pub(crate) fn frame_size(s: &str) -> Result<(u32, u32), AppError> {
     let bad = || AppError::Value {
@@ -915,6 +1140,8 @@ pub(crate) fn frame_size(s: &str) -> Result<(u32, u32), AppError> {
     }
 }
 
+/// `--step-ms`: a time step in milliseconds, more than 0 and at most 250 (Bevy clamps a longer
+/// update).
 fn step_ms(s: &str) -> Result<f64, AppError> {
     let ms: f64 = s.parse().map_err(|_| AppError::Value {
         text: s.to_owned(),

@@ -40,6 +40,12 @@ pub struct EraseOverrides {
     /// Capture the background H from the live frame at this time (s).
     #[arg(long, value_name = "S")]
     pub capture_background_at: Option<f64>,
+    /// The camera pose the app believes, from a file (under camera_from_base or
+    /// base_from_camera, the robot's base frame; what `avatarm calibrate` writes) instead of
+    /// the scene's pose and calibration error. The simulated room's camera stays where the
+    /// scene puts it.
+    #[arg(long = "believed-pose", value_name = "FILE")]
+    pub believed_pose: Option<PathBuf>,
     /// Run the scene's camera at WIDTHxHEIGHT pixels, its pose and vertical field of view kept
     /// (the principal point at the centre): the same scene at 1080p.
     #[arg(long = "camera-size", value_name = "WxH", value_parser = super::frame_size)]
@@ -98,6 +104,10 @@ impl EraseOverrides {
             (c.width, c.height) = (width, height);
         }
         self.apply_to_settings(&mut scene.file.erase)?;
+        if let Some(path) = &self.believed_pose {
+            let base_from_camera = avatarm_record::camera::read_pose(path)?;
+            scene.believed_camera.world_from_camera = scene.robot_base() * base_from_camera;
+        }
         if let Some(path) = &self.background {
             if !path.is_file() {
                 return Err(AppError::flag(

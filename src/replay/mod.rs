@@ -23,7 +23,7 @@ pub mod recording;
 pub mod task;
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -55,6 +55,10 @@ pub struct ReplayOptions {
     pub progress: bool,
     /// Where the finished report (or the error) is left for the caller.
     pub result: Arc<Mutex<Option<Result<serde_json::Value, AppError>>>>,
+    /// Also write the replay as a recording (MCAP): every scored frame as the camera gave it,
+    /// the simulated robot's joints at its capture, the camera as the app believes it, the true
+    /// silhouette as its reference mask, and Avatarm's erased frame and mask.
+    pub record: Option<PathBuf>,
 }
 
 impl ReplayOptions {
@@ -65,8 +69,44 @@ impl ReplayOptions {
             frames_every: 1,
             progress: false,
             result: Arc::default(),
+            record: None,
         }
     }
+}
+
+/// One scored frame as `--record` writes it (PNG bytes, the robot's joints at capture).
+struct RecordedFrame {
+    t_s: f64,
+    frame: Vec<u8>,
+    truth: Vec<u8>,
+    erased: Vec<u8>,
+    mask: Vec<u8>,
+    q_true: Vec<f64>,
+}
+
+/// PNG bytes of an RGBA8 image (as RGB) or of a 0/1 mask (as 0/255 grey).
+fn png_bytes(width: u32, height: u32, data: &[u8], mask: bool) -> Result<Vec<u8>, AppError> {
+    let image = if mask {
+        image::GrayImage::from_raw(width, height, data.iter().map(|&v| v * 255).collect())
+            .map(image::DynamicImage::ImageLuma8)
+    } else {
+        image::RgbaImage::from_raw(width, height, data.to_vec())
+            .map(|i| image::DynamicImage::ImageRgb8(image::DynamicImage::ImageRgba8(i).to_rgb8()))
+    }
+    .ok_or(AppError::ImageSize {
+        what: "recorded frame".into(),
+        width,
+        height,
+    })?;
+    let mut out = std::io::Cursor::new(Vec::new());
+    image
+        .write_to(&mut out, image::ImageFormat::Png)
+        .map_err(|source| AppError::Image {
+            path: PathBuf::from("(recording)"),
+            action: "write",
+            source,
+        })?;
+    Ok(out.into_inner())
 }
 
 /// Drives a replay: capture, ground truth, report, exit.
@@ -158,6 +198,8 @@ struct Replay {
     /// GPU pass samples measured before time started (warm-up renders, not reported).
     gpu_measured_at_start: BTreeMap<String, u64>,
     bar: ProgressBar,
+    /// Scored frames for `--record`.
+    recorded: Vec<RecordedFrame>,
 }
 
 /// The images a replay scores each frame with.
@@ -207,6 +249,7 @@ impl Plugin for ReplayPlugin {
             started: None,
             gpu_measured_at_start: BTreeMap::new(),
             bar,
+            recorded: Vec::new(),
         })
         .add_systems(Startup, pause_for_warmup)
         .add_systems(
@@ -425,7 +468,11 @@ fn score_ready(mut replay: ResMut<Replay>, scene: Res<SceneResource>) {
         };
         let q_true = p.q_true.take().unwrap_or_default();
         match score_frame(&replay, &scene, p) {
-            Ok(score) => {
+            Ok((score, recorded)) => {
+                if let Some(mut r) = recorded {
+                    r.q_true.clone_from(&q_true);
+                    replay.recorded.push(r);
+                }
                 if let Some(r) = replay.records.iter_mut().find(|r| frame_key(r.t_s) == k) {
                     r.score = Some(score.clone());
                     r.q_true = q_true;
@@ -450,7 +497,11 @@ fn score_ready(mut replay: ResMut<Replay>, scene: Res<SceneResource>) {
     }
 }
 
-fn score_frame(replay: &Replay, scene: &SceneResource, p: Pending) -> Result<FrameScore, AppError> {
+fn score_frame(
+    replay: &Replay,
+    scene: &SceneResource,
+    p: Pending,
+) -> Result<(FrameScore, Option<RecordedFrame>), AppError> {
     let (
         FrameImages {
             norobot: Some(mut norobot),
@@ -562,7 +613,18 @@ fn score_frame(replay: &Replay, scene: &SceneResource, p: Pending) -> Result<Fra
         gray(&gpu_mask, format!("mask_{i:05}.png"))?;
         gray(&truth, format!("gt_silhouette_{i:05}.png"))?;
     }
-    Ok(FrameScore {
+    let recorded = match replay.options.record {
+        Some(_) => Some(RecordedFrame {
+            t_s: inputs.t_s,
+            frame: png_bytes(w, h, &inputs.live, false)?,
+            truth: png_bytes(w, h, &truth, true)?,
+            erased: png_bytes(w, h, &gpu, false)?,
+            mask: png_bytes(w, h, &gpu_mask, true)?,
+            q_true: Vec::new(),
+        }),
+        None => None,
+    };
+    let score = FrameScore {
         t_s: inputs.t_s,
         mask: scores,
         psnr_robot_db: psnr,
@@ -571,7 +633,8 @@ fn score_frame(replay: &Replay, scene: &SceneResource, p: Pending) -> Result<Fra
         cpu_mask_ms,
         cpu_composite_ms,
         photometric: inputs.photometric,
-    })
+    };
+    Ok((score, recorded))
 }
 
 /// Median and 95th percentile.
@@ -659,6 +722,58 @@ fn stage_timings(replay: &Replay, gpu: &SpanTimes) -> serde_json::Value {
     })
 }
 
+/// Writes `--record`'s MCAP: the believed camera (its pose in the robot's base frame), and per
+/// scored frame the frame, the simulated robot's joints at capture, the true silhouette as the
+/// reference mask, Avatarm's erased frame and mask; stamped with the capture time.
+fn write_recording(path: &Path, replay: &Replay, scene: &SceneResource) -> Result<(), AppError> {
+    use avatarm_record::{CompressedFrame, ImageFormat, JointStates, RecordingWriter};
+    let s = &scene.0;
+    let k = &s.believed_camera.intrinsics;
+    let mut w = RecordingWriter::create(path)?;
+    let ns = |t: f64| (t.max(0.0) * 1e9).round() as u64;
+    let first = replay
+        .recorded
+        .iter()
+        .map(|r| r.t_s)
+        .fold(f64::INFINITY, f64::min);
+    let t0 = ns(if first.is_finite() { first } else { 0.0 });
+    w.calibration(
+        t0,
+        &avatarm_record::camera::CameraCalibration::pinhole(
+            k.width,
+            k.height,
+            [k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0],
+        ),
+    )?;
+    let base_from_camera = s.robot_base().inverse() * s.believed_camera.world_from_camera;
+    w.camera_pose(t0, &base_from_camera)?;
+    let names: Vec<String> = s.model.dof_names().iter().map(|n| n.to_string()).collect();
+    let mut frames: Vec<&RecordedFrame> = replay.recorded.iter().collect();
+    frames.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    for r in frames {
+        let stamp_ns = ns(r.t_s);
+        let png = |data: &Vec<u8>| CompressedFrame {
+            stamp_ns,
+            format: ImageFormat::Png,
+            data: data.clone(),
+        };
+        if r.q_true.len() == names.len() {
+            w.joint_states(&JointStates {
+                stamp_ns,
+                names: names.clone(),
+                positions: r.q_true.clone(),
+                velocities: Vec::new(),
+            })?;
+        }
+        w.frame(&png(&r.frame))?;
+        w.reference_mask(&png(&r.truth))?;
+        w.erased(&png(&r.erased))?;
+        w.mask(&png(&r.mask))?;
+    }
+    w.finish()?;
+    Ok(())
+}
+
 fn finish(
     replay: &Replay,
     scene: &SceneResource,
@@ -672,6 +787,9 @@ fn finish(
         return Err(AppError::replay(replay.errors.join("; ")));
     }
     let wall = replay.started.map_or(0.0, |s| s.elapsed().as_secs_f64());
+    if let Some(path) = &replay.options.record {
+        write_recording(path, replay, scene)?;
+    }
     let sim = robot.0.time_s();
     let twin = twins.get(app_twin).ok();
     let s = &scene.0;

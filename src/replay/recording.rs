@@ -288,7 +288,7 @@ impl Input {
 /// The recording's joint states in the description's q order, by stamp. Errors name a joint
 /// the description does not have; joints the recording never names stay at 0 (said in the
 /// notes).
-fn joint_vectors(
+pub(crate) fn joint_vectors(
     recording: &Recording,
     model: &RobotModel,
     name: &str,
@@ -339,7 +339,7 @@ fn joint_vectors(
 
 /// The joints at `stamp_ns`: linear between the two states around it, the first before the
 /// first, the last after the last.
-fn interpolate(states: &[(u64, DVector<f64>)], stamp_ns: u64) -> DVector<f64> {
+pub(crate) fn interpolate(states: &[(u64, DVector<f64>)], stamp_ns: u64) -> DVector<f64> {
     let i = states.partition_point(|s| s.0 <= stamp_ns);
     match (i.checked_sub(1).map(|j| &states[j]), states.get(i)) {
         (Some(a), Some(b)) if b.0 > a.0 => {
@@ -352,7 +352,7 @@ fn interpolate(states: &[(u64, DVector<f64>)], stamp_ns: u64) -> DVector<f64> {
     }
 }
 
-fn decode(f: &CompressedFrame, name: &str) -> Result<image::RgbaImage, AppError> {
+pub(crate) fn decode(f: &CompressedFrame, name: &str) -> Result<image::RgbaImage, AppError> {
     image::load_from_memory(&f.data)
         .map(|i| i.to_rgba8())
         .map_err(|e| {
@@ -679,7 +679,7 @@ enum Part {
 
 /// The frame with the mask tinted red over it and the reference mask's outline in green: where
 /// the mask lands against where the robot is, by eye.
-fn overlay(frame: &[u8], mask: &[u8], reference: Option<&[u8]>, width: u32) -> Vec<u8> {
+pub(crate) fn overlay(frame: &[u8], mask: &[u8], reference: Option<&[u8]>, width: u32) -> Vec<u8> {
     let w = width as usize;
     let mut out = frame.to_vec();
     for (i, px) in out.chunks_exact_mut(4).enumerate() {

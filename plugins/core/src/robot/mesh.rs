@@ -152,6 +152,93 @@ impl MeshFormat {
     }
 }
 
+/// A primitive shape as triangles in its own frame (URDF's: cylinders and capsules along z,
+/// centred), `segments` around the round ones; `None` for a mesh file.
+pub fn tessellate(shape: &crate::robot::Shape, segments: usize) -> Option<TriMesh> {
+    use crate::robot::Shape;
+    let n = segments.max(6);
+    let mut m = TriMesh::default();
+    fn push(m: &mut TriMesh, a: [f64; 3], b: [f64; 3], c: [f64; 3]) {
+        let base = m.positions.len() as u32;
+        for v in [a, b, c] {
+            m.positions.push([v[0] as f32, v[1] as f32, v[2] as f32]);
+        }
+        m.indices.extend([base, base + 1, base + 2]);
+    }
+    // A surface of revolution about z through `profile` (radius, z) from bottom to top.
+    let revolve = |m: &mut TriMesh, profile: &[(f64, f64)]| {
+        for i in 0..n {
+            let (a0, a1) = (
+                std::f64::consts::TAU * i as f64 / n as f64,
+                std::f64::consts::TAU * (i + 1) as f64 / n as f64,
+            );
+            for w in profile.windows(2) {
+                let ((r0, z0), (r1, z1)) = (w[0], w[1]);
+                let p = |r: f64, a: f64, z: f64| [r * a.cos(), r * a.sin(), z];
+                push(m, p(r0, a0, z0), p(r0, a1, z0), p(r1, a1, z1));
+                push(m, p(r0, a0, z0), p(r1, a1, z1), p(r1, a0, z1));
+            }
+        }
+    };
+    match shape {
+        Shape::Mesh { .. } => return None,
+        Shape::Box { size } => {
+            let h = size / 2.0;
+            let c = |x: f64, y: f64, z: f64| [x * h.x, y * h.y, z * h.z];
+            let v = [
+                c(-1., -1., -1.),
+                c(1., -1., -1.),
+                c(1., 1., -1.),
+                c(-1., 1., -1.),
+                c(-1., -1., 1.),
+                c(1., -1., 1.),
+                c(1., 1., 1.),
+                c(-1., 1., 1.),
+            ];
+            for f in [
+                [0, 3, 2, 1],
+                [4, 5, 6, 7],
+                [0, 1, 5, 4],
+                [1, 2, 6, 5],
+                [2, 3, 7, 6],
+                [3, 0, 4, 7],
+            ] {
+                push(&mut m, v[f[0]], v[f[1]], v[f[2]]);
+                push(&mut m, v[f[0]], v[f[2]], v[f[3]]);
+            }
+        }
+        Shape::Cylinder { radius, length } => {
+            let (r, h) = (*radius, length / 2.0);
+            revolve(&mut m, &[(0.0, -h), (r, -h), (r, h), (0.0, h)]);
+        }
+        Shape::Capsule { radius, length } => {
+            let (r, h) = (*radius, length / 2.0);
+            let mut profile = Vec::new();
+            for i in 0..=n / 2 {
+                let a =
+                    -std::f64::consts::FRAC_PI_2 + std::f64::consts::PI * i as f64 / (n / 2) as f64;
+                let z = if a <= 0.0 { -h } else { h };
+                profile.push((r * a.cos(), z + r * a.sin()));
+                if i == n / 4 {
+                    profile.push((r, h));
+                }
+            }
+            revolve(&mut m, &profile);
+        }
+        Shape::Sphere { radius } => {
+            let profile: Vec<(f64, f64)> = (0..=n / 2)
+                .map(|i| {
+                    let a = -std::f64::consts::FRAC_PI_2
+                        + std::f64::consts::PI * i as f64 / (n / 2) as f64;
+                    (radius * a.cos(), radius * a.sin())
+                })
+                .collect();
+            revolve(&mut m, &profile);
+        }
+    }
+    Some(m)
+}
+
 /// The mesh of a link's `<visual>` or `<collision>` shape, loaded and scaled, or `None` for a
 /// primitive. Errors are [`Error::LinkMesh`], naming the link, the URI and the file: the one
 /// way the twins, the bench and `avatarm robot` load a link's mesh.

@@ -6,6 +6,7 @@
 //!   the real object's pixels (the paper's perspective equations, for any pinhole camera).
 //! - [`sensor`]: the simulated camera's sensor (noise, exposure).
 
+pub mod calibrate;
 pub mod camera;
 pub mod placement;
 pub mod sensor;

@@ -1,0 +1,389 @@
+//! `avatarm calibrate --recording FILE.mcap --urdf DESCRIPTION`: the camera's pose fitted to the
+//! robot itself, so that the mask lands on the robot without a calibration board.
+//!
+//! The recording gives the frames' robot silhouettes (its reference masks), the joints at each
+//! frame (interpolated to the capture time) and K; the rough pose comes from `--pose FILE`,
+//! `--look-at EYE,TARGET` or the recording. [`avatarm_core::vision::calibrate`] fits the pose
+//! (and with `--intrinsics` fx, fy) on the `--fit` frames; the IoU of the model silhouette
+//! against the reference is measured on every frame before and after, so that `--eval` frames
+//! left out of the fit say how well the pose generalises. Written to `--out`:
+//! `camera_pose.yaml` (`base_from_camera`, a 4x4 matrix: what `--pose` and `avatarm import
+//! --pose` read), `camera_info.yaml` with `--intrinsics`, `overlay_before_NNNNN.png` and
+//! `overlay_after_NNNNN.png` (the model's silhouette tinted red, the reference's outline in
+//! green), and `report.json`.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use avatarm_core::dr;
+use avatarm_core::robot::{PackagePath, RobotModel};
+use avatarm_core::vision::calibrate::{
+    CalibrationOptions, RobotSilhouette, SilhouetteFrame, calibrate, clip_below, rasterize,
+};
+use avatarm_core::vision::camera::{CameraPose, Intrinsics};
+use avatarm_record::Recording;
+use avatarm_record::camera::{read_calibration, read_pose};
+use nalgebra::{Isometry3, UnitQuaternion};
+use serde_json::json;
+
+use crate::AppError;
+use crate::replay::recording::{decode, interpolate, joint_vectors, overlay};
+
+/// The pairing check draws every frame's joints against every frame's mask: up to this many.
+const MAX_PAIRING_FRAMES: usize = 60;
+
+/// Frames one fit takes at most (10 take 50 s on two cores).
+const MAX_FIT_FRAMES: usize = 100;
+
+/// What `avatarm calibrate` is given.
+#[derive(Debug, Clone)]
+pub struct CalibrateOptions {
+    /// The recording (MCAP) with reference masks.
+    pub recording: PathBuf,
+    /// The robot's description.
+    pub urdf: PathBuf,
+    /// Folders searched for its `package://` URIs.
+    pub packages: PackagePath,
+    /// A camera file instead of the recording's calibration.
+    pub camera: Option<PathBuf>,
+    /// The rough pose from a file.
+    pub pose: Option<PathBuf>,
+    /// The rough pose as the camera's eye and a point it looks at, in the base frame (m).
+    pub look_at: Option<([f64; 3], [f64; 3])>,
+    /// Frames the fit uses (inclusive ranges of indices); every frame with a reference mask when empty.
+    pub fit: Vec<(usize, usize)>,
+    /// Only every N-th frame with a reference mask is used at all (fit and measured).
+    pub every: usize,
+    /// Also fit fx and fy.
+    pub fit_focal: bool,
+    /// Triangles the robot's silhouette is drawn with.
+    pub budget: usize,
+    /// The robot's geometry below this height in the base frame (m) is hidden (the table it
+    /// stands on) and cut from the silhouette.
+    pub hidden_below: Option<f64>,
+    /// Output folder.
+    pub out: PathBuf,
+    /// Show a progress bar.
+    pub progress: bool,
+}
+
+/// Fits the pose; returns the report (also `out/report.json`).
+pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError> {
+    let started = Instant::now();
+    let name = o.recording.display().to_string();
+    let bad = |message: String| AppError::replay(format!("{name}: {message}"));
+    let recording = Recording::open(&o.recording)?;
+    let first = recording
+        .frames
+        .first()
+        .ok_or_else(|| bad("the recording has no camera frames".into()))?;
+    let size = decode(first, &name)?.dimensions();
+    let calibration = match &o.camera {
+        Some(path) => read_calibration(path, Some(size))?,
+        None => recording.calibration.clone().ok_or_else(|| {
+            bad("the recording has no camera calibration: give one with --camera FILE".into())
+        })?,
+    };
+    if (calibration.width, calibration.height) != size {
+        return Err(bad(format!(
+            "the calibration is for {}x{} images, the frames are {}x{}",
+            calibration.width, calibration.height, size.0, size.1
+        )));
+    }
+    let c = calibration.k;
+    let k = Intrinsics {
+        fx: c[0],
+        fy: c[4],
+        cx: c[2],
+        cy: c[5],
+        width: size.0,
+        height: size.1,
+    };
+    let base_from_camera = match (&o.pose, &o.look_at) {
+        (Some(path), _) => read_pose(path)?,
+        (None, Some((eye, target))) => CameraPose {
+            eye: *eye,
+            target: *target,
+            up: [0.0, 0.0, 1.0],
+        }
+        .to_isometry()?,
+        (None, None) => recording.base_from_camera.ok_or_else(|| {
+            bad(
+                "no rough pose: give --pose FILE or --look-at EYE,TARGET (the recording has none)"
+                    .into(),
+            )
+        })?,
+    };
+    let rough = base_from_camera.inverse();
+    let model = RobotModel::from_urdf_file(&o.urdf, &o.packages)?;
+    let mut notes = Vec::new();
+    if !calibration.is_pinhole() {
+        notes.push(format!(
+            "the camera's {} distortion is not applied: the silhouettes are drawn through K alone (lens distortion in the erase and the fit is not built yet)",
+            calibration.distortion_model.ros_name()
+        ));
+    }
+    let states = joint_vectors(&recording, &model, &name, &mut notes)?;
+    let silhouette = RobotSilhouette::new(&model, o.budget)?;
+    // The frames with a reference mask: the robot's silhouette at its joints, and the mask.
+    let mut frames = Vec::new();
+    let mut with_reference = 0usize;
+    for (i, f) in recording.frames.iter().enumerate() {
+        let Some(m) = recording
+            .reference_masks
+            .iter()
+            .find(|m| m.stamp_ns.abs_diff(f.stamp_ns) <= 1_000_000)
+        else {
+            continue;
+        };
+        with_reference += 1;
+        if !(with_reference - 1).is_multiple_of(o.every.max(1)) {
+            continue;
+        }
+        let mask = decode(m, &name)?;
+        if mask.dimensions() != size {
+            return Err(bad(format!(
+                "the reference mask at {} ns is not {}x{}",
+                m.stamp_ns, size.0, size.1
+            )));
+        }
+        let q = interpolate(&states, f.stamp_ns);
+        let mut triangles = silhouette.at(&model, &Isometry3::identity(), q.as_slice());
+        if let Some(z) = o.hidden_below {
+            triangles = clip_below(&triangles, z);
+        }
+        frames.push((
+            i,
+            SilhouetteFrame {
+                triangles,
+                observed: dr::binarise(&mask.into_raw(), 4),
+            },
+        ));
+    }
+    if frames.is_empty() {
+        return Err(bad(
+            "no frame has a reference mask (the robot's silhouette to fit): import the frames with their masks".into(),
+        ));
+    }
+    let in_fit = |i: usize| o.fit.is_empty() || o.fit.iter().any(|&(a, b)| (a..=b).contains(&i));
+    let fit: Vec<SilhouetteFrame> = frames
+        .iter()
+        .filter(|(i, _)| in_fit(*i))
+        .map(|(_, f)| f.clone())
+        .collect();
+    if fit.is_empty() {
+        return Err(AppError::flag(
+            "--fit",
+            format!(
+                "no frame with a reference mask in that range (frames {} to {})",
+                frames[0].0,
+                frames[frames.len() - 1].0
+            ),
+        ));
+    }
+    if fit.len() > MAX_FIT_FRAMES {
+        return Err(AppError::flag(
+            "--every",
+            format!(
+                "{} frames to fit: at most {MAX_FIT_FRAMES} (each costs every evaluation); thin them with --every N or pick them with --fit",
+                fit.len()
+            ),
+        ));
+    }
+    std::fs::create_dir_all(&o.out).map_err(|source| AppError::Io {
+        path: o.out.clone(),
+        action: "create",
+        source,
+    })?;
+    let options = CalibrationOptions {
+        fit_focal: o.fit_focal,
+        ..CalibrationOptions::default()
+    };
+    let bar = crate::progress::bar(1, format!("calibrate on {} frames", fit.len()), o.progress);
+    let result = calibrate(&fit, &k, &rough, &options, |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })?;
+    bar.finish_and_clear();
+    // Every frame, before and after, at full resolution.
+    let mut per_frame = Vec::new();
+    let (w, h) = size;
+    for (i, f) in &frames {
+        let before = rasterize(&f.triangles, &rough, &k);
+        let after = rasterize(&f.triangles, &result.camera_from_base, &result.intrinsics);
+        let iou = |m: &[u8]| dr::mask_scores(m, &f.observed).map_or(f64::NAN, |s| s.iou);
+        let image = decode(&recording.frames[*i], &name)?.into_raw();
+        for (tag, m) in [("before", &before), ("after", &after)] {
+            let picture = overlay(&image, m, Some(&f.observed), w);
+            let path = o.out.join(format!("overlay_{tag}_{i:05}.png"));
+            image::RgbaImage::from_raw(w, h, picture)
+                .ok_or(AppError::ImageSize {
+                    what: "overlay".into(),
+                    width: w,
+                    height: h,
+                })?
+                .save(&path)
+                .map_err(|source| AppError::Image {
+                    path: path.clone(),
+                    action: "write",
+                    source,
+                })?;
+        }
+        per_frame.push(json!({
+            "frame": i,
+            "fit": in_fit(*i),
+            "iou_before": iou(&before),
+            "iou_after": iou(&after),
+        }));
+    }
+    // Pairing: each frame's reference against the silhouette at every frame's joints, at the
+    // fitted pose. A frame whose mask another frame's joints explain clearly better than its
+    // own was recorded with the wrong joints (or a wrong stamp): no pose can fit it.
+    let mut pairing = Vec::new();
+    let mut mispaired = Vec::new();
+    if frames.len() > MAX_PAIRING_FRAMES {
+        notes.push(format!(
+            "the pairing check was skipped: {} frames (at most {MAX_PAIRING_FRAMES}; thin them with --every)",
+            frames.len()
+        ));
+    } else {
+        let drawn: Vec<Vec<u8>> = frames
+            .iter()
+            .map(|(_, f)| rasterize(&f.triangles, &result.camera_from_base, &result.intrinsics))
+            .collect();
+        for (a, (i, f)) in frames.iter().enumerate() {
+            let scores: Vec<f64> = drawn
+                .iter()
+                .map(|m| dr::mask_scores(m, &f.observed).map_or(0.0, |s| s.iou))
+                .collect();
+            let (best, best_iou) =
+                scores.iter().enumerate().fold(
+                    (a, scores[a]),
+                    |b, (j, &v)| if v > b.1 { (j, v) } else { b },
+                );
+            let own = scores[a];
+            if best != a && best_iou > own + 0.1 {
+                mispaired.push(*i);
+            }
+            pairing.push(json!({
+                "frame": i,
+                "own_joints_iou": own,
+                "best_joints_frame": frames[best].0,
+                "best_joints_iou": best_iou,
+            }));
+        }
+        if !mispaired.is_empty() {
+            notes.push(format!(
+                "frames {mispaired:?}: another frame's joints fit the reference mask better than their own by more than 0.1 IoU (see pairing): the frames and joint states look mispaired, which bounds the IoU any pose reaches"
+            ));
+        }
+    }
+    let mean = |fit: bool, key: &str| -> Option<f64> {
+        let v: Vec<f64> = per_frame
+            .iter()
+            .filter(|f| f["fit"].as_bool() == Some(fit))
+            .filter_map(|f| f[key].as_f64())
+            .collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    };
+    let base_from_camera = result.camera_from_base.inverse();
+    let change = result.camera_from_base * rough.inverse();
+    let pose_path = o.out.join("camera_pose.yaml");
+    let m = base_from_camera.to_homogeneous();
+    let rows: String = (0..4)
+        .map(|r| {
+            format!(
+                "  - [{:.9}, {:.9}, {:.9}, {:.9}]\n",
+                m[(r, 0)],
+                m[(r, 1)],
+                m[(r, 2)],
+                m[(r, 3)]
+            )
+        })
+        .collect();
+    let text = format!(
+        "# The camera's pose in the robot's base frame (OpenCV optical axes: x right, y down, z\n# forward), fitted by `avatarm calibrate` to {} frames of {}.\nbase_from_camera:\n{rows}",
+        fit.len(),
+        name
+    );
+    std::fs::write(&pose_path, text).map_err(|e| AppError::write(&pose_path, e))?;
+    let mut camera_path = None;
+    if o.fit_focal {
+        let path = o.out.join("camera_info.yaml");
+        let ki = &result.intrinsics;
+        let text = format!(
+            "# K fitted by `avatarm calibrate` (fx, fy; the principal point and distortion as recorded).\nimage_width: {}\nimage_height: {}\ncamera_matrix:\n  rows: 3\n  cols: 3\n  data: [{}, 0, {}, 0, {}, {}, 0, 0, 1]\ndistortion_model: {}\ndistortion_coefficients:\n  rows: 1\n  cols: {}\n  data: [{}]\n",
+            ki.width,
+            ki.height,
+            ki.fx,
+            ki.cx,
+            ki.fy,
+            ki.cy,
+            calibration.distortion_model.ros_name(),
+            calibration.d.len(),
+            calibration
+                .d
+                .iter()
+                .map(|v| v.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        std::fs::write(&path, text).map_err(|e| AppError::write(&path, e))?;
+        camera_path = Some(path.display().to_string());
+    }
+    let stages: Vec<serde_json::Value> = ["coarse", "fine", "full"]
+        .iter()
+        .enumerate()
+        .map(|(i, stage)| {
+            json!({"stage": stage, "seconds": result.stage_seconds[i],
+                   "evaluations": result.stage_evaluations[i]})
+        })
+        .collect();
+    let q: UnitQuaternion<f64> = base_from_camera.rotation;
+    let t = base_from_camera.translation.vector;
+    let report = json!({
+        "recording": name,
+        "robot": model.name,
+        "triangles": silhouette.triangle_count(),
+        "hidden_below_m": o.hidden_below,
+        "frames_with_reference": frames.len(),
+        "frames_fit": fit.len(),
+        "iou": {
+            "fit_before": mean(true, "iou_before"),
+            "fit_after": mean(true, "iou_after"),
+            "held_out_before": mean(false, "iou_before"),
+            "held_out_after": mean(false, "iou_after"),
+            "per_frame": per_frame,
+        },
+        "base_from_camera": {
+            "translation": [t.x, t.y, t.z],
+            "quaternion_xyzw": [q.i, q.j, q.k, q.w],
+        },
+        "change_from_rough": {
+            "rotation_deg": change.rotation.angle().to_degrees(),
+            "translation_mm": 1e3 * change.translation.vector.norm(),
+        },
+        "intrinsics": {"fx": result.intrinsics.fx, "fy": result.intrinsics.fy,
+                       "cx": result.intrinsics.cx, "cy": result.intrinsics.cy, "fitted": o.fit_focal},
+        "cost_px": {"rough": result.rough_cost_px, "fitted": result.cost_px},
+        "uncertainty": {
+            "spread_deg": result.spread_deg_mm.0,
+            "spread_mm": result.spread_deg_mm.1,
+            "starts": result.starts.iter().map(|s| json!({
+                "start_deg": s.start.0, "start_m": s.start.1, "cost_px": s.cost_px,
+            })).collect::<Vec<_>>(),
+            "note": "cost_px: the mean truncated chamfer distance between the outlines at half resolution; spread: the largest difference between the answer and another start that ended within 10 % of its cost",
+        },
+        "pairing": pairing,
+        "mispaired_frames": mispaired,
+        "evaluations": result.evaluations,
+        "stages": stages,
+        "wall_time_s": started.elapsed().as_secs_f64(),
+        "notes": notes,
+        "outputs": {"pose": pose_path.display().to_string(), "camera": camera_path},
+    });
+    let path = o.out.join("report.json");
+    let text = serde_json::to_string_pretty(&report)?;
+    std::fs::write(&path, text + "\n").map_err(|e| AppError::write(path, e))?;
+    Ok(report)
+}
