@@ -21,6 +21,7 @@ use avatarm_core::vision::calibrate::{
     CalibrationOptions, RobotSilhouette, SilhouetteFrame, calibrate, clip_below, rasterize,
 };
 use avatarm_core::vision::camera::{CameraPose, Intrinsics};
+use avatarm_core::vision::distortion::Distortion;
 use avatarm_record::Recording;
 use avatarm_record::camera::{read_calibration, read_pose};
 use nalgebra::{Isometry3, UnitQuaternion};
@@ -117,12 +118,8 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     let rough = base_from_camera.inverse();
     let model = RobotModel::from_urdf_file(&o.urdf, &o.packages)?;
     let mut notes = Vec::new();
-    if !calibration.is_pinhole() {
-        notes.push(format!(
-            "the camera's {} distortion is not applied: the silhouettes are drawn through K alone (lens distortion in the erase and the fit is not built yet)",
-            calibration.distortion_model.ros_name()
-        ));
-    }
+    // The lens: every projected vertex goes through it, in the fit and in the IoUs.
+    let lens = Distortion::from_ros(calibration.distortion_model.ros_name(), &calibration.d)?;
     let states = joint_vectors(&recording, &model, &name, &mut notes)?;
     let silhouette = RobotSilhouette::new(&model, o.budget)?;
     // The frames with a reference mask: the robot's silhouette at its joints, and the mask.
@@ -197,6 +194,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     })?;
     let options = CalibrationOptions {
         fit_focal: o.fit_focal,
+        distortion: lens,
         ..CalibrationOptions::default()
     };
     let bar = crate::progress::bar(1, format!("calibrate on {} frames", fit.len()), o.progress);
@@ -209,8 +207,13 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     let mut per_frame = Vec::new();
     let (w, h) = size;
     for (i, f) in &frames {
-        let before = rasterize(&f.triangles, &rough, &k);
-        let after = rasterize(&f.triangles, &result.camera_from_base, &result.intrinsics);
+        let before = rasterize(&f.triangles, &rough, &k, &lens);
+        let after = rasterize(
+            &f.triangles,
+            &result.camera_from_base,
+            &result.intrinsics,
+            &lens,
+        );
         let iou = |m: &[u8]| dr::mask_scores(m, &f.observed).map_or(f64::NAN, |s| s.iou);
         let image = decode(&recording.frames[*i], &name)?.into_raw();
         for (tag, m) in [("before", &before), ("after", &after)] {
@@ -249,7 +252,14 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     } else {
         let drawn: Vec<Vec<u8>> = frames
             .iter()
-            .map(|(_, f)| rasterize(&f.triangles, &result.camera_from_base, &result.intrinsics))
+            .map(|(_, f)| {
+                rasterize(
+                    &f.triangles,
+                    &result.camera_from_base,
+                    &result.intrinsics,
+                    &lens,
+                )
+            })
             .collect();
         for (a, (i, f)) in frames.iter().enumerate() {
             let scores: Vec<f64> = drawn
@@ -346,6 +356,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         "robot": model.name,
         "triangles": silhouette.triangle_count(),
         "hidden_below_m": o.hidden_below,
+        "distortion": {"model": calibration.distortion_model.ros_name(), "coefficients": calibration.d, "applied": !lens.is_none()},
         "frames_with_reference": frames.len(),
         "frames_fit": fit.len(),
         "iou": {

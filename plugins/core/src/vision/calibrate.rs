@@ -28,6 +28,7 @@ use crate::error::{Error, Result};
 use crate::robot::mesh::{TriMesh, load_shape_mesh, tessellate};
 use crate::robot::{GeometryKind, RobotModel};
 use crate::vision::camera::Intrinsics;
+use crate::vision::distortion::Distortion;
 
 /// A robot's visual geometry, loaded once and simplified to a triangle budget, to be posed at
 /// each frame's joints.
@@ -169,6 +170,9 @@ pub struct CalibrationOptions {
     pub start_m: f64,
     /// Nelder-Mead iterations per start and stage.
     pub max_iters: u64,
+    /// The lens's distortion, applied to every projected vertex (triangle edges stay straight
+    /// between them: the meshes' facets are small against its curvature).
+    pub distortion: Distortion,
 }
 
 impl Default for CalibrationOptions {
@@ -178,6 +182,7 @@ impl Default for CalibrationOptions {
             start_deg: 8.0,
             start_m: 0.1,
             max_iters: 250,
+            distortion: Distortion::None,
         }
     }
 }
@@ -218,18 +223,19 @@ pub struct CalibrationResult {
     pub stage_evaluations: [u64; 3],
 }
 
-/// Rasterises the triangles seen through `camera_from_base` with `k` into a `k.width ×
-/// k.height` 0/1 mask (pixel centres sampled; triangles with a vertex within 1 cm of the camera
-/// plane or behind it are left out).
+/// Rasterises the triangles seen through `camera_from_base` with `k` and the lens `d` into a
+/// `k.width × k.height` 0/1 mask (pixel centres sampled; triangles with a vertex within 1 cm of
+/// the camera plane or behind it are left out).
 pub fn rasterize(
     triangles: &[[Point3<f64>; 3]],
     camera_from_base: &Isometry3<f64>,
     k: &Intrinsics,
+    d: &Distortion,
 ) -> Vec<u8> {
     let (w, h) = (k.width as usize, k.height as usize);
     let mut mask = vec![0u8; w * h];
     for t in triangles {
-        if let Some(p) = project(t, camera_from_base, k) {
+        if let Some(p) = project(t, camera_from_base, k, d) {
             fill_triangle(&mut mask, w, h, &p);
         }
     }
@@ -242,11 +248,12 @@ pub fn coverage(
     triangles: &[[Point3<f64>; 3]],
     camera_from_base: &Isometry3<f64>,
     k: &Intrinsics,
+    d: &Distortion,
 ) -> Vec<u16> {
     let (w, h) = (k.width as usize, k.height as usize);
     let mut bits = vec![0u16; w * h];
     for t in triangles {
-        let Some(p) = project(t, camera_from_base, k) else {
+        let Some(p) = project(t, camera_from_base, k, d) else {
             continue;
         };
         // In sample units: 4 per pixel, sample (4x + i) at x - 3/8 + i/4.
@@ -270,12 +277,13 @@ pub fn coverage(
     bits
 }
 
-/// A triangle's vertices in pixels (`None` when one is within 1 cm of the camera plane or
-/// behind it).
+/// A triangle's vertices in pixels through the lens (`None` when one is within 1 cm of the
+/// camera plane or behind it).
 fn project(
     t: &[Point3<f64>; 3],
     camera_from_base: &Isometry3<f64>,
     k: &Intrinsics,
+    d: &Distortion,
 ) -> Option<[[f64; 2]; 3]> {
     let mut p = [[0.0f64; 2]; 3];
     for (i, v) in t.iter().enumerate() {
@@ -283,7 +291,8 @@ fn project(
         if c.z.is_nan() || c.z < 0.01 {
             return None;
         }
-        p[i] = [k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy];
+        let (x, y) = d.distort(c.x / c.z, c.y / c.z);
+        p[i] = [k.fx * x + k.cx, k.fy * y + k.cy];
     }
     Some(p)
 }
@@ -437,6 +446,7 @@ struct Level {
 /// The fit's cost at one working resolution.
 struct Chamfer {
     k: Intrinsics,
+    d: Distortion,
     frames: Vec<Level>,
     truncate_px: f64,
     rough: Isometry3<f64>,
@@ -451,6 +461,7 @@ struct Chamfer {
 /// averages out over its thousands of pixels; a binary raster's chamfer is flat there.
 struct Area {
     k: Intrinsics,
+    d: Distortion,
     frames: Vec<AreaFrame>,
     rough: Isometry3<f64>,
     fit_focal: bool,
@@ -535,12 +546,14 @@ impl Area {
     fn new(
         frames: &[SilhouetteFrame],
         k: &Intrinsics,
+        d: Distortion,
         rough: Isometry3<f64>,
         fit_focal: bool,
     ) -> Self {
         let (w, h) = (k.width as usize, k.height as usize);
         Self {
             k: *k,
+            d,
             frames: frames
                 .iter()
                 .map(|f| {
@@ -577,13 +590,13 @@ impl Area {
         let (pose, k) = candidate(p, &self.rough, &self.k, self.fit_focal);
         let (w, h) = (k.width as usize, k.height as usize);
         let per_frame = |f: &AreaFrame| {
-            let bits = coverage(&f.triangles, &pose, &k);
+            let bits = coverage(&f.triangles, &pose, &k, &self.d);
             // Both silhouettes, blurred, are zero outside the union of their grown boxes: the
             // blur and the difference run there alone.
             let model = f
                 .triangles
                 .iter()
-                .filter_map(|t| project(t, &pose, &k))
+                .filter_map(|t| project(t, &pose, &k, &self.d))
                 .flatten();
             let b = grown_box(model, BLUR_MARGIN, w, h);
             let o = f.within;
@@ -659,6 +672,7 @@ impl Chamfer {
     fn new(
         frames: &[SilhouetteFrame],
         k: &Intrinsics,
+        d: Distortion,
         scale: f64,
         truncate_px: f64,
         rough: Isometry3<f64>,
@@ -685,6 +699,7 @@ impl Chamfer {
             .collect();
         Self {
             k: small,
+            d,
             frames: levels,
             truncate_px,
             rough,
@@ -701,7 +716,7 @@ impl Chamfer {
         let (w, h) = (k.width as usize, k.height as usize);
         let tau = self.truncate_px;
         let per_frame = |f: &Level| {
-            let model = rasterize(&f.triangles, &pose, &k);
+            let model = rasterize(&f.triangles, &pose, &k, &self.d);
             let edges = outline(&model, w, h);
             let model_edges: Vec<usize> = edges
                 .iter()
@@ -888,7 +903,15 @@ pub fn calibrate(
         p
     };
     // Coarse: every start at a quarter of the resolution, outlines within 12 px there (48 px at full resolution) count.
-    let coarse = Chamfer::new(frames, k, 0.25, 12.0, *rough, options.fit_focal);
+    let coarse = Chamfer::new(
+        frames,
+        k,
+        options.distortion,
+        0.25,
+        12.0,
+        *rough,
+        options.fit_focal,
+    );
     let mut steps = vec![0.05, 0.05, 0.05, 0.03, 0.03, 0.06];
     if options.fit_focal {
         steps.extend([0.03, 0.03]);
@@ -905,7 +928,15 @@ pub fn calibrate(
     coarse_ends.sort_by(|a, b| a.2.total_cmp(&b.2));
     let coarse_s = clock.elapsed().as_secs_f64();
     // Fine: the best few at half resolution, outlines within 10 px count.
-    let fine = Chamfer::new(frames, k, 0.5, 10.0, *rough, options.fit_focal);
+    let fine = Chamfer::new(
+        frames,
+        k,
+        options.distortion,
+        0.5,
+        10.0,
+        *rough,
+        options.fit_focal,
+    );
     let fine_steps: Vec<f64> = steps.iter().map(|s| s * 0.3).collect();
     let rough_cost_px = fine.at(&vec![0.0; dims]);
     let mut ends = Vec::with_capacity(fine_count);
@@ -926,7 +957,7 @@ pub fn calibrate(
     let fine_s = clock.elapsed().as_secs_f64() - coarse_s;
     // Finest: the area where the model's sub-pixel coverage and the observed silhouette
     // disagree, at full resolution, from the best.
-    let full = Area::new(frames, k, *rough, options.fit_focal);
+    let full = Area::new(frames, k, options.distortion, *rough, options.fit_focal);
     let full_steps: Vec<f64> = fine_steps.iter().map(|s| s * 0.3).collect();
     // (Nelder-Mead returns its best, never worse than where it started on this cost.)
     let (p, _) = search(&full, &ends[0].1, &full_steps, options.max_iters)?;
@@ -1021,6 +1052,73 @@ mod tests {
         (k, camera_from_base)
     }
 
+    /// Each triangle split in four, `levels` times (a mesh's small facets).
+    fn subdivided(triangles: &[[Point3<f64>; 3]], levels: usize) -> Vec<[Point3<f64>; 3]> {
+        let mut out = triangles.to_vec();
+        for _ in 0..levels {
+            out = out
+                .iter()
+                .flat_map(|[a, b, c]| {
+                    let (ab, bc, ca) = (
+                        nalgebra::center(a, b),
+                        nalgebra::center(b, c),
+                        nalgebra::center(c, a),
+                    );
+                    [[*a, ab, ca], [ab, *b, bc], [ca, bc, *c], [ab, bc, ca]]
+                })
+                .collect();
+        }
+        out
+    }
+
+    #[test]
+    fn a_distorted_lens_is_honoured() {
+        let (k, truth) = camera();
+        // A webcam's barrel distortion: the image's corners 13 % inwards.
+        let lens = Distortion::PlumbBob([-0.25, 0.05, 0.0005, -0.0005, 0.0]);
+        let frames: Vec<SilhouetteFrame> = [0.0f64, 0.2]
+            .iter()
+            .map(|&shift| {
+                let mut boxes = cuboid([0.0, 0.0, 0.0], [0.2, 0.2, 0.6]);
+                boxes.extend(cuboid([0.3, 0.4 + shift, 0.3], [0.2, 0.3, 0.1]));
+                boxes.extend(cuboid([-0.3, -0.45, -0.3 + shift], [0.1, 0.1, 0.3]));
+                let triangles = subdivided(&boxes, 3);
+                let observed = rasterize(&triangles, &truth, &k, &lens);
+                SilhouetteFrame {
+                    triangles,
+                    observed,
+                }
+            })
+            .collect();
+        let error = Isometry3::from_parts(
+            Translation3::new(0.006, -0.005, 0.006),
+            UnitQuaternion::from_scaled_axis(Vector3::new(0.01, -0.012, 0.005)),
+        );
+        let rough = error * truth;
+        let off = |lens: Distortion| {
+            let options = CalibrationOptions {
+                distortion: lens,
+                ..CalibrationOptions::default()
+            };
+            let r = calibrate(&frames, &k, &rough, &options, |_, _| {}).expect("fit");
+            let d = r.camera_from_base * truth.inverse();
+            (
+                d.rotation.angle().to_degrees(),
+                1e3 * d.translation.vector.norm(),
+            )
+        };
+        let (deg, mm) = off(lens);
+        let (deg_pinhole, mm_pinhole) = off(Distortion::None);
+        eprintln!(
+            "distortion honoured: {deg:.3} deg, {mm:.2} mm; ignored: {deg_pinhole:.3} deg, {mm_pinhole:.2} mm"
+        );
+        assert!(deg < 0.2 && mm < 3.0, "{deg:.3} deg, {mm:.2} mm");
+        assert!(
+            mm_pinhole > 3.0 * mm.max(1.0),
+            "{mm_pinhole:.2} mm against {mm:.2} mm"
+        );
+    }
+
     #[test]
     fn clipping_keeps_what_is_above_the_table() {
         let unit = cuboid([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]);
@@ -1066,7 +1164,12 @@ mod tests {
     fn a_box_rasterises_where_it_projects() {
         let (k, pose) = camera();
         // A 0.4 m cube at 1.5 m: about 0.4 / 1.5 * fy = 34 px across.
-        let mask = rasterize(&cuboid([0.0, 0.0, 0.0], [0.4, 0.4, 0.4]), &pose, &k);
+        let mask = rasterize(
+            &cuboid([0.0, 0.0, 0.0], [0.4, 0.4, 0.4]),
+            &pose,
+            &k,
+            &Distortion::None,
+        );
         let count = mask.iter().filter(|&&m| m != 0).count();
         let side = 0.4 / 1.3 * k.fy; // the near face at 1.3 m bounds it
         assert!(
@@ -1083,7 +1186,12 @@ mod tests {
         }
         assert!((sx / count as f64 - k.cx).abs() < 1.0 && (sy / count as f64 - k.cy).abs() < 1.0);
         // Behind the camera: nothing.
-        let behind = rasterize(&cuboid([-3.0, 0.0, 0.0], [0.4, 0.4, 0.4]), &pose, &k);
+        let behind = rasterize(
+            &cuboid([-3.0, 0.0, 0.0], [0.4, 0.4, 0.4]),
+            &pose,
+            &k,
+            &Distortion::None,
+        );
         assert!(behind.iter().all(|&m| m == 0));
     }
 
@@ -1099,7 +1207,7 @@ mod tests {
                 triangles.extend(cuboid([0.3, 0.25 + shift, 0.25], [0.2, 0.4, 0.1]));
                 triangles.extend(cuboid([-0.3, -0.3, -0.2 + shift], [0.1, 0.1, 0.3]));
                 triangles.extend(cuboid([0.5, -0.1 - shift, 0.3], [0.1, 0.3, 0.1]));
-                let observed = rasterize(&triangles, &truth, &k);
+                let observed = rasterize(&triangles, &truth, &k, &Distortion::None);
                 SilhouetteFrame {
                     triangles,
                     observed,
