@@ -331,8 +331,10 @@ fn image_of(
 }
 
 fn size_of(f: &CompressedFrame, at: &str) -> Result<(u32, u32), String> {
-    image::load_from_memory(&f.data)
-        .map(|i| (i.width(), i.height()))
+    image::ImageReader::new(std::io::Cursor::new(&f.data))
+        .with_guessed_format()
+        .map_err(|e| format!("{at}: {e}"))?
+        .into_dimensions()
         .map_err(|e| format!("{at}: the image does not decode: {e}"))
 }
 
@@ -637,27 +639,20 @@ pub fn import_bag(o: &BagOptions) -> Result<BagSummary, AppError> {
             ),
         ));
     }
+    // Every frame and mask the first frame's size (read from the headers alone).
     let size = size_of(&frames[0], &format!("{image_topic}, the first frame"))
         .map_err(|m| bag_error(path, m))?;
-    for (i, f) in frames.iter().enumerate().skip(1) {
-        let s = size_of(f, &format!("{image_topic}, frame {i}")).map_err(|m| bag_error(path, m))?;
+    let masks_topic = mask_topic.clone().unwrap_or_default();
+    let frames_at = frames.iter().enumerate().map(|(i, f)| (&image_topic, i, f));
+    let masks_at = masks.iter().enumerate().map(|(i, f)| (&masks_topic, i, f));
+    for (topic, i, f) in frames_at.chain(masks_at) {
+        let at = format!("{topic}, message {i}");
+        let s = size_of(f, &at).map_err(|m| bag_error(path, m))?;
         if s != size {
             return Err(bag_error(
                 path,
                 format!(
-                    "{image_topic}, frame {i}: {}x{}, the first frame {}x{}",
-                    s.0, s.1, size.0, size.1
-                ),
-            ));
-        }
-    }
-    for (i, m) in masks.iter().enumerate() {
-        let s = size_of(m, &format!("the mask {i}")).map_err(|m| bag_error(path, m))?;
-        if s != size {
-            return Err(bag_error(
-                path,
-                format!(
-                    "the mask {i} is {}x{}, the frames {}x{}",
+                    "{at}: {}x{}, the first frame {}x{}",
                     s.0, s.1, size.0, size.1
                 ),
             ));

@@ -20,15 +20,15 @@ use avatarm_core::robot::{PackagePath, RobotModel};
 use avatarm_core::vision::calibrate::{
     CalibrationOptions, RobotSilhouette, SilhouetteFrame, calibrate, clip_below, rasterize,
 };
-use avatarm_core::vision::camera::{CameraPose, Intrinsics};
+use avatarm_core::vision::camera::CameraPose;
 use avatarm_core::vision::distortion::Distortion;
 use avatarm_record::Recording;
-use avatarm_record::camera::{read_calibration, read_pose};
+use avatarm_record::camera::read_pose;
 use nalgebra::{Isometry3, UnitQuaternion};
 use serde_json::json;
 
 use crate::AppError;
-use crate::replay::recording::{decode, interpolate, joint_vectors, overlay};
+use crate::replay::recording::{decode, interpolate, joint_vectors, overlay, recording_camera};
 
 /// The pairing check draws every frame's joints against every frame's mask: up to this many.
 const MAX_PAIRING_FRAMES: usize = 60;
@@ -74,32 +74,8 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     let name = o.recording.display().to_string();
     let bad = |message: String| AppError::replay(format!("{name}: {message}"));
     let recording = Recording::open(&o.recording)?;
-    let first = recording
-        .frames
-        .first()
-        .ok_or_else(|| bad("the recording has no camera frames".into()))?;
-    let size = decode(first, &name)?.dimensions();
-    let calibration = match &o.camera {
-        Some(path) => read_calibration(path, Some(size))?,
-        None => recording.calibration.clone().ok_or_else(|| {
-            bad("the recording has no camera calibration: give one with --camera FILE".into())
-        })?,
-    };
-    if (calibration.width, calibration.height) != size {
-        return Err(bad(format!(
-            "the calibration is for {}x{} images, the frames are {}x{}",
-            calibration.width, calibration.height, size.0, size.1
-        )));
-    }
-    let c = calibration.k;
-    let k = Intrinsics {
-        fx: c[0],
-        fy: c[4],
-        cx: c[2],
-        cy: c[5],
-        width: size.0,
-        height: size.1,
-    };
+    let (calibration, k) = recording_camera(&recording, o.camera.as_deref(), &name)?;
+    let size = (k.width, k.height);
     let base_from_camera = match (&o.pose, &o.look_at) {
         (Some(path), _) => read_pose(path)?,
         (None, Some((eye, target))) => CameraPose {
@@ -205,6 +181,8 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     bar.finish_and_clear();
     // Every frame, before and after, at full resolution.
     let mut per_frame = Vec::new();
+    // The silhouettes at the fitted pose, kept for the pairing check.
+    let mut drawn: Vec<Vec<u8>> = Vec::with_capacity(frames.len());
     let (w, h) = size;
     for (i, f) in &frames {
         let before = rasterize(&f.triangles, &rough, &k, &lens);
@@ -238,6 +216,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             "iou_before": iou(&before),
             "iou_after": iou(&after),
         }));
+        drawn.push(after);
     }
     // Pairing: each frame's reference against the silhouette at every frame's joints, at the
     // fitted pose. A frame whose mask another frame's joints explain clearly better than its
@@ -250,17 +229,6 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             frames.len()
         ));
     } else {
-        let drawn: Vec<Vec<u8>> = frames
-            .iter()
-            .map(|(_, f)| {
-                rasterize(
-                    &f.triangles,
-                    &result.camera_from_base,
-                    &result.intrinsics,
-                    &lens,
-                )
-            })
-            .collect();
         for (a, (i, f)) in frames.iter().enumerate() {
             let scores: Vec<f64> = drawn
                 .iter()

@@ -21,8 +21,13 @@ fn out_dir(name: &str) -> PathBuf {
 
 /// Runs `avatarm import ARGS`; (success, stdout + stderr).
 fn import(args: &[&str]) -> (bool, String) {
+    avatarm("import", args)
+}
+
+/// Runs `avatarm COMMAND ARGS` from the project root; (success, stdout + stderr).
+fn avatarm(command: &str, args: &[&str]) -> (bool, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_avatarm"))
-        .arg("import")
+        .arg(command)
         .args(args)
         .current_dir(root())
         .output()
@@ -195,18 +200,7 @@ fn import_panda(data: &Path, out: &Path) -> PathBuf {
 
 /// Runs `avatarm replay ARGS`; (success, stdout + stderr).
 fn replay(args: &[&str]) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_avatarm"))
-        .arg("replay")
-        .args(args)
-        .current_dir(root())
-        .output()
-        .expect("avatarm runs");
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out.status.success(), text)
+    avatarm("replay", args)
 }
 
 /// The real Panda's frames through the erase: every frame masked at its recorded joints,
@@ -497,18 +491,7 @@ fn bad_folders_are_refused_naming_the_entry() {
 
 /// Runs `avatarm calibrate ARGS`; (success, stdout + stderr).
 fn calibrate(args: &[&str]) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_avatarm"))
-        .arg("calibrate")
-        .args(args)
-        .current_dir(root())
-        .output()
-        .expect("avatarm runs");
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out.status.success(), text)
+    avatarm("calibrate", args)
 }
 
 fn report(path: &Path) -> serde_json::Value {

@@ -637,8 +637,8 @@ fn score_frame(
     Ok((score, recorded))
 }
 
-/// Median and 95th percentile.
-fn spread(values: &[f64]) -> serde_json::Value {
+/// Median and 95th percentile of some times, or null.
+pub(crate) fn spread(values: &[f64]) -> serde_json::Value {
     if values.is_empty() {
         return json!(null);
     }

@@ -198,23 +198,8 @@ impl Input {
         let recording = Recording::open(&o.recording)?;
         let name = o.recording.display().to_string();
         let bad = |message: String| AppError::replay(format!("{name}: {message}"));
-        let first = recording
-            .frames
-            .first()
-            .ok_or_else(|| bad("the recording has no camera frames".into()))?;
-        let size = decode(first, &name)?.dimensions();
-        let calibration = match &o.camera {
-            Some(path) => read_calibration(path, Some(size))?,
-            None => recording.calibration.clone().ok_or_else(|| {
-                bad("the recording has no camera calibration: give one with --camera FILE".into())
-            })?,
-        };
-        if (calibration.width, calibration.height) != size {
-            return Err(bad(format!(
-                "the calibration is for {}x{} images, the frames are {}x{}",
-                calibration.width, calibration.height, size.0, size.1
-            )));
-        }
+        let (calibration, intrinsics) = recording_camera(&recording, o.camera.as_deref(), &name)?;
+        let size = (intrinsics.width, intrinsics.height);
         let base_from_camera = match &o.pose {
             Some(path) => read_pose(path)?,
             None => recording.base_from_camera.ok_or_else(|| {
@@ -228,16 +213,8 @@ impl Input {
                 calibration.distortion_model.ros_name()
             ));
         }
-        let k = calibration.k;
         let camera = PinholeCamera {
-            intrinsics: Intrinsics {
-                fx: k[0],
-                fy: k[4],
-                cx: k[2],
-                cy: k[5],
-                width: size.0,
-                height: size.1,
-            },
+            intrinsics,
             world_from_camera: base_from_camera,
         };
         let model = Arc::new(RobotModel::from_urdf_file(&o.urdf, &o.packages)?);
@@ -288,6 +265,44 @@ impl Input {
 /// The recording's joint states in the description's q order, by stamp. Errors name a joint
 /// the description does not have; joints the recording never names stay at 0 (said in the
 /// notes).
+/// A recording's camera: its calibration (or `camera`, a camera file, instead) checked against
+/// the frames' size, and the pinhole intrinsics from its K. Errors: no frames, no calibration,
+/// a calibration for another image size.
+pub(crate) fn recording_camera(
+    recording: &Recording,
+    camera: Option<&Path>,
+    name: &str,
+) -> Result<(CameraCalibration, Intrinsics), AppError> {
+    let bad = |message: String| AppError::replay(format!("{name}: {message}"));
+    let first = recording
+        .frames
+        .first()
+        .ok_or_else(|| bad("the recording has no camera frames".into()))?;
+    let size = decode(first, name)?.dimensions();
+    let calibration = match camera {
+        Some(path) => read_calibration(path, Some(size))?,
+        None => recording.calibration.clone().ok_or_else(|| {
+            bad("the recording has no camera calibration: give one with --camera FILE".into())
+        })?,
+    };
+    if (calibration.width, calibration.height) != size {
+        return Err(bad(format!(
+            "the calibration is for {}x{} images, the frames are {}x{}",
+            calibration.width, calibration.height, size.0, size.1
+        )));
+    }
+    let k = calibration.k;
+    let intrinsics = Intrinsics {
+        fx: k[0],
+        fy: k[4],
+        cx: k[2],
+        cy: k[5],
+        width: size.0,
+        height: size.1,
+    };
+    Ok((calibration, intrinsics))
+}
+
 pub(crate) fn joint_vectors(
     recording: &Recording,
     model: &RobotModel,
@@ -712,16 +727,7 @@ pub(crate) fn overlay(frame: &[u8], mask: &[u8], reference: Option<&[u8]>, width
     out
 }
 
-/// Median and 95th percentile of some times, or null.
-fn spread(values: &[f64]) -> serde_json::Value {
-    if values.is_empty() {
-        return json!(null);
-    }
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-    json!({"median": at(0.5), "p95": at(0.95)})
-}
+use super::spread;
 
 fn mean(v: &[f64]) -> Option<f64> {
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)

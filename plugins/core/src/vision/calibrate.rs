@@ -631,23 +631,31 @@ impl Area {
             // Per cent of the observed area, so that it is of the chamfer's order.
             100.0 * ssd / f.area
         };
-        let half = self.frames.len().div_ceil(2);
-        let (first, second) = self.frames.split_at(half);
-        let total: f64 = std::thread::scope(|s| {
-            let other = s.spawn(|| second.iter().map(per_frame).sum::<f64>());
-            let mine: f64 = first.iter().map(per_frame).sum();
-            mine + other.join().unwrap_or(f64::INFINITY)
-        });
-        total / self.frames.len().max(1) as f64
+        mean_over_frames(&self.frames, per_frame)
     }
 }
 
-impl CostFunction for &Area {
+/// The mean of `per_frame` over the frames, on two threads (this machine's cores; the sum
+/// does not depend on it).
+fn mean_over_frames<F: Sync>(frames: &[F], per_frame: impl Fn(&F) -> f64 + Sync) -> f64 {
+    let (first, second) = frames.split_at(frames.len().div_ceil(2));
+    let total: f64 = std::thread::scope(|s| {
+        let other = s.spawn(|| second.iter().map(&per_frame).sum::<f64>());
+        let mine: f64 = first.iter().map(&per_frame).sum();
+        mine + other.join().unwrap_or(f64::INFINITY)
+    });
+    total / frames.len().max(1) as f64
+}
+
+/// A stage's cost as argmin's Nelder-Mead sees it.
+struct Stage<'a>(&'a dyn Fn(&[f64]) -> f64);
+
+impl CostFunction for Stage<'_> {
     type Param = Vec<f64>;
     type Output = f64;
 
     fn cost(&self, p: &Self::Param) -> std::result::Result<f64, argmin::core::Error> {
-        Ok(self.at(p))
+        Ok((self.0)(p))
     }
 }
 
@@ -741,24 +749,7 @@ impl Chamfer {
                 / f.observed_outline.len() as f64;
             a + b
         };
-        // The frames on two threads (this machine's cores); the sum does not depend on it.
-        let half = self.frames.len().div_ceil(2);
-        let (first, second) = self.frames.split_at(half);
-        let total: f64 = std::thread::scope(|s| {
-            let other = s.spawn(|| second.iter().map(per_frame).sum::<f64>());
-            let mine: f64 = first.iter().map(per_frame).sum();
-            mine + other.join().unwrap_or(f64::INFINITY)
-        });
-        total / self.frames.len().max(1) as f64
-    }
-}
-
-impl CostFunction for &Chamfer {
-    type Param = Vec<f64>;
-    type Output = f64;
-
-    fn cost(&self, p: &Self::Param) -> std::result::Result<f64, argmin::core::Error> {
-        Ok(self.at(p))
+        mean_over_frames(&self.frames, per_frame)
     }
 }
 
@@ -816,10 +807,12 @@ pub fn reprojection_rms(
 }
 
 /// Nelder-Mead from `start` with initial steps `steps`; the best parameters and their cost.
-fn search<'a, C>(cost: &'a C, start: &[f64], steps: &[f64], iters: u64) -> Result<(Vec<f64>, f64)>
-where
-    &'a C: CostFunction<Param = Vec<f64>, Output = f64>,
-{
+fn search(
+    cost: &dyn Fn(&[f64]) -> f64,
+    start: &[f64],
+    steps: &[f64],
+    iters: u64,
+) -> Result<(Vec<f64>, f64)> {
     let mut simplex = vec![start.to_vec()];
     for (i, s) in steps.iter().enumerate() {
         let mut v = start.to_vec();
@@ -832,7 +825,7 @@ where
             what: "calibration".into(),
             message: e.to_string(),
         })?;
-    let result = Executor::new(cost, solver)
+    let result = Executor::new(Stage(cost), solver)
         .configure(|s| s.max_iters(iters))
         .run()
         .map_err(|e| Error::BadSetting {
@@ -921,7 +914,7 @@ pub fn calibrate(
     let clock = std::time::Instant::now();
     let mut coarse_ends = Vec::with_capacity(starts.len());
     for (i, s) in starts.iter().enumerate() {
-        let (p, c) = search(&coarse, &param(s), &steps, options.max_iters)?;
+        let (p, c) = search(&|p| coarse.at(p), &param(s), &steps, options.max_iters)?;
         coarse_ends.push((i, p, c));
         progress(i + 1, total);
     }
@@ -941,7 +934,7 @@ pub fn calibrate(
     let rough_cost_px = fine.at(&vec![0.0; dims]);
     let mut ends = Vec::with_capacity(fine_count);
     for (j, (i, p, _)) in coarse_ends.iter().take(fine_count).enumerate() {
-        let (p, c) = search(&fine, p, &fine_steps, options.max_iters)?;
+        let (p, c) = search(&|p| fine.at(p), p, &fine_steps, options.max_iters)?;
         let (pose, _) = candidate(&p, rough, k, options.fit_focal);
         ends.push((
             StartResult {
@@ -960,7 +953,7 @@ pub fn calibrate(
     let full = Area::new(frames, k, options.distortion, *rough, options.fit_focal);
     let full_steps: Vec<f64> = fine_steps.iter().map(|s| s * 0.3).collect();
     // (Nelder-Mead returns its best, never worse than where it started on this cost.)
-    let (p, _) = search(&full, &ends[0].1, &full_steps, options.max_iters)?;
+    let (p, _) = search(&|p| full.at(p), &ends[0].1, &full_steps, options.max_iters)?;
     let (pose, _) = candidate(&p, rough, k, options.fit_focal);
     ends[0].0.camera_from_base = pose;
     ends[0].0.cost_px = fine.at(&p);
