@@ -4,6 +4,7 @@
 //! by the frame's capture time, then scored against the simulated room's truth.
 
 use avatarm_core::dr::{self, EraseSettings, MaskScores};
+use avatarm_sim::SimCameras;
 use avatarm_twin::readback::{ImageRead, read_image_once};
 use bevy::prelude::*;
 
@@ -102,6 +103,42 @@ pub fn request_part<S: FrameStore>(
                 read.bytes_per_pixel,
                 read.data.clone(),
             );
+        }
+    });
+}
+
+/// Reads the simulated room's ground-truth view `part` ([`FramePart::NoRobot`] or
+/// [`FramePart::Silhouette`]; nothing for another part or a room without it) back once into
+/// the frame `key` of the store `S`, as the camera gives it (through its lens,
+/// [`SimCameras::camera_image`]).
+pub fn request_truth<S: FrameStore>(
+    commands: &mut Commands,
+    cameras: &SimCameras,
+    part: FramePart,
+    key: i64,
+) {
+    let handle = match part {
+        FramePart::NoRobot => cameras.no_robot.clone(),
+        FramePart::Silhouette => cameras.silhouette.clone(),
+        _ => None,
+    };
+    let Some(handle) = handle else {
+        return;
+    };
+    let cameras = cameras.clone();
+    read_image_once(commands, handle).observe(move |read: On<ImageRead>, mut store: ResMut<S>| {
+        let size = (read.width, read.height, read.bytes_per_pixel);
+        let nearest = part == FramePart::Silhouette;
+        let image = cameras.camera_image(size, read.data.clone(), nearest);
+        // It arrived either way (the store counts what it waits for).
+        let Some(images) = store.arrived(key) else {
+            return;
+        };
+        match image {
+            Ok((width, height, data)) => {
+                images.put(part, (width, height), read.bytes_per_pixel, data);
+            }
+            Err(e) => error!("ground truth: {e}"),
         }
     });
 }

@@ -963,6 +963,76 @@ fn dilation_covers_calibration_error() {
     }
 }
 
+/// A webcam's barrel lens in the simulated room: the camera's frames and ground truth are
+/// distorted by it; the mask drawn through the lens map leaks no more than a pinhole's does
+/// in the default scene, and drawn as a pinhole's (the lens ignored) it leaks.
+#[test]
+fn a_distorted_lens_is_honoured_by_the_mask() {
+    let path = root().join("assets/scenes/default.toml");
+    let text = std::fs::read_to_string(&path).expect("default scene");
+    let lens = "distortion = { model = \"plumb_bob\", coefficients = [-0.32, 0.11, 0.0008, -0.0006, -0.015] }\nfps = 30.0";
+    let text = text.replacen("fps = 30.0", lens, 1);
+    let mut scene =
+        Scene::parse(&text, &path, &PackagePath::default()).expect("the scene with a lens");
+    assert!(!scene.lens.is_none());
+    // A wrong count, or a lens that folds over inside the image, is refused by name.
+    for (coefficients, expected) in [
+        ("[-0.32, 0.11, 0.0008, -0.0006]", "takes 5"),
+        ("[-2.5, 0.0, 0.0, 0.0, 0.0]", "inverts nowhere"),
+    ] {
+        let bad = text.replace("[-0.32, 0.11, 0.0008, -0.0006, -0.015]", coefficients);
+        let e = Scene::parse(&bad, &path, &PackagePath::default()).expect_err(coefficients);
+        let e = e.to_string();
+        assert!(
+            e.contains("camera.distortion") && e.contains(expected),
+            "{e}"
+        );
+    }
+    scene.file.duration_s = 1.5;
+    let honoured = run(&scene, "dr_lens_honoured");
+    // The frame the GPU erased through the lens is the CPU reference's, exactly.
+    assert_eq!(num(&honoured, "gpu_vs_cpu.max_abs_diff"), 0.0);
+    scene.file.erase.resolution_scale = 0.5;
+    let half = run(&scene, "dr_lens_half");
+    scene.file.erase.resolution_scale = 1.0;
+    scene.file.erase.lens_distortion = false;
+    let ignored = run(&scene, "dr_lens_ignored");
+    let leak = |r: &serde_json::Value| num(r, "mask.leak_pct_mean");
+    let iou = |r: &serde_json::Value| num(r, "mask.iou_mean");
+    eprintln!(
+        "barrel lens: honoured leak {:.3} % IoU {:.4}; at half resolution leak {:.3} % IoU {:.4}; ignored leak {:.3} % IoU {:.4}",
+        leak(&honoured),
+        iou(&honoured),
+        leak(&half),
+        iou(&half),
+        leak(&ignored),
+        iou(&ignored)
+    );
+    assert_eq!(honoured["camera"]["lens"]["honoured"], true);
+    assert_eq!(ignored["camera"]["lens"]["honoured"], false);
+    eprintln!(
+        "mask render through the lens: {}",
+        honoured["camera"]["lens"]["mask_render"]
+    );
+    // Measured (llvmpipe): honoured leak 0.003 %, IoU 0.9999; at half resolution 1.20 %,
+    // 0.974; ignored 0.57 %, IoU 0.942 (overmask 5.6 %: this barrel draws the robot smaller
+    // than a pinhole would).
+    assert!(leak(&honoured) <= 1.0, "{}", honoured["mask"]);
+    assert!(
+        iou(&ignored) <= iou(&honoured) - 0.03,
+        "{}",
+        ignored["mask"]
+    );
+    assert!(iou(&honoured) >= 0.99, "{}", honoured["mask"]);
+    assert!(leak(&half) <= 2.0, "{}", half["mask"]);
+    assert!(
+        leak(&ignored) >= 3.0 * leak(&honoured).max(0.1),
+        "ignoring the lens must cost: {} vs {}",
+        ignored["mask"],
+        honoured["mask"]
+    );
+}
+
 /// `avatarm bench dr` on a two-point sweep: table, chart and fronts, and a coarser mask that
 /// does cost accuracy.
 #[test]

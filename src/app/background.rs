@@ -139,9 +139,20 @@ fn empty_room(
     );
 }
 
-fn send_empty_room(world: &mut World, width: u32, height: u32, mut rgba: Vec<u8>) {
+fn send_empty_room(world: &mut World, width: u32, height: u32, rgba: Vec<u8>) {
     let Some(scene) = world.get_resource::<SceneResource>() else {
         return;
+    };
+    // The photograph through the camera's lens.
+    let Some(cameras) = world.get_resource::<SimCameras>() else {
+        return;
+    };
+    let (width, height, mut rgba) = match cameras.camera_image((width, height, 4), rgba, false) {
+        Ok(image) => image,
+        Err(e) => {
+            error!("background: the empty room: {e}");
+            return;
+        }
     };
     let sensor = scene.0.file.camera.sensor.clone();
     let seed = scene.0.file.seed;

@@ -258,6 +258,7 @@ impl Plugin for AvatarmSetupPlugin {
                 trajectory: scene.trajectory.clone(),
                 control_rate_hz: scene.file.control_rate_hz,
                 camera: scene.true_camera,
+                distortion: scene.lens,
                 props: scene.props.clone(),
                 // The no-robot view also gives the simulated "empty room" background.
                 ground_truth: matches!(mode, Mode::Headless(_))
@@ -281,6 +282,7 @@ impl Plugin for AvatarmSetupPlugin {
             .insert_resource(EraseConfig {
                 settings: scene.file.erase,
                 camera: scene.believed_camera,
+                distortion: scene.lens,
                 joint_map: JointMap::new(&scene.model, &scene.twin_model),
                 model: scene.twin_model.clone(),
                 detail: twin_detail(&scene.file.twin),

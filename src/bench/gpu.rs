@@ -470,6 +470,7 @@ fn setup_bench(
                     render: true,
                     frame: None,
                     background: Some(bench.background.clone()),
+                    lens: None,
                     measure_floor: true,
                 },
             ))

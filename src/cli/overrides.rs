@@ -34,6 +34,9 @@ pub struct EraseOverrides {
     /// Refresh the background from pixels the robot cannot cover (0 = never, 1 = copy).
     #[arg(long, value_name = "F")]
     pub background_refresh: Option<f64>,
+    /// Draw the mask through the camera's lens distortion (off: as a pinhole's).
+    #[arg(long, value_name = "on|off", value_parser = on_off)]
+    pub lens_distortion: Option<bool>,
     /// Load the background H from an image file (the camera's size).
     #[arg(long, value_name = "PATH", conflicts_with = "capture_background_at")]
     pub background: Option<PathBuf>,
@@ -88,6 +91,9 @@ impl EraseOverrides {
         }
         if let Some(v) = self.background_refresh {
             e.background_refresh = v as f32;
+        }
+        if let Some(v) = self.lens_distortion {
+            e.lens_distortion = v;
         }
         e.validate("command line")?;
         Ok(())

@@ -16,7 +16,7 @@ use avatarm_sim::{SimCameras, VideoCounter};
 use bevy::prelude::*;
 
 use crate::score::{
-    FrameImages, FramePart, FrameStore, frame_key, request_part, score_against_truth,
+    FrameImages, FramePart, FrameStore, frame_key, request_part, request_truth, score_against_truth,
 };
 use crate::{AvatarmSystems, SceneResource};
 
@@ -120,9 +120,9 @@ fn request_parts(
     if live.stopped {
         return;
     }
-    let (Some(norobot), Some(silhouette)) = (&cameras.no_robot, &cameras.silhouette) else {
+    if cameras.no_robot.is_none() || cameras.silhouette.is_none() {
         return;
-    };
+    }
     // The room's truth at the update the camera captured a sampled frame.
     if let Some((index, t_s)) = counter.last
         && live.last_index != Some(index)
@@ -131,8 +131,8 @@ fn request_parts(
         if index.is_multiple_of(live.every) && live.pending.len() < MAX_PENDING {
             let k = frame_key(t_s);
             live.pending.insert(k, Parts { t_s, ..default() });
-            request_part::<LiveDr>(&mut commands, norobot.clone(), FramePart::NoRobot, k);
-            request_part::<LiveDr>(&mut commands, silhouette.clone(), FramePart::Silhouette, k);
+            request_truth::<LiveDr>(&mut commands, &cameras, FramePart::NoRobot, k);
+            request_truth::<LiveDr>(&mut commands, &cameras, FramePart::Silhouette, k);
         }
     }
     // The pipeline's images of a sampled frame, at the end of the update that erases it (the

@@ -28,8 +28,10 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use avatarm_core::dr::{self, MaskScores, Photometric, RgbaView};
+use avatarm_core::vision::distortion::{Distortion, DistortionMap};
 use avatarm_erase::{
-    EraseState, EraseTargets, GpuTimes, PASS_NAMES, SpanTimes, UPLOAD_CPU_SPAN, UPLOAD_SPAN,
+    EraseLens, EraseState, EraseTargets, GpuTimes, PASS_NAMES, SpanTimes, UPLOAD_CPU_SPAN,
+    UPLOAD_SPAN,
 };
 use avatarm_sim::{SimCameras, SimRobotState};
 use avatarm_twin::RobotTwin;
@@ -40,7 +42,8 @@ use serde::Serialize;
 use serde_json::json;
 
 use crate::score::{
-    FrameImages, FramePart, FrameStore, TruthScores, frame_key, request_part, score_against_truth,
+    FrameImages, FramePart, FrameStore, TruthScores, frame_key, request_part, request_truth,
+    score_against_truth,
 };
 use crate::{AppError, AppTwin, AvatarmSystems, SceneResource};
 
@@ -200,6 +203,8 @@ struct Replay {
     bar: ProgressBar,
     /// Scored frames for `--record`.
     recorded: Vec<RecordedFrame>,
+    /// The mask's lens map ([`EraseLens`], taken when the replay starts).
+    lens: Option<Arc<DistortionMap>>,
 }
 
 /// The images a replay scores each frame with.
@@ -250,6 +255,7 @@ impl Plugin for ReplayPlugin {
             gpu_measured_at_start: BTreeMap::new(),
             bar,
             recorded: Vec::new(),
+            lens: None,
         })
         .add_systems(Startup, pause_for_warmup)
         .add_systems(
@@ -300,9 +306,12 @@ fn drive_replay(
         Res<GpuTimes>,
     ),
     twins: Query<&RobotTwin>,
-    scene: Res<SceneResource>,
+    (scene, lens): (Res<SceneResource>, Option<Res<EraseLens>>),
     mut exit: MessageWriter<AppExit>,
 ) {
+    if replay.lens.is_none() {
+        replay.lens = lens.and_then(|l| l.0.clone());
+    }
     let (targets, erase_state, live, gpu_times) = erase;
     let (Some(cameras), Some(robot), Some(app_twin), Some(targets)) =
         (cameras, robot, app_twin, targets)
@@ -341,21 +350,11 @@ fn drive_replay(
         // Ground truth at this update's capture time.
         let t = robot.0.time_s();
         let k = frame_key(t);
-        if let (Some(norobot), Some(silhouette)) = (&cameras.no_robot, &cameras.silhouette) {
-            spawn_capture(
-                &mut commands,
-                &mut replay,
-                norobot.clone(),
-                FramePart::NoRobot,
-                k,
-            );
-            spawn_capture(
-                &mut commands,
-                &mut replay,
-                silhouette.clone(),
-                FramePart::Silhouette,
-                k,
-            );
+        if cameras.no_robot.is_some() && cameras.silhouette.is_some() {
+            for part in [FramePart::NoRobot, FramePart::Silhouette] {
+                replay.pending += 1;
+                request_truth::<Replay>(&mut commands, &cameras, part, k);
+            }
         }
         // The frame the app received now.
         if let Some(f) = live.frame.as_ref().filter(|_| live.fresh) {
@@ -456,6 +455,7 @@ fn drive_replay(
 
 /// Scores every frame whose captures have all arrived, and saves the chosen ones.
 fn score_ready(mut replay: ResMut<Replay>, scene: Res<SceneResource>) {
+    let lens = replay.lens.clone();
     let ready: Vec<i64> = replay
         .frames
         .iter()
@@ -467,7 +467,7 @@ fn score_ready(mut replay: ResMut<Replay>, scene: Res<SceneResource>) {
             continue;
         };
         let q_true = p.q_true.take().unwrap_or_default();
-        match score_frame(&replay, &scene, p) {
+        match score_frame(&replay, &scene, lens.as_deref(), p) {
             Ok((score, recorded)) => {
                 if let Some(mut r) = recorded {
                     r.q_true.clone_from(&q_true);
@@ -500,6 +500,7 @@ fn score_ready(mut replay: ResMut<Replay>, scene: Res<SceneResource>) {
 fn score_frame(
     replay: &Replay,
     scene: &SceneResource,
+    lens: Option<&DistortionMap>,
     p: Pending,
 ) -> Result<(FrameScore, Option<RecordedFrame>), AppError> {
     let (
@@ -535,7 +536,7 @@ fn score_frame(
     let raw = RgbaView::new("mask twin render", rw, rh, &raw)?;
     // CPU reference on the same inputs.
     let t0 = Instant::now();
-    let cpu_mask = dr::threshold_mask(&raw, w, h, &settings.ranges, settings.mask_radius());
+    let cpu_mask = dr::threshold_mask(&raw, w, h, &settings.ranges, settings.mask_radius(), lens)?;
     let cpu_mask_ms = t0.elapsed().as_secs_f64() * 1e3;
     let t1 = Instant::now();
     let alpha = dr::feather_alpha(&cpu_mask, w, h, settings.feather_px);
@@ -737,14 +738,17 @@ fn write_recording(path: &Path, replay: &Replay, scene: &SceneResource) -> Resul
         .map(|r| r.t_s)
         .fold(f64::INFINITY, f64::min);
     let t0 = ns(if first.is_finite() { first } else { 0.0 });
-    w.calibration(
-        t0,
-        &avatarm_record::camera::CameraCalibration::pinhole(
-            k.width,
-            k.height,
-            [k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0],
-        ),
-    )?;
+    let mut calibration = avatarm_record::camera::CameraCalibration::pinhole(
+        k.width,
+        k.height,
+        [k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0],
+    );
+    // The camera's lens, as its camera_info would give it.
+    if let Some(model) = avatarm_record::camera::DistortionModel::from_ros_name(s.lens.ros_name()) {
+        calibration.distortion_model = model;
+        calibration.d = s.lens.coefficients().to_vec();
+    }
+    w.calibration(t0, &calibration)?;
     let base_from_camera = s.robot_base().inverse() * s.believed_camera.world_from_camera;
     w.camera_pose(t0, &base_from_camera)?;
     let names: Vec<String> = s.model.dof_names().iter().map(|n| n.to_string()).collect();
@@ -772,6 +776,17 @@ fn write_recording(path: &Path, replay: &Replay, scene: &SceneResource) -> Resul
     }
     w.finish()?;
     Ok(())
+}
+
+/// The report's account of the camera's lens: its model and coefficients, whether the mask
+/// honoured it and the size of the mask's pinhole render.
+pub(crate) fn lens_report(lens: &Distortion, map: Option<&DistortionMap>) -> serde_json::Value {
+    json!({
+        "model": lens.ros_name(),
+        "coefficients": lens.coefficients(),
+        "honoured": map.is_some(),
+        "mask_render": map.map(|m| [m.pinhole.width, m.pinhole.height]),
+    })
 }
 
 fn finish(
@@ -839,6 +854,7 @@ fn finish(
             "fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
             "fps": s.file.camera.fps,
             "frame_latency_s": s.file.camera.frame_latency_s,
+            "lens": lens_report(&s.lens, replay.lens.as_deref()),
         },
         "robot": {
             "name": s.model.name,

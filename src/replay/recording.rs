@@ -24,9 +24,10 @@ use std::time::{Duration, Instant};
 use avatarm_core::dr::{self, BackgroundEstimate, EraseSettings, FootageBackground, RgbaView};
 use avatarm_core::robot::{JointMap, PackagePath, RobotModel};
 use avatarm_core::vision::camera::{Intrinsics, PinholeCamera};
+use avatarm_core::vision::distortion::Distortion;
 use avatarm_erase::{
-    EraseConfig, ErasePlugin, EraseState, EraseSystems, EraseTargets, GpuTimes, PASS_NAMES,
-    SetBackground, UPLOAD_SPAN,
+    EraseConfig, EraseLens, ErasePlugin, EraseState, EraseSystems, EraseTargets, GpuTimes,
+    PASS_NAMES, SetBackground, UPLOAD_SPAN,
 };
 use avatarm_record::camera::{CameraCalibration, read_calibration, read_pose};
 use avatarm_record::{CompressedFrame, ImageFormat, Recording, RecordingWriter};
@@ -123,6 +124,7 @@ pub fn run_recording(o: &RecordingOptions) -> Result<serde_json::Value, AppError
         .insert_resource(EraseConfig {
             settings,
             camera: input.camera,
+            distortion: input.lens,
             joint_map: JointMap::new(&model, &model),
             model: model.clone(),
             detail: TwinDetail::default(),
@@ -181,6 +183,8 @@ struct Input {
     recording: Recording,
     model: Arc<RobotModel>,
     camera: PinholeCamera,
+    /// The camera's lens (honoured by the mask unless `[erase] lens_distortion` is off).
+    lens: Distortion,
     calibration: CameraCalibration,
     size: (u32, u32),
     /// The frames, by capture time.
@@ -207,9 +211,10 @@ impl Input {
             })?,
         };
         let mut notes = Vec::new();
-        if !calibration.is_pinhole() {
+        let lens = Distortion::from_ros(calibration.distortion_model.ros_name(), &calibration.d)?;
+        if !lens.is_none() && !o.settings.lens_distortion {
             notes.push(format!(
-                "the camera's {} distortion is not honoured: the mask is a pinhole projection",
+                "the camera's {} distortion is ignored (lens_distortion off): the mask is a pinhole projection",
                 calibration.distortion_model.ros_name()
             ));
         }
@@ -252,6 +257,7 @@ impl Input {
             recording,
             model,
             camera,
+            lens,
             calibration,
             size,
             frames,
@@ -783,6 +789,8 @@ fn write_outputs(
         mcap.joint_states(s)?;
     }
     let settings = o.settings;
+    // The lens map the mask was drawn through (the same function as the pipeline's).
+    let lens = EraseLens::new(&input.camera.intrinsics, &input.lens, &settings)?;
     let (mut coverage, mut max_diff, mut mismatch) = (Vec::new(), 0u8, 0u64);
     let mut scored = Vec::new();
     let mut robot_union = vec![0u8; (w * h) as usize];
@@ -797,7 +805,14 @@ fn write_outputs(
         if let (Some((rw, rh, raw)), Some((live, bg, photometric))) = (&result.raw, &result.inputs)
         {
             let raw = RgbaView::new("mask twin render", *rw, *rh, raw)?;
-            let cpu_mask = dr::threshold_mask(&raw, w, h, &settings.ranges, settings.mask_radius());
+            let cpu_mask = dr::threshold_mask(
+                &raw,
+                w,
+                h,
+                &settings.ranges,
+                settings.mask_radius(),
+                lens.0.as_deref(),
+            )?;
             let alpha = dr::feather_alpha(&cpu_mask, w, h, settings.feather_px);
             let black = vec![0u8; live.len()];
             let alpha_h = if settings.enabled && bg.is_some() {
@@ -895,7 +910,8 @@ fn write_outputs(
         "frames": input.frames.len(),
         "size": [w, h],
         "camera": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
-                   "distortion_model": input.calibration.distortion_model.ros_name()},
+                   "distortion_model": input.calibration.distortion_model.ros_name(),
+                   "lens": super::lens_report(&input.lens, lens.0.as_deref())},
         "erase": {"dilate_px": settings.dilate_px, "feather_px": settings.feather_px,
                   "resolution_scale": settings.resolution_scale, "photometric": settings.photometric},
         "background": background_report,

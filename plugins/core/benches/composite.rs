@@ -47,7 +47,9 @@ fn inputs(w: u32, h: u32) -> Inputs {
         h,
         &[[240, 255]; 4],
         0,
-    );
+        None,
+    )
+    .expect("sizes");
     let alpha = mask.iter().map(|&m| f32::from(m)).collect();
     Inputs {
         w,

@@ -7,6 +7,8 @@
 //   r = 0:         composite_threshold                     (1 pass: threshold inline)
 //   r > 0, f = 0:  dilate_rows -> composite_dilated        (2 passes: column max inline)
 //   f > 0:         dilate_rows -> dilate_columns -> feather_rows -> composite_feathered
+// Through a lens (params.lens = 1) the twin's render is the pinhole view of a lens map and each
+// pixel reads the texel its ray lands on (avatarm_core::vision::distortion::DistortionMap).
 // A pass that writes M(t) writes it as 0/1 into an R8 target; Ĩ(t) is written through an
 // Rgba8Unorm view of its sRGB image, so its bytes are the 8-bit values themselves.
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
@@ -23,7 +25,8 @@ struct EraseParams {
     radius: i32,
     feather: i32,
     alpha_h: f32,
-    pad: f32,
+    // 1: the twin's render is a lens map's pinhole view, read at the map's texel per pixel.
+    lens: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: EraseParams;
@@ -33,15 +36,24 @@ struct EraseParams {
 @group(0) @binding(3) var background: texture_2d<f32>;
 // The previous pass's output (row maxima, the mask, or row sums).
 @group(0) @binding(4) var previous: texture_2d<f32>;
+// Per frame pixel, the render's texel its ray lands on through the lens (65535: none).
+@group(0) @binding(5) var lens_map: texture_2d<u32>;
 
 fn clamped(p: vec2<i32>) -> vec2<i32> {
     return clamp(p, vec2<i32>(0), vec2<i32>(params.size) - vec2<i32>(1));
 }
 
-// M before dilation at a full-size pixel: its nearest raw texel in the ranges.
+// M before dilation at a full-size pixel: the raw texel its ray lands on (through the lens),
+// else its nearest raw texel by scale, in the ranges.
 fn is_robot(p: vec2<i32>) -> bool {
     let q = vec2<u32>(clamped(p));
-    let r = ((q * 2u + 1u) * params.raw_size) / (2u * params.size);
+    var r = ((q * 2u + 1u) * params.raw_size) / (2u * params.size);
+    if params.lens != 0u {
+        r = textureLoad(lens_map, vec2<i32>(q), 0).rg;
+        if r.x == 65535u {
+            return false;
+        }
+    }
     let v = round(textureLoad(raw_twin, vec2<i32>(r), 0).r * 255.0);
     let px = vec4<f32>(v, v, v, 255.0);
     return all(px >= params.lo) && all(px <= params.hi);

@@ -44,6 +44,7 @@ fn app(resolution_scale: f64) -> App {
                 ..EraseSettings::default()
             },
             camera: camera(),
+            distortion: Default::default(),
             joint_map: JointMap::new(&model, &model),
             model,
             detail: TwinDetail::default(),

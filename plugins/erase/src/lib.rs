@@ -10,7 +10,10 @@
 //! 2. **Mask render.** A [`FlatView`] with the *believed* intrinsics and pose of the real
 //!    camera draws it, white on black, into [`EraseTargets::raw`] (`R8Unorm`, at
 //!    `resolution_scale` of the camera's size): no Bevy camera, no lighting, tonemapping or
-//!    MSAA ([`avatarm_twin::flat`]).
+//!    MSAA ([`avatarm_twin::flat`]). Through a distorting lens ([`EraseConfig::distortion`])
+//!    the render is the pinhole view wide enough for every ray the lens sees, and each pixel of
+//!    the mask reads it where its ray lands ([`EraseLens`]): the mask is warped into the
+//!    distorted image, the live frame is never resampled.
 //! 3. **Threshold, dilation, feathering, composite** ([`passes`], `erase.wgsl`): per-channel
 //!    RGBα ranges give the binary mask M(t), dilated by `dilate_px + feather_px` into
 //!    [`EraseTargets::mask`] (`R8Unorm`); the live frame with the background panel in front at
@@ -44,6 +47,7 @@ use std::sync::Arc;
 use avatarm_core::dr::{self, EraseSettings, LinkSphere, Photometric, RgbaView};
 use avatarm_core::robot::{JointMap, RobotModel};
 use avatarm_core::vision::camera::PinholeCamera;
+use avatarm_core::vision::distortion::{Distortion, DistortionMap};
 use avatarm_twin::camera::rgba8_image;
 use avatarm_twin::flat::{FlatPart, FlatView, flat_target_image};
 use avatarm_twin::layers;
@@ -73,6 +77,8 @@ pub struct EraseConfig {
     pub settings: EraseSettings,
     /// The camera as the app believes it is (intrinsics + calibrated pose).
     pub camera: PinholeCamera,
+    /// Its lens distortion (honoured unless `settings.lens_distortion` is off).
+    pub distortion: Distortion,
     /// The mask twin's description: the robot's own, or a lighter one of the same robot.
     pub model: Arc<RobotModel>,
     /// From the joint states' vectors (the robot's description) to `model`'s.
@@ -87,6 +93,39 @@ pub struct EraseConfig {
     /// the mask's view so that M(t) follows the robot's *visible* pixels. Meshes with their
     /// world transforms.
     pub occluders: Vec<(Mesh, Transform)>,
+}
+
+/// The mask's lens map: `Some` when the camera's lens distorts and the settings honour it
+/// (fixed at start-up: the mask render's size follows it).
+#[derive(Resource, Debug, Clone, Default)]
+pub struct EraseLens(pub Option<Arc<DistortionMap>>);
+
+impl EraseLens {
+    /// The map of a camera with intrinsics `k` and lens `lens` at `settings` (`None`: a
+    /// pinhole or the lens ignored). Errors: a lens that inverts nowhere on the image's border.
+    pub fn new(
+        k: &avatarm_core::vision::camera::Intrinsics,
+        lens: &Distortion,
+        settings: &EraseSettings,
+    ) -> avatarm_core::Result<Self> {
+        if lens.is_none() || !settings.lens_distortion {
+            return Ok(Self(None));
+        }
+        let map = DistortionMap::new(k, lens, settings.resolution_scale)?;
+        Ok(Self(Some(Arc::new(map))))
+    }
+
+    /// The mask render's intrinsics: the lens map's pinhole, else the camera's at the settings'
+    /// scale.
+    pub fn raw_intrinsics(&self, config: &EraseConfig) -> avatarm_core::vision::camera::Intrinsics {
+        match &self.0 {
+            Some(map) => map.pinhole,
+            None => config
+                .camera
+                .intrinsics
+                .scaled(config.settings.resolution_scale),
+        }
+    }
 }
 
 /// Images of the pipeline, all at the camera's size except `raw`.
@@ -278,7 +317,11 @@ fn setup(
     mut images: ResMut<Assets<Image>>,
 ) {
     let k = config.camera.intrinsics;
-    let raw_k = k.scaled(config.settings.resolution_scale);
+    let lens = EraseLens::new(&k, &config.distortion, &config.settings).unwrap_or_else(|e| {
+        error!("erase: {e}; the mask is drawn as a pinhole's");
+        EraseLens(None)
+    });
+    let raw_k = lens.raw_intrinsics(&config);
     let layer = RenderLayers::layer(layers::MASK_TWIN);
     let twin = spawn_twin_with_visuals(
         &mut commands,
@@ -334,10 +377,12 @@ fn setup(
                 render: true,
                 frame: None,
                 background: None,
+                lens: lens.0.clone(),
                 measure_floor: false,
             },
         ))
         .id();
+    commands.insert_resource(lens);
     commands.insert_resource(ErasePipeline(pipeline));
     commands.insert_resource(EraseTargets {
         raw,
@@ -421,12 +466,14 @@ fn prepare_frame(
     history: Res<JointHistory>,
     pipeline: Option<Res<ErasePipeline>>,
     mask_twin: Option<Res<MaskTwin>>,
-    spheres: Option<Res<RobotSpheres>>,
+    (spheres, lens): (Option<Res<RobotSpheres>>, Option<Res<EraseLens>>),
     mut state: ResMut<EraseState>,
     mut twins: Query<&mut RobotTwin>,
     mut jobs: Query<&mut EraseJob>,
 ) {
-    let (Some(pipeline), Some(mask_twin), Some(spheres)) = (pipeline, mask_twin, spheres) else {
+    let (Some(pipeline), Some(mask_twin), Some(spheres), Some(lens)) =
+        (pipeline, mask_twin, spheres, lens)
+    else {
         return;
     };
     let Ok(mut job) = jobs.get_mut(pipeline.0) else {
@@ -492,7 +539,21 @@ fn prepare_frame(
                 .unwrap_or_default();
             let poses = config.model.forward_kinematics(&config.base, &q);
             let margin = f64::from(s.mask_radius()) + 6.0;
-            let region = dr::sphere_mask(&config.camera, &poses, &spheres.0, margin);
+            let region = match &lens.0 {
+                // Through the lens: the region in the pinhole render, read where each pixel's
+                // ray lands.
+                Some(map) => {
+                    let pinhole = PinholeCamera {
+                        intrinsics: map.pinhole,
+                        world_from_camera: config.camera.world_from_camera,
+                    };
+                    let margin = margin * s.resolution_scale + 1.0;
+                    let region = dr::sphere_mask(&pinhole, &poses, &spheres.0, margin);
+                    map.remap_nearest("robot region", &region, 1)
+                        .unwrap_or_else(|_| vec![1; (k.width * k.height) as usize])
+                }
+                None => dr::sphere_mask(&config.camera, &poses, &spheres.0, margin),
+            };
             let views = RgbaView::new("live frame", k.width, k.height, &f.rgba)
                 .and_then(|l| RgbaView::new("background", k.width, k.height, &bg).map(|b| (l, b)));
             match views {
@@ -543,7 +604,7 @@ fn prepare_frame(
         state.uploaded_background = Some(bg.clone());
     }
     if dirty {
-        let raw = config.camera.intrinsics.scaled(s.resolution_scale);
+        let raw = lens.raw_intrinsics(&config);
         job.params = EraseParams::new(
             &s,
             &current.photometric,

@@ -19,6 +19,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use avatarm_core::dr::{EraseSettings, Photometric};
+use avatarm_core::vision::distortion::{DistortionMap, NO_TEXEL};
 use avatarm_twin::flat::FlatSystems;
 use avatarm_twin::gpu_timing::{GpuClock, GpuTimes};
 use bevy::asset::{embedded_asset, load_embedded_asset};
@@ -81,6 +82,9 @@ pub struct EraseJob {
     pub frame: Option<Arc<Vec<u8>>>,
     /// A new background H to upload in this update (RGBA8, the camera's size).
     pub background: Option<Arc<Vec<u8>>>,
+    /// The lens map the mask reads the render through (uploaded once; `None`: a pinhole, and
+    /// [`EraseParams::lens`] is 0).
+    pub lens: Option<Arc<DistortionMap>>,
     /// After the passes, also time ([`FLOOR_SPAN`]) a plain GPU copy of the images they read
     /// (the mask twin's render, the live frame and H) into scratch textures: the memory floor
     /// `avatarm bench gpu` compares the passes with. Off in the app.
@@ -108,8 +112,9 @@ pub struct EraseParams {
     pub feather: i32,
     /// Opacity of the background panel; 0 while erasing is off or there is no H.
     pub alpha_h: f32,
-    /// Unused.
-    pub pad: f32,
+    /// 1: each pixel reads the mask render at its lens map's texel (the render is the map's
+    /// pinhole); 0: at its nearest texel by scale.
+    pub lens: u32,
 }
 
 impl EraseParams {
@@ -136,7 +141,15 @@ impl EraseParams {
             } else {
                 0.0
             },
-            pad: 0.0,
+            lens: 0,
+        }
+    }
+
+    /// The same, the mask read through a lens map (`true`) or by scale.
+    pub fn through_lens(self, lens: bool) -> Self {
+        Self {
+            lens: u32::from(lens),
+            ..self
         }
     }
 
@@ -374,6 +387,50 @@ struct JobGpu {
     scratch: Vec<Texture>,
     /// The last H uploaded: uploaded again when the textures are made anew (a new size).
     background_data: Option<Arc<Vec<u8>>>,
+    /// The lens map's texels (`Rg16Uint`, the frame's size; 1x1 without a lens) and the map
+    /// they came from.
+    lens: (TextureView, Option<Arc<DistortionMap>>),
+}
+
+/// The lens map's texels as an `Rg16Uint` texture (1x1 of [`NO_TEXEL`]s without one).
+fn lens_texture(
+    device: &RenderDevice,
+    queue: &RenderQueue,
+    map: Option<&DistortionMap>,
+) -> TextureView {
+    let (size, texels) = match map {
+        Some(m) => (
+            UVec2::new(m.image.width, m.image.height),
+            m.texels.as_slice(),
+        ),
+        None => (UVec2::ONE, &[[NO_TEXEL; 2]][..]),
+    };
+    let texture = device.create_texture(&TextureDescriptor {
+        label: Some("erase: lens map"),
+        size: extent(size),
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: TextureDimension::D2,
+        format: TextureFormat::Rg16Uint,
+        usage: TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    let bytes: Vec<u8> = texels
+        .iter()
+        .flat_map(|t| [t[0].to_le_bytes(), t[1].to_le_bytes()])
+        .flatten()
+        .collect();
+    queue.write_texture(
+        texture.as_image_copy(),
+        &bytes,
+        TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(size.x * 4),
+            rows_per_image: Some(size.y),
+        },
+        extent(size),
+    );
+    texture.create_view(&TextureViewDescriptor::default())
 }
 
 #[derive(Resource)]
@@ -391,6 +448,7 @@ fn init_erase_pipelines(
     cache: Res<PipelineCache>,
 ) {
     let texture = || texture_2d(TextureSampleType::Float { filterable: false });
+    let texels = texture_2d(TextureSampleType::Uint);
     let layout = BindGroupLayoutDescriptor::new(
         "erase passes",
         &BindGroupLayoutEntries::sequential(
@@ -401,6 +459,7 @@ fn init_erase_pipelines(
                 texture(),
                 texture(),
                 texture(),
+                texels,
             ),
         ),
     );
@@ -498,7 +557,19 @@ fn prepare_jobs(
             floor: Vec::new(),
             scratch: Vec::new(),
             background_data: None,
+            lens: (lens_texture(&device, &queue, None), None),
         });
+        let same_lens = match (&gpu.lens.1, &job.lens) {
+            (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+            (None, None) => true,
+            _ => false,
+        };
+        if !same_lens {
+            gpu.lens = (
+                lens_texture(&device, &queue, job.lens.as_deref()),
+                job.lens.clone(),
+            );
+        }
         let resized = gpu.size != size;
         if resized {
             gpu.size = size;
@@ -554,7 +625,12 @@ fn prepare_jobs(
         ) else {
             continue;
         };
-        gpu.params.set(job.params);
+        // The lens map is read only when it fits the frame and the render.
+        let lens = job.lens.as_ref().is_some_and(|m| {
+            UVec2::new(m.image.width, m.image.height) == size
+                && UVec2::new(m.pinhole.width, m.pinhole.height) == job.params.raw_size
+        });
+        gpu.params.set(job.params.through_lens(lens));
         gpu.params.write_buffer(&device, &queue);
         let Some(params) = gpu.params.binding() else {
             continue;
@@ -585,6 +661,7 @@ fn prepare_jobs(
                     &gpu.live.view,
                     &gpu.background.view,
                     previous,
+                    &gpu.lens.0,
                 )),
             );
             gpu.frame.push((pass, bind_group, targets));

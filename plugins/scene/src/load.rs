@@ -8,6 +8,7 @@ use std::sync::Arc;
 use avatarm_core::robot::trajectory::{JointTrajectory, Keyframe};
 use avatarm_core::robot::{PackagePath, RobotModel};
 use avatarm_core::vision::camera::{Intrinsics, PinholeCamera};
+use avatarm_core::vision::distortion::{Distortion, DistortionMap};
 use nalgebra::{DVector, Isometry3, Vector3};
 
 use crate::error::SceneError;
@@ -36,6 +37,9 @@ pub struct Scene {
     pub true_camera: PinholeCamera,
     /// The camera at the pose the app believes (true pose + calibration error).
     pub believed_camera: PinholeCamera,
+    /// The camera's lens (`[camera] distortion`; the believed camera's is the true one's, as a
+    /// calibrated lens's would be).
+    pub lens: Distortion,
     /// Props in the room.
     pub props: Vec<Prop>,
     /// The background image file, resolved (`[background] source = "file"`).
@@ -355,6 +359,19 @@ impl Scene {
             intrinsics,
             world_from_camera: pose,
         };
+        let lens = match &c.distortion {
+            Some(l) => {
+                let lens = Distortion::from_ros(&l.model, &l.coefficients)
+                    .map_err(|e| SceneError::value("camera.distortion", e).in_file(path))?;
+                // The lens must invert over the image (a render can be drawn through it).
+                if !lens.is_none() {
+                    DistortionMap::new(&intrinsics, &lens, 1.0)
+                        .map_err(|e| SceneError::value("camera.distortion", e).in_file(path))?;
+                }
+                lens
+            }
+            None => Distortion::None,
+        };
         let believed_camera = true_camera.perturbed(
             &Vector3::from(ce.axis),
             ce.rotation_deg.to_radians(),
@@ -415,6 +432,7 @@ impl Scene {
             trajectory: JointTrajectory::new(keyframes),
             true_camera,
             believed_camera,
+            lens,
             props,
             file,
         })

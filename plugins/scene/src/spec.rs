@@ -264,6 +264,22 @@ pub struct CameraSpec {
     /// Error of the pose the app believes.
     #[serde(default)]
     pub calibration_error: CalibrationError,
+    /// The lens's distortion (none: a pinhole). The simulated camera's frames are distorted
+    /// by it and the mask honours it (`[erase] lens_distortion`).
+    #[serde(default)]
+    pub distortion: Option<LensSpec>,
+}
+
+/// `[camera] distortion = { model = "plumb_bob", coefficients = [k1, k2, p1, p2, k3] }`: a lens
+/// as ROS's `camera_info` gives it (`plumb_bob`, `rational_polynomial`, `equidistant`; the
+/// coefficients in OpenCV's order, see `avatarm_core::vision::distortion`).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LensSpec {
+    /// The model's ROS name.
+    pub model: String,
+    /// Its coefficients.
+    pub coefficients: Vec<f64>,
 }
 
 fn default_fov() -> f64 {

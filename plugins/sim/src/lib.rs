@@ -14,6 +14,7 @@ use avatarm_core::robot::RobotModel;
 use avatarm_core::robot::trajectory::JointTrajectory;
 use avatarm_core::sim::{JointCommand, SimRobot, SimRobotParams};
 use avatarm_core::vision::camera::PinholeCamera;
+use avatarm_core::vision::distortion::{Distortion, DistortionMap};
 use avatarm_core::vision::sensor::SensorModel;
 use avatarm_scene::prop::{BOTTLE_BODY_FRACTION, BOTTLE_NECK_RADIUS_FRACTION};
 pub use avatarm_scene::prop::{Prop, PropShape};
@@ -74,6 +75,9 @@ pub struct SimRoomConfig {
     pub control_rate_hz: f64,
     /// The real camera at its true pose.
     pub camera: PinholeCamera,
+    /// Its lens: the room's views render the pinhole view wide enough for every ray it sees
+    /// and their read-backs are distorted into the camera's image ([`SimCameras::camera_image`]).
+    pub distortion: Distortion,
     /// Props, including the real objects.
     pub props: Vec<Prop>,
     /// Render the ground-truth views (robot silhouette, room without robot).
@@ -126,6 +130,42 @@ pub struct SimCameras {
     /// The robot's visible silhouette: white robot, black elsewhere (ground truth; `R8Unorm`,
     /// drawn flat by [`avatarm_twin::flat`]).
     pub silhouette: Option<Handle<Image>>,
+    /// With a distorting lens, the map from the views' pinhole renders to the camera's image:
+    /// the images above are the pinhole renders, [`SimCameras::camera_image`] distorts their
+    /// read-backs.
+    pub lens: Option<Arc<DistortionMap>>,
+}
+
+impl SimCameras {
+    /// A read-back of one of the views (`width × height`, `bytes_per_pixel`) as the camera
+    /// gives it: through the lens (bilinear for a lit view; `nearest` for a silhouette, whose
+    /// pixels stay 0 or 255), else as it is. Errors: a read-back of another size than the
+    /// views'.
+    pub fn camera_image(
+        &self,
+        (width, height, bytes_per_pixel): (u32, u32, usize),
+        data: Vec<u8>,
+        nearest: bool,
+    ) -> avatarm_core::Result<(u32, u32, Vec<u8>)> {
+        let Some(map) = &self.lens else {
+            return Ok((width, height, data));
+        };
+        if (width, height) != (map.pinhole.width, map.pinhole.height) {
+            return Err(avatarm_core::Error::BadImage {
+                what: "simulated view".into(),
+                message: format!(
+                    "read back at {width}x{height}, but the lens's pinhole render is {}x{}",
+                    map.pinhole.width, map.pinhole.height
+                ),
+            });
+        }
+        let out = if nearest {
+            map.remap_nearest("simulated view", &data, bytes_per_pixel)?
+        } else {
+            map.remap_bilinear("simulated view", &data, bytes_per_pixel)?
+        };
+        Ok((map.image.width, map.image.height, out))
+    }
 }
 
 /// The simulated robot's visual twins.
@@ -263,7 +303,25 @@ fn setup_room(
     });
     commands.insert_resource(SimTwins { real, silhouette });
 
-    let k = &config.camera.intrinsics;
+    // Through a lens, the views render its pinhole view (the read-backs are distorted).
+    let lens = if config.distortion.is_none() {
+        None
+    } else {
+        match DistortionMap::new(&config.camera.intrinsics, &config.distortion, 1.0) {
+            Ok(map) => Some(Arc::new(map)),
+            Err(e) => {
+                error!("simulated camera: {e}; its frames are a pinhole's");
+                None
+            }
+        }
+    };
+    let view_camera = PinholeCamera {
+        intrinsics: lens
+            .as_ref()
+            .map_or(config.camera.intrinsics, |m| m.pinhole),
+        world_from_camera: config.camera.world_from_camera,
+    };
+    let k = &view_camera.intrinsics;
     let background = Color::srgb(0.78, 0.80, 0.83);
     let real_image = images.add(target_image(k.width, k.height));
     // The lit views draw depth first, so each pixel is shaded once: the room's wall, floor and
@@ -271,7 +329,7 @@ fn setup_room(
     // (measured on llvmpipe: 121 -> 95 ms for this view; the pixels are the same).
     let real = spawn_pinhole_camera(
         &mut commands,
-        &config.camera,
+        &view_camera,
         real_image.clone(),
         RenderLayers::from_layers(&[layers::ROOM, layers::SIM_ROBOT]),
         background,
@@ -284,7 +342,7 @@ fn setup_room(
         let image = images.add(target_image(k.width, k.height));
         let no_robot_camera = spawn_pinhole_camera(
             &mut commands,
-            &config.camera,
+            &view_camera,
             image.clone(),
             RenderLayers::layer(layers::ROOM),
             background,
@@ -300,7 +358,7 @@ fn setup_room(
         commands.spawn((
             Name::new("ground truth: robot silhouette"),
             FlatView {
-                camera: config.camera,
+                camera: view_camera,
                 target: image.clone(),
                 clear: 0,
                 active: true,
@@ -314,6 +372,7 @@ fn setup_room(
         real: real_image,
         no_robot,
         silhouette: silhouette_image,
+        lens,
     });
     commands.insert_resource(SimRobotState(SimRobot::new(
         config.robot,
@@ -497,10 +556,18 @@ fn capture_video(
     let index = counter.frames;
     counter.frames += 1;
     counter.last = Some((index, capture_s));
+    let cameras = cameras.clone();
     read_image_once(&mut commands, cameras.real.clone()).observe(
         move |read: On<ImageRead>, mut inbox: ResMut<VideoInbox>| {
-            let (width, height) = (read.width, read.height);
-            let mut rgba = read.data.clone();
+            let size = (read.width, read.height, read.bytes_per_pixel);
+            let (width, height, mut rgba) =
+                match cameras.camera_image(size, read.data.clone(), false) {
+                    Ok(image) => image,
+                    Err(e) => {
+                        error!("simulated camera: {e}; frame {index} dropped");
+                        return;
+                    }
+                };
             video
                 .sensor
                 .apply(&mut rgba, capture_s, &mut Rng::stream(video.seed, index));

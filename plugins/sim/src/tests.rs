@@ -39,6 +39,7 @@ fn config(ground_truth: bool) -> SimRoomConfig {
             intrinsics: Intrinsics::from_fov_y(55f64.to_radians(), 64, 48),
             world_from_camera: pose.to_isometry().expect("pose"),
         },
+        distortion: Default::default(),
         props: vec![
             Prop {
                 name: "desk".into(),

@@ -66,7 +66,8 @@ pub fn erase_frame(
         live.height,
         &settings.ranges,
         settings.mask_radius(),
-    );
+        None,
+    )?;
     let alpha = feather_alpha(&mask, live.width, live.height, settings.feather_px);
     let alpha_h = if settings.enabled {
         settings.alpha_h

@@ -4,8 +4,10 @@
 use nalgebra::{Isometry3, Point3};
 
 use super::RgbaView;
+use crate::error::{Error, Result};
 use crate::robot::{RobotModel, Shape};
 use crate::vision::camera::PinholeCamera;
+use crate::vision::distortion::{DistortionMap, NO_TEXEL};
 
 /// Whether an RGBA pixel lies inside every channel's range.
 pub fn in_ranges(px: &[u8], ranges: &[[u8; 2]; 4]) -> bool {
@@ -21,15 +23,47 @@ pub fn raw_index(x: u32, full: u32, raw: u32) -> u32 {
 }
 
 /// Thresholds the twin's render `raw` into a `width × height` mask (0/1), dilated by a square
-/// window of radius `radius` (pixels outside the image repeat the edge).
+/// window of radius `radius` (pixels outside the image repeat the edge). Through a lens
+/// (`lens`, whose `pinhole` is `raw`'s size and whose image is `width × height`), each pixel
+/// reads the texel its ray lands on ([`DistortionMap::texels`]; none: not robot); without
+/// one, its nearest texel at `raw`'s scale ([`raw_index`]). The GPU pass computes the same.
+/// Errors: a lens whose sizes are not these.
 pub fn threshold_mask(
     raw: &RgbaView,
     width: u32,
     height: u32,
     ranges: &[[u8; 2]; 4],
     radius: u32,
-) -> Vec<u8> {
+    lens: Option<&DistortionMap>,
+) -> Result<Vec<u8>> {
     let (w, h) = (width as usize, height as usize);
+    if let Some(map) = lens {
+        if (map.image.width, map.image.height) != (width, height)
+            || (map.pinhole.width, map.pinhole.height) != (raw.width, raw.height)
+        {
+            return Err(Error::BadImage {
+                what: "mask twin render".into(),
+                message: format!(
+                    "is {}x{} for a {width}x{height} mask, but the lens maps a {}x{} image onto a {}x{} render",
+                    raw.width,
+                    raw.height,
+                    map.image.width,
+                    map.image.height,
+                    map.pinhole.width,
+                    map.pinhole.height
+                ),
+            });
+        }
+        let mask: Vec<u8> = map
+            .texels
+            .iter()
+            .map(|t| {
+                let at = (t[1] as usize * raw.width as usize + t[0] as usize) * 4;
+                u8::from(t[0] != NO_TEXEL && in_ranges(&raw.data[at..at + 4], ranges))
+            })
+            .collect();
+        return Ok(dilate(&mask, width, height, radius));
+    }
     let xs: Vec<usize> = (0..width)
         .map(|x| raw_index(x, width, raw.width) as usize)
         .collect();
@@ -42,7 +76,7 @@ pub fn threshold_mask(
             *o = u8::from(in_ranges(&row[rx * 4..rx * 4 + 4], ranges));
         }
     }
-    dilate(&mask, width, height, radius)
+    Ok(dilate(&mask, width, height, radius))
 }
 
 /// Square (Chebyshev) dilation of a 0/1 mask, separable; the edge repeats.

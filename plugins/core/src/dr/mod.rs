@@ -97,6 +97,10 @@ pub struct EraseSettings {
     pub photometric: bool,
     /// Blend the live frame into the background where the robot cannot be (0 = never, 1 = copy).
     pub background_refresh: f32,
+    /// Draw the mask through the camera's lens distortion (each pixel reads the pinhole render
+    /// where its ray lands, [`crate::vision::distortion::DistortionMap`]); off draws it as a
+    /// pinhole's, to measure what ignoring the lens costs. No effect on a pinhole camera.
+    pub lens_distortion: bool,
 }
 
 impl Default for EraseSettings {
@@ -111,6 +115,7 @@ impl Default for EraseSettings {
             latency_compensation: false,
             photometric: false,
             background_refresh: 0.0,
+            lens_distortion: true,
         }
     }
 }
@@ -189,15 +194,15 @@ mod tests {
             255, 255, 255, 255, 239, 239, 239, 255, 255, 255, 255, 100, 250, 245, 240, 255, //
             0, 0, 0, 255, 255, 255, 255, 255, 0, 0, 0, 255, 0, 0, 0, 255,
         ];
-        let m = threshold_mask(&view(4, 2, &raw), 4, 2, &[[240, 255]; 4], 0);
+        let m = threshold_mask(&view(4, 2, &raw), 4, 2, &[[240, 255]; 4], 0, None).expect("sizes");
         assert_eq!(m, vec![1, 0, 0, 1, 0, 1, 0, 0]);
         let mut ranges = [[240, 255]; 4];
         ranges[3] = [0, 255];
-        let m = threshold_mask(&view(4, 2, &raw), 4, 2, &ranges, 0);
+        let m = threshold_mask(&view(4, 2, &raw), 4, 2, &ranges, 0, None).expect("sizes");
         assert_eq!(m[2], 1, "alpha range opened");
         // Half-resolution raw upsampled by nearest texel.
         let raw2 = [255u8, 255, 255, 255, 0, 0, 0, 255];
-        let m = threshold_mask(&view(2, 1, &raw2), 4, 2, &[[240, 255]; 4], 0);
+        let m = threshold_mask(&view(2, 1, &raw2), 4, 2, &[[240, 255]; 4], 0, None).expect("sizes");
         assert_eq!(m, vec![1, 1, 0, 0, 1, 1, 0, 0]);
     }
 

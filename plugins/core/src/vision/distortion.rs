@@ -13,8 +13,14 @@
 //!
 //! [`Distortion::undistort`] inverts them by Newton's method on the 2x2 Jacobian, as far as a
 //! model is invertible (a point past a strong barrel's fold is refused, never guessed).
+//!
+//! [`DistortionMap`] is what a renderer needs to draw a distorted camera's image: a pinhole
+//! render wide enough for every ray the lens sees, and for each pixel of the distorted image
+//! where its ray lands in that render (the `map` of OpenCV's `remap`, `dst(u, v) =
+//! src(map(u, v))`).
 
 use crate::error::{Error, Result};
+use crate::vision::camera::Intrinsics;
 
 /// A lens's distortion (the coefficients in OpenCV's order).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -73,6 +79,26 @@ impl Distortion {
             other => Err(bad(format!(
                 "model '{other}' is not known (plumb_bob, rational_polynomial, equidistant)"
             ))),
+        }
+    }
+
+    /// ROS's name of the model (`none` for a pinhole).
+    pub fn ros_name(&self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::PlumbBob(_) => "plumb_bob",
+            Self::RationalPolynomial(_) => "rational_polynomial",
+            Self::Equidistant(_) => "equidistant",
+        }
+    }
+
+    /// The coefficients, in OpenCV's order (none for a pinhole).
+    pub fn coefficients(&self) -> &[f64] {
+        match self {
+            Self::None => &[],
+            Self::PlumbBob(d) => d,
+            Self::RationalPolynomial(d) => d,
+            Self::Equidistant(d) => d,
         }
     }
 
@@ -150,6 +176,186 @@ impl Distortion {
     }
 }
 
+/// [`DistortionMap::texels`]' value for a pixel whose ray the pinhole render does not hold.
+pub const NO_TEXEL: u16 = u16::MAX;
+
+/// The pinhole render a distorted image is drawn from, and where each of its pixels looks in it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DistortionMap {
+    /// The distorted image's intrinsics (`width × height` is the map's size).
+    pub image: Intrinsics,
+    /// The lens.
+    pub lens: Distortion,
+    /// The pinhole render's intrinsics: the image's focal lengths times the render's scale,
+    /// its size and principal point grown (or shrunk) to the undistorted rays of the image's
+    /// border pixels, one texel of margin, at most three times the scaled size per side.
+    pub pinhole: Intrinsics,
+    /// Per pixel of the image (row-major), its ray's position in the pinhole render (px,
+    /// pixel centres at integers); NaN where the lens does not invert.
+    pub coords: Vec<[f32; 2]>,
+    /// Per pixel, the pinhole render's nearest texel `(u, v)`, [`NO_TEXEL`] in both where
+    /// the ray is outside the render or the lens does not invert.
+    pub texels: Vec<[u16; 2]>,
+}
+
+impl DistortionMap {
+    /// The map of a camera with intrinsics `image` and lens `lens` onto a pinhole render at
+    /// `scale` of its resolution (as [`Intrinsics::scaled`]). Errors: bad intrinsics, a scale
+    /// outside (0, 1], a lens that inverts at none of the border's pixels.
+    pub fn new(image: &Intrinsics, lens: &Distortion, scale: f64) -> Result<Self> {
+        image.validate()?;
+        if !(scale > 0.0 && scale <= 1.0) {
+            return Err(Error::BadSetting {
+                what: "distortion map".into(),
+                message: format!("scale {scale} is outside (0, 1]"),
+            });
+        }
+        let scaled = image.scaled(scale);
+        let ray =
+            |u: f64, v: f64| lens.undistort((u - image.cx) / image.fx, (v - image.cy) / image.fy);
+        // The border pixels' rays bound the render (the models are monotonic where they
+        // invert).
+        let (w, h) = (f64::from(image.width - 1), f64::from(image.height - 1));
+        let mut border = Vec::new();
+        for i in 0..image.width {
+            border.push((f64::from(i), 0.0));
+            border.push((f64::from(i), h));
+        }
+        for j in 0..image.height {
+            border.push((0.0, f64::from(j)));
+            border.push((w, f64::from(j)));
+        }
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for (u, v) in border {
+            if let Some((x, y)) = ray(u, v) {
+                let p = [scaled.fx * x + scaled.cx, scaled.fy * y + scaled.cy];
+                for a in 0..2 {
+                    lo[a] = lo[a].min(p[a]);
+                    hi[a] = hi[a].max(p[a]);
+                }
+            }
+        }
+        if !(lo[0].is_finite() && lo[1].is_finite()) {
+            return Err(Error::BadSetting {
+                what: "lens distortion".into(),
+                message: format!("{lens:?} inverts nowhere on the image's border"),
+            });
+        }
+        let size = [f64::from(scaled.width), f64::from(scaled.height)];
+        // At most one scaled image's width (height) beyond each side: 3x per side.
+        let first: [f64; 2] = std::array::from_fn(|a| (lo[a].floor() - 1.0).max(-size[a]));
+        let last: [f64; 2] =
+            std::array::from_fn(|a| (hi[a].ceil() + 1.0).min(2.0 * size[a] - 1.0).max(first[a]));
+        let extent: [u32; 2] = std::array::from_fn(|a| (last[a] - first[a]) as u32 + 1);
+        let pinhole = Intrinsics {
+            fx: scaled.fx,
+            fy: scaled.fy,
+            cx: scaled.cx - first[0],
+            cy: scaled.cy - first[1],
+            width: extent[0],
+            height: extent[1],
+        };
+        pinhole.validate()?;
+        let n = image.width as usize * image.height as usize;
+        let mut coords = Vec::with_capacity(n);
+        let mut texels = Vec::with_capacity(n);
+        for j in 0..image.height {
+            for i in 0..image.width {
+                match ray(f64::from(i), f64::from(j)) {
+                    Some((x, y)) => {
+                        let (u, v) = (pinhole.fx * x + pinhole.cx, pinhole.fy * y + pinhole.cy);
+                        coords.push([u as f32, v as f32]);
+                        let (tu, tv) = (u.round(), v.round());
+                        let inside = (0.0..f64::from(pinhole.width)).contains(&tu)
+                            && (0.0..f64::from(pinhole.height)).contains(&tv);
+                        texels.push(if inside {
+                            [tu as u16, tv as u16]
+                        } else {
+                            [NO_TEXEL; 2]
+                        });
+                    }
+                    None => {
+                        coords.push([f32::NAN; 2]);
+                        texels.push([NO_TEXEL; 2]);
+                    }
+                }
+            }
+        }
+        Ok(Self {
+            image: *image,
+            lens: *lens,
+            pinhole,
+            coords,
+            texels,
+        })
+    }
+
+    fn check(&self, what: &str, src: &[u8], bytes_per_pixel: usize) -> Result<()> {
+        let expected = self.pinhole.width as usize * self.pinhole.height as usize * bytes_per_pixel;
+        if bytes_per_pixel == 0 || src.len() != expected {
+            return Err(Error::BadImage {
+                what: what.to_owned(),
+                message: format!(
+                    "{} bytes, but the pinhole render is {}x{} at {bytes_per_pixel} bytes per pixel",
+                    src.len(),
+                    self.pinhole.width,
+                    self.pinhole.height
+                ),
+            });
+        }
+        Ok(())
+    }
+
+    /// The distorted image of the pinhole render `src` (`pinhole` size, `bytes_per_pixel`
+    /// per pixel), each pixel its nearest texel's (a mask's lookup); zeros where
+    /// [`NO_TEXEL`]. `what` names `src` in the error.
+    pub fn remap_nearest(&self, what: &str, src: &[u8], bytes_per_pixel: usize) -> Result<Vec<u8>> {
+        self.check(what, src, bytes_per_pixel)?;
+        let row = self.pinhole.width as usize;
+        let mut out = vec![0u8; self.texels.len() * bytes_per_pixel];
+        for (o, t) in out.chunks_exact_mut(bytes_per_pixel).zip(&self.texels) {
+            if t[0] != NO_TEXEL {
+                let at = (t[1] as usize * row + t[0] as usize) * bytes_per_pixel;
+                o.copy_from_slice(&src[at..at + bytes_per_pixel]);
+            }
+        }
+        Ok(out)
+    }
+
+    /// The distorted image of the pinhole render `src`, bilinearly interpolated (a camera's
+    /// image: what the lens shows); the edge repeats, zeros where the lens does not invert.
+    pub fn remap_bilinear(
+        &self,
+        what: &str,
+        src: &[u8],
+        bytes_per_pixel: usize,
+    ) -> Result<Vec<u8>> {
+        self.check(what, src, bytes_per_pixel)?;
+        let (w, h) = (self.pinhole.width as usize, self.pinhole.height as usize);
+        let mut out = vec![0u8; self.coords.len() * bytes_per_pixel];
+        for (o, c) in out.chunks_exact_mut(bytes_per_pixel).zip(&self.coords) {
+            if !(c[0].is_finite() && c[1].is_finite()) {
+                continue;
+            }
+            let (u, v) = (
+                f64::from(c[0]).clamp(0.0, (w - 1) as f64),
+                f64::from(c[1]).clamp(0.0, (h - 1) as f64),
+            );
+            let (u0, v0) = (u.floor() as usize, v.floor() as usize);
+            let (u1, v1) = ((u0 + 1).min(w - 1), (v0 + 1).min(h - 1));
+            let (a, b) = (u - u0 as f64, v - v0 as f64);
+            let at =
+                |x: usize, y: usize, k: usize| f64::from(src[(y * w + x) * bytes_per_pixel + k]);
+            for (k, o) in o.iter_mut().enumerate() {
+                let top = at(u0, v0, k) * (1.0 - a) + at(u1, v0, k) * a;
+                let bottom = at(u0, v1, k) * (1.0 - a) + at(u1, v1, k) * a;
+                *o = (top * (1.0 - b) + bottom * b).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+        Ok(out)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -218,5 +424,64 @@ mod tests {
         let strong = Distortion::PlumbBob([-0.9, 0.0, 0.0, 0.0, 0.0]);
         assert_eq!(strong.undistort(2.0, 0.0), None);
         assert_eq!(strong.undistort(f64::NAN, 0.0), None);
+    }
+
+    #[test]
+    fn a_map_finds_each_pixel_s_ray_in_the_pinhole_render() {
+        let k = Intrinsics::from_fov_y(55f64.to_radians(), 160, 120);
+        // A pinhole: the render is the image with a pixel of margin.
+        let map = DistortionMap::new(&k, &Distortion::None, 1.0).expect("pinhole");
+        assert_eq!((map.pinhole.width, map.pinhole.height), (162, 122));
+        assert_eq!(map.texels[0], [1, 1]);
+        // A webcam's barrel: the render grows to hold the corners' rays.
+        let lens = Distortion::PlumbBob([-0.3, 0.1, 0.001, -0.001, 0.0]);
+        let map = DistortionMap::new(&k, &lens, 1.0).expect("barrel");
+        assert!(
+            map.pinhole.width > 170 && map.pinhole.height > 125,
+            "{:?}",
+            map.pinhole
+        );
+        // A world ray: its pinhole pixel and its distorted pixel agree through the map.
+        for (x, y) in [(0.0, 0.0), (0.35, -0.2), (-0.4, 0.3), (0.1, 0.25)] {
+            let (xd, yd) = lens.distort(x, y);
+            let (u, v) = (k.fx * xd + k.cx, k.fy * yd + k.cy);
+            let (i, j) = (u.round() as usize, v.round() as usize);
+            let c = map.coords[j * 160 + i];
+            // Rounding the distorted pixel moves the ray by at most half a pixel (times the
+            // lens's local magnification, below 1.5 here).
+            let (pu, pv) = (
+                map.pinhole.fx * x + map.pinhole.cx,
+                map.pinhole.fy * y + map.pinhole.cy,
+            );
+            assert!(
+                (f64::from(c[0]) - pu).abs() < 0.75 && (f64::from(c[1]) - pv).abs() < 0.75,
+                "ray ({x}, {y}): map {c:?}, pinhole ({pu}, {pv})"
+            );
+            let t = map.texels[j * 160 + i];
+            assert_eq!(
+                [f64::from(t[0]), f64::from(t[1])],
+                [f64::from(c[0]).round(), f64::from(c[1]).round()]
+            );
+        }
+        // Remapping: a render whose texels hold their own coordinates reads back the texels.
+        let (pw, ph) = (map.pinhole.width as usize, map.pinhole.height as usize);
+        let src: Vec<u8> = (0..pw * ph)
+            .flat_map(|n| [(n % pw) as u8, (n / pw) as u8])
+            .collect();
+        let out = map.remap_nearest("coordinates", &src, 2).expect("size");
+        assert_eq!(out[..2], [map.texels[0][0] as u8, map.texels[0][1] as u8]);
+        let smooth = map.remap_bilinear("coordinates", &src, 2).expect("size");
+        let centre = 60 * 160 + 80;
+        assert!((f64::from(smooth[centre * 2]) - f64::from(map.coords[centre][0])).abs() <= 0.5);
+        // Sizes and scales are checked.
+        assert!(map.remap_nearest("short", &src[1..], 2).is_err());
+        assert!(DistortionMap::new(&k, &lens, 0.0).is_err());
+        let half = DistortionMap::new(&k, &lens, 0.5).expect("half");
+        assert!(
+            half.pinhole.width <= map.pinhole.width / 2 + 3,
+            "{:?} {:?}",
+            half.pinhole,
+            map.pinhole
+        );
     }
 }
