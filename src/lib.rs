@@ -30,6 +30,7 @@ pub mod preview;
 pub mod progress;
 pub mod replay;
 pub mod score;
+pub mod session;
 pub mod teleop;
 
 pub use app::{AppTwin, AvatarmPlugins, AvatarmSystems, Mode, SceneResource, build_app};

@@ -8,6 +8,9 @@ use std::process::Command;
 #[path = "../plugins/ros/tests/support/mod.rs"]
 mod ros_support;
 
+#[path = "support/python_mcap.rs"]
+mod python_mcap;
+
 use avatarm::replay::{self, ReplayOptions};
 use avatarm::scene::Scene;
 use avatarm_core::robot::{PackagePath, Shape};
@@ -274,12 +277,14 @@ fn numbers_after(log: &str, marker: &str) -> Vec<f64> {
 
 /// `avatarm run` on the pouring scene teleoperates its task live: the scripted hand grasps the
 /// bottle's twin, the simulated arm closes on the real bottle and lifts it after the twin, in
-/// the preview with the robot erased.
+/// the preview with the robot erased; `--record` writes the session, every control tick's
+/// command in it, read back by Avatarm's reader and PyPI's.
 #[test]
 fn run_teleoperates_the_pouring_task_live() {
     let out = out_dir("run_teleop");
     std::fs::create_dir_all(&out).unwrap();
     let shot = out.join("teleop.png");
+    let session = out.join("session.mcap");
     // 200 updates of half a camera frame: 3.3 s, past the grasp (1.8 s) into the lift.
     let log = run_preview(
         &[
@@ -288,6 +293,8 @@ fn run_teleoperates_the_pouring_task_live() {
             "200",
             "--screenshot",
             shot.to_str().unwrap(),
+            "--record",
+            session.to_str().unwrap(),
         ],
         &out,
     );
@@ -304,6 +311,65 @@ fn run_teleoperates_the_pouring_task_live() {
     // Measured: 2.1 mm. Allowed: 8 mm.
     assert!(off_mm < 8.0, "the real bottle follows its twin: {line}");
     assert!(load_rgb(&shot).dimensions() == (1280, 720));
+    // The session: about 100 camera frames at 30 fps over 200 half-frame updates, each with its
+    // erased frame and mask; every control tick's command; the hand; the limiter's events.
+    assert!(log.contains("recorded the session: "), "{log}");
+    let r = avatarm_record::Recording::open(&session).expect("the session reads back");
+    let frames = r.frames.len();
+    assert!((90..=110).contains(&frames), "{frames} frames");
+    assert_eq!((r.erased.len(), r.masks.len()), (frames, frames));
+    let stamps =
+        |v: &[avatarm_record::CompressedFrame]| v.iter().map(|f| f.stamp_ns).collect::<Vec<_>>();
+    assert_eq!(
+        stamps(&r.erased),
+        stamps(&r.frames),
+        "each frame's outputs at its stamp"
+    );
+    // Every tick's command (the status line is printed a few updates before the end), none
+    // lost: one per control period (100 Hz).
+    assert!(
+        r.commands.len() as f64 >= ticks,
+        "{} commands: {line}",
+        r.commands.len()
+    );
+    let gaps: Vec<u64> = r
+        .commands
+        .windows(2)
+        .map(|w| w[1].stamp_ns - w[0].stamp_ns)
+        .collect();
+    assert!(
+        gaps.iter().all(|&g| (9_000_000..=11_000_000).contains(&g)),
+        "tick gaps (ns): {:?}",
+        gaps.iter()
+            .filter(|&&g| !(9_000_000..=11_000_000).contains(&g))
+            .collect::<Vec<_>>()
+    );
+    assert!(r.commands.iter().any(|c| c.gripper_closed));
+    assert!(r.joint_states.len() >= 150, "{}", r.joint_states.len());
+    assert!(r.hands.len() >= 100 && r.hands.iter().all(|h| h.poses.len() == 26 || !h.tracked));
+    assert!(r.calibration.is_some() && r.base_from_camera.is_some() && r.world_from_base.is_some());
+    assert!(
+        r.safety
+            .iter()
+            .all(|e| e.source == "limiter" || e.source == "mapping" || e.source == "robot"),
+        "{:?}",
+        r.safety
+    );
+    let py = python_mcap::python_read(&session);
+    for (topic, schema) in [
+        ("/camera/image/compressed", "foxglove.CompressedImage"),
+        ("/avatarm/erased/compressed", "foxglove.CompressedImage"),
+        ("/avatarm/hand", "foxglove.PosesInFrame"),
+        ("/avatarm/robot/command", "avatarm.JointCommand"),
+        ("/joint_states", "avatarm.JointState"),
+        ("/tf", "foxglove.FrameTransform"),
+    ] {
+        assert!(
+            py.lines()
+                .any(|l| l.starts_with(&format!("{topic} {schema} jsonschema json "))),
+            "{topic} not in\n{py}"
+        );
+    }
 }
 
 /// `avatarm run --hand` refuses what it cannot use before opening a window, naming the flag.
@@ -978,7 +1044,7 @@ fn a_distorted_lens_is_honoured_by_the_mask() {
     // A wrong count, or a lens that folds over inside the image, is refused by name.
     for (coefficients, expected) in [
         ("[-0.32, 0.11, 0.0008, -0.0006]", "takes 5"),
-        ("[-2.5, 0.0, 0.0, 0.0, 0.0]", "inverts nowhere"),
+        ("[-2.5, 0.0, 0.0, 0.0, 0.0]", "does not invert at"),
     ] {
         let bad = text.replace("[-0.32, 0.11, 0.0008, -0.0006, -0.015]", coefficients);
         let e = Scene::parse(&bad, &path, &PackagePath::default()).expect_err(coefficients);

@@ -157,6 +157,11 @@ enum Command {
         /// through the scene's [robot.link], ROS 1; docs/robot-ros.md).
         #[arg(long, value_name = "ROBOT", value_parser = ["sim", "ros"], default_value = "sim")]
         robot: String,
+        /// Record the session (MCAP, Foxglove's schemas): camera frames, calibration and pose,
+        /// joint states, Avatarm's erased frames and masks, the hand, the robot's commands and
+        /// safety events (docs/real-footage.md).
+        #[arg(long, value_name = "FILE.mcap")]
+        record: Option<PathBuf>,
         #[command(flatten)]
         overrides: EraseOverrides,
     },
@@ -623,6 +628,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             hand,
             leap_mount,
             robot,
+            record,
             overrides,
         } => {
             if webcam.is_some() && !cfg!(feature = "webcam") {
@@ -676,7 +682,11 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 hand,
                 robot,
             });
-            let exit = build_app(&scene, &mode)?.run();
+            let mut app = build_app(&scene, &mode)?;
+            if let Some(path) = &record {
+                crate::session::add_session_recorder(&mut app, path, &scene)?;
+            }
+            let exit = app.run();
             if exit.is_error() {
                 return Err(AppError::Preview);
             }

@@ -286,7 +286,10 @@ fn show_panel(
         PanelView::Feed => Some(cameras.real.clone()),
         PanelView::Mask => erase.as_ref().map(|t| t.mask.clone()),
     };
-    let tint = if state.mask_overlay && state.view != PanelView::Mask {
+    // Through a lens the feed shown is the room's pinhole render: the mask (the camera's
+    // distorted image) does not lie over it.
+    let pinhole_feed = state.view == PanelView::Feed && cameras.lens.is_some();
+    let tint = if state.mask_overlay && state.view != PanelView::Mask && !pinhole_feed {
         MASK_TINT
     } else {
         Vec4::ZERO

@@ -786,6 +786,9 @@ pub(crate) fn lens_report(lens: &Distortion, map: Option<&DistortionMap>) -> ser
         "coefficients": lens.coefficients(),
         "honoured": map.is_some(),
         "mask_render": map.map(|m| [m.pinhole.width, m.pinhole.height]),
+        // Pixels never masked: past a barrel's fold, or beyond the render's 3x cap.
+        "pixels_unmapped": map.map(|m| m.unmapped),
+        "pixels_outside_render": map.map(|m| m.outside),
     })
 }
 

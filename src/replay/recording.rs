@@ -185,6 +185,8 @@ struct Input {
     camera: PinholeCamera,
     /// The camera's lens (honoured by the mask unless `[erase] lens_distortion` is off).
     lens: Distortion,
+    /// The mask's lens map (the pipeline builds the same).
+    lens_map: EraseLens,
     calibration: CameraCalibration,
     size: (u32, u32),
     /// The frames, by capture time.
@@ -212,6 +214,14 @@ impl Input {
         };
         let mut notes = Vec::new();
         let lens = Distortion::from_ros(calibration.distortion_model.ros_name(), &calibration.d)?;
+        // The mask's lens map, checked before any frame is decoded.
+        let lens_map = EraseLens::new(&intrinsics, &lens, &o.settings)?;
+        if let Some(m) = lens_map.0.as_ref().filter(|m| m.unmapped + m.outside > 0) {
+            notes.push(format!(
+                "the lens does not invert at {} pixels and the mask's render misses {} more: those pixels are never masked",
+                m.unmapped, m.outside
+            ));
+        }
         if !lens.is_none() && !o.settings.lens_distortion {
             notes.push(format!(
                 "the camera's {} distortion is ignored (lens_distortion off): the mask is a pinhole projection",
@@ -258,6 +268,7 @@ impl Input {
             model,
             camera,
             lens,
+            lens_map,
             calibration,
             size,
             frames,
@@ -790,7 +801,7 @@ fn write_outputs(
     }
     let settings = o.settings;
     // The lens map the mask was drawn through (the same function as the pipeline's).
-    let lens = EraseLens::new(&input.camera.intrinsics, &input.lens, &settings)?;
+    let lens = &input.lens_map;
     let (mut coverage, mut max_diff, mut mismatch) = (Vec::new(), 0u8, 0u64);
     let mut scored = Vec::new();
     let mut robot_union = vec![0u8; (w * h) as usize];

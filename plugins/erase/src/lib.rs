@@ -321,6 +321,12 @@ fn setup(
         error!("erase: {e}; the mask is drawn as a pinhole's");
         EraseLens(None)
     });
+    if let Some(m) = lens.0.as_ref().filter(|m| m.unmapped + m.outside > 0) {
+        warn!(
+            "erase: the lens does not invert at {} pixels and the mask's render misses {} more: those pixels are never masked",
+            m.unmapped, m.outside
+        );
+    }
     let raw_k = lens.raw_intrinsics(&config);
     let layer = RenderLayers::layer(layers::MASK_TWIN);
     let twin = spawn_twin_with_visuals(
@@ -541,16 +547,19 @@ fn prepare_frame(
             let margin = f64::from(s.mask_radius()) + 6.0;
             let region = match &lens.0 {
                 // Through the lens: the region in the pinhole render, read where each pixel's
-                // ray lands.
+                // ray lands, then grown by the mask's radius in the camera's own pixels (a
+                // margin in the render's pixels shrinks where the lens compresses the image).
                 Some(map) => {
                     let pinhole = PinholeCamera {
                         intrinsics: map.pinhole,
                         world_from_camera: config.camera.world_from_camera,
                     };
-                    let margin = margin * s.resolution_scale + 1.0;
-                    let region = dr::sphere_mask(&pinhole, &poses, &spheres.0, margin);
-                    map.remap_nearest("robot region", &region, 1)
-                        .unwrap_or_else(|_| vec![1; (k.width * k.height) as usize])
+                    let slack = 6.0 * s.resolution_scale + 1.0;
+                    let region = dr::sphere_mask(&pinhole, &poses, &spheres.0, slack);
+                    match map.remap_nearest("robot region", &region, 1) {
+                        Ok(r) => dr::dilate(&r, k.width, k.height, s.mask_radius()),
+                        Err(_) => vec![1; (k.width * k.height) as usize],
+                    }
                 }
                 None => dr::sphere_mask(&config.camera, &poses, &spheres.0, margin),
             };

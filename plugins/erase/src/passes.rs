@@ -630,6 +630,13 @@ fn prepare_jobs(
             UVec2::new(m.image.width, m.image.height) == size
                 && UVec2::new(m.pinhole.width, m.pinhole.height) == job.params.raw_size
         });
+        if job.lens.is_some() && !lens && !p.warned {
+            error!(
+                "erase{}: the lens map does not fit the frame or the mask's render; the mask is read by scale",
+                job.label
+            );
+            p.warned = true;
+        }
         gpu.params.set(job.params.through_lens(lens));
         gpu.params.write_buffer(&device, &queue);
         let Some(params) = gpu.params.binding() else {

@@ -14,6 +14,13 @@
 //! | [`topics::REFERENCE_MASK`] | `foxglove.CompressedImage` | a reference silhouette (PNG, 255 = robot), where the source has one |
 //! | [`topics::ERASED`] | `foxglove.CompressedImage` | Avatarm's output Ĩ(t): the frame with the robot erased (PNG) |
 //! | [`topics::MASK`] | `foxglove.CompressedImage` | Avatarm's mask M(t) of that frame (PNG, 255 = robot) |
+//! | [`topics::HAND`] | `foxglove.PosesInFrame` (with `hand`, `tracked`, `radius`) | the operator's tracked hand: its 26 joints' poses in [`WORLD_FRAME`] (none while untracked), each joint's capsule radius (m) |
+//! | [`topics::ROBOT_COMMAND`] | `avatarm.JointCommand` | each control tick's command to the robot: joint names and velocities (rad/s or m/s), gripper closed, the limiter stopping, tool-point speed (m/s) |
+//! | [`topics::SAFETY`] | `foxglove.Log` | safety events: the limiter starting or ending a stop or an intervention, mapping and robot-link errors |
+//!
+//! [`topics::TRANSFORM`] also carries the robot's base in the world ([`WORLD_FRAME`] →
+//! [`BASE_FRAME`]) where the session has one, so Foxglove's 3D panel puts the hand, the robot's
+//! base and the camera in one scene.
 //!
 //! Times: MCAP log and publish times in ns since the Unix epoch (or since the session's start
 //! where the source has no wall clock); each message's `timestamp` is Foxglove's JSON time
@@ -41,6 +48,8 @@ pub const FORMAT_VERSION: &str = "1";
 pub const BASE_FRAME: &str = "base";
 /// The camera's optical frame (x right, y down, z forward).
 pub const CAMERA_FRAME: &str = "camera_optical";
+/// The world frame of a live session (z up): the hand's, and the parent of [`BASE_FRAME`].
+pub const WORLD_FRAME: &str = "world";
 
 /// The topics of a recording.
 pub mod topics {
@@ -58,6 +67,87 @@ pub mod topics {
     pub const ERASED: &str = "/avatarm/erased/compressed";
     /// Avatarm's masks M(t).
     pub const MASK: &str = "/avatarm/mask/compressed";
+    /// The operator's tracked hand.
+    pub const HAND: &str = "/avatarm/hand";
+    /// The commands sent to the robot.
+    pub const ROBOT_COMMAND: &str = "/avatarm/robot/command";
+    /// Safety events.
+    pub const SAFETY: &str = "/avatarm/safety";
+}
+
+/// One hand at one instant, as the hand source gave it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HandPoses {
+    /// Capture time (ns).
+    pub stamp_ns: u64,
+    /// `left` or `right`.
+    pub hand: String,
+    /// Tracked; an untracked hand has no joints.
+    pub tracked: bool,
+    /// The joints' poses in [`WORLD_FRAME`] (26, OpenXR's order, when tracked).
+    pub poses: Vec<Isometry3<f64>>,
+    /// Each joint's capsule radius (m).
+    pub radii: Vec<f64>,
+}
+
+/// One control tick's command to the robot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RobotCommand {
+    /// Tick time (ns).
+    pub stamp_ns: u64,
+    /// Joint names (the description's).
+    pub names: Vec<String>,
+    /// Joint velocities sent (rad/s or m/s), one per name (zero when nothing was sent).
+    pub velocities: Vec<f64>,
+    /// The gripper commanded closed.
+    pub gripper_closed: bool,
+    /// The safety limiter is stopping the robot.
+    pub stopping: bool,
+    /// Commanded tool-point speed (m/s).
+    pub tcp_speed: f64,
+}
+
+/// A safety event's severity (`foxglove.Log`'s levels).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LogLevel {
+    /// Something ended, or information (2).
+    Info,
+    /// The limiter intervened (3).
+    Warning,
+    /// The robot was stopped, or an error (4).
+    Error,
+}
+
+impl LogLevel {
+    fn code(self) -> u8 {
+        match self {
+            Self::Info => 2,
+            Self::Warning => 3,
+            Self::Error => 4,
+        }
+    }
+
+    fn of_code(code: u8) -> Option<Self> {
+        match code {
+            1 | 2 => Some(Self::Info),
+            3 => Some(Self::Warning),
+            4 | 5 => Some(Self::Error),
+            _ => None,
+        }
+    }
+}
+
+/// A safety event.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SafetyEvent {
+    /// When (ns).
+    pub stamp_ns: u64,
+    /// Its severity.
+    pub level: LogLevel,
+    /// What raised it (`limiter`, `mapping`, `robot`).
+    pub source: String,
+    /// What happened.
+    pub message: String,
 }
 
 /// A compressed image's format.
@@ -131,6 +221,14 @@ pub struct Recording {
     pub masks: Vec<CompressedFrame>,
     /// Joint states, by sample time.
     pub joint_states: Vec<JointStates>,
+    /// The robot's base in the world (the last one recorded), where the session has one.
+    pub world_from_base: Option<Isometry3<f64>>,
+    /// The operator's hand, by capture time.
+    pub hands: Vec<HandPoses>,
+    /// The commands sent to the robot, by tick time.
+    pub commands: Vec<RobotCommand>,
+    /// Safety events, by time.
+    pub safety: Vec<SafetyEvent>,
     /// Messages on topics Avatarm does not read, by topic.
     pub other_topics: BTreeMap<String, usize>,
 }
@@ -242,6 +340,80 @@ struct WireTransform {
 }
 
 #[derive(Debug, Serialize, Deserialize)]
+struct WirePose {
+    position: WireVector3,
+    orientation: WireQuaternion,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct WireHand {
+    timestamp: Time,
+    frame_id: String,
+    poses: Vec<WirePose>,
+    hand: String,
+    tracked: bool,
+    radius: Vec<f64>,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct WireCommand {
+    timestamp: Time,
+    name: Vec<String>,
+    velocity: Vec<f64>,
+    gripper_closed: bool,
+    stopping: bool,
+    tcp_speed: f64,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct WireLog {
+    timestamp: Time,
+    level: u8,
+    message: String,
+    name: String,
+    file: String,
+    line: u32,
+}
+
+fn wire_pose(p: &Isometry3<f64>) -> WirePose {
+    let (t, q) = (p.translation.vector, p.rotation);
+    WirePose {
+        position: WireVector3 {
+            x: t.x,
+            y: t.y,
+            z: t.z,
+        },
+        orientation: WireQuaternion {
+            x: q.i,
+            y: q.j,
+            z: q.k,
+            w: q.w,
+        },
+    }
+}
+
+/// The pose of `translation` and `rotation`, or what is wrong with them.
+fn pose_of(t: &WireVector3, q: &WireQuaternion) -> Result<Isometry3<f64>, String> {
+    let t = Vector3::new(t.x, t.y, t.z);
+    let q = Quaternion::new(q.w, q.x, q.y, q.z);
+    let norm = q.norm();
+    if !(t.iter().all(|v| v.is_finite()) && norm.is_finite() && (norm - 1.0).abs() < 1e-3) {
+        return Err(format!(
+            "translation {t:?}, rotation of norm {norm}: not a pose"
+        ));
+    }
+    Ok(Isometry3::from_parts(
+        Translation3::from(t),
+        UnitQuaternion::from_quaternion(q),
+    ))
+}
+
+fn finite_pose(p: &Isometry3<f64>) -> bool {
+    p.translation.vector.iter().all(|v| v.is_finite())
+        && p.rotation.coords.iter().all(|v| v.is_finite())
+}
+
+#[derive(Debug, Serialize, Deserialize)]
 struct WireJointState {
     timestamp: Time,
     name: Vec<String>,
@@ -302,6 +474,57 @@ fn schema(topic: &str) -> (&'static str, serde_json::Value) {
                     "child_frame_id": {"type": "string"},
                     "translation": xyz,
                     "rotation": {"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}, "w": {"type": "number"}}}
+                }
+            }),
+        ),
+        topics::HAND => (
+            "foxglove.PosesInFrame",
+            json!({
+                "title": "foxglove.PosesInFrame",
+                "description": "An array of timestamped poses in a reference frame (Avatarm: a hand's joints, with its side, whether it is tracked and each joint's radius in m)",
+                "type": "object",
+                "properties": {
+                    "timestamp": time,
+                    "frame_id": {"type": "string"},
+                    "poses": {"type": "array", "items": {"type": "object", "properties": {
+                        "position": xyz,
+                        "orientation": {"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}, "w": {"type": "number"}}}
+                    }}},
+                    "hand": {"type": "string", "enum": ["left", "right"]},
+                    "tracked": {"type": "boolean"},
+                    "radius": numbers
+                }
+            }),
+        ),
+        topics::ROBOT_COMMAND => (
+            "avatarm.JointCommand",
+            json!({
+                "title": "avatarm.JointCommand",
+                "description": "One control tick's command to the robot: joint velocities (rad/s or m/s), the gripper, whether the safety limiter is stopping the arm, the tool-point speed (m/s)",
+                "type": "object",
+                "properties": {
+                    "timestamp": time,
+                    "name": {"type": "array", "items": {"type": "string"}},
+                    "velocity": numbers,
+                    "gripper_closed": {"type": "boolean"},
+                    "stopping": {"type": "boolean"},
+                    "tcp_speed": {"type": "number"}
+                }
+            }),
+        ),
+        topics::SAFETY => (
+            "foxglove.Log",
+            json!({
+                "title": "foxglove.Log",
+                "description": "A log message",
+                "type": "object",
+                "properties": {
+                    "timestamp": time,
+                    "level": {"type": "integer", "minimum": 0, "maximum": 5},
+                    "message": {"type": "string"},
+                    "name": {"type": "string"},
+                    "file": {"type": "string"},
+                    "line": {"type": "integer", "minimum": 0}
                 }
             }),
         ),
@@ -543,6 +766,105 @@ impl RecordingWriter {
         self.write(topics::JOINT_STATES, s.stamp_ns, &message)
     }
 
+    /// The robot's base in the world at `stamp_ns` (a live session's). Refused when not
+    /// finite.
+    pub fn base_pose(
+        &mut self,
+        stamp_ns: u64,
+        world_from_base: &Isometry3<f64>,
+    ) -> Result<(), RecordError> {
+        if !finite_pose(world_from_base) {
+            return Err(self.refuse(format!("base pose {world_from_base:?} is not finite")));
+        }
+        let p = wire_pose(world_from_base);
+        let message = WireTransform {
+            timestamp: Time::of(stamp_ns),
+            parent_frame_id: WORLD_FRAME.into(),
+            child_frame_id: BASE_FRAME.into(),
+            translation: p.position,
+            rotation: p.orientation,
+        };
+        self.write(topics::TRANSFORM, stamp_ns, &message)
+    }
+
+    /// The operator's hand. Refused (nothing written) when a pose or radius is not finite, the
+    /// counts differ, a tracked hand has no joints or `hand` is not `left` or `right`.
+    pub fn hand(&mut self, h: &HandPoses) -> Result<(), RecordError> {
+        let at = format!("hand at {} ns", h.stamp_ns);
+        if !matches!(h.hand.as_str(), "left" | "right") {
+            return Err(self.refuse(format!("{at}: side '{}'", h.hand)));
+        }
+        if h.poses.len() != h.radii.len() || (h.tracked && h.poses.is_empty()) {
+            return Err(self.refuse(format!(
+                "{at}: {} poses, {} radii (tracked: {})",
+                h.poses.len(),
+                h.radii.len(),
+                h.tracked
+            )));
+        }
+        if let Some(i) =
+            (0..h.poses.len()).find(|&i| !(finite_pose(&h.poses[i]) && h.radii[i].is_finite()))
+        {
+            return Err(self.refuse(format!("{at}: joint {i} is not finite")));
+        }
+        let message = WireHand {
+            timestamp: Time::of(h.stamp_ns),
+            frame_id: WORLD_FRAME.into(),
+            poses: h.poses.iter().map(wire_pose).collect(),
+            hand: h.hand.clone(),
+            tracked: h.tracked,
+            radius: h.radii.clone(),
+        };
+        self.write(topics::HAND, h.stamp_ns, &message)
+    }
+
+    /// A command sent to the robot. Refused (nothing written) when the counts differ or a
+    /// value is not finite (a NaN command is never recorded as if it were sent).
+    pub fn robot_command(&mut self, c: &RobotCommand) -> Result<(), RecordError> {
+        if c.names.len() != c.velocities.len() {
+            return Err(self.refuse(format!(
+                "robot command at {} ns: {} names, {} velocities",
+                c.stamp_ns,
+                c.names.len(),
+                c.velocities.len()
+            )));
+        }
+        if let Some(i) = c.velocities.iter().position(|v| !v.is_finite()) {
+            return Err(self.refuse(format!(
+                "robot command at {} ns: joint '{}' has {}",
+                c.stamp_ns, c.names[i], c.velocities[i]
+            )));
+        }
+        if !c.tcp_speed.is_finite() {
+            return Err(self.refuse(format!(
+                "robot command at {} ns: tool-point speed {}",
+                c.stamp_ns, c.tcp_speed
+            )));
+        }
+        let message = WireCommand {
+            timestamp: Time::of(c.stamp_ns),
+            name: c.names.clone(),
+            velocity: c.velocities.clone(),
+            gripper_closed: c.gripper_closed,
+            stopping: c.stopping,
+            tcp_speed: c.tcp_speed,
+        };
+        self.write(topics::ROBOT_COMMAND, c.stamp_ns, &message)
+    }
+
+    /// A safety event.
+    pub fn safety_event(&mut self, e: &SafetyEvent) -> Result<(), RecordError> {
+        let message = WireLog {
+            timestamp: Time::of(e.stamp_ns),
+            level: e.level.code(),
+            message: e.message.clone(),
+            name: e.source.clone(),
+            file: String::new(),
+            line: 0,
+        };
+        self.write(topics::SAFETY, e.stamp_ns, &message)
+    }
+
     /// Messages written so far.
     pub fn messages(&self) -> u64 {
         self.messages
@@ -596,6 +918,9 @@ impl Recording {
                 topics::REFERENCE_MASK,
                 topics::ERASED,
                 topics::MASK,
+                topics::HAND,
+                topics::ROBOT_COMMAND,
+                topics::SAFETY,
             ];
             if !known.contains(&topic.as_str()) {
                 *out.other_topics.entry(topic.clone()).or_default() += 1;
@@ -668,6 +993,13 @@ impl Recording {
                     let m: WireTransform = serde_json::from_slice(&message.data)
                         .map_err(|e| bad(format!("not a foxglove.FrameTransform: {e}")))?;
                     if (m.parent_frame_id.as_str(), m.child_frame_id.as_str())
+                        == (WORLD_FRAME, BASE_FRAME)
+                    {
+                        out.world_from_base =
+                            Some(pose_of(&m.translation, &m.rotation).map_err(bad)?);
+                        continue;
+                    }
+                    if (m.parent_frame_id.as_str(), m.child_frame_id.as_str())
                         != (BASE_FRAME, CAMERA_FRAME)
                     {
                         *out.other_topics
@@ -678,21 +1010,66 @@ impl Recording {
                             .or_default() += 1;
                         continue;
                     }
-                    let t = Vector3::new(m.translation.x, m.translation.y, m.translation.z);
-                    let q = Quaternion::new(m.rotation.w, m.rotation.x, m.rotation.y, m.rotation.z);
-                    let norm = q.norm();
-                    if !(t.iter().all(|v| v.is_finite())
-                        && norm.is_finite()
-                        && (norm - 1.0).abs() < 1e-3)
-                    {
+                    out.base_from_camera = Some(pose_of(&m.translation, &m.rotation).map_err(bad)?);
+                }
+                topics::HAND => {
+                    let m: WireHand = serde_json::from_slice(&message.data)
+                        .map_err(|e| bad(format!("not a foxglove.PosesInFrame hand: {e}")))?;
+                    let poses = m
+                        .poses
+                        .iter()
+                        .map(|p| pose_of(&p.position, &p.orientation))
+                        .collect::<Result<Vec<_>, _>>()
+                        .map_err(bad)?;
+                    if poses.len() != m.radius.len() || m.radius.iter().any(|r| !r.is_finite()) {
                         return Err(bad(format!(
-                            "translation {t:?}, rotation of norm {norm}: not a pose"
+                            "{} poses, {} radii (all finite)",
+                            poses.len(),
+                            m.radius.len()
                         )));
                     }
-                    out.base_from_camera = Some(Isometry3::from_parts(
-                        Translation3::from(t),
-                        UnitQuaternion::from_quaternion(q),
-                    ));
+                    out.hands.push(HandPoses {
+                        stamp_ns: m.timestamp.ns(),
+                        hand: m.hand,
+                        tracked: m.tracked,
+                        poses,
+                        radii: m.radius,
+                    });
+                }
+                topics::ROBOT_COMMAND => {
+                    let m: WireCommand = serde_json::from_slice(&message.data)
+                        .map_err(|e| bad(format!("not an avatarm.JointCommand: {e}")))?;
+                    if m.velocity.len() != m.name.len()
+                        || m.velocity.iter().any(|v| !v.is_finite())
+                        || !m.tcp_speed.is_finite()
+                    {
+                        return Err(bad(format!(
+                            "{} names, {} velocities (all finite), tool-point speed {}",
+                            m.name.len(),
+                            m.velocity.len(),
+                            m.tcp_speed
+                        )));
+                    }
+                    out.commands.push(RobotCommand {
+                        stamp_ns: m.timestamp.ns(),
+                        names: m.name,
+                        velocities: m.velocity,
+                        gripper_closed: m.gripper_closed,
+                        stopping: m.stopping,
+                        tcp_speed: m.tcp_speed,
+                    });
+                }
+                topics::SAFETY => {
+                    let m: WireLog = serde_json::from_slice(&message.data)
+                        .map_err(|e| bad(format!("not a foxglove.Log: {e}")))?;
+                    let level = LogLevel::of_code(m.level)
+                        .ok_or_else(|| bad(format!("log level {}", m.level)))?;
+                    out.safety.push(SafetyEvent {
+                        stamp_ns: m.timestamp.ns(),
+                        level,
+                        source: m.name,
+                        message: m.message,
+                    });
                 }
                 _ => {
                     let m: WireJointState = serde_json::from_slice(&message.data)
@@ -724,6 +1101,9 @@ impl Recording {
         out.erased.sort_by_key(|f| f.stamp_ns);
         out.masks.sort_by_key(|f| f.stamp_ns);
         out.joint_states.sort_by_key(|s| s.stamp_ns);
+        out.hands.sort_by_key(|h| h.stamp_ns);
+        out.commands.sort_by_key(|c| c.stamp_ns);
+        out.safety.sort_by_key(|e| e.stamp_ns);
         Ok(out)
     }
 
@@ -798,6 +1178,41 @@ mod tests {
         })
         .expect("mask");
         assert_eq!(w.messages(), 9);
+        // A live session's streams: the base in the world, the hand, commands, events.
+        let base = Isometry3::translation(0.0, 0.0, 0.75);
+        w.base_pose(1_700_000_000_000_000_000, &base).expect("base");
+        let hand = HandPoses {
+            stamp_ns: 1_700_000_000_005_000_000,
+            hand: "right".into(),
+            tracked: true,
+            poses: vec![pose, base],
+            radii: vec![0.01, 0.008],
+        };
+        w.hand(&hand).expect("hand");
+        let lost = HandPoses {
+            stamp_ns: 1_700_000_000_006_000_000,
+            tracked: false,
+            poses: vec![],
+            radii: vec![],
+            ..hand.clone()
+        };
+        w.hand(&lost).expect("untracked hand");
+        let command = RobotCommand {
+            stamp_ns: 1_700_000_000_010_000_000,
+            names: vec!["j1".into(), "j2".into()],
+            velocities: vec![0.1, -0.05],
+            gripper_closed: true,
+            stopping: false,
+            tcp_speed: 0.12,
+        };
+        w.robot_command(&command).expect("command");
+        let event = SafetyEvent {
+            stamp_ns: 1_700_000_000_011_000_000,
+            level: LogLevel::Error,
+            source: "limiter".into(),
+            message: "stopping: the hand is not tracked".into(),
+        };
+        w.safety_event(&event).expect("event");
         w.finish().expect("finish");
 
         let r = Recording::open(&path).expect("open");
@@ -815,6 +1230,17 @@ mod tests {
         assert_eq!(r.joints_at(1_700_000_000_015_000_000), Some(&joints(1)));
         assert_eq!(r.joints_at(1), None);
         assert!(r.other_topics.is_empty());
+        assert!((r.world_from_base.expect("base").translation.z - 0.75).abs() < 1e-12);
+        assert_eq!(r.hands.len(), 2);
+        assert_eq!(
+            (r.hands[0].hand.as_str(), r.hands[0].tracked),
+            ("right", true)
+        );
+        assert!(r.hands[0].poses[0].rotation.angle_to(&pose.rotation) < 1e-12);
+        assert_eq!(r.hands[0].radii, hand.radii);
+        assert_eq!(r.hands[1], lost);
+        assert_eq!(r.commands, vec![command]);
+        assert_eq!(r.safety, vec![event]);
     }
 
     #[test]
@@ -847,6 +1273,27 @@ mod tests {
             })
             .expect_err("not jpeg");
         assert!(e.to_string().contains("not jpeg"), "{e}");
+        let e = w
+            .robot_command(&RobotCommand {
+                stamp_ns: 1,
+                names: vec!["j1".into()],
+                velocities: vec![f64::NAN],
+                gripper_closed: false,
+                stopping: true,
+                tcp_speed: 0.0,
+            })
+            .expect_err("a NaN command");
+        assert!(e.to_string().contains("joint 'j1' has NaN"), "{e}");
+        let e = w
+            .hand(&HandPoses {
+                stamp_ns: 1,
+                hand: "right".into(),
+                tracked: true,
+                poses: vec![],
+                radii: vec![],
+            })
+            .expect_err("tracked, no joints");
+        assert!(e.to_string().contains("0 poses"), "{e}");
         let mut bad = calibration();
         bad.d.pop();
         let e = w.calibration(0, &bad).expect_err("7 of 8");

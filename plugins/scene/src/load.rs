@@ -365,8 +365,18 @@ impl Scene {
                     .map_err(|e| SceneError::value("camera.distortion", e).in_file(path))?;
                 // The lens must invert over the image (a render can be drawn through it).
                 if !lens.is_none() {
-                    DistortionMap::new(&intrinsics, &lens, 1.0)
+                    let map = DistortionMap::new(&intrinsics, &lens, 1.0)
                         .map_err(|e| SceneError::value("camera.distortion", e).in_file(path))?;
+                    if map.unmapped > 0 {
+                        let e = avatarm_core::Error::BadSetting {
+                            what: "lens distortion".into(),
+                            message: format!(
+                                "does not invert at {} of the image's pixels (past a barrel's fold): not a lens over this image",
+                                map.unmapped
+                            ),
+                        };
+                        return Err(SceneError::value("camera.distortion", e).in_file(path));
+                    }
                 }
                 lens
             }

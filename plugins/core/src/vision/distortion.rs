@@ -187,8 +187,8 @@ pub struct DistortionMap {
     /// The lens.
     pub lens: Distortion,
     /// The pinhole render's intrinsics: the image's focal lengths times the render's scale,
-    /// its size and principal point grown (or shrunk) to the undistorted rays of the image's
-    /// border pixels, one texel of margin, at most three times the scaled size per side.
+    /// its size and principal point grown (or shrunk) to hold the undistorted rays of all the
+    /// image's pixels, one texel of margin, at most three times the scaled size per side.
     pub pinhole: Intrinsics,
     /// Per pixel of the image (row-major), its ray's position in the pinhole render (px,
     /// pixel centres at integers); NaN where the lens does not invert.
@@ -196,12 +196,16 @@ pub struct DistortionMap {
     /// Per pixel, the pinhole render's nearest texel `(u, v)`, [`NO_TEXEL`] in both where
     /// the ray is outside the render or the lens does not invert.
     pub texels: Vec<[u16; 2]>,
+    /// Pixels whose ray the render does not hold (beyond its 3x cap: a wide fisheye's rim).
+    pub outside: usize,
+    /// Pixels where the lens does not invert (past a strong barrel's fold).
+    pub unmapped: usize,
 }
 
 impl DistortionMap {
     /// The map of a camera with intrinsics `image` and lens `lens` onto a pinhole render at
     /// `scale` of its resolution (as [`Intrinsics::scaled`]). Errors: bad intrinsics, a scale
-    /// outside (0, 1], a lens that inverts at none of the border's pixels.
+    /// outside (0, 1], a lens that inverts at none of the image's pixels.
     pub fn new(image: &Intrinsics, lens: &Distortion, scale: f64) -> Result<Self> {
         image.validate()?;
         if !(scale > 0.0 && scale <= 1.0) {
@@ -213,32 +217,26 @@ impl DistortionMap {
         let scaled = image.scaled(scale);
         let ray =
             |u: f64, v: f64| lens.undistort((u - image.cx) / image.fx, (v - image.cy) / image.fy);
-        // The border pixels' rays bound the render (the models are monotonic where they
-        // invert).
-        let (w, h) = (f64::from(image.width - 1), f64::from(image.height - 1));
-        let mut border = Vec::new();
-        for i in 0..image.width {
-            border.push((f64::from(i), 0.0));
-            border.push((f64::from(i), h));
-        }
-        for j in 0..image.height {
-            border.push((0.0, f64::from(j)));
-            border.push((w, f64::from(j)));
-        }
+        // Every pixel's ray, once: their extent bounds the render.
+        let mut rays = Vec::with_capacity(image.width as usize * image.height as usize);
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for (u, v) in border {
-            if let Some((x, y)) = ray(u, v) {
-                let p = [scaled.fx * x + scaled.cx, scaled.fy * y + scaled.cy];
-                for a in 0..2 {
-                    lo[a] = lo[a].min(p[a]);
-                    hi[a] = hi[a].max(p[a]);
+        for j in 0..image.height {
+            for i in 0..image.width {
+                let r = ray(f64::from(i), f64::from(j));
+                if let Some((x, y)) = r {
+                    let p = [scaled.fx * x + scaled.cx, scaled.fy * y + scaled.cy];
+                    for a in 0..2 {
+                        lo[a] = lo[a].min(p[a]);
+                        hi[a] = hi[a].max(p[a]);
+                    }
                 }
+                rays.push(r);
             }
         }
         if !(lo[0].is_finite() && lo[1].is_finite()) {
             return Err(Error::BadSetting {
                 what: "lens distortion".into(),
-                message: format!("{lens:?} inverts nowhere on the image's border"),
+                message: format!("{lens:?} inverts at none of the image's pixels"),
             });
         }
         let size = [f64::from(scaled.width), f64::from(scaled.height)];
@@ -256,28 +254,30 @@ impl DistortionMap {
             height: extent[1],
         };
         pinhole.validate()?;
-        let n = image.width as usize * image.height as usize;
-        let mut coords = Vec::with_capacity(n);
-        let mut texels = Vec::with_capacity(n);
-        for j in 0..image.height {
-            for i in 0..image.width {
-                match ray(f64::from(i), f64::from(j)) {
-                    Some((x, y)) => {
-                        let (u, v) = (pinhole.fx * x + pinhole.cx, pinhole.fy * y + pinhole.cy);
-                        coords.push([u as f32, v as f32]);
-                        let (tu, tv) = (u.round(), v.round());
-                        let inside = (0.0..f64::from(pinhole.width)).contains(&tu)
-                            && (0.0..f64::from(pinhole.height)).contains(&tv);
-                        texels.push(if inside {
-                            [tu as u16, tv as u16]
-                        } else {
-                            [NO_TEXEL; 2]
-                        });
-                    }
-                    None => {
-                        coords.push([f32::NAN; 2]);
+        let (mut coords, mut texels) = (
+            Vec::with_capacity(rays.len()),
+            Vec::with_capacity(rays.len()),
+        );
+        let (mut outside, mut unmapped) = (0, 0);
+        for r in rays {
+            match r {
+                Some((x, y)) => {
+                    let (u, v) = (pinhole.fx * x + pinhole.cx, pinhole.fy * y + pinhole.cy);
+                    coords.push([u as f32, v as f32]);
+                    let (tu, tv) = (u.round(), v.round());
+                    let inside = (0.0..f64::from(pinhole.width)).contains(&tu)
+                        && (0.0..f64::from(pinhole.height)).contains(&tv);
+                    if inside {
+                        texels.push([tu as u16, tv as u16]);
+                    } else {
+                        outside += 1;
                         texels.push([NO_TEXEL; 2]);
                     }
+                }
+                None => {
+                    unmapped += 1;
+                    coords.push([f32::NAN; 2]);
+                    texels.push([NO_TEXEL; 2]);
                 }
             }
         }
@@ -287,6 +287,8 @@ impl DistortionMap {
             pinhole,
             coords,
             texels,
+            outside,
+            unmapped,
         })
     }
 

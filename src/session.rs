@@ -1,0 +1,563 @@
+//! `avatarm run --record FILE.mcap`: the live session as a recording (`avatarm_record`'s
+//! channels, docs/real-footage.md), written while it runs.
+//!
+//! What is recorded, each stamped with its capture or sample time on the app's clock (offset to
+//! the Unix epoch at start): the camera's frames (JPEG) as the pipeline received them, its
+//! calibration (K, the lens) and believed pose, the robot's base in the world, the robot's
+//! joint states as the app's twin received them, Avatarm's erased frame (JPEG) and mask (PNG)
+//! of every frame (read back after the frame's render: the one read-back the live path gets
+//! with `--record`), the operator's hand frames, every control tick's command to the robot,
+//! and safety events: the limiter starting or ending an intervention (a stop for a lost hand,
+//! stale or non-finite data; a slow-down at a limit), mapping errors, refused joint states.
+//!
+//! The encoding and the file are on a thread of their own fed through a channel, so the app's
+//! updates never wait for the disk; nothing is dropped (the channel is unbounded). A message
+//! the recording refuses (a non-finite value) is left out and counted, not fatal. The file is
+//! completed when the app ends (the recorder's resource is dropped with the app's world).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::thread::JoinHandle;
+
+use avatarm_core::teleop::safety::Intervention;
+use avatarm_erase::{EraseState, EraseTargets};
+use avatarm_hand::ActiveHand;
+use avatarm_mapping::{Teleop, TeleopSample, TeleopStatus};
+use avatarm_record::camera::{CameraCalibration, DistortionModel};
+use avatarm_record::{
+    CompressedFrame, HandPoses, ImageFormat, JointStates, LogLevel, RecordError, RecordingWriter,
+    RobotCommand, SafetyEvent,
+};
+use avatarm_scene::Scene;
+use avatarm_twin::RobotTwin;
+use avatarm_twin::readback::{ImageRead, read_image_once};
+use avatarm_video::LiveVideo;
+use bevy::prelude::*;
+
+use crate::{AppError, AppTwin};
+
+/// The JPEG quality of recorded camera and erased frames.
+const JPEG_QUALITY: u8 = 90;
+
+/// Adds the session recorder to `app`: creates `path` now (an error names it), records until
+/// the app ends.
+pub fn add_session_recorder(app: &mut App, path: &Path, scene: &Scene) -> Result<(), AppError> {
+    let mut writer = RecordingWriter::create(path)?;
+    let epoch_ns = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    let k = &scene.believed_camera.intrinsics;
+    let mut calibration = CameraCalibration::pinhole(
+        k.width,
+        k.height,
+        [k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0],
+    );
+    if let Some(model) = DistortionModel::from_ros_name(scene.lens.ros_name()) {
+        calibration.distortion_model = model;
+        calibration.d = scene.lens.coefficients().to_vec();
+    }
+    let base = scene.robot_base();
+    writer.calibration(epoch_ns, &calibration)?;
+    writer.camera_pose(
+        epoch_ns,
+        &(base.inverse() * scene.believed_camera.world_from_camera),
+    )?;
+    writer.base_pose(epoch_ns, &base)?;
+    let (tx, rx) = channel();
+    let thread = std::thread::Builder::new()
+        .name("session recorder".into())
+        .spawn(move || write_session(writer, rx))
+        .map_err(|source| RecordError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+    let names = scene
+        .model
+        .dof_names()
+        .iter()
+        .map(|n| n.to_string())
+        .collect();
+    app.insert_resource(SessionRecorder {
+        path: path.to_owned(),
+        tx: Some(tx),
+        thread: Some(thread),
+        epoch_ns,
+        names,
+        last_frame: None,
+        last_erased: None,
+        last_joints: None,
+        last_hand: None,
+        watch: SafetyWatch::default(),
+    })
+    .add_systems(Last, record_session);
+    // Every control tick from the first (the live task's loop is in the app already).
+    if let Some(mut teleop) = app.world_mut().get_resource_mut::<Teleop>() {
+        teleop.record = true;
+    }
+    Ok(())
+}
+
+/// One message for the writer thread.
+enum Item {
+    /// An RGBA8 image to encode (`mask`: 0/255 in one byte per pixel, as PNG).
+    Image {
+        stream: Stream,
+        stamp_ns: u64,
+        width: u32,
+        height: u32,
+        data: Arc<Vec<u8>>,
+    },
+    Joints(JointStates),
+    Hand(HandPoses),
+    Command(RobotCommand),
+    Safety(SafetyEvent),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stream {
+    Frame,
+    Erased,
+    Mask,
+}
+
+/// What the writer did, for the log line at the end.
+#[derive(Debug, Default)]
+struct Written {
+    messages: u64,
+    refused: u64,
+    first_refusal: Option<String>,
+}
+
+fn encode(stream: Stream, width: u32, height: u32, data: &[u8]) -> Result<CompressedFrame, String> {
+    let bad = || {
+        format!(
+            "{stream:?} image: {} bytes for {width}x{height}",
+            data.len()
+        )
+    };
+    let mut out = std::io::Cursor::new(Vec::new());
+    let format = if stream == Stream::Mask {
+        let grey: Vec<u8> = data.iter().map(|&v| if v > 0 { 255 } else { 0 }).collect();
+        let image = image::GrayImage::from_raw(width, height, grey).ok_or_else(bad)?;
+        image
+            .write_to(&mut out, image::ImageFormat::Png)
+            .map_err(|e| e.to_string())?;
+        ImageFormat::Png
+    } else {
+        let rgba = image::RgbaImage::from_raw(width, height, data.to_vec()).ok_or_else(bad)?;
+        let rgb = image::DynamicImage::ImageRgba8(rgba).to_rgb8();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, JPEG_QUALITY)
+            .encode_image(&rgb)
+            .map_err(|e| e.to_string())?;
+        ImageFormat::Jpeg
+    };
+    Ok(CompressedFrame {
+        stamp_ns: 0,
+        format,
+        data: out.into_inner(),
+    })
+}
+
+fn write_session(mut writer: RecordingWriter, rx: Receiver<Item>) -> Result<Written, RecordError> {
+    let mut written = Written::default();
+    for item in rx {
+        let result = match item {
+            Item::Image {
+                stream,
+                stamp_ns,
+                width,
+                height,
+                data,
+            } => match encode(stream, width, height, &data) {
+                Ok(frame) => {
+                    let frame = CompressedFrame { stamp_ns, ..frame };
+                    match stream {
+                        Stream::Frame => writer.frame(&frame),
+                        Stream::Erased => writer.erased(&frame),
+                        Stream::Mask => writer.mask(&frame),
+                    }
+                }
+                Err(message) => {
+                    written.refused += 1;
+                    written.first_refusal.get_or_insert(message);
+                    continue;
+                }
+            },
+            Item::Joints(s) => writer.joint_states(&s),
+            Item::Hand(h) => writer.hand(&h),
+            Item::Command(c) => writer.robot_command(&c),
+            Item::Safety(e) => writer.safety_event(&e),
+        };
+        match result {
+            Ok(()) => {}
+            // A value the recording refuses is left out; the file itself failing ends it.
+            Err(RecordError::Content { message, .. }) => {
+                written.refused += 1;
+                written.first_refusal.get_or_insert(message);
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    written.messages = writer.messages();
+    writer.finish()?;
+    Ok(written)
+}
+
+/// Intervention counts and flags seen so far, to turn the limiter's counters into events.
+#[derive(Debug, Default)]
+struct SafetyWatch {
+    /// Ticks counted per intervention at the last update.
+    counts: BTreeMap<String, u64>,
+    /// Interventions under way, with the last time one happened (s).
+    active: BTreeMap<String, f64>,
+    stopping: bool,
+    errors: u64,
+    bad_joint_states: u64,
+}
+
+/// The live session's recorder (its thread finishes the file when this is dropped).
+#[derive(Resource)]
+struct SessionRecorder {
+    path: PathBuf,
+    tx: Option<Sender<Item>>,
+    thread: Option<JoinHandle<Result<Written, RecordError>>>,
+    epoch_ns: u64,
+    /// The robot's joint names (the description's q order).
+    names: Vec<String>,
+    last_frame: Option<u64>,
+    last_erased: Option<u64>,
+    last_joints: Option<f64>,
+    last_hand: Option<f64>,
+    watch: SafetyWatch,
+}
+
+impl SessionRecorder {
+    fn ns(&self, t_s: f64) -> u64 {
+        self.epoch_ns + (t_s.max(0.0) * 1e9).round() as u64
+    }
+
+    /// The names of a vector of `n` joint values: the description's, or `q0`, `q1`, ... when
+    /// it has another length.
+    fn names_of(&self, n: usize) -> Vec<String> {
+        if self.names.len() == n {
+            self.names.clone()
+        } else {
+            (0..n).map(|i| format!("q{i}")).collect()
+        }
+    }
+
+    fn send(&self, item: Item) {
+        if let Some(tx) = &self.tx {
+            // The thread ended early (the file failed): the error is reported at the end.
+            let _ = tx.send(item);
+        }
+    }
+
+    fn event(&self, t_s: f64, level: LogLevel, source: &str, message: String) {
+        info!("safety ({source}): {message}");
+        self.send(Item::Safety(SafetyEvent {
+            stamp_ns: self.ns(t_s),
+            level,
+            source: source.into(),
+            message,
+        }));
+    }
+}
+
+impl Drop for SessionRecorder {
+    fn drop(&mut self) {
+        self.tx = None;
+        let Some(thread) = self.thread.take() else {
+            return;
+        };
+        match thread.join() {
+            Ok(Ok(w)) => {
+                eprintln!(
+                    "recorded the session: {} messages in {}{}",
+                    w.messages,
+                    self.path.display(),
+                    match w.first_refusal {
+                        Some(m) => format!(" ({} left out, the first: {m})", w.refused),
+                        None => String::new(),
+                    }
+                );
+            }
+            Ok(Err(e)) => eprintln!("recording the session failed: {e}"),
+            Err(_) => eprintln!("recording the session failed: its thread panicked"),
+        }
+    }
+}
+
+/// An intervention is over when none has happened for this long (s): the limiter's slews come
+/// and go from tick to tick while it works.
+const INTERVENTION_QUIET_S: f64 = 0.5;
+
+/// How serious an intervention is: the ones that stop the arm are errors.
+fn severity(kind: &str) -> LogLevel {
+    let stops = [
+        Intervention::NotFinite,
+        Intervention::HandStale,
+        Intervention::HandLost,
+        Intervention::JointsStale,
+    ];
+    if stops.iter().any(|i| format!("{i:?}") == kind) {
+        LogLevel::Error
+    } else {
+        LogLevel::Warning
+    }
+}
+
+#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
+fn record_session(
+    mut commands: Commands,
+    mut recorder: ResMut<SessionRecorder>,
+    live: Res<LiveVideo>,
+    erase: (Res<EraseState>, Option<Res<EraseTargets>>),
+    app_twin: Option<Res<AppTwin>>,
+    twins: Query<&RobotTwin>,
+    hand: Option<Res<ActiveHand>>,
+    teleop: Option<ResMut<Teleop>>,
+) {
+    let recorder = &mut *recorder;
+    let (state, targets) = erase;
+    // The camera frame, once.
+    if let Some(f) = live.frame.as_ref().filter(|_| live.fresh)
+        && recorder.last_frame != Some(f.index)
+    {
+        recorder.last_frame = Some(f.index);
+        recorder.send(Item::Image {
+            stream: Stream::Frame,
+            stamp_ns: recorder.ns(f.capture_s),
+            width: f.width,
+            height: f.height,
+            data: f.rgba.clone(),
+        });
+    }
+    // Avatarm's outputs of the frame erased in this update, read back after its render.
+    if let (Some(targets), Some((t_s, index, _))) = (
+        targets,
+        state
+            .current
+            .as_ref()
+            .filter(|c| c.dirty)
+            .and_then(|c| c.frame.clone()),
+    ) && recorder.last_erased != Some(index)
+    {
+        recorder.last_erased = Some(index);
+        let stamp_ns = recorder.ns(t_s);
+        for (stream, handle) in [
+            (Stream::Erased, targets.composite.clone()),
+            (Stream::Mask, targets.mask.clone()),
+        ] {
+            let tx = recorder.tx.clone();
+            read_image_once(&mut commands, handle).observe(move |read: On<ImageRead>| {
+                if let Some(tx) = &tx {
+                    let _ = tx.send(Item::Image {
+                        stream,
+                        stamp_ns,
+                        width: read.width,
+                        height: read.height,
+                        data: Arc::new(read.data.clone()),
+                    });
+                }
+            });
+        }
+    }
+    // The joint states the app's twin received.
+    if let Some(twin) = app_twin.and_then(|t| twins.get(t.0).ok())
+        && let Some(stamp) = twin.stamp_s
+        && recorder.last_joints != Some(stamp)
+    {
+        recorder.last_joints = Some(stamp);
+        recorder.send(Item::Joints(JointStates {
+            stamp_ns: recorder.ns(stamp),
+            names: recorder.names_of(twin.positions.len()),
+            positions: twin.positions.iter().copied().collect(),
+            velocities: twin.velocities.iter().copied().collect(),
+        }));
+    }
+    // The operator's hand.
+    if let Some(frame) = hand.as_ref().and_then(|h| h.latest.as_ref())
+        && recorder.last_hand != Some(frame.t_s)
+    {
+        recorder.last_hand = Some(frame.t_s);
+        recorder.send(Item::Hand(HandPoses {
+            stamp_ns: recorder.ns(frame.t_s),
+            hand: match frame.hand {
+                avatarm_core::teleop::hand::Handedness::Left => "left".into(),
+                avatarm_core::teleop::hand::Handedness::Right => "right".into(),
+            },
+            tracked: frame.tracked,
+            poses: frame.joints.iter().map(|j| j.pose).collect(),
+            radii: frame.joints.iter().map(|j| j.radius).collect(),
+        }));
+    }
+    let Some(mut teleop) = teleop else {
+        return;
+    };
+    teleop.record = true;
+    // Every control tick's command, and the limiter's stops as they start and end.
+    let samples: Vec<_> = teleop.log.drain(..).collect();
+    for s in &samples {
+        recorder.send(Item::Command(RobotCommand {
+            stamp_ns: recorder.ns(s.t_s),
+            names: recorder.names_of(s.qdot.len()),
+            velocities: s.qdot.iter().copied().collect(),
+            gripper_closed: s.gripper_closed,
+            stopping: s.stopping,
+            tcp_speed: s.tcp_speed,
+        }));
+    }
+    let events = recorder.watch.events(&samples, &teleop.status);
+    for (t_s, level, source, message) in events {
+        recorder.event(t_s, level, source, message);
+    }
+}
+
+impl SafetyWatch {
+    /// The safety events of one update's control ticks `samples` (oldest first) and the
+    /// loop's counters after them: `(time s, level, source, message)`.
+    fn events(
+        &mut self,
+        samples: &[TeleopSample],
+        status: &TeleopStatus,
+    ) -> Vec<(f64, LogLevel, &'static str, String)> {
+        let mut out = Vec::new();
+        for s in samples {
+            if s.stopping != self.stopping {
+                self.stopping = s.stopping;
+                out.push(if s.stopping {
+                    (
+                        s.t_s,
+                        LogLevel::Error,
+                        "limiter",
+                        "stopping the robot (zero velocity, ramped)".to_owned(),
+                    )
+                } else {
+                    (
+                        s.t_s,
+                        LogLevel::Info,
+                        "limiter",
+                        "stop ended: the robot follows the hand again".to_owned(),
+                    )
+                });
+            }
+        }
+        let Some(t_s) = samples.last().map(|s| s.t_s) else {
+            return out;
+        };
+        for (kind, count) in &status.interventions {
+            let kind = format!("{kind:?}");
+            let before = self.counts.insert(kind.clone(), *count).unwrap_or(0);
+            if *count > before && self.active.insert(kind.clone(), t_s).is_none() {
+                out.push((
+                    t_s,
+                    severity(&kind),
+                    "limiter",
+                    format!("intervention began: {kind}"),
+                ));
+            } else if *count > before {
+                self.active.insert(kind, t_s);
+            }
+        }
+        let ended: Vec<String> = self
+            .active
+            .iter()
+            .filter(|(_, last)| t_s - **last > INTERVENTION_QUIET_S)
+            .map(|(kind, _)| kind.clone())
+            .collect();
+        for kind in ended {
+            self.active.remove(&kind);
+            out.push((
+                t_s,
+                LogLevel::Info,
+                "limiter",
+                format!("intervention ended: {kind}"),
+            ));
+        }
+        if status.errors > self.errors {
+            out.push((
+                t_s,
+                LogLevel::Error,
+                "mapping",
+                format!(
+                    "{} tick(s) refused: {}",
+                    status.errors - self.errors,
+                    status.last_error.as_deref().unwrap_or("no reason given")
+                ),
+            ));
+            self.errors = status.errors;
+        }
+        if status.bad_joint_states > self.bad_joint_states {
+            out.push((
+                t_s,
+                LogLevel::Warning,
+                "robot",
+                format!(
+                    "{} joint state(s) refused (wrong size or not finite)",
+                    status.bad_joint_states - self.bad_joint_states
+                ),
+            ));
+            self.bad_joint_states = status.bad_joint_states;
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DVector, Isometry3, Vector6};
+
+    fn tick(t_s: f64, stopping: bool) -> TeleopSample {
+        TeleopSample {
+            t_s,
+            target: Isometry3::identity(),
+            measured: Isometry3::identity(),
+            truth: None,
+            gripper_closed: false,
+            tcp_speed: 0.0,
+            max_joint_speed: 0.0,
+            stopping,
+            contacts: 0,
+            squeeze_n: 0.0,
+            twin_twist: Vector6::zeros(),
+            q: DVector::zeros(2),
+            qdot: DVector::zeros(2),
+        }
+    }
+
+    #[test]
+    fn the_limiter_s_counters_become_events_that_begin_and_end() {
+        let mut watch = SafetyWatch::default();
+        // The hand is lost: a stop, and the intervention that caused it.
+        let mut status = TeleopStatus {
+            interventions: vec![(Intervention::HandLost, 3)],
+            ..TeleopStatus::default()
+        };
+        let e = watch.events(&[tick(1.0, false), tick(1.01, true)], &status);
+        assert_eq!(e.len(), 2, "{e:?}");
+        assert_eq!((e[0].1, e[0].0), (LogLevel::Error, 1.01));
+        assert!(e[1].3.contains("began: HandLost") && e[1].1 == LogLevel::Error);
+        // Still lost: nothing new. A slew at a limit is a warning.
+        status.interventions = vec![(Intervention::HandLost, 5), (Intervention::Acceleration, 1)];
+        let e = watch.events(&[tick(1.02, true)], &status);
+        assert_eq!(e.len(), 1, "{e:?}");
+        assert_eq!(e[0].1, LogLevel::Warning);
+        // Found again; both quiet for more than INTERVENTION_QUIET_S: the stop and both end.
+        let e = watch.events(&[tick(1.03, false), tick(1.6, false)], &status);
+        assert_eq!(e.len(), 3, "{e:?}");
+        assert!(e.iter().all(|x| x.1 == LogLevel::Info));
+        // A refused tick and refused joint states, once each.
+        status.errors = 2;
+        status.last_error = Some("joint state has NaN".into());
+        status.bad_joint_states = 1;
+        let e = watch.events(&[tick(2.0, false)], &status);
+        assert_eq!(e.len(), 2, "{e:?}");
+        assert!(e[0].3.contains("2 tick(s) refused: joint state has NaN"));
+        assert!(watch.events(&[tick(2.01, false)], &status).is_empty());
+        assert!(watch.events(&[], &status).is_empty());
+    }
+}
