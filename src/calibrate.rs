@@ -1,8 +1,10 @@
 //! `avatarm calibrate --recording FILE.mcap --urdf DESCRIPTION`: the camera's pose fitted to the
 //! robot itself, so that the mask lands on the robot without a calibration board.
 //!
-//! The recording gives the frames' robot silhouettes (its reference masks), the joints at each
-//! frame (interpolated to the capture time) and K; the rough pose comes from `--pose FILE`,
+//! The recording gives the frames' robot silhouettes (its reference masks, or with
+//! `--background FILE` each frame's difference from an empty-room photograph,
+//! [`dr::background_difference`]), the joints at each frame (interpolated to the capture
+//! time) and K; the rough pose comes from `--pose FILE`,
 //! `--look-at EYE,TARGET` or the recording. [`avatarm_core::vision::calibrate`] fits the pose
 //! (and with `--intrinsics` fx, fy) on the `--fit` frames; the IoU of the model silhouette
 //! against the reference is measured on every frame before and after, so that `--eval` frames
@@ -62,6 +64,11 @@ pub struct CalibrateOptions {
     /// The robot's geometry below this height in the base frame (m) is hidden (the table it
     /// stands on) and cut from the silhouette.
     pub hidden_below: Option<f64>,
+    /// An empty-room photograph of the same camera: the silhouettes are each frame's
+    /// difference from it instead of the reference masks.
+    pub background: Option<PathBuf>,
+    /// The difference (8-bit levels, any channel) that counts as the robot.
+    pub background_threshold: u8,
     /// Output folder.
     pub out: PathBuf,
     /// Show a progress bar.
@@ -98,28 +105,73 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     let lens = Distortion::from_ros(calibration.distortion_model.ros_name(), &calibration.d)?;
     let states = joint_vectors(&recording, &model, &name, &mut notes)?;
     let silhouette = RobotSilhouette::new(&model, o.budget)?;
-    // The frames with a reference mask: the robot's silhouette at its joints, and the mask.
+    let background = match &o.background {
+        Some(path) => {
+            let image = image::open(path).map_err(|source| AppError::Image {
+                path: path.clone(),
+                action: "read",
+                source,
+            })?;
+            if (image.width(), image.height()) != size {
+                return Err(AppError::flag(
+                    "--background",
+                    format!(
+                        "{} is {}x{}, the frames {}x{}",
+                        path.display(),
+                        image.width(),
+                        image.height(),
+                        size.0,
+                        size.1
+                    ),
+                ));
+            }
+            Some(image.to_rgba8().into_raw())
+        }
+        None => None,
+    };
+    // Where both exist, how well the background's silhouettes match the reference masks.
+    let mut difference_vs_reference = Vec::new();
+    // The frames with a silhouette: the robot's at its joints, and the observed one.
     let mut frames = Vec::new();
     let mut with_reference = 0usize;
     for (i, f) in recording.frames.iter().enumerate() {
-        let Some(m) = recording
+        let reference = recording
             .reference_masks
             .iter()
-            .find(|m| m.stamp_ns.abs_diff(f.stamp_ns) <= 1_000_000)
-        else {
+            .find(|m| m.stamp_ns.abs_diff(f.stamp_ns) <= 1_000_000);
+        if reference.is_none() && background.is_none() {
             continue;
-        };
+        }
         with_reference += 1;
         if !(with_reference - 1).is_multiple_of(o.every.max(1)) {
             continue;
         }
-        let mask = decode(m, &name)?;
-        if mask.dimensions() != size {
-            return Err(bad(format!(
-                "the reference mask at {} ns is not {}x{}",
-                m.stamp_ns, size.0, size.1
-            )));
-        }
+        let reference = match reference {
+            Some(m) => {
+                let mask = decode(m, &name)?;
+                if mask.dimensions() != size {
+                    return Err(bad(format!(
+                        "the reference mask at {} ns is not {}x{}",
+                        m.stamp_ns, size.0, size.1
+                    )));
+                }
+                Some(dr::binarise(&mask.into_raw(), 4))
+            }
+            None => None,
+        };
+        let observed = match &background {
+            Some(bg) => {
+                let frame = decode(f, &name)?;
+                let frame = dr::RgbaView::new("frame", size.0, size.1, frame.as_raw())?;
+                let bg = dr::RgbaView::new("--background", size.0, size.1, bg)?;
+                let m = dr::background_difference(&frame, &bg, o.background_threshold, 2)?;
+                if let Some(s) = reference.as_ref().and_then(|r| dr::mask_scores(&m, r)) {
+                    difference_vs_reference.push(s.iou);
+                }
+                m
+            }
+            None => reference.unwrap_or_default(),
+        };
         let q = interpolate(&states, f.stamp_ns);
         let mut triangles = silhouette.at(&model, &Isometry3::identity(), q.as_slice());
         if let Some(z) = o.hidden_below {
@@ -129,13 +181,13 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             i,
             SilhouetteFrame {
                 triangles,
-                observed: dr::binarise(&mask.into_raw(), 4),
+                observed,
             },
         ));
     }
     if frames.is_empty() {
         return Err(bad(
-            "no frame has a reference mask (the robot's silhouette to fit): import the frames with their masks".into(),
+            "no frame has a reference mask (the robot's silhouette to fit): import the frames with their masks, or give an empty-room photograph with --background".into(),
         ));
     }
     let in_fit = |i: usize| o.fit.is_empty() || o.fit.iter().any(|&(a, b)| (a..=b).contains(&i));
@@ -326,6 +378,17 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         "hidden_below_m": o.hidden_below,
         "distortion": {"model": calibration.distortion_model.ros_name(), "coefficients": calibration.d, "applied": !lens.is_none()},
         "frames_with_reference": frames.len(),
+        "silhouettes": match &o.background {
+            Some(path) => json!({
+                "source": "background difference",
+                "background": path.display().to_string(),
+                "threshold": o.background_threshold,
+                "iou_vs_reference_mean": (!difference_vs_reference.is_empty()).then(|| {
+                    difference_vs_reference.iter().sum::<f64>() / difference_vs_reference.len() as f64
+                }),
+            }),
+            None => json!({"source": "reference masks"}),
+        },
         "frames_fit": fit.len(),
         "iou": {
             "fit_before": mean(true, "iou_before"),

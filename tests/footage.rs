@@ -540,6 +540,46 @@ fn the_camera_calibrated_from_a_simulated_session_erases_the_robot() {
     assert!(iou["fit_after"].as_f64() > Some(0.98), "{iou}");
     assert!(fitted.join("overlay_after_00000.png").is_file());
     assert!(fitted.join("overlay_before_00000.png").is_file());
+    // The same from the frames alone, the silhouettes their difference from the empty room
+    // (the background the replay photographed): no reference masks used.
+    let from_background = out.join("calibrated_from_background");
+    let (ok, log) = calibrate(&[
+        "--recording",
+        recording.to_str().expect("utf-8"),
+        "--urdf",
+        urdf.to_str().expect("utf-8"),
+        "--every",
+        "8",
+        "--hidden-below",
+        "0",
+        "--background",
+        out.join("recorded/background.png").to_str().expect("utf-8"),
+        "--out",
+        from_background.to_str().expect("utf-8"),
+    ]);
+    assert!(ok, "{log}");
+    let rep_bg = report(&from_background.join("report.json"));
+    let silhouettes = &rep_bg["silhouettes"];
+    assert_eq!(silhouettes["source"], "background difference");
+    let pose_bg =
+        avatarm_record::camera::read_pose(&from_background.join("camera_pose.yaml")).expect("pose");
+    let off_bg = truth.inverse() * pose_bg;
+    let (deg_bg, mm_bg) = (
+        off_bg.rotation.angle().to_degrees(),
+        1e3 * off_bg.translation.vector.norm(),
+    );
+    eprintln!(
+        "from the background difference (IoU {} against the reference masks): {deg_bg:.3} deg, {mm_bg:.2} mm",
+        silhouettes["iou_vs_reference_mean"]
+    );
+    assert!(
+        silhouettes["iou_vs_reference_mean"].as_f64() > Some(0.95),
+        "{silhouettes}"
+    );
+    assert!(
+        deg_bg <= 0.2 && mm_bg <= 2.0,
+        "{deg_bg} deg {mm_bg} mm\n{rep_bg}"
+    );
     // The scene with the calibrated pose: no dilation, the robot erased.
     let replayed = out.join("replayed");
     let (ok, log) = replay(&[

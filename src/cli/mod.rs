@@ -257,6 +257,18 @@ enum Command {
         /// desk).
         #[arg(long = "hidden-below", value_name = "Z", allow_negative_numbers = true)]
         hidden_below: Option<f64>,
+        /// An empty-room photograph of the same camera (no robot): the robot's silhouettes
+        /// are each frame's difference from it, instead of the recording's reference masks.
+        #[arg(long, value_name = "IMAGE")]
+        background: Option<PathBuf>,
+        /// With --background: the difference (8-bit levels, any channel) that counts as the
+        /// robot.
+        #[arg(
+            long = "background-threshold",
+            value_name = "LEVELS",
+            default_value_t = 30
+        )]
+        background_threshold: u8,
         /// Output folder.
         #[arg(long, value_name = "DIR", default_value = "out/calibrate")]
         out: PathBuf,
@@ -782,6 +794,8 @@ fn run(cli: Cli) -> Result<(), AppError> {
             intrinsics,
             triangles,
             hidden_below,
+            background,
+            background_threshold,
             out,
         } => {
             if let Some(z) = hidden_below.filter(|z| !z.is_finite()) {
@@ -821,6 +835,8 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 fit_focal: intrinsics,
                 budget: triangles.max(100),
                 hidden_below,
+                background,
+                background_threshold,
                 out: out.clone(),
                 progress: true,
             })?;

@@ -106,6 +106,40 @@ pub fn dilate(mask: &[u8], width: u32, height: u32, radius: u32) -> Vec<u8> {
     out
 }
 
+/// Square (Chebyshev) erosion of a 0/1 mask: the complement's dilation, complemented (the
+/// edge repeats).
+pub fn erode(mask: &[u8], width: u32, height: u32, radius: u32) -> Vec<u8> {
+    let inverse: Vec<u8> = mask.iter().map(|&v| u8::from(v == 0)).collect();
+    dilate(&inverse, width, height, radius)
+        .iter()
+        .map(|&v| u8::from(v == 0))
+        .collect()
+}
+
+/// The robot's silhouette in `frame` from an empty-room photograph `background` of the same
+/// camera (classic background subtraction): a pixel is foreground where some channel differs
+/// by more than `threshold` levels; a closing (dilate, erode) of `close_px` fills the holes
+/// where the robot's colour happens to match the room, then an opening (erode, dilate) of 1 px
+/// removes the sensor noise's specks (and parts thinner than 3 px). Returns 0/1 per pixel.
+/// Errors: sizes that differ.
+pub fn background_difference(
+    frame: &RgbaView,
+    background: &RgbaView,
+    threshold: u8,
+    close_px: u32,
+) -> Result<Vec<u8>> {
+    super::same_size(frame, background, "empty-room background")?;
+    let (w, h) = (frame.width, frame.height);
+    let raw: Vec<u8> = frame
+        .data
+        .chunks_exact(4)
+        .zip(background.data.chunks_exact(4))
+        .map(|(a, b)| u8::from((0..3).any(|c| a[c].abs_diff(b[c]) > threshold)))
+        .collect();
+    let closed = erode(&dilate(&raw, w, h, close_px), w, h, close_px);
+    Ok(dilate(&erode(&closed, w, h, 1), w, h, 1))
+}
+
 /// `dst[i] = max(src[i - r ..= i + r])` (clamped), by a running count of ones.
 fn window_max(src: &[u8], dst: &mut [u8], r: usize) {
     let n = src.len();

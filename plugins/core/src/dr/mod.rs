@@ -207,6 +207,39 @@ mod tests {
     }
 
     #[test]
+    fn background_difference_finds_the_robot_without_specks_or_holes() {
+        let (w, h) = (20u32, 20u32);
+        let background: Vec<u8> = (0..w * h).flat_map(|_| [120, 130, 140, 255]).collect();
+        let mut frame = background.clone();
+        let mut set = |x: u32, y: u32, px: [u8; 4]| {
+            let i = ((y * w + x) * 4) as usize;
+            frame[i..i + 4].copy_from_slice(&px);
+        };
+        // The robot: a 6x6 block, one of its pixels the room's colour.
+        for y in 5..11 {
+            for x in 5..11 {
+                set(x, y, [200, 40, 40, 255]);
+            }
+        }
+        set(7, 7, [120, 130, 140, 255]);
+        // A speck of noise, and noise below the threshold everywhere else.
+        set(15, 15, [255, 255, 255, 255]);
+        set(2, 2, [140, 110, 160, 255]);
+        let f = view(w, h, &frame);
+        let b = view(w, h, &background);
+        let m = background_difference(&f, &b, 30, 2).expect("sizes");
+        let at = |x: u32, y: u32| m[(y * w + x) as usize];
+        assert_eq!(at(7, 7), 1, "the hole is closed");
+        assert_eq!((at(15, 15), at(2, 2)), (0, 0), "the speck is opened away");
+        assert_eq!(
+            m.iter().map(|&v| u32::from(v)).sum::<u32>(),
+            36,
+            "the block, exactly"
+        );
+        assert!(background_difference(&f, &view(2, 2, &background[..16]), 30, 2).is_err());
+    }
+
+    #[test]
     fn dilation_is_a_square_window() {
         let (w, h) = (7u32, 7u32);
         let mut m = vec![0u8; 49];

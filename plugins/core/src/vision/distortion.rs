@@ -478,6 +478,26 @@ mod tests {
         // Sizes and scales are checked.
         assert!(map.remap_nearest("short", &src[1..], 2).is_err());
         assert!(DistortionMap::new(&k, &lens, 0.0).is_err());
+        // A fisheye and a rational lens map every pixel, their rays where the model puts them.
+        for lens in [
+            Distortion::Equidistant([0.05, -0.01, 0.002, 0.0]),
+            Distortion::RationalPolynomial([0.2, 0.01, 0.0, 0.0, 0.0, 0.5, 0.02, 0.0]),
+        ] {
+            let m = DistortionMap::new(&k, &lens, 1.0).expect("invertible");
+            assert_eq!((m.unmapped, m.outside), (0, 0), "{lens:?}");
+            let (x, y) = (0.3, -0.2);
+            let (xd, yd) = lens.distort(x, y);
+            let (i, j) = (
+                (k.fx * xd + k.cx).round() as usize,
+                (k.fy * yd + k.cy).round() as usize,
+            );
+            let c = m.coords[j * 160 + i];
+            let (pu, pv) = (
+                m.pinhole.fx * x + m.pinhole.cx,
+                m.pinhole.fy * y + m.pinhole.cy,
+            );
+            assert!((f64::from(c[0]) - pu).abs() < 0.75 && (f64::from(c[1]) - pv).abs() < 0.75);
+        }
         let half = DistortionMap::new(&k, &lens, 0.5).expect("half");
         assert!(
             half.pinhole.width <= map.pinhole.width / 2 + 3,
