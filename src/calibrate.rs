@@ -38,6 +38,9 @@ const MAX_PAIRING_FRAMES: usize = 60;
 /// Frames one fit takes at most (10 take 50 s on two cores).
 const MAX_FIT_FRAMES: usize = 100;
 
+/// Frames one run decodes, draws and scores at most (fit and held out).
+const MAX_USED_FRAMES: usize = 300;
+
 /// What `avatarm calibrate` is given.
 #[derive(Debug, Clone)]
 pub struct CalibrateOptions {
@@ -53,9 +56,10 @@ pub struct CalibrateOptions {
     pub pose: Option<PathBuf>,
     /// The rough pose as the camera's eye and a point it looks at, in the base frame (m).
     pub look_at: Option<([f64; 3], [f64; 3])>,
-    /// Frames the fit uses (inclusive ranges of indices); every frame with a reference mask when empty.
+    /// Frames the fit uses (inclusive ranges of indices); every frame with a silhouette when
+    /// empty (a reference mask, or with `background` every frame).
     pub fit: Vec<(usize, usize)>,
-    /// Only every N-th frame with a reference mask is used at all (fit and measured).
+    /// Only every N-th frame with a silhouette is used at all (fit and measured).
     pub every: usize,
     /// Also fit fx and fy.
     pub fit_focal: bool,
@@ -129,11 +133,27 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         }
         None => None,
     };
+    // How many frames there are to decode and draw, before any is.
+    let candidates = if background.is_some() {
+        recording.frames.len()
+    } else {
+        recording.reference_masks.len()
+    };
+    let used = candidates.div_ceil(o.every.max(1));
+    if used > MAX_USED_FRAMES {
+        return Err(AppError::flag(
+            "--every",
+            format!(
+                "{used} frames to use (of {candidates} with a silhouette): at most {MAX_USED_FRAMES}; thin them with --every {}",
+                candidates.div_ceil(MAX_USED_FRAMES)
+            ),
+        ));
+    }
     // Where both exist, how well the background's silhouettes match the reference masks.
     let mut difference_vs_reference = Vec::new();
     // The frames with a silhouette: the robot's at its joints, and the observed one.
     let mut frames = Vec::new();
-    let mut with_reference = 0usize;
+    let mut with_silhouette = 0usize;
     for (i, f) in recording.frames.iter().enumerate() {
         let reference = recording
             .reference_masks
@@ -142,8 +162,8 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         if reference.is_none() && background.is_none() {
             continue;
         }
-        with_reference += 1;
-        if !(with_reference - 1).is_multiple_of(o.every.max(1)) {
+        with_silhouette += 1;
+        if !(with_silhouette - 1).is_multiple_of(o.every.max(1)) {
             continue;
         }
         let reference = match reference {
@@ -165,13 +185,28 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
                 let frame = dr::RgbaView::new("frame", size.0, size.1, frame.as_raw())?;
                 let bg = dr::RgbaView::new("--background", size.0, size.1, bg)?;
                 let m = dr::background_difference(&frame, &bg, o.background_threshold, 2)?;
+                // An exposure change or someone in view makes the whole frame differ; a robot
+                // out of view leaves nothing: neither is a silhouette to fit.
+                let coverage = m.iter().filter(|&&v| v > 0).count() as f64 / m.len() as f64;
+                if !(0.001..=0.5).contains(&coverage) {
+                    notes.push(format!(
+                        "frame {i}: {:.1} % of it differs from the background: left out (an exposure change, something else in view, or no robot)",
+                        100.0 * coverage
+                    ));
+                    continue;
+                }
                 if let Some(s) = reference.as_ref().and_then(|r| dr::mask_scores(&m, r)) {
                     difference_vs_reference.push(s.iou);
                 }
                 m
             }
-            None => reference.unwrap_or_default(),
+            None => match &reference {
+                Some(r) => r.clone(),
+                None => continue,
+            },
         };
+        // Scored (IoUs, pairing) against the reference where there is one, fitted to `observed`.
+        let scored = reference.unwrap_or_else(|| observed.clone());
         let q = interpolate(&states, f.stamp_ns);
         let mut triangles = silhouette.at(&model, &Isometry3::identity(), q.as_slice());
         if let Some(z) = o.hidden_below {
@@ -183,6 +218,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
                 triangles,
                 observed,
             },
+            scored,
         ));
     }
     if frames.is_empty() {
@@ -193,14 +229,14 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     let in_fit = |i: usize| o.fit.is_empty() || o.fit.iter().any(|&(a, b)| (a..=b).contains(&i));
     let fit: Vec<SilhouetteFrame> = frames
         .iter()
-        .filter(|(i, _)| in_fit(*i))
-        .map(|(_, f)| f.clone())
+        .filter(|(i, _, _)| in_fit(*i))
+        .map(|(_, f, _)| f.clone())
         .collect();
     if fit.is_empty() {
         return Err(AppError::flag(
             "--fit",
             format!(
-                "no frame with a reference mask in that range (frames {} to {})",
+                "no frame with a silhouette in that range (frames {} to {})",
                 frames[0].0,
                 frames[frames.len() - 1].0
             ),
@@ -236,7 +272,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     // The silhouettes at the fitted pose, kept for the pairing check.
     let mut drawn: Vec<Vec<u8>> = Vec::with_capacity(frames.len());
     let (w, h) = size;
-    for (i, f) in &frames {
+    for (i, f, scored) in &frames {
         let before = rasterize(&f.triangles, &rough, &k, &lens);
         let after = rasterize(
             &f.triangles,
@@ -244,10 +280,10 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             &result.intrinsics,
             &lens,
         );
-        let iou = |m: &[u8]| dr::mask_scores(m, &f.observed).map_or(f64::NAN, |s| s.iou);
+        let iou = |m: &[u8]| dr::mask_scores(m, scored).map_or(f64::NAN, |s| s.iou);
         let image = decode(&recording.frames[*i], &name)?.into_raw();
         for (tag, m) in [("before", &before), ("after", &after)] {
-            let picture = overlay(&image, m, Some(&f.observed), w);
+            let picture = overlay(&image, m, Some(scored), w);
             let path = o.out.join(format!("overlay_{tag}_{i:05}.png"));
             image::RgbaImage::from_raw(w, h, picture)
                 .ok_or(AppError::ImageSize {
@@ -281,10 +317,10 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             frames.len()
         ));
     } else {
-        for (a, (i, f)) in frames.iter().enumerate() {
+        for (a, (i, _, scored)) in frames.iter().enumerate() {
             let scores: Vec<f64> = drawn
                 .iter()
-                .map(|m| dr::mask_scores(m, &f.observed).map_or(0.0, |s| s.iou))
+                .map(|m| dr::mask_scores(m, scored).map_or(0.0, |s| s.iou))
                 .collect();
             let (best, best_iou) =
                 scores.iter().enumerate().fold(
@@ -377,7 +413,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         "triangles": silhouette.triangle_count(),
         "hidden_below_m": o.hidden_below,
         "distortion": {"model": calibration.distortion_model.ros_name(), "coefficients": calibration.d, "applied": !lens.is_none()},
-        "frames_with_reference": frames.len(),
+        "frames_used": frames.len(),
         "silhouettes": match &o.background {
             Some(path) => json!({
                 "source": "background difference",

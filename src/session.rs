@@ -4,7 +4,7 @@
 //! What is recorded, each stamped with its capture or sample time on the app's clock (offset to
 //! the Unix epoch at start): the camera's frames (JPEG) as the pipeline received them, its
 //! calibration (K, the lens) and believed pose, the robot's base in the world, the robot's
-//! joint states as the app's twin received them, Avatarm's erased frame (JPEG) and mask (PNG)
+//! every joint state sent to the app's twin, Avatarm's erased frame (JPEG) and mask (PNG)
 //! of every frame (read back after the frame's render: the one read-back the live path gets
 //! with `--record`), the operator's hand frames, every control tick's command to the robot,
 //! and safety events: the limiter starting or ending an intervention (a stop for a lost hand,
@@ -31,7 +31,7 @@ use avatarm_record::{
     RobotCommand, SafetyEvent,
 };
 use avatarm_scene::Scene;
-use avatarm_twin::RobotTwin;
+use avatarm_twin::JointStateMessage;
 use avatarm_twin::readback::{ImageRead, read_image_once};
 use avatarm_video::LiveVideo;
 use bevy::prelude::*;
@@ -87,8 +87,8 @@ pub fn add_session_recorder(app: &mut App, path: &Path, scene: &Scene) -> Result
         names,
         last_frame: None,
         last_erased: None,
-        last_joints: None,
         last_hand: None,
+        writer_gone: Default::default(),
         watch: SafetyWatch::default(),
     })
     .add_systems(Last, record_session);
@@ -113,6 +113,8 @@ enum Item {
     Hand(HandPoses),
     Command(RobotCommand),
     Safety(SafetyEvent),
+    /// The session is over: finish the file.
+    End,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -164,6 +166,7 @@ fn write_session(mut writer: RecordingWriter, rx: Receiver<Item>) -> Result<Writ
     let mut written = Written::default();
     for item in rx {
         let result = match item {
+            Item::End => break,
             Item::Image {
                 stream,
                 stamp_ns,
@@ -210,11 +213,10 @@ fn write_session(mut writer: RecordingWriter, rx: Receiver<Item>) -> Result<Writ
 struct SafetyWatch {
     /// Ticks counted per intervention at the last update.
     counts: BTreeMap<String, u64>,
-    /// Interventions under way, with the last time one happened (s).
-    active: BTreeMap<String, f64>,
+    /// Episodes under way (interventions, refused ticks, refused joint states): the last
+    /// time one happened (s), the count when the episode began, and its source.
+    active: BTreeMap<String, (f64, u64, &'static str)>,
     stopping: bool,
-    errors: u64,
-    bad_joint_states: u64,
 }
 
 /// The live session's recorder (its thread finishes the file when this is dropped).
@@ -228,8 +230,9 @@ struct SessionRecorder {
     names: Vec<String>,
     last_frame: Option<u64>,
     last_erased: Option<u64>,
-    last_joints: Option<f64>,
     last_hand: Option<f64>,
+    /// The writer thread ended early (said once).
+    writer_gone: std::sync::atomic::AtomicBool,
     watch: SafetyWatch,
 }
 
@@ -249,9 +252,17 @@ impl SessionRecorder {
     }
 
     fn send(&self, item: Item) {
-        if let Some(tx) = &self.tx {
-            // The thread ended early (the file failed): the error is reported at the end.
-            let _ = tx.send(item);
+        if let Some(tx) = &self.tx
+            && tx.send(item).is_err()
+            && !self
+                .writer_gone
+                .swap(true, std::sync::atomic::Ordering::Relaxed)
+        {
+            // The thread ended early (the file failed): its error is reported at the end.
+            error!(
+                "recording {}: the writer stopped; nothing more is recorded",
+                self.path.display()
+            );
         }
     }
 
@@ -268,6 +279,8 @@ impl SessionRecorder {
 
 impl Drop for SessionRecorder {
     fn drop(&mut self) {
+        // The end, explicitly: read-backs still in flight hold senders of their own.
+        self.send(Item::End);
         self.tx = None;
         let Some(thread) = self.thread.take() else {
             return;
@@ -315,8 +328,8 @@ fn record_session(
     mut recorder: ResMut<SessionRecorder>,
     live: Res<LiveVideo>,
     erase: (Res<EraseState>, Option<Res<EraseTargets>>),
-    app_twin: Option<Res<AppTwin>>,
-    twins: Query<&RobotTwin>,
+    (app_twin, mut joint_states): (Option<Res<AppTwin>>, MessageReader<JointStateMessage>),
+    time: Res<Time>,
     hand: Option<Res<ActiveHand>>,
     teleop: Option<ResMut<Teleop>>,
 ) {
@@ -365,17 +378,14 @@ fn record_session(
             });
         }
     }
-    // The joint states the app's twin received.
-    if let Some(twin) = app_twin.and_then(|t| twins.get(t.0).ok())
-        && let Some(stamp) = twin.stamp_s
-        && recorder.last_joints != Some(stamp)
-    {
-        recorder.last_joints = Some(stamp);
+    // Every joint state sent to the app's twin since the last update.
+    let twin = app_twin.map(|t| t.0);
+    for m in joint_states.read().filter(|m| Some(m.twin) == twin) {
         recorder.send(Item::Joints(JointStates {
-            stamp_ns: recorder.ns(stamp),
-            names: recorder.names_of(twin.positions.len()),
-            positions: twin.positions.iter().copied().collect(),
-            velocities: twin.velocities.iter().copied().collect(),
+            stamp_ns: recorder.ns(m.stamp_s),
+            names: m.names.clone(),
+            positions: m.positions.clone(),
+            velocities: m.velocities.clone(),
         }));
     }
     // The operator's hand.
@@ -410,19 +420,25 @@ fn record_session(
             tcp_speed: s.tcp_speed,
         }));
     }
-    let events = recorder.watch.events(&samples, &teleop.status);
+    let events = recorder
+        .watch
+        .events(&samples, &teleop.status, time.elapsed_secs_f64());
     for (t_s, level, source, message) in events {
         recorder.event(t_s, level, source, message);
     }
 }
 
 impl SafetyWatch {
-    /// The safety events of one update's control ticks `samples` (oldest first) and the
-    /// loop's counters after them: `(time s, level, source, message)`.
+    /// The safety events of one update: its control ticks `samples` (oldest first), the loop's
+    /// counters after them, and the app's time `now_s` (for an update with no tick, as while
+    /// nothing drives the arm): `(time s, level, source, message)`. Each counter's episode
+    /// (interventions, refused ticks, refused joint states) is one event when it begins and one
+    /// when none has come for [`INTERVENTION_QUIET_S`], not one per tick.
     fn events(
         &mut self,
         samples: &[TeleopSample],
         status: &TeleopStatus,
+        now_s: f64,
     ) -> Vec<(f64, LogLevel, &'static str, String)> {
         let mut out = Vec::new();
         for s in samples {
@@ -445,62 +461,63 @@ impl SafetyWatch {
                 });
             }
         }
-        let Some(t_s) = samples.last().map(|s| s.t_s) else {
-            return out;
-        };
-        for (kind, count) in &status.interventions {
-            let kind = format!("{kind:?}");
-            let before = self.counts.insert(kind.clone(), *count).unwrap_or(0);
-            if *count > before && self.active.insert(kind.clone(), t_s).is_none() {
-                out.push((
-                    t_s,
-                    severity(&kind),
-                    "limiter",
-                    format!("intervention began: {kind}"),
-                ));
-            } else if *count > before {
-                self.active.insert(kind, t_s);
+        let t_s = samples.last().map_or(now_s, |s| s.t_s);
+        // (key, count, source, severity, what began)
+        let mut counters: Vec<(String, u64, &'static str, LogLevel, String)> = status
+            .interventions
+            .iter()
+            .map(|(kind, count)| {
+                let kind = format!("{kind:?}");
+                let what = format!("intervention began: {kind}");
+                (kind.clone(), *count, "limiter", severity(&kind), what)
+            })
+            .collect();
+        counters.push((
+            "refused ticks".into(),
+            status.errors,
+            "mapping",
+            LogLevel::Error,
+            format!(
+                "ticks refused: {}",
+                status.last_error.as_deref().unwrap_or("no reason given")
+            ),
+        ));
+        counters.push((
+            "refused joint states".into(),
+            status.bad_joint_states,
+            "robot",
+            LogLevel::Warning,
+            "joint states refused (wrong size or not finite)".into(),
+        ));
+        for (key, count, source, level, what) in counters {
+            let before = self.counts.insert(key.clone(), count).unwrap_or(0);
+            if count <= before {
+                continue;
+            }
+            match self.active.get_mut(&key) {
+                Some(episode) => episode.0 = t_s,
+                None => {
+                    self.active.insert(key, (t_s, before, source));
+                    out.push((t_s, level, source, what));
+                }
             }
         }
         let ended: Vec<String> = self
             .active
             .iter()
-            .filter(|(_, last)| t_s - **last > INTERVENTION_QUIET_S)
-            .map(|(kind, _)| kind.clone())
+            .filter(|(_, e)| t_s - e.0 > INTERVENTION_QUIET_S)
+            .map(|(key, _)| key.clone())
             .collect();
-        for kind in ended {
-            self.active.remove(&kind);
-            out.push((
-                t_s,
-                LogLevel::Info,
-                "limiter",
-                format!("intervention ended: {kind}"),
-            ));
-        }
-        if status.errors > self.errors {
-            out.push((
-                t_s,
-                LogLevel::Error,
-                "mapping",
-                format!(
-                    "{} tick(s) refused: {}",
-                    status.errors - self.errors,
-                    status.last_error.as_deref().unwrap_or("no reason given")
-                ),
-            ));
-            self.errors = status.errors;
-        }
-        if status.bad_joint_states > self.bad_joint_states {
-            out.push((
-                t_s,
-                LogLevel::Warning,
-                "robot",
-                format!(
-                    "{} joint state(s) refused (wrong size or not finite)",
-                    status.bad_joint_states - self.bad_joint_states
-                ),
-            ));
-            self.bad_joint_states = status.bad_joint_states;
+        for key in ended {
+            if let Some((_, first, source)) = self.active.remove(&key) {
+                let n = self.counts.get(&key).copied().unwrap_or(first) - first;
+                let message = if source == "limiter" {
+                    format!("intervention ended: {key} ({n} ticks)")
+                } else {
+                    format!("{key} ended ({n} in all)")
+                };
+                out.push((t_s, LogLevel::Info, source, message));
+            }
         }
         out
     }
@@ -537,27 +554,45 @@ mod tests {
             interventions: vec![(Intervention::HandLost, 3)],
             ..TeleopStatus::default()
         };
-        let e = watch.events(&[tick(1.0, false), tick(1.01, true)], &status);
+        let e = watch.events(&[tick(1.0, false), tick(1.01, true)], &status, 1.01);
         assert_eq!(e.len(), 2, "{e:?}");
         assert_eq!((e[0].1, e[0].0), (LogLevel::Error, 1.01));
         assert!(e[1].3.contains("began: HandLost") && e[1].1 == LogLevel::Error);
         // Still lost: nothing new. A slew at a limit is a warning.
         status.interventions = vec![(Intervention::HandLost, 5), (Intervention::Acceleration, 1)];
-        let e = watch.events(&[tick(1.02, true)], &status);
+        let e = watch.events(&[tick(1.02, true)], &status, 1.02);
         assert_eq!(e.len(), 1, "{e:?}");
         assert_eq!(e[0].1, LogLevel::Warning);
         // Found again; both quiet for more than INTERVENTION_QUIET_S: the stop and both end.
-        let e = watch.events(&[tick(1.03, false), tick(1.6, false)], &status);
+        let e = watch.events(&[tick(1.03, false), tick(1.6, false)], &status, 1.6);
         assert_eq!(e.len(), 3, "{e:?}");
         assert!(e.iter().all(|x| x.1 == LogLevel::Info));
-        // A refused tick and refused joint states, once each.
-        status.errors = 2;
-        status.last_error = Some("joint state has NaN".into());
-        status.bad_joint_states = 1;
-        let e = watch.events(&[tick(2.0, false)], &status);
+        assert!(
+            e.iter()
+                .any(|x| x.3 == "intervention ended: HandLost (5 ticks)"),
+            "{e:?}"
+        );
+        // A link refusing every tick: one event when it begins, none while it goes on (even
+        // in updates without a tick), one when it ends.
+        for (i, t) in [2.0, 2.1, 2.2, 2.3].into_iter().enumerate() {
+            status.errors = 10 * (i as u64 + 1);
+            status.last_error = Some("the robot link is down".into());
+            status.bad_joint_states = i as u64 + 1;
+            let e = watch.events(&[], &status, t);
+            if i == 0 {
+                assert_eq!(e.len(), 2, "{e:?}");
+                assert!(e[0].3.contains("ticks refused: the robot link is down"));
+                assert_eq!((e[0].2, e[1].2), ("mapping", "robot"));
+            } else {
+                assert!(e.is_empty(), "{e:?}");
+            }
+        }
+        let e = watch.events(&[], &status, 3.0);
         assert_eq!(e.len(), 2, "{e:?}");
-        assert!(e[0].3.contains("2 tick(s) refused: joint state has NaN"));
-        assert!(watch.events(&[tick(2.01, false)], &status).is_empty());
-        assert!(watch.events(&[], &status).is_empty());
+        assert!(
+            e.iter().any(|x| x.3 == "refused ticks ended (40 in all)"),
+            "{e:?}"
+        );
+        assert!(watch.events(&[], &status, 4.0).is_empty());
     }
 }

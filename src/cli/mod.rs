@@ -240,10 +240,11 @@ enum Command {
         look_at: Option<Vec<f64>>,
         /// The frames the fit uses: FIRST-LAST ranges or single indices, comma-separated (indices
         /// in the recording, e.g. 0-4 or 0,1,5; the others are held out and only measured).
-        /// Default: every frame with a reference mask.
+        /// Default: every frame with a silhouette (a reference mask, or with --background
+        /// every frame).
         #[arg(long, value_name = "FRAMES", value_parser = frame_range, value_delimiter = ',')]
         fit: Vec<(usize, usize)>,
-        /// Use only every N-th frame with a reference mask (long recordings).
+        /// Use only every N-th frame with a silhouette (long recordings).
         #[arg(long, value_name = "N", default_value_t = 1)]
         every: usize,
         /// Also fit the focal lengths fx and fy.

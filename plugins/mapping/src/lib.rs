@@ -518,7 +518,8 @@ fn teleop_tick(
 }
 
 /// One tick of the move to the start ([`Approach`]): `true` when it commanded the arm (the
-/// tick ends there and is not recorded in [`Teleop::log`]); `false` when there is none, no
+/// tick ends there, recorded in [`Teleop::log`] with the object's target and measured pose
+/// both where the tool holds it now); `false` when there is none, no
 /// joint state yet, or the arm arrived this tick (the hand drives it from this tick on).
 fn approach_tick(t: &mut Teleop, now: f64, dt: f64) -> bool {
     let Some(run) = t.approach.as_mut() else {
@@ -547,7 +548,7 @@ fn approach_tick(t: &mut Teleop, now: f64, dt: f64) -> bool {
         .model
         .jacobian(&t.base, &q, t.tcp, &Vector3::zeros(), Frame::World);
     let stamp = joints.stamp_s;
-    limit_and_send(
+    let limited = limit_and_send(
         t,
         &safety::TickInputs {
             now_s: now,
@@ -561,6 +562,28 @@ fn approach_tick(t: &mut Teleop, now: f64, dt: f64) -> bool {
         },
         dt,
     );
+    if t.record {
+        let held = t.model.forward_kinematics(&t.base, &q)[t.tcp] * t.tcp_from_object;
+        let sample = TeleopSample {
+            t_s: now,
+            target: held,
+            measured: held,
+            truth: t.robot.true_object_pose(),
+            gripper_closed: false,
+            tcp_speed: limited.tcp_speed,
+            max_joint_speed: limited.command.as_ref().map_or(0.0, |c| c.amax()),
+            stopping: limited.stopping,
+            contacts: 0,
+            squeeze_n: 0.0,
+            twin_twist: nalgebra::Vector6::zeros(),
+            qdot: limited
+                .command
+                .clone()
+                .unwrap_or_else(|| DVector::zeros(q.len())),
+            q: DVector::from_vec(q),
+        };
+        t.log.push(sample);
+    }
     true
 }
 

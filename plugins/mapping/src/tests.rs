@@ -667,13 +667,21 @@ fn an_arm_away_from_the_start_is_brought_there_first_within_the_limits() {
         took > 0.5,
         "a 0.4 rad move at 30 % speed takes time: {took}"
     );
-    // Approach ticks are not recorded; the arrival tick is the mapping's first.
-    assert_eq!(t.log.len(), 1);
+    // Approach ticks are recorded too (their commands; no contact, the gripper open), one per
+    // tick that commanded the arm; the arrival tick is the mapping's first.
+    let approached = t.log.len();
+    assert!(approached > 50, "{approached} ticks recorded");
+    assert!(
+        t.log[..approached - 1]
+            .iter()
+            .all(|s| s.contacts == 0 && !s.gripper_closed && s.qdot.iter().all(|v| v.is_finite()))
+    );
+    assert!(t.log[..approached - 1].iter().any(|s| s.qdot.amax() > 0.0));
     // Then the hand drives it: ticks are the mapping's, recorded.
     for _ in 0..50 {
         app.update();
     }
     let t = app.world().resource::<Teleop>();
-    assert_eq!(t.log.len(), 51);
+    assert_eq!(t.log.len(), approached + 50);
     assert!(!t.status.approaching);
 }

@@ -110,7 +110,7 @@ pub struct RobotCommand {
 /// A safety event's severity (`foxglove.Log`'s levels).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LogLevel {
-    /// Something ended, or information (2).
+    /// Something ended, or information (2; a reader takes 0 and 1 as this too).
     Info,
     /// The limiter intervened (3).
     Warning,
@@ -129,7 +129,7 @@ impl LogLevel {
 
     fn of_code(code: u8) -> Option<Self> {
         match code {
-            1 | 2 => Some(Self::Info),
+            0..=2 => Some(Self::Info),
             3 => Some(Self::Warning),
             4 | 5 => Some(Self::Error),
             _ => None,
@@ -1021,9 +1021,15 @@ impl Recording {
                         .map(|p| pose_of(&p.position, &p.orientation))
                         .collect::<Result<Vec<_>, _>>()
                         .map_err(bad)?;
-                    if poses.len() != m.radius.len() || m.radius.iter().any(|r| !r.is_finite()) {
+                    if !matches!(m.hand.as_str(), "left" | "right") {
+                        return Err(bad(format!("hand side '{}'", m.hand)));
+                    }
+                    if poses.len() != m.radius.len()
+                        || m.radius.iter().any(|r| !r.is_finite())
+                        || (m.tracked && poses.is_empty())
+                    {
                         return Err(bad(format!(
-                            "{} poses, {} radii (all finite)",
+                            "{} poses, {} radii (all finite; a tracked hand has joints)",
                             poses.len(),
                             m.radius.len()
                         )));
