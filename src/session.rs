@@ -25,7 +25,6 @@ use avatarm_core::teleop::safety::Intervention;
 use avatarm_erase::{EraseState, EraseTargets};
 use avatarm_hand::ActiveHand;
 use avatarm_mapping::{Teleop, TeleopSample, TeleopStatus};
-use avatarm_record::camera::{CameraCalibration, DistortionModel};
 use avatarm_record::{
     CompressedFrame, HandPoses, ImageFormat, JointStates, LogLevel, RecordError, RecordingWriter,
     RobotCommand, SafetyEvent,
@@ -48,16 +47,7 @@ pub fn add_session_recorder(app: &mut App, path: &Path, scene: &Scene) -> Result
     let epoch_ns = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_nanos() as u64);
-    let k = &scene.believed_camera.intrinsics;
-    let mut calibration = CameraCalibration::pinhole(
-        k.width,
-        k.height,
-        [k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0],
-    );
-    if let Some(model) = DistortionModel::from_ros_name(scene.lens.ros_name()) {
-        calibration.distortion_model = model;
-        calibration.d = scene.lens.coefficients().to_vec();
-    }
+    let calibration = crate::replay::scene_calibration(scene);
     let base = scene.robot_base();
     writer.calibration(epoch_ns, &calibration)?;
     writer.camera_pose(

@@ -726,10 +726,25 @@ fn stage_timings(replay: &Replay, gpu: &SpanTimes) -> serde_json::Value {
 /// Writes `--record`'s MCAP: the believed camera (its pose in the robot's base frame), and per
 /// scored frame the frame, the simulated robot's joints at capture, the true silhouette as the
 /// reference mask, Avatarm's erased frame and mask; stamped with the capture time.
+/// The scene's believed camera as a recording's calibration: K, the size and the lens, as its
+/// `camera_info` would give them.
+pub(crate) fn scene_calibration(s: &avatarm_scene::Scene) -> avatarm_record::CameraCalibration {
+    let k = &s.believed_camera.intrinsics;
+    let mut calibration = avatarm_record::CameraCalibration::pinhole(
+        k.width,
+        k.height,
+        [k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0],
+    );
+    if let Some(model) = avatarm_record::DistortionModel::from_ros_name(s.lens.ros_name()) {
+        calibration.distortion_model = model;
+        calibration.d = s.lens.coefficients().to_vec();
+    }
+    calibration
+}
+
 fn write_recording(path: &Path, replay: &Replay, scene: &SceneResource) -> Result<(), AppError> {
     use avatarm_record::{CompressedFrame, ImageFormat, JointStates, RecordingWriter};
     let s = &scene.0;
-    let k = &s.believed_camera.intrinsics;
     let mut w = RecordingWriter::create(path)?;
     let ns = |t: f64| (t.max(0.0) * 1e9).round() as u64;
     let first = replay
@@ -738,17 +753,7 @@ fn write_recording(path: &Path, replay: &Replay, scene: &SceneResource) -> Resul
         .map(|r| r.t_s)
         .fold(f64::INFINITY, f64::min);
     let t0 = ns(if first.is_finite() { first } else { 0.0 });
-    let mut calibration = avatarm_record::camera::CameraCalibration::pinhole(
-        k.width,
-        k.height,
-        [k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0],
-    );
-    // The camera's lens, as its camera_info would give it.
-    if let Some(model) = avatarm_record::camera::DistortionModel::from_ros_name(s.lens.ros_name()) {
-        calibration.distortion_model = model;
-        calibration.d = s.lens.coefficients().to_vec();
-    }
-    w.calibration(t0, &calibration)?;
+    w.calibration(t0, &scene_calibration(s))?;
     let base_from_camera = s.robot_base().inverse() * s.believed_camera.world_from_camera;
     w.camera_pose(t0, &base_from_camera)?;
     let names: Vec<String> = s.model.dof_names().iter().map(|n| n.to_string()).collect();
