@@ -23,6 +23,9 @@ pub enum AppError {
     /// A camera file (intrinsics, distortion, pose) that could not be used.
     #[error(transparent)]
     CameraFile(Box<avatarm_record::CameraFileError>),
+    /// A two-site session that could not be set up or was refused.
+    #[error(transparent)]
+    Net(Box<avatarm_net::NetError>),
     /// A command-line flag (or the scene field it stands for) with a value that cannot be used.
     #[error("{flag}: {message}")]
     Flag {
@@ -182,5 +185,11 @@ impl From<avatarm_record::RecordError> for AppError {
 impl From<avatarm_record::CameraFileError> for AppError {
     fn from(e: avatarm_record::CameraFileError) -> Self {
         Self::CameraFile(Box::new(e))
+    }
+}
+
+impl From<avatarm_net::NetError> for AppError {
+    fn from(e: avatarm_net::NetError) -> Self {
+        Self::Net(Box::new(e))
     }
 }

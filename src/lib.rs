@@ -26,6 +26,7 @@ pub mod cli;
 pub mod error;
 pub mod footage;
 pub mod import;
+pub mod net;
 pub mod preview;
 pub mod progress;
 pub mod replay;

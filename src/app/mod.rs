@@ -35,6 +35,9 @@ pub enum Mode {
     Preview(preview::PreviewOptions),
     /// No window: replay the scene on a fixed timestep and write frames and a report.
     Headless(replay::ReplayOptions),
+    /// No window, in real time: the robot site's erased video (`avatarm serve`), its arm
+    /// driven by the site's control loop.
+    Serve(crate::net::video::ServeVideoOptions),
 }
 
 /// The app's own twin of the robot (what the app believes, from received joint states).
@@ -78,7 +81,7 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
                 })
             })
             .transpose()?,
-        Mode::Headless(_) => None,
+        Mode::Headless(_) | Mode::Serve(_) => None,
     };
     let mut app = App::new();
     let frame_dt = Duration::from_secs_f64(1.0 / scene.file.camera.fps);
@@ -89,6 +92,14 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
                 ScheduleRunnerPlugin::run_loop(Duration::ZERO),
             ))
             .insert_resource(TimeUpdateStrategy::ManualDuration(frame_dt));
+        }
+        Mode::Serve(_) => {
+            // Real time (the clock is the wall's); one update per camera frame at most. The
+            // site's own log set-up stays (the control loop logs before the app exists).
+            app.add_plugins((
+                headless_plugins().disable::<bevy::log::LogPlugin>(),
+                ScheduleRunnerPlugin::run_loop(frame_dt),
+            ));
         }
         Mode::Preview(options) => {
             // winit panics without a display server; say what to do instead.
@@ -158,7 +169,7 @@ impl PluginGroup for AvatarmPlugins {
     fn build(self) -> PluginGroupBuilder {
         let webcam = match &self.mode {
             Mode::Preview(options) => options.webcam,
-            Mode::Headless(_) => None,
+            Mode::Headless(_) | Mode::Serve(_) => None,
         };
         let live_scores =
             webcam.is_none() && self.scene.file.background == BackgroundSpec::EmptyRoom;
@@ -193,6 +204,7 @@ impl PluginGroup for AvatarmPlugins {
         }
         match self.mode {
             Mode::Headless(options) => group.add(replay::ReplayPlugin(options)),
+            Mode::Serve(options) => group.add(crate::net::video::ServeVideoPlugin(options)),
             Mode::Preview(options) => {
                 #[cfg(feature = "xr")]
                 if options.xr {
@@ -247,7 +259,7 @@ impl Plugin for AvatarmSetupPlugin {
         let (scene, mode) = (&self.scene, &self.mode);
         let webcam = match mode {
             Mode::Preview(options) => options.webcam,
-            Mode::Headless(_) => None,
+            Mode::Headless(_) | Mode::Serve(_) => None,
         };
         app.insert_resource(SceneResource(scene.clone()))
             .insert_resource(SimRoomConfig {

@@ -274,6 +274,82 @@ enum Command {
         #[arg(long, value_name = "DIR", default_value = "out/calibrate")]
         out: PathBuf,
     },
+    /// The robot site of a two-site session (Alice's desk, docs/network.md): the robot, the
+    /// camera, the erase and the robot's side of the mapping, over Zenoh. Needs a scene with a
+    /// [task] (default: the pouring scene).
+    Serve {
+        /// The scene file.
+        scene: Option<PathBuf>,
+        /// The robot: sim (the simulated arm) or ros (the scene's [robot.link], ROS 1).
+        #[arg(long, value_name = "ROBOT", value_parser = ["sim", "ros"], default_value = "sim")]
+        robot: String,
+        /// Where to listen (tcp/HOST:PORT, udp/HOST:PORT or tls/HOST:PORT).
+        #[arg(long, value_name = "ENDPOINT", default_value = "tcp/0.0.0.0:7447")]
+        listen: Vec<String>,
+        /// The mapping mode: paper or closed_loop (default: the task's closed loop).
+        #[arg(long, value_name = "MODE", value_parser = mapping_mode)]
+        mode: Option<avatarm_core::teleop::mapping::MappingMode>,
+        /// Targets older than this stop the arm (s): above the network's one-way delay.
+        #[arg(long = "target-timeout", value_name = "S", default_value_t = 0.5)]
+        target_timeout: f64,
+        /// Render, erase and publish the camera's video: on or off (the control loop alone).
+        #[arg(long, value_name = "on|off", value_parser = on_off)]
+        video: Option<bool>,
+        /// Stop after this many seconds (default: until killed).
+        #[arg(long, value_name = "S")]
+        duration: Option<f64>,
+        /// Write the site's report (JSON) here when it stops.
+        #[arg(long, value_name = "FILE")]
+        report: Option<PathBuf>,
+        /// Folder searched for package://NAME/... URIs (repeatable).
+        #[arg(long = "package-path", value_name = "DIR")]
+        package_path: Vec<PathBuf>,
+        #[command(flatten)]
+        net: crate::net::NetArgs,
+    },
+    /// The operator's site of a two-site session (Blair, docs/network.md): the hand, the
+    /// physics twin and the operator's side of the mapping, sending targets to ENDPOINT; or,
+    /// with --watch, an observer.
+    Join {
+        /// The robot site (or a router): tcp/HOST:PORT, udp/HOST:PORT or tls/HOST:PORT.
+        endpoint: String,
+        /// The scene file, the same as the robot site's (default: the pouring scene).
+        #[arg(long, value_name = "FILE")]
+        scene: Option<PathBuf>,
+        /// Only watch: no hand, no targets.
+        #[arg(long)]
+        watch: bool,
+        /// Stop after this many seconds (default: the task's duration; an observer: until
+        /// killed).
+        #[arg(long, value_name = "S")]
+        duration: Option<f64>,
+        /// Write the report (JSON) here when it stops.
+        #[arg(long, value_name = "FILE")]
+        report: Option<PathBuf>,
+        /// How long to wait for the robot site (s).
+        #[arg(long, value_name = "S", default_value_t = 10.0)]
+        wait: f64,
+        /// Folder searched for package://NAME/... URIs (repeatable).
+        #[arg(long = "package-path", value_name = "DIR")]
+        package_path: Vec<PathBuf>,
+        #[command(flatten)]
+        net: crate::net::NetArgs,
+    },
+    /// A Zenoh router between the sites (docs/network.md): fans the robot site's video out to
+    /// many observers so the robot site sends each stream once.
+    Router {
+        /// Where to listen.
+        #[arg(long, value_name = "ENDPOINT", default_value = "tcp/0.0.0.0:7448")]
+        listen: Vec<String>,
+        /// Robot sites or other routers to connect to.
+        #[arg(long, value_name = "ENDPOINT")]
+        connect: Vec<String>,
+        /// Stop after this many seconds (default: until killed).
+        #[arg(long, value_name = "S")]
+        duration: Option<f64>,
+        #[command(flatten)]
+        net: crate::net::NetArgs,
+    },
     /// Measure speed against accuracy and chart it.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -422,6 +498,14 @@ fn leap_mount(text: &str) -> Result<LeapMountKind, String> {
     text.parse()
 }
 
+fn mapping_mode(s: &str) -> Result<avatarm_core::teleop::mapping::MappingMode, String> {
+    match s {
+        "paper" => Ok(avatarm_core::teleop::mapping::MappingMode::Paper),
+        "closed_loop" => Ok(avatarm_core::teleop::mapping::MappingMode::ClosedLoop),
+        other => Err(format!("'{other}' is not paper or closed_loop")),
+    }
+}
+
 fn default_scene() -> PathBuf {
     bundled_scene("default.toml")
 }
@@ -481,6 +565,80 @@ pub fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<(), AppError> {
     match cli.command {
+        Command::Serve {
+            scene,
+            robot,
+            listen,
+            mode,
+            target_timeout,
+            video,
+            duration,
+            report,
+            package_path,
+            net,
+        } => {
+            crate::net::init_log();
+            let path = scene.unwrap_or_else(pouring_scene);
+            let scene = Scene::load(&path, &packages(package_path))?;
+            let options = crate::net::serve::ServeOptions {
+                net: net.config(avatarm_net::Role::RobotSite, listen, Vec::new())?,
+                scene,
+                robot: if robot == "ros" {
+                    crate::teleop::RobotChoice::Ros
+                } else {
+                    crate::teleop::RobotChoice::Sim
+                },
+                mode,
+                duration_s: duration,
+                report,
+                video: video.unwrap_or(true),
+                target_timeout_s: target_timeout,
+            };
+            let r = crate::net::serve::serve(&options)?;
+            println!("{}", crate::net::serve::summary(&r));
+            Ok(())
+        }
+        Command::Join {
+            endpoint,
+            scene,
+            watch,
+            duration,
+            report,
+            wait,
+            package_path,
+            net,
+        } => {
+            crate::net::init_log();
+            let path = scene.unwrap_or_else(pouring_scene);
+            let scene = Scene::load(&path, &packages(package_path))?;
+            let role = if watch {
+                avatarm_net::Role::Observer
+            } else {
+                avatarm_net::Role::Operator
+            };
+            let options = crate::net::join::JoinOptions {
+                net: net.config(role, Vec::new(), vec![endpoint])?,
+                scene,
+                watch,
+                duration_s: duration,
+                mode: None,
+                report,
+                wait_s: wait,
+            };
+            let r = crate::net::join::join(&options)?;
+            println!("{}", crate::net::join::summary(&r));
+            Ok(())
+        }
+        Command::Router {
+            listen,
+            connect,
+            duration,
+            net,
+        } => {
+            crate::net::init_log();
+            let config = net.config(avatarm_net::Role::Router, listen, connect)?;
+            crate::net::router(&config, duration)
+        }
         Command::Robot {
             urdf,
             package_path,

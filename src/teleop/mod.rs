@@ -102,37 +102,10 @@ impl LiveTeleop {
         choice: &HandChoice,
         robot: RobotChoice,
     ) -> Result<Self, AppError> {
+        let (parts, mode) = trial_parts(scene, robot, None, "--hand")?;
         let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
-            return Err(AppError::flag(
-                "--hand",
-                format!(
-                    "the scene '{}' has no [task] to teleoperate",
-                    scene.file.name
-                ),
-            ));
+            return Err(AppError::flag("--hand", "the scene has no [task]"));
         };
-        let prepared = prepare(task, setup)?;
-        let mode = if task.modes.contains(&MappingMode::ClosedLoop) {
-            MappingMode::ClosedLoop
-        } else {
-            task.modes
-                .first()
-                .copied()
-                .unwrap_or(MappingMode::ClosedLoop)
-        };
-        let link = match robot {
-            RobotChoice::Sim => None,
-            RobotChoice::Ros => Some(ros_arm(scene, setup, prepared.q0())?),
-        };
-        let mut parts = TrialParts::on_robot(task, setup, &prepared, mode, 0, link)?;
-        if robot == RobotChoice::Ros {
-            // A real arm starts wherever it was left: it moves to the grasp's start first, at
-            // the link's speed ratio, before the hand drives it.
-            parts.teleop.approach(avatarm_mapping::Approach {
-                speed_ratio: scene.file.robot.link.speed_ratio,
-                ..avatarm_mapping::Approach::to(prepared.q0().clone())
-            })?;
-        }
         let start = parts.script.wrist_at(0.0).0;
         let (hand, desktop) = match choice {
             HandChoice::Scripted => (
@@ -257,6 +230,52 @@ impl LiveTeleop {
         }
         Ok(())
     }
+}
+
+/// The live trial's world for `scene`'s `[task]` (trial 0) on `robot`, in `mode` (default: the
+/// closed loop where the task has it, else its first mode), and that mode: what `avatarm run`
+/// and the robot site of `avatarm serve` drive. A real robot first moves to the grasp's start
+/// ([`avatarm_mapping::Approach`]). Errors name `flag` when the scene has no task, and the
+/// setting when the task cannot be set up.
+pub fn trial_parts(
+    scene: &Scene,
+    robot: RobotChoice,
+    mode: Option<MappingMode>,
+    flag: &str,
+) -> Result<(TrialParts, MappingMode), AppError> {
+    let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
+        return Err(AppError::flag(
+            flag,
+            format!(
+                "the scene '{}' has no [task] to teleoperate",
+                scene.file.name
+            ),
+        ));
+    };
+    let prepared = prepare(task, setup)?;
+    let mode = match mode {
+        Some(m) => m,
+        None if task.modes.contains(&MappingMode::ClosedLoop) => MappingMode::ClosedLoop,
+        None => task
+            .modes
+            .first()
+            .copied()
+            .unwrap_or(MappingMode::ClosedLoop),
+    };
+    let link = match robot {
+        RobotChoice::Sim => None,
+        RobotChoice::Ros => Some(ros_arm(scene, setup, prepared.q0())?),
+    };
+    let mut parts = TrialParts::on_robot(task, setup, &prepared, mode, 0, link)?;
+    if robot == RobotChoice::Ros {
+        // A real arm starts wherever it was left: it moves to the grasp's start first, at
+        // the link's speed ratio, before the hand drives it.
+        parts.teleop.approach(avatarm_mapping::Approach {
+            speed_ratio: scene.file.robot.link.speed_ratio,
+            ..avatarm_mapping::Approach::to(prepared.q0().clone())
+        })?;
+    }
+    Ok((parts, mode))
 }
 
 /// Adds the live trial of the scene's `[task]` to a preview app, driven by `choice`
@@ -554,7 +573,7 @@ fn mirror_room(
         robot.0.clone_from(sim);
     } else if let Some(s) = teleop.received().last() {
         // A real robot: the room's arm (the simulated camera's) shows where it is.
-        robot.0.place(&s.positions);
+        robot.0.place_at(&s.positions, s.stamp_s);
     }
     if let Some(twin) = twin {
         for s in teleop.received() {

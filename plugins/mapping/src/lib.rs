@@ -25,7 +25,8 @@ use avatarm_core::robot::{LinkId, RobotModel};
 use avatarm_core::sim::JointState;
 use avatarm_core::teleop::grasp::Contact;
 use avatarm_core::teleop::mapping::{
-    Mapper, MappingSettings, RobotSide, TickInputs, VirtualToReal,
+    Mapper, MappingSettings, OperatorInputs, OperatorTarget, RobotInputs, RobotSide,
+    VirtualToReal,
 };
 use avatarm_core::teleop::safety::{self, Intervention, SafetyLimiter};
 use avatarm_hand::{ActiveHand, GraspTarget, HandSystems, HeldObject, ObjectContacts};
@@ -311,6 +312,24 @@ impl Teleop {
         Ok(())
     }
 
+    /// Sets the limiter's watchdog: hand data (or a remote operator's targets) and joint states
+    /// older than `timeout_s` stop the robot. The robot site of a two-site session sets it above
+    /// the network's delay. Errors for a timeout that is not > 0.
+    pub fn set_watchdog_timeout(&mut self, timeout_s: f64) -> Result<(), MappingError> {
+        let settings = safety::SafetySettings {
+            timeout_s,
+            ..*self.limiter.settings()
+        };
+        settings.validate()?;
+        self.limiter = SafetyLimiter::new(settings, self.model.dof_limits());
+        Ok(())
+    }
+
+    /// The limiter's settings.
+    pub fn safety(&self) -> &safety::SafetySettings {
+        self.limiter.settings()
+    }
+
     /// The robot backend's name.
     pub fn robot_name(&self) -> &str {
         self.robot.name()
@@ -379,141 +398,238 @@ fn teleop_tick(
         scratch.0.push(c.contact);
         scratch.1.push(c.object_velocity);
     }
-    let started = std::time::Instant::now();
-    let t = &mut *teleop;
-    let now = time.elapsed_secs_f64();
-    let dt = time.timestep().as_secs_f64().max(1e-6);
-    t.robot.advance(now);
-    let n = t.model.dof();
-    t.received.clear();
-    for s in t.robot.receive() {
-        let ok = s.positions.len() == n
-            && s.positions.iter().all(|v| v.is_finite())
-            && s.stamp_s.is_finite();
-        if ok {
-            t.received.push(s.clone());
-            t.joints = Some(s);
-        } else {
-            t.status.bad_joint_states += 1;
-        }
-    }
-    t.status.ticks += 1;
-    if approach_tick(t, now, dt) {
-        t.status.tick_wall_s += started.elapsed().as_secs_f64();
-        return;
-    }
-    let (hand_stamp, hand_tracked) = match hand.as_ref().and_then(|h| h.latest.as_ref()) {
+    let (hand_stamp_s, hand_tracked) = match hand.as_ref().and_then(|h| h.latest.as_ref()) {
         Some(f) => (Some(f.t_s), f.tracked),
         None => (None, false),
     };
-    let twin_pose = twin.single().map(avatarm_twin::transform_to_iso);
-    let q: Vec<f64> = t
-        .joints
-        .as_ref()
-        .map(|s| s.positions.iter().copied().collect())
-        .unwrap_or_else(|| vec![f64::NAN; n]);
-    let side = RobotSide {
-        model: &t.model,
-        base: t.base,
-        tcp: t.tcp,
-        arm: &t.arm,
-        tcp_from_object: t.tcp_from_object,
-    };
-    let mapped = match (&twin_pose, &t.joints) {
-        (Err(e), _) => Err(format!(
-            "the mapping needs exactly one object twin (GraspTarget): {e}"
-        )),
-        (_, None) => Err("no joint state received yet".to_string()),
-        (Ok(pose), Some(_)) => t
-            .mapper
-            .tick(
-                &TickInputs {
-                    contacts: &scratch.0,
-                    contact_velocities: &scratch.1,
-                    twin_pose: *pose,
-                    q: &q,
-                    held: held.as_ref().is_some_and(|h| h.held.is_some()),
-                    now_s: now,
-                    joints_stamp_s: t.joints.as_ref().map_or(now, |s| s.stamp_s),
-                },
-                &t.v2r,
-                &side,
-            )
-            .map_err(|e| e.to_string()),
-    };
-    let (qdot, jacobian, out) = match mapped {
-        Ok(out) => (out.qdot.clone(), out.tcp_jacobian.clone(), Some(out)),
-        Err(e) => {
-            if t.joints.is_some() {
-                t.fail(e);
-            }
-            (
-                DVector::from_element(n, f64::NAN),
-                Matrix6xX::zeros(n),
-                None,
-            )
-        }
-    };
-    let joints_stamp_s = t.joints.as_ref().map(|s| s.stamp_s);
-    let limited = limit_and_send(
-        t,
-        &safety::TickInputs {
-            now_s: now,
-            qdot: &qdot,
-            q: &q,
-            joints_stamp_s,
-            hand_stamp_s: hand_stamp,
+    let twin_pose = twin.single().map(avatarm_twin::transform_to_iso).map_err(|e| {
+        format!("the mapping needs exactly one object twin (GraspTarget): {e}")
+    });
+    teleop.tick(
+        time.elapsed_secs_f64(),
+        time.timestep().as_secs_f64(),
+        TickSource::Local {
+            contacts: &scratch.0,
+            contact_velocities: &scratch.1,
+            twin_pose,
+            held: held.as_ref().is_some_and(|h| h.held.is_some()),
+            hand_stamp_s,
             hand_tracked,
-            jacobian: &jacobian,
         },
-        dt,
     );
-    // The gripper follows σ only while the hand drives the robot: a lost hand or a refused
-    // tick keeps it as it is (never drops the real object).
-    if let Some(out) = &out
-        && !limited.stopping
-        && let Err(e) = t.robot.gripper(&out.gripper)
-    {
-        t.fail(e.to_string());
-    }
-    t.status.tick_wall_s += started.elapsed().as_secs_f64();
-    if t.record {
-        let nan = Isometry3::from_parts(
-            Translation3::new(f64::NAN, f64::NAN, f64::NAN),
-            UnitQuaternion::identity(),
+}
+
+/// Where a control tick's operator side ([`Mapper::operator_side`]) comes from.
+#[derive(Debug, Clone)]
+pub enum TickSource<'a> {
+    /// The hand and the twin in this process (`avatarm run`).
+    Local {
+        /// The hand's contacts on the twin (virtual scene).
+        contacts: &'a [Contact],
+        /// Their points' velocities (virtual scene, m/s).
+        contact_velocities: &'a [Vector3<f64>],
+        /// The twin's pose (virtual scene), or why there is none.
+        twin_pose: Result<Isometry3<f64>, String>,
+        /// The hand holds the twin.
+        held: bool,
+        /// When the newest hand frame was captured (s, this clock).
+        hand_stamp_s: Option<f64>,
+        /// The hand is tracked.
+        hand_tracked: bool,
+    },
+    /// The operator's site over a network (`avatarm serve`): the newest valid target, `None`
+    /// while there is none (none yet, the operator gone, a refused message).
+    Remote(Option<RemoteTarget>),
+}
+
+/// A target from the operator's site, as the robot's site uses it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RemoteTarget {
+    /// The operator's side of the tick (stamp on this site's clock).
+    pub target: avatarm_core::teleop::mapping::OperatorTarget,
+    /// When the hand frame behind it was captured (s, this site's clock): the watchdog's age.
+    pub hand_stamp_s: f64,
+    /// The operator's hand is tracked.
+    pub hand_tracked: bool,
+}
+
+impl Teleop {
+    /// One control tick at `now_s` (s, the joint states' clock) of period `dt_s`: joint states
+    /// from the robot, the operator's side from `source`, the robot's side
+    /// ([`Mapper::robot_side`]), the limiter, the command to the robot and the gripper; counted
+    /// in [`Teleop::status`] and recorded in [`Teleop::log`] when [`Teleop::record`]. Every
+    /// failure becomes a stop of the robot (a non-finite command the limiter ramps to zero),
+    /// counted, never a panic.
+    pub fn tick(&mut self, now_s: f64, dt_s: f64, source: TickSource) {
+        let started = std::time::Instant::now();
+        let t = self;
+        let now = now_s;
+        let dt = dt_s.max(1e-6);
+        t.robot.advance(now);
+        let n = t.model.dof();
+        t.received.clear();
+        for s in t.robot.receive() {
+            let ok = s.positions.len() == n
+                && s.positions.iter().all(|v| v.is_finite())
+                && s.stamp_s.is_finite();
+            if ok {
+                t.received.push(s.clone());
+                t.joints = Some(s);
+            } else {
+                t.status.bad_joint_states += 1;
+            }
+        }
+        t.status.ticks += 1;
+        if approach_tick(t, now, dt) {
+            t.status.tick_wall_s += started.elapsed().as_secs_f64();
+            return;
+        }
+        let q: Vec<f64> = t
+            .joints
+            .as_ref()
+            .map(|s| s.positions.iter().copied().collect())
+            .unwrap_or_else(|| vec![f64::NAN; n]);
+        // The operator's side: here, or received.
+        let (operator, hand_stamp, hand_tracked): (Result<OperatorTarget, String>, _, _) =
+            match &source {
+                TickSource::Local {
+                    contacts,
+                    contact_velocities,
+                    twin_pose,
+                    held,
+                    hand_stamp_s,
+                    hand_tracked,
+                } => (
+                    twin_pose.clone().and_then(|pose| {
+                        Mapper::operator_side(
+                            &OperatorInputs {
+                                contacts,
+                                contact_velocities,
+                                twin_pose: pose,
+                                held: *held,
+                                stamp_s: now,
+                            },
+                            &t.v2r,
+                        )
+                        .map_err(|e| e.to_string())
+                    }),
+                    *hand_stamp_s,
+                    *hand_tracked,
+                ),
+                TickSource::Remote(Some(r)) => (Ok(r.target), Some(r.hand_stamp_s), r.hand_tracked),
+                TickSource::Remote(None) => {
+                    (Err("no valid target from the operator".to_string()), None, false)
+                }
+            };
+        let side = RobotSide {
+            model: &t.model,
+            base: t.base,
+            tcp: t.tcp,
+            arm: &t.arm,
+            tcp_from_object: t.tcp_from_object,
+        };
+        let mapped = match (&operator, &t.joints) {
+            (Err(e), _) => Err(e.clone()),
+            (_, None) => Err("no joint state received yet".to_string()),
+            (Ok(target), Some(joints)) => t
+                .mapper
+                .robot_side(
+                    target,
+                    &RobotInputs {
+                        q: &q,
+                        now_s: now,
+                        joints_stamp_s: joints.stamp_s,
+                    },
+                    &side,
+                )
+                .map_err(|e| e.to_string()),
+        };
+        let (qdot, jacobian, out) = match mapped {
+            Ok(out) => (out.qdot.clone(), out.tcp_jacobian.clone(), Some(out)),
+            Err(e) => {
+                // Before the first joint state, and while a remote operator has sent nothing
+                // valid, there is nothing to refuse: the robot is simply not driven.
+                let quiet = t.joints.is_none() || matches!(source, TickSource::Remote(None));
+                if !quiet {
+                    t.fail(e);
+                }
+                (
+                    DVector::from_element(n, f64::NAN),
+                    Matrix6xX::zeros(n),
+                    None,
+                )
+            }
+        };
+        let joints_stamp_s = t.joints.as_ref().map(|s| s.stamp_s);
+        let limited = limit_and_send(
+            t,
+            &safety::TickInputs {
+                now_s: now,
+                qdot: &qdot,
+                q: &q,
+                joints_stamp_s,
+                hand_stamp_s: hand_stamp,
+                hand_tracked,
+                jacobian: &jacobian,
+            },
+            dt,
         );
-        let (target, measured, gripper_closed, squeeze_n, twin_twist) = match &out {
-            Some(o) => (
-                o.target,
-                o.measured,
-                o.gripper.closed,
-                o.squeeze_n,
-                o.twin_twist,
-            ),
-            None => (
-                twin_pose.as_ref().map_or(nan, |p| t.v2r.pose(p)),
-                nan,
-                false,
-                0.0,
-                nalgebra::Vector6::zeros(),
-            ),
-        };
-        let sample = TeleopSample {
-            t_s: now,
-            target,
-            measured,
-            truth: t.robot.true_object_pose(),
-            gripper_closed,
-            tcp_speed: limited.tcp_speed,
-            max_joint_speed: limited.command.as_ref().map_or(0.0, |c| c.amax()),
-            stopping: limited.stopping,
-            contacts: contacts.contacts.len(),
-            squeeze_n,
-            twin_twist,
-            q: DVector::from_vec(q),
-            qdot: limited.command.clone().unwrap_or_else(|| DVector::zeros(n)),
-        };
-        t.log.push(sample);
+        // The gripper follows σ only while the hand drives the robot: a lost hand or a refused
+        // tick keeps it as it is (never drops the real object).
+        if let Some(out) = &out
+            && !limited.stopping
+            && let Err(e) = t.robot.gripper(&out.gripper)
+        {
+            t.fail(e.to_string());
+        }
+        t.status.tick_wall_s += started.elapsed().as_secs_f64();
+        if t.record {
+            let nan = Isometry3::from_parts(
+                Translation3::new(f64::NAN, f64::NAN, f64::NAN),
+                UnitQuaternion::identity(),
+            );
+            let (target, measured, gripper_closed, squeeze_n, twin_twist) = match &out {
+                Some(o) => (
+                    o.target,
+                    o.measured,
+                    o.gripper.closed,
+                    o.squeeze_n,
+                    o.twin_twist,
+                ),
+                None => (
+                    match (&source, &operator) {
+                        (_, Ok(op)) => op.target,
+                        (TickSource::Local { twin_pose: Ok(p), .. }, _) => t.v2r.pose(p),
+                        _ => nan,
+                    },
+                    nan,
+                    false,
+                    0.0,
+                    nalgebra::Vector6::zeros(),
+                ),
+            };
+            let contacts = match (&source, &operator) {
+                (TickSource::Local { contacts, .. }, _) => contacts.len(),
+                (_, Ok(op)) => op.contacts,
+                _ => 0,
+            };
+            let sample = TeleopSample {
+                t_s: now,
+                target,
+                measured,
+                truth: t.robot.true_object_pose(),
+                gripper_closed,
+                tcp_speed: limited.tcp_speed,
+                max_joint_speed: limited.command.as_ref().map_or(0.0, |c| c.amax()),
+                stopping: limited.stopping,
+                contacts,
+                squeeze_n,
+                twin_twist,
+                q: DVector::from_vec(q),
+                qdot: limited.command.clone().unwrap_or_else(|| DVector::zeros(n)),
+            };
+            t.log.push(sample);
+        }
     }
 }
 

@@ -135,6 +135,16 @@ impl SimRobot {
         self.active = None;
     }
 
+    /// [`SimRobot::place`], and its clock set to `t_s` (s): a room that shows where another
+    /// robot was at `t_s` (a real robot's joint state, a remote site's) stamps its camera frames
+    /// on that robot's clock.
+    pub fn place_at(&mut self, q: &DVector<f64>, t_s: f64) {
+        self.place(q);
+        if t_s.is_finite() {
+            self.time_s = t_s;
+        }
+    }
+
     /// Sends a command now; it acts after the command latency.
     pub fn send(&mut self, command: JointCommand) -> Result<()> {
         let (what, values) = match &command {

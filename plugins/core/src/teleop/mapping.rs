@@ -173,6 +173,109 @@ pub struct TickInputs<'a> {
     pub joints_stamp_s: f64,
 }
 
+/// The operator's side of a tick's inputs ([`Mapper::operator_side`]).
+#[derive(Debug, Clone)]
+pub struct OperatorInputs<'a> {
+    /// Contacts of the hand on the object twin (virtual scene).
+    pub contacts: &'a [Contact],
+    /// Velocities of the contact points (the hand's, virtual scene, m/s).
+    pub contact_velocities: &'a [Vector3<f64>],
+    /// The object twin's pose (virtual scene).
+    pub twin_pose: Isometry3<f64>,
+    /// The hand holds the twin (its grasp state).
+    pub held: bool,
+    /// When (s, the robot's clock: the joint states' stamps; over a network, the operator's
+    /// estimate of it).
+    pub stamp_s: f64,
+}
+
+/// The robot's side of a tick's inputs ([`Mapper::robot_side`]).
+#[derive(Debug, Clone)]
+pub struct RobotInputs<'a> {
+    /// Measured joint positions (all joints, the model's order).
+    pub q: &'a [f64],
+    /// The tick's time (s, the clock of the joint states' stamps).
+    pub now_s: f64,
+    /// When the robot measured `q` (s, same clock).
+    pub joints_stamp_s: f64,
+}
+
+/// What the operator's side sends the robot's side each tick: the real object's target and
+/// twist (real world, from the twin through [`VirtualToReal`]), the grasp's squeezing force
+/// and state. Checked by [`OperatorTarget::validate`] on both sides.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OperatorTarget {
+    /// When the twin was there (s, the robot's clock).
+    pub stamp_s: f64,
+    /// The real object's target pose (the scaled twin, real world).
+    pub target: Isometry3<f64>,
+    /// The real object's twist from the contacts (real world, at its origin; m/s, rad/s).
+    pub object_twist: Vector6<f64>,
+    /// The twin's twist (virtual scene, at its origin).
+    pub twin_twist: Vector6<f64>,
+    /// Squeezing force σ (N, virtual).
+    pub squeeze_n: f64,
+    /// Grasp matrix rank (0–6).
+    pub rank: usize,
+    /// Contacts on the twin.
+    pub contacts: usize,
+    /// The hand holds the twin.
+    pub held: bool,
+}
+
+/// Largest target position from the real world's origin an [`OperatorTarget`] may have (m):
+/// beyond any desk.
+pub const MAX_TARGET_DISTANCE_M: f64 = 10.0;
+/// Largest linear (m/s) or angular (rad/s) speed in an [`OperatorTarget`]'s twists: far above
+/// a hand's, below anything that is not a measurement error.
+pub const MAX_TARGET_SPEED: f64 = 50.0;
+/// Largest squeezing force an [`OperatorTarget`] may carry (N).
+pub const MAX_SQUEEZE_N: f64 = 10_000.0;
+
+impl OperatorTarget {
+    /// Checks that every number is finite and in range (position within
+    /// [`MAX_TARGET_DISTANCE_M`], twists within [`MAX_TARGET_SPEED`], σ in
+    /// `0..=`[`MAX_SQUEEZE_N`], a unit rotation, rank ≤ 6); the error names the field.
+    pub fn validate(&self) -> crate::Result<()> {
+        let field = |name: &str, message: String| Err(bad_input(format!("target {name}: {message}")));
+        if !self.stamp_s.is_finite() {
+            return field("stamp_s", format!("{} is not finite", self.stamp_s));
+        }
+        let p = self.target.translation.vector;
+        if !p.iter().all(|v| v.is_finite()) || p.norm() > MAX_TARGET_DISTANCE_M {
+            return field(
+                "position",
+                format!("{p:?} is not finite or beyond {MAX_TARGET_DISTANCE_M} m"),
+            );
+        }
+        let q = self.target.rotation.quaternion();
+        if !q.coords.iter().all(|v| v.is_finite()) || (q.norm() - 1.0).abs() > 1e-6 {
+            return field("rotation", format!("{:?} is not a unit quaternion", q.coords));
+        }
+        for (name, t) in [
+            ("object_twist", &self.object_twist),
+            ("twin_twist", &self.twin_twist),
+        ] {
+            if !t.iter().all(|v| v.is_finite() && v.abs() <= MAX_TARGET_SPEED) {
+                return field(
+                    name,
+                    format!("{:?} is not finite or beyond {MAX_TARGET_SPEED}", t.as_slice()),
+                );
+            }
+        }
+        if !(self.squeeze_n.is_finite() && (0.0..=MAX_SQUEEZE_N).contains(&self.squeeze_n)) {
+            return field(
+                "squeeze_n",
+                format!("{} is outside 0..={MAX_SQUEEZE_N} N", self.squeeze_n),
+            );
+        }
+        if self.rank > 6 {
+            return field("rank", format!("{} is more than 6", self.rank));
+        }
+        Ok(())
+    }
+}
+
 /// The gripper command.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct GripperCommand {
@@ -299,7 +402,9 @@ impl Mapper {
         robot.model.forward_kinematics(&robot.base, q)[robot.tcp] * robot.tcp_from_object
     }
 
-    /// One tick. Errors name the bad input; the caller stops the robot on an error.
+    /// One tick, both sides in one process: [`Mapper::operator_side`] then
+    /// [`Mapper::robot_side`]. Errors name the bad input; the caller stops the robot on an
+    /// error.
     pub fn tick(
         &mut self,
         input: &TickInputs,
@@ -310,10 +415,39 @@ impl Mapper {
         if input.q.len() != n || input.q.iter().any(|v| !v.is_finite()) {
             return Err(bad_input(format!("joint state: {n} finite values needed")));
         }
-        if !(input.now_s.is_finite() && input.joints_stamp_s.is_finite()) {
+        let target = Self::operator_side(
+            &OperatorInputs {
+                contacts: input.contacts,
+                contact_velocities: input.contact_velocities,
+                twin_pose: input.twin_pose,
+                held: input.held,
+                stamp_s: input.now_s,
+            },
+            v2r,
+        )?;
+        self.robot_side(
+            &target,
+            &RobotInputs {
+                q: input.q,
+                now_s: input.now_s,
+                joints_stamp_s: input.joints_stamp_s,
+            },
+            robot,
+        )
+    }
+
+    /// The operator's side of a tick (steps 1–2 of the module's list), where the hand and
+    /// the twin are: the twin's twist from the contacts through the grasp matrix, σ, and both
+    /// mapped into the real world. Needs no robot: this is what crosses the network from the
+    /// operator's site to the robot's. Errors name the bad input.
+    pub fn operator_side(
+        input: &OperatorInputs,
+        v2r: &VirtualToReal,
+    ) -> crate::Result<OperatorTarget> {
+        if !input.stamp_s.is_finite() {
             return Err(bad_input(format!(
-                "tick time {} s or joint-state stamp {} s is not finite",
-                input.now_s, input.joints_stamp_s
+                "tick time {} s is not finite",
+                input.stamp_s
             )));
         }
         if input.contact_velocities.len() != input.contacts.len() {
@@ -338,11 +472,47 @@ impl Mapper {
             let nu = grasp::object_twist_from_pinv(&a.g_pinv, &vc)?;
             (nu, a.squeeze, a.rank)
         };
+        let target = OperatorTarget {
+            stamp_s: input.stamp_s,
+            target: v2r.pose(&input.twin_pose),
+            object_twist: v2r.twist(&twin_twist),
+            twin_twist,
+            squeeze_n,
+            rank,
+            contacts: input.contacts.len(),
+            held: input.held,
+        };
+        target.validate()?;
+        Ok(target)
+    }
+
+    /// The robot's side of a tick (steps 3–4), next to the robot: the gripper from σ, the
+    /// closed loop's correction against the measured joints, and the tool point's twist to
+    /// joint velocities. `target` comes from [`Mapper::operator_side`], in this process or
+    /// over the network (its stamp on this clock). Errors name the bad input.
+    pub fn robot_side(
+        &mut self,
+        target: &OperatorTarget,
+        input: &RobotInputs,
+        robot: &RobotSide,
+    ) -> crate::Result<TickOutput> {
+        let n = robot.model.dof();
+        if input.q.len() != n || input.q.iter().any(|v| !v.is_finite()) {
+            return Err(bad_input(format!("joint state: {n} finite values needed")));
+        }
+        if !(input.now_s.is_finite() && input.joints_stamp_s.is_finite()) {
+            return Err(bad_input(format!(
+                "tick time {} s or joint-state stamp {} s is not finite",
+                input.now_s, input.joints_stamp_s
+            )));
+        }
+        target.validate()?;
+        let squeeze_n = target.squeeze_n;
         // Gripper from σ (with hysteresis) or the hand's grasp state.
         let s = self.settings;
-        if !self.closed && (squeeze_n >= s.close_at_n || input.held) {
+        if !self.closed && (squeeze_n >= s.close_at_n || target.held) {
             self.closed = true;
-        } else if self.closed && squeeze_n < s.open_at_n && !input.held {
+        } else if self.closed && squeeze_n < s.open_at_n && !target.held {
             self.closed = false;
         }
         let gripper = GripperCommand {
@@ -353,11 +523,10 @@ impl Mapper {
                 0.0
             },
         };
-        let target = v2r.pose(&input.twin_pose);
         // One FK for the measured object pose, the tool point and its Jacobian.
         let poses = robot.model.forward_kinematics(&robot.base, input.q);
         let measured = poses[robot.tcp] * robot.tcp_from_object;
-        let mut object_twist = v2r.twist(&twin_twist);
+        let mut object_twist = target.object_twist;
         if s.mode == MappingMode::ClosedLoop {
             // The contact twist carries the fingers' tracking jitter; integrated by the robot it
             // becomes a slow wander that the correction has to undo. Low-passed, it still
@@ -366,8 +535,8 @@ impl Mapper {
             // Like with like: the joints were measured at their stamp, so they are compared
             // with the target of that moment. Against the newest target, a joint-state latency
             // d makes the loop settle d ahead of a moving twin (1° at the pour's peak speed
-            // for 15 ms).
-            self.remember(input.now_s, target);
+            // for 15 ms). A target from the network is remembered at its own stamp.
+            self.remember(target.stamp_s, target.target);
             let then = self.target_at(input.joints_stamp_s);
             object_twist += pose_difference(&measured, &then) * s.gain;
         }
@@ -398,12 +567,12 @@ impl Mapper {
         }
         Ok(TickOutput {
             qdot,
-            twin_twist,
+            twin_twist: target.twin_twist,
             object_twist,
-            target,
+            target: target.target,
             measured,
             squeeze_n,
-            rank,
+            rank: target.rank,
             gripper,
             sigma_min: step.sigma_min,
             tcp_jacobian: j_full,

@@ -1,0 +1,249 @@
+//! A site's Zenoh configuration: endpoints, authentication, TLS and access control, built
+//! from a few settings with safe defaults ([`NetConfig::zenoh`]).
+//!
+//! - No multicast scouting and no gossip: sites find each other only through the endpoints
+//!   given (two sessions on one network never join by accident).
+//! - The robot site (and a router) listens; it refuses to listen without a credentials
+//!   dictionary unless [`NetConfig::insecure_lan`] is set.
+//! - With credentials, Zenoh's access control lets only the dictionary's operators
+//!   ([`NetConfig::operators`]) put on the operator's keys and declare its liveliness token:
+//!   an observer's or a stranger's target never reaches the robot's loop.
+
+use std::path::PathBuf;
+
+use crate::NetError;
+use crate::keys::Keys;
+
+/// What a process is in the session.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// Alice's desk: the robot and the cameras (`avatarm serve`); a Zenoh peer that listens.
+    RobotSite,
+    /// Blair: the hand and the targets (`avatarm join`); a Zenoh client.
+    Operator,
+    /// An observer (`avatarm join --watch`); a Zenoh client.
+    Observer,
+    /// A router between the sites that fans the video out (`avatarm router`).
+    Router,
+}
+
+/// A user name and password this side presents (Zenoh's `usrpwd` authentication).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Credentials {
+    /// User name.
+    pub user: String,
+    /// Password.
+    pub password: String,
+}
+
+impl Credentials {
+    /// Reads `user:password` from the first line of `path`.
+    pub fn from_file(path: &std::path::Path) -> Result<Self, NetError> {
+        let text = std::fs::read_to_string(path).map_err(|e| NetError::Config {
+            what: path.display().to_string(),
+            message: format!("cannot read the credentials: {e}"),
+        })?;
+        let line = text.lines().next().unwrap_or("").trim();
+        match line.split_once(':') {
+            Some((user, password)) if !user.is_empty() && !password.is_empty() => Ok(Self {
+                user: user.into(),
+                password: password.into(),
+            }),
+            _ => Err(NetError::Config {
+                what: path.display().to_string(),
+                message: "the first line must be user:password".into(),
+            }),
+        }
+    }
+}
+
+/// TLS files (PEM). The listening side needs its certificate and key; the connecting side
+/// needs the authority's certificate to check the listener's.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct TlsFiles {
+    /// The certificate authority's certificate.
+    pub root_ca: Option<PathBuf>,
+    /// This side's certificate (listening side).
+    pub certificate: Option<PathBuf>,
+    /// This side's private key (listening side).
+    pub private_key: Option<PathBuf>,
+}
+
+/// A site's network settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NetConfig {
+    /// What this process is.
+    pub role: Role,
+    /// The session's key space.
+    pub keys: Keys,
+    /// Endpoints to listen on (`tcp/0.0.0.0:7447`, `udp/...`, `tls/...`).
+    pub listen: Vec<String>,
+    /// Endpoints to connect to.
+    pub connect: Vec<String>,
+    /// What this side presents.
+    pub credentials: Option<Credentials>,
+    /// The listening side's dictionary of `user:password` lines (who may connect).
+    pub dictionary: Option<PathBuf>,
+    /// User names (in the dictionary) allowed to command the robot.
+    pub operators: Vec<String>,
+    /// TLS files.
+    pub tls: Option<TlsFiles>,
+    /// Listen without authentication (a trusted LAN or a test).
+    pub insecure_lan: bool,
+}
+
+fn json(s: &str) -> String {
+    serde_json::Value::String(s.to_owned()).to_string()
+}
+
+fn list(items: &[String]) -> String {
+    serde_json::Value::from(items.to_vec()).to_string()
+}
+
+impl NetConfig {
+    /// Checks the settings: endpoints present, a listener only with a dictionary (or
+    /// `insecure_lan`), TLS files that exist. The error names the setting.
+    pub fn validate(&self) -> Result<(), NetError> {
+        let bad = |what: &str, message: String| {
+            Err(NetError::Config {
+                what: what.into(),
+                message,
+            })
+        };
+        let listens = matches!(self.role, Role::RobotSite | Role::Router);
+        if listens && self.listen.is_empty() {
+            return bad("--listen", "a robot site or router needs an endpoint to listen on".into());
+        }
+        if !listens && self.connect.is_empty() {
+            return bad("ENDPOINT", "an endpoint to connect to is needed".into());
+        }
+        for e in self.listen.iter().chain(&self.connect) {
+            if e.parse::<zenoh::config::EndPoint>().is_err()
+                || !["tcp/", "udp/", "tls/"].iter().any(|p| e.starts_with(p))
+            {
+                return bad(
+                    "endpoint",
+                    format!("'{e}' is not tcp/HOST:PORT, udp/HOST:PORT or tls/HOST:PORT"),
+                );
+            }
+        }
+        if listens && self.dictionary.is_none() && !self.insecure_lan {
+            return bad(
+                "--credentials",
+                "refusing to listen without authentication: give a dictionary of user:password \
+                 lines (--credentials FILE), or --insecure-lan on a network you trust"
+                    .into(),
+            );
+        }
+        if let Some(d) = &self.dictionary
+            && !d.is_file()
+        {
+            return bad("--credentials", format!("{} is not a file", d.display()));
+        }
+        if let Some(tls) = &self.tls {
+            for (name, p) in [
+                ("--tls-ca", &tls.root_ca),
+                ("--tls-cert", &tls.certificate),
+                ("--tls-key", &tls.private_key),
+            ] {
+                if let Some(p) = p
+                    && !p.is_file()
+                {
+                    return bad(name, format!("{} is not a file", p.display()));
+                }
+            }
+            let tls_listen = self.listen.iter().any(|e| e.starts_with("tls/"));
+            if tls_listen && (tls.certificate.is_none() || tls.private_key.is_none()) {
+                return bad("--tls-cert", "a TLS listener needs --tls-cert and --tls-key".into());
+            }
+        }
+        Ok(())
+    }
+
+    /// The Zenoh configuration (JSON5 built from the settings, then parsed by Zenoh).
+    pub fn zenoh(&self) -> Result<zenoh::Config, NetError> {
+        self.validate()?;
+        let mode = match self.role {
+            Role::RobotSite => "peer",
+            Role::Operator | Role::Observer => "client",
+            Role::Router => "router",
+        };
+        let mut auth = Vec::new();
+        if let Some(c) = &self.credentials {
+            auth.push(format!("user: {}, password: {}", json(&c.user), json(&c.password)));
+        }
+        if let Some(d) = &self.dictionary {
+            auth.push(format!("dictionary_file: {}", json(&d.display().to_string())));
+        }
+        let mut tls = Vec::new();
+        if let Some(t) = &self.tls {
+            for (key, p) in [
+                ("root_ca_certificate", &t.root_ca),
+                ("listen_certificate", &t.certificate),
+                ("listen_private_key", &t.private_key),
+            ] {
+                if let Some(p) = p {
+                    tls.push(format!("{key}: {}", json(&p.display().to_string())));
+                }
+            }
+        }
+        let acl = if self.dictionary.is_some() && matches!(self.role, Role::RobotSite | Role::Router)
+        {
+            self.access_control()
+        } else {
+            String::new()
+        };
+        let text = format!(
+            "{{ mode: {mode}, \
+               listen: {{ endpoints: {listen} }}, \
+               connect: {{ endpoints: {connect} }}, \
+               scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }}, \
+               transport: {{ auth: {{ usrpwd: {{ {auth} }} }}, link: {{ tls: {{ {tls} }} }} }}, \
+               {acl} }}",
+            mode = json(mode),
+            listen = list(&self.listen),
+            connect = list(&self.connect),
+            auth = auth.join(", "),
+            tls = tls.join(", "),
+        );
+        zenoh::Config::from_json5(&text).map_err(|e| NetError::Config {
+            what: "zenoh configuration".into(),
+            message: e.to_string(),
+        })
+    }
+
+    /// Access control: denied unless allowed; everyone may read the session and use the
+    /// robot site's keys; only [`NetConfig::operators`] may put on the operator's keys.
+    fn access_control(&self) -> String {
+        let k = &self.keys;
+        let all = r#"["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable", "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"]"#;
+        let read = r#"["declare_subscriber", "query", "liveliness_query", "declare_liveliness_subscriber"]"#;
+        let robot = list(&[k.robot_space(), k.camera_space()]);
+        let session = list(&[k.session_space()]);
+        let operator = list(&[k.operator_space()]);
+        let operators = list(&self.operators);
+        let operator_subject = if self.operators.is_empty() {
+            // Nobody may command: a subject no user name matches.
+            r#"{ id: "operators", usernames: ["-"] }"#.to_string()
+        } else {
+            format!(r#"{{ id: "operators", usernames: {operators} }}"#)
+        };
+        format!(
+            r#"access_control: {{
+                enabled: true,
+                default_permission: "deny",
+                rules: [
+                  {{ id: "robot_site", messages: {all}, flows: ["egress", "ingress"], permission: "allow", key_exprs: {robot} }},
+                  {{ id: "read", messages: {read}, flows: ["egress", "ingress"], permission: "allow", key_exprs: {session} }},
+                  {{ id: "forward_operator", messages: ["put", "delete", "liveliness_token"], flows: ["egress"], permission: "allow", key_exprs: {operator} }},
+                  {{ id: "command", messages: ["put", "delete", "liveliness_token"], flows: ["ingress"], permission: "allow", key_exprs: {operator} }},
+                ],
+                subjects: [ {{ id: "anyone" }}, {operator_subject} ],
+                policies: [
+                  {{ rules: ["robot_site", "read", "forward_operator"], subjects: ["anyone"] }},
+                  {{ rules: ["command"], subjects: ["operators"] }},
+                ],
+              }},"#
+        )
+    }
+}

@@ -1,0 +1,483 @@
+//! The messages between the two sites, their encoding and their checks.
+//!
+//! Every message but a video frame's payload is JSON (serde) with the protocol version `v`
+//! first; a frame is the coded image as the payload and its JSON [`FrameHeader`] as the
+//! sample's attachment. Stamps are seconds on the **robot site's clock** (its session start);
+//! the operator converts its own with its estimate of the offset ([`crate::ClockOffset`]).
+//!
+//! Decoding checks, in order: the size ([`MAX_TARGET_BYTES`] and the others), the version
+//! ([`PROTOCOL_VERSION`]), the fields (unknown fields are refused), then every number (finite,
+//! in range). Each refusal is a [`NetError`] that names the message and the field.
+
+use avatarm_core::teleop::mapping::OperatorTarget;
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector6};
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+use crate::NetError;
+
+/// The protocol's version: a peer with another is refused with both versions named. Raised
+/// on every change of a message's fields or meaning.
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// Largest operator target accepted (bytes): one is ~400.
+pub const MAX_TARGET_BYTES: usize = 4096;
+/// Largest hand frame accepted (bytes): 26 joints are ~3 kB.
+pub const MAX_HAND_BYTES: usize = 32 * 1024;
+/// Largest joint-state, status or info message accepted (bytes).
+pub const MAX_SMALL_BYTES: usize = 64 * 1024;
+/// Largest coded video frame accepted (bytes): a 1080p JPEG at quality 95 is under 1 MB.
+pub const MAX_FRAME_BYTES: usize = 8 << 20;
+/// Largest number of joints in a joint state.
+pub const MAX_JOINTS: usize = 64;
+
+/// The operator's target for one control tick: [`OperatorTarget`] on the wire, with the hand
+/// frame's stamp and tracking state for the robot site's watchdog.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TargetMsg {
+    /// Protocol version.
+    pub v: u32,
+    /// Sequence number (per operator session, from 0): a target older than one already used
+    /// is dropped.
+    pub seq: u64,
+    /// When the twin was there (s, robot clock).
+    pub stamp_s: f64,
+    /// When the hand frame behind it was captured (s, robot clock).
+    pub hand_stamp_s: f64,
+    /// The operator's hand is tracked.
+    pub hand_tracked: bool,
+    /// The real object's target position (m, real world).
+    pub position: [f64; 3],
+    /// Its orientation, unit quaternion `[x, y, z, w]`.
+    pub rotation_xyzw: [f64; 4],
+    /// The real object's twist (real world, at its origin: m/s then rad/s).
+    pub object_twist: [f64; 6],
+    /// The twin's twist (virtual scene).
+    pub twin_twist: [f64; 6],
+    /// Squeezing force σ (N).
+    pub squeeze_n: f64,
+    /// Grasp matrix rank.
+    pub rank: u8,
+    /// Contacts on the twin.
+    pub contacts: u32,
+    /// The hand holds the twin.
+    pub held: bool,
+}
+
+impl TargetMsg {
+    /// The message for `target` (its stamp already on the robot's clock).
+    pub fn new(seq: u64, target: &OperatorTarget, hand_stamp_s: f64, hand_tracked: bool) -> Self {
+        let t = target.target.translation.vector;
+        let q = target.target.rotation.quaternion().coords;
+        Self {
+            v: PROTOCOL_VERSION,
+            seq,
+            stamp_s: target.stamp_s,
+            hand_stamp_s,
+            hand_tracked,
+            position: [t.x, t.y, t.z],
+            rotation_xyzw: [q.x, q.y, q.z, q.w],
+            object_twist: array6(&target.object_twist),
+            twin_twist: array6(&target.twin_twist),
+            squeeze_n: target.squeeze_n,
+            rank: target.rank.min(6) as u8,
+            contacts: target.contacts.min(u32::MAX as usize) as u32,
+            held: target.held,
+        }
+    }
+
+    /// The target it carries, checked ([`OperatorTarget::validate`] and the hand's stamp).
+    pub fn target(&self) -> Result<OperatorTarget, NetError> {
+        let [x, y, z, w] = self.rotation_xyzw;
+        let t = OperatorTarget {
+            stamp_s: self.stamp_s,
+            target: Isometry3::from_parts(
+                Translation3::new(self.position[0], self.position[1], self.position[2]),
+                UnitQuaternion::new_unchecked(Quaternion::new(w, x, y, z)),
+            ),
+            object_twist: Vector6::from_row_slice(&self.object_twist),
+            twin_twist: Vector6::from_row_slice(&self.twin_twist),
+            squeeze_n: self.squeeze_n,
+            rank: usize::from(self.rank),
+            contacts: self.contacts as usize,
+            held: self.held,
+        };
+        t.validate().map_err(|e| NetError::Invalid {
+            what: "target".into(),
+            message: e.to_string(),
+        })?;
+        if !self.hand_stamp_s.is_finite() {
+            return Err(NetError::Invalid {
+                what: "target".into(),
+                message: format!("hand_stamp_s {} is not finite", self.hand_stamp_s),
+            });
+        }
+        Ok(t)
+    }
+}
+
+fn array6(v: &Vector6<f64>) -> [f64; 6] {
+    [v[0], v[1], v[2], v[3], v[4], v[5]]
+}
+
+/// The robot's joint states, as the robot site received them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointStatesMsg {
+    /// Protocol version.
+    pub v: u32,
+    /// When they were sampled (s, robot clock).
+    pub stamp_s: f64,
+    /// Joint positions (rad or m, the robot model's order).
+    pub positions: Vec<f64>,
+    /// Joint velocities (rad/s or m/s).
+    pub velocities: Vec<f64>,
+    /// The real object's pose where the robot site knows it (simulation): position (m) then
+    /// quaternion `[x, y, z, w]`.
+    pub object: Option<[f64; 7]>,
+}
+
+impl JointStatesMsg {
+    fn check(&self) -> Result<(), NetError> {
+        let bad = |message: String| {
+            Err(NetError::Invalid {
+                what: "joint_states".into(),
+                message,
+            })
+        };
+        if self.positions.len() > MAX_JOINTS || self.velocities.len() != self.positions.len() {
+            return bad(format!(
+                "{} positions and {} velocities (at most {MAX_JOINTS}, as many of each)",
+                self.positions.len(),
+                self.velocities.len()
+            ));
+        }
+        let finite = self.stamp_s.is_finite()
+            && self.positions.iter().chain(&self.velocities).all(|v| v.is_finite())
+            && self.object.is_none_or(|o| o.iter().all(|v| v.is_finite()));
+        if !finite {
+            return bad("a value is not finite".into());
+        }
+        Ok(())
+    }
+}
+
+/// The robot site's state, a few times a second and on every change.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotStatusMsg {
+    /// Protocol version.
+    pub v: u32,
+    /// When (s, robot clock).
+    pub stamp_s: f64,
+    /// The limiter is stopping (or holding) the arm.
+    pub stopping: bool,
+    /// Why the arm is stopped, when it is.
+    pub reason: Option<String>,
+    /// Control ticks run.
+    pub ticks: u64,
+    /// Targets refused (malformed, another version, out of range).
+    pub refused_targets: u64,
+    /// Targets used.
+    pub targets: u64,
+    /// An operator is present (its liveliness token is there).
+    pub operator_present: bool,
+}
+
+/// What the robot site says about itself when asked ([`crate::keys::Keys::info`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotInfo {
+    /// Protocol version.
+    pub v: u32,
+    /// Avatarm's version (Cargo's).
+    pub software: String,
+    /// The scene's name.
+    pub scene: String,
+    /// FNV-1a hash of the scene file's text, hexadecimal: the operator's scene must match.
+    pub scene_hash: String,
+    /// The cameras whose erased video is published, by name.
+    pub cameras: Vec<String>,
+    /// Control rate (Hz).
+    pub control_rate_hz: f64,
+    /// Targets older than this stop the arm (s).
+    pub target_timeout_s: f64,
+    /// The robot backend's name.
+    pub robot: String,
+}
+
+/// A coded video frame's header (the sample's attachment; the payload is the coded image).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrameHeader {
+    /// Protocol version.
+    pub v: u32,
+    /// Camera name.
+    pub camera: String,
+    /// Frame index at the camera.
+    pub index: u64,
+    /// Codec: `jpeg`.
+    pub codec: String,
+    /// Width and height (pixels).
+    pub width: u32,
+    /// Height (pixels).
+    pub height: u32,
+    /// Stage stamps (s, robot clock): captured by the camera.
+    pub capture_s: f64,
+    /// Erased (the composite read back).
+    pub erased_s: f64,
+    /// Coded and handed to the network.
+    pub sent_s: f64,
+}
+
+impl FrameHeader {
+    fn check(&self) -> Result<(), NetError> {
+        let ok = self.codec == "jpeg"
+            && (1..=8192).contains(&self.width)
+            && (1..=8192).contains(&self.height)
+            && [self.capture_s, self.erased_s, self.sent_s]
+                .iter()
+                .all(|v| v.is_finite())
+            && self.camera.len() <= 64;
+        if ok {
+            Ok(())
+        } else {
+            Err(NetError::Invalid {
+                what: "frame header".into(),
+                message: format!(
+                    "codec '{}' (jpeg), {}x{} (1..=8192), stamps {} {} {} (finite)",
+                    self.codec, self.width, self.height, self.capture_s, self.erased_s, self.sent_s
+                ),
+            })
+        }
+    }
+}
+
+/// The operator's hand for observers: joint positions (m, real world), tracked or not.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HandMsg {
+    /// Protocol version.
+    pub v: u32,
+    /// Capture time (s, robot clock).
+    pub stamp_s: f64,
+    /// `left` or `right`.
+    pub hand: String,
+    /// Tracked.
+    pub tracked: bool,
+    /// Joint positions (m, real world), in OpenXR's joint order.
+    pub joints: Vec<[f64; 3]>,
+}
+
+impl HandMsg {
+    fn check(&self) -> Result<(), NetError> {
+        let ok = self.stamp_s.is_finite()
+            && (self.hand == "left" || self.hand == "right")
+            && self.joints.len() <= 32
+            && self.joints.iter().flatten().all(|v| v.is_finite());
+        if ok {
+            Ok(())
+        } else {
+            Err(NetError::Invalid {
+                what: "hand".into(),
+                message: "a side of left or right, at most 32 finite joints".into(),
+            })
+        }
+    }
+}
+
+/// Encodes a message (JSON). Errors only for a non-finite number, which JSON cannot hold.
+pub fn encode<T: Serialize>(what: &str, message: &T) -> Result<Vec<u8>, NetError> {
+    serde_json::to_vec(message).map_err(|e| NetError::Invalid {
+        what: what.into(),
+        message: e.to_string(),
+    })
+}
+
+#[derive(Deserialize)]
+struct Versioned {
+    v: Option<u32>,
+}
+
+/// Decodes `bytes` as `what`: size, version, fields, in that order.
+fn decode<T: DeserializeOwned>(what: &str, bytes: &[u8], max: usize) -> Result<T, NetError> {
+    if bytes.len() > max {
+        return Err(NetError::Invalid {
+            what: what.into(),
+            message: format!("{} bytes, more than the {max} allowed", bytes.len()),
+        });
+    }
+    let version: Versioned = serde_json::from_slice(bytes).map_err(|e| NetError::Invalid {
+        what: what.into(),
+        message: format!("not a message: {e}"),
+    })?;
+    match version.v {
+        Some(PROTOCOL_VERSION) => {}
+        other => {
+            return Err(NetError::Version {
+                what: what.into(),
+                theirs: other,
+            });
+        }
+    }
+    serde_json::from_slice(bytes).map_err(|e| NetError::Invalid {
+        what: what.into(),
+        message: e.to_string(),
+    })
+}
+
+/// Decodes and checks an operator target ([`TargetMsg::target`]).
+pub fn decode_target(bytes: &[u8]) -> Result<(TargetMsg, OperatorTarget), NetError> {
+    let m: TargetMsg = decode("target", bytes, MAX_TARGET_BYTES)?;
+    let t = m.target()?;
+    Ok((m, t))
+}
+
+/// Decodes and checks a joint-state message.
+pub fn decode_joint_states(bytes: &[u8]) -> Result<JointStatesMsg, NetError> {
+    let m: JointStatesMsg = decode("joint_states", bytes, MAX_SMALL_BYTES)?;
+    m.check()?;
+    Ok(m)
+}
+
+/// Decodes a robot status.
+pub fn decode_status(bytes: &[u8]) -> Result<RobotStatusMsg, NetError> {
+    let m: RobotStatusMsg = decode("status", bytes, MAX_SMALL_BYTES)?;
+    if !m.stamp_s.is_finite() {
+        return Err(NetError::Invalid {
+            what: "status".into(),
+            message: "stamp_s is not finite".into(),
+        });
+    }
+    Ok(m)
+}
+
+/// Decodes the robot site's info.
+pub fn decode_info(bytes: &[u8]) -> Result<RobotInfo, NetError> {
+    decode("info", bytes, MAX_SMALL_BYTES)
+}
+
+/// Decodes and checks a frame header; `payload_len` is the coded image's size.
+pub fn decode_frame_header(bytes: &[u8], payload_len: usize) -> Result<FrameHeader, NetError> {
+    let h: FrameHeader = decode("frame header", bytes, MAX_SMALL_BYTES)?;
+    h.check()?;
+    if payload_len > MAX_FRAME_BYTES || payload_len == 0 {
+        return Err(NetError::Invalid {
+            what: "frame".into(),
+            message: format!("{payload_len} bytes (1..={MAX_FRAME_BYTES})"),
+        });
+    }
+    Ok(h)
+}
+
+/// Decodes and checks a hand frame.
+pub fn decode_hand(bytes: &[u8]) -> Result<HandMsg, NetError> {
+    let m: HandMsg = decode("hand", bytes, MAX_HAND_BYTES)?;
+    m.check()?;
+    Ok(m)
+}
+
+/// FNV-1a (64 bit) of `bytes`, hexadecimal: the scene's fingerprint in [`RobotInfo`].
+pub fn fingerprint(bytes: &[u8]) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    format!("{h:016x}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn target() -> OperatorTarget {
+        OperatorTarget {
+            stamp_s: 1.25,
+            target: Isometry3::from_parts(
+                Translation3::new(0.6, -0.1, 0.9),
+                UnitQuaternion::from_euler_angles(0.1, 0.2, 0.3),
+            ),
+            object_twist: Vector6::new(0.01, 0.02, 0.0, 0.0, 0.1, 0.0),
+            twin_twist: Vector6::new(0.02, 0.04, 0.0, 0.0, 0.1, 0.0),
+            squeeze_n: 3.5,
+            rank: 6,
+            contacts: 4,
+            held: true,
+        }
+    }
+
+    #[test]
+    fn a_target_crosses_unchanged() {
+        let t = target();
+        let bytes = encode("target", &TargetMsg::new(7, &t, 1.2, true)).expect("encodes");
+        assert!(bytes.len() < MAX_TARGET_BYTES);
+        let (m, back) = decode_target(&bytes).expect("decodes");
+        assert_eq!(m.seq, 7);
+        assert_eq!(back.stamp_s, t.stamp_s);
+        assert!((back.target.translation.vector - t.target.translation.vector).norm() < 1e-12);
+        assert!(back.target.rotation.angle_to(&t.target.rotation) < 1e-9);
+        assert_eq!(back.object_twist, t.object_twist);
+        assert_eq!((back.squeeze_n, back.rank, back.held), (3.5, 6, true));
+    }
+
+    #[test]
+    fn bad_targets_are_refused_with_the_reason() {
+        let good = encode("target", &TargetMsg::new(1, &target(), 1.2, true)).expect("encodes");
+        let text = String::from_utf8(good.clone()).expect("utf-8");
+        let cases: Vec<(Vec<u8>, &str)> = vec![
+            (b"not json".to_vec(), "not a message"),
+            (vec![b' '; MAX_TARGET_BYTES + 1], "more than"),
+            (text.replacen("\"v\":1", "\"v\":2", 1).into_bytes(), "version 2"),
+            (text.replacen("\"v\":1,", "", 1).into_bytes(), "no version"),
+            (text.replacen("\"squeeze_n\":3.5", "\"squeeze_n\":-1.0", 1).into_bytes(), "squeeze_n"),
+            (text.replacen("\"position\":[0.6", "\"position\":[60.0", 1).into_bytes(), "position"),
+            (text.replacen("\"rank\":6", "\"rank\":7", 1).into_bytes(), "rank"),
+            (text.replacen("\"held\":true", "\"held\":true,\"extra\":1", 1).into_bytes(), "unknown field"),
+            (text.replacen("\"squeeze_n\":3.5", "\"squeeze_n\":1e999", 1).into_bytes(), ""),
+        ];
+        for (bytes, says) in cases {
+            let e = decode_target(&bytes).expect_err("refused");
+            assert!(e.to_string().contains(says), "{e} should say '{says}'");
+        }
+        // A rotation that is not a unit quaternion.
+        let mut m = TargetMsg::new(1, &target(), 1.2, true);
+        m.rotation_xyzw = [0.0, 0.0, 0.0, 2.0];
+        let e = m.target().expect_err("refused");
+        assert!(e.to_string().contains("rotation"), "{e}");
+        // NaN cannot even be encoded.
+        m.squeeze_n = f64::NAN;
+        assert!(encode("target", &m).is_ok_and(|b| decode_target(&b).is_err()));
+    }
+
+    #[test]
+    fn headers_and_joint_states_are_checked() {
+        let h = FrameHeader {
+            v: PROTOCOL_VERSION,
+            camera: "desk".into(),
+            index: 3,
+            codec: "jpeg".into(),
+            width: 640,
+            height: 480,
+            capture_s: 1.0,
+            erased_s: 1.01,
+            sent_s: 1.02,
+        };
+        let bytes = encode("frame header", &h).expect("encodes");
+        assert_eq!(decode_frame_header(&bytes, 1000).expect("decodes"), h);
+        assert!(decode_frame_header(&bytes, 0).is_err());
+        let mut bad = h.clone();
+        bad.codec = "h265".into();
+        assert!(decode_frame_header(&encode("h", &bad).expect("encodes"), 10).is_err());
+        let j = JointStatesMsg {
+            v: PROTOCOL_VERSION,
+            stamp_s: 0.5,
+            positions: vec![0.1; 9],
+            velocities: vec![0.0; 8],
+            object: None,
+        };
+        let e = decode_joint_states(&encode("j", &j).expect("encodes")).expect_err("refused");
+        assert!(e.to_string().contains("9 positions and 8 velocities"), "{e}");
+    }
+}

@@ -1,0 +1,595 @@
+//! The two ends of a session over Zenoh: [`RobotSite`] (Alice's desk) and [`OperatorSite`]
+//! (Blair, or an observer). Both are synchronous (Zenoh's `Wait`): calls return at once,
+//! received messages wait in bounded queues until polled.
+//!
+//! QoS per stream (`docs/network.md`):
+//!
+//! | stream | priority | express | when congested |
+//! |---|---|---|---|
+//! | targets | real time | yes | drop (the next one is 10 ms away) |
+//! | joint states | interactive high | yes | drop |
+//! | status | data high | no | block (rare, must arrive) |
+//! | erased video | data | no | drop (a late frame is useless) |
+//! | hand | interactive low | yes | drop |
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+use zenoh::Wait;
+use zenoh::handlers::FifoChannelHandler;
+use zenoh::liveliness::LivelinessToken;
+use zenoh::pubsub::{Publisher, Subscriber};
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::query::Queryable;
+use zenoh::sample::{Sample, SampleKind};
+use zenoh::Session;
+
+use crate::config::NetConfig;
+use crate::keys::Keys;
+use crate::msg::{
+    self, FrameHeader, HandMsg, JointStatesMsg, PROTOCOL_VERSION, RobotInfo, RobotStatusMsg,
+    TargetMsg,
+};
+use crate::NetError;
+
+/// How many messages of a stream wait to be polled; beyond, Zenoh's handler blocks its
+/// thread briefly (the stream's own congestion control applies upstream).
+const QUEUE: usize = 1024;
+
+/// The robot site's clock: seconds since the site started. Every stamp of the session is on
+/// it.
+#[derive(Debug, Clone, Copy)]
+pub struct SiteClock {
+    start: Instant,
+}
+
+impl SiteClock {
+    /// A clock starting now.
+    pub fn start() -> Self {
+        Self {
+            start: Instant::now(),
+        }
+    }
+
+    /// Now (s).
+    pub fn now_s(&self) -> f64 {
+        self.start.elapsed().as_secs_f64()
+    }
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct ClockReply {
+    v: u32,
+    now_s: f64,
+}
+
+fn zerr(what: &str, e: impl std::fmt::Display) -> NetError {
+    NetError::Zenoh {
+        what: what.into(),
+        message: e.to_string(),
+    }
+}
+
+fn open(config: &NetConfig) -> Result<Session, NetError> {
+    let z = config.zenoh()?;
+    let endpoints = if config.listen.is_empty() {
+        &config.connect
+    } else {
+        &config.listen
+    };
+    zenoh::open(z)
+        .wait()
+        .map_err(|e| zerr(&format!("opening the session on {endpoints:?}"), e))
+}
+
+fn publisher(
+    session: &Session,
+    key: String,
+    priority: Priority,
+    express: bool,
+    congestion: CongestionControl,
+) -> Result<Publisher<'static>, NetError> {
+    session
+        .declare_publisher(key.clone())
+        .priority(priority)
+        .express(express)
+        .congestion_control(congestion)
+        .wait()
+        .map_err(|e| zerr(&key, e))
+}
+
+fn subscriber(session: &Session, key: String) -> Result<Subscriber<FifoChannelHandler<Sample>>, NetError> {
+    session
+        .declare_subscriber(key.clone())
+        .with(zenoh::handlers::FifoChannel::new(QUEUE))
+        .wait()
+        .map_err(|e| zerr(&key, e))
+}
+
+fn drain(sub: &Subscriber<FifoChannelHandler<Sample>>) -> Vec<Sample> {
+    let mut out = Vec::new();
+    while let Ok(Some(s)) = sub.try_recv() {
+        out.push(s);
+    }
+    out
+}
+
+/// What the robot site received since the last poll.
+#[derive(Debug, Default)]
+pub struct RobotInbox {
+    /// Targets, decoded and checked, in arrival order; a refused one says why.
+    pub targets: Vec<Result<(TargetMsg, avatarm_core::teleop::mapping::OperatorTarget), NetError>>,
+    /// An operator's liveliness token is present.
+    pub operator_present: bool,
+    /// An operator's token appeared (`true`) or went (`false`) since the last poll.
+    pub operator_changed: Option<bool>,
+}
+
+/// Alice's end: publishes the robot's state and the erased video, receives the operator's
+/// targets, answers info and clock queries.
+pub struct RobotSite {
+    session: Session,
+    keys: Keys,
+    clock: SiteClock,
+    targets: Subscriber<FifoChannelHandler<Sample>>,
+    alive: Subscriber<FifoChannelHandler<Sample>>,
+    operators: usize,
+    joint_states: Publisher<'static>,
+    status: Publisher<'static>,
+    frames: Arc<Vec<(String, Publisher<'static>)>>,
+    _info: Queryable<()>,
+    _clock: Queryable<()>,
+}
+
+impl RobotSite {
+    /// Opens the session (listening on the configuration's endpoints), declares every stream
+    /// and answers `info`. Errors name the setting or the key.
+    pub fn open(config: &NetConfig, info: &RobotInfo, clock: SiteClock) -> Result<Self, NetError> {
+        let session = open(config)?;
+        let keys = config.keys.clone();
+        let targets = subscriber(&session, keys.target())?;
+        let alive = session
+            .liveliness()
+            .declare_subscriber(keys.alive())
+            .history(true)
+            .with(zenoh::handlers::FifoChannel::new(QUEUE))
+            .wait()
+            .map_err(|e| zerr(&keys.alive(), e))?;
+        let joint_states = publisher(
+            &session,
+            keys.joint_states(),
+            Priority::InteractiveHigh,
+            true,
+            CongestionControl::Drop,
+        )?;
+        let status = publisher(
+            &session,
+            keys.status(),
+            Priority::DataHigh,
+            false,
+            CongestionControl::Block,
+        )?;
+        let mut frames = Vec::new();
+        for camera in &info.cameras {
+            frames.push((
+                camera.clone(),
+                publisher(
+                    &session,
+                    keys.erased(camera),
+                    Priority::Data,
+                    false,
+                    CongestionControl::Drop,
+                )?,
+            ));
+        }
+        let info_bytes = msg::encode("info", info)?;
+        let info_key = keys.info();
+        let info_queryable = session
+            .declare_queryable(info_key.clone())
+            .callback(move |q| {
+                let _ = q.reply(q.key_expr().clone(), info_bytes.clone()).wait();
+            })
+            .wait()
+            .map_err(|e| zerr(&info_key, e))?;
+        let clock_key = keys.clock();
+        let clock_queryable = session
+            .declare_queryable(clock_key.clone())
+            .callback(move |q| {
+                let reply = ClockReply {
+                    v: PROTOCOL_VERSION,
+                    now_s: clock.now_s(),
+                };
+                if let Ok(bytes) = msg::encode("clock", &reply) {
+                    let _ = q.reply(q.key_expr().clone(), bytes).wait();
+                }
+            })
+            .wait()
+            .map_err(|e| zerr(&clock_key, e))?;
+        Ok(Self {
+            session,
+            keys,
+            clock,
+            targets,
+            alive,
+            operators: 0,
+            joint_states,
+            status,
+            frames: Arc::new(frames),
+            _info: info_queryable,
+            _clock: clock_queryable,
+        })
+    }
+
+    /// The site's clock.
+    pub fn clock(&self) -> SiteClock {
+        self.clock
+    }
+
+    /// The session's keys.
+    pub fn keys(&self) -> &Keys {
+        &self.keys
+    }
+
+    /// Everything received since the last poll.
+    pub fn poll(&mut self) -> RobotInbox {
+        let mut inbox = RobotInbox::default();
+        let before = self.operators > 0;
+        for s in drain(&self.alive) {
+            match s.kind() {
+                SampleKind::Put => self.operators += 1,
+                SampleKind::Delete => self.operators = self.operators.saturating_sub(1),
+            }
+        }
+        inbox.operator_present = self.operators > 0;
+        if inbox.operator_present != before {
+            inbox.operator_changed = Some(inbox.operator_present);
+        }
+        for s in drain(&self.targets) {
+            inbox.targets.push(msg::decode_target(&s.payload().to_bytes()));
+        }
+        inbox
+    }
+
+    /// Publishes the robot's joint states.
+    pub fn publish_joint_states(&self, m: &JointStatesMsg) -> Result<(), NetError> {
+        let bytes = msg::encode("joint_states", m)?;
+        self.joint_states
+            .put(bytes)
+            .wait()
+            .map_err(|e| zerr(&self.keys.joint_states(), e))
+    }
+
+    /// Publishes the site's status.
+    pub fn publish_status(&self, m: &RobotStatusMsg) -> Result<(), NetError> {
+        let bytes = msg::encode("status", m)?;
+        self.status
+            .put(bytes)
+            .wait()
+            .map_err(|e| zerr(&self.keys.status(), e))
+    }
+
+    /// A handle that publishes camera frames from another thread (the video encoder's).
+    pub fn frame_sender(&self) -> FrameSender {
+        FrameSender {
+            publishers: self.frames.clone(),
+        }
+    }
+
+    /// Closes the session (the operator sees the site go).
+    pub fn close(self) {
+        let _ = self.session.close().wait();
+    }
+}
+
+/// Publishes coded frames of the robot site's cameras; cloned to the encoder's thread.
+#[derive(Clone)]
+pub struct FrameSender {
+    publishers: Arc<Vec<(String, Publisher<'static>)>>,
+}
+
+impl FrameSender {
+    /// Publishes one coded frame. Errors for an unknown camera or a frame Zenoh refuses.
+    pub fn send(&self, header: &FrameHeader, payload: Vec<u8>) -> Result<(), NetError> {
+        let Some((_, p)) = self.publishers.iter().find(|(n, _)| *n == header.camera) else {
+            return Err(NetError::Invalid {
+                what: "frame".into(),
+                message: format!("no camera '{}'", header.camera),
+            });
+        };
+        let attachment = msg::encode("frame header", header)?;
+        p.put(payload)
+            .attachment(attachment)
+            .wait()
+            .map_err(|e| zerr(&header.camera, e))
+    }
+}
+
+/// The operator's estimate of the robot site's clock: `robot = local + offset_s`, from the
+/// query with the shortest round trip (Cristian's algorithm).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClockOffset {
+    /// Robot clock minus this process's clock (s).
+    pub offset_s: f64,
+    /// The round trip of the query it came from (s): the estimate is within half of it.
+    pub rtt_s: f64,
+}
+
+/// What an operator or observer received since the last poll.
+#[derive(Debug, Default)]
+pub struct OperatorInbox {
+    /// Joint states.
+    pub joint_states: Vec<Result<JointStatesMsg, NetError>>,
+    /// Status messages.
+    pub status: Vec<Result<RobotStatusMsg, NetError>>,
+    /// Erased frames: header, coded image, when received (s, robot clock).
+    pub frames: Vec<Result<(FrameHeader, Vec<u8>, f64), NetError>>,
+    /// The operator's hand (observers).
+    pub hands: Vec<Result<HandMsg, NetError>>,
+}
+
+/// Blair's end (or an observer's): asks the robot site who it is, estimates its clock,
+/// publishes targets and hand frames (an operator), receives the video and the robot's state.
+pub struct OperatorSite {
+    session: Session,
+    keys: Keys,
+    info: RobotInfo,
+    local: SiteClock,
+    offset: Arc<std::sync::Mutex<ClockOffset>>,
+    refresh: Arc<std::sync::atomic::AtomicBool>,
+    target: Publisher<'static>,
+    hand: Publisher<'static>,
+    _token: Option<LivelinessToken>,
+    joint_states: Subscriber<FifoChannelHandler<Sample>>,
+    status: Subscriber<FifoChannelHandler<Sample>>,
+    frames: Subscriber<FifoChannelHandler<Sample>>,
+    hands: Subscriber<FifoChannelHandler<Sample>>,
+}
+
+impl OperatorSite {
+    /// Connects, waits up to `wait` for the robot site's info (refusing another protocol
+    /// version with both named), estimates the clock offset, and — for an operator — declares
+    /// its liveliness token. Errors name what failed.
+    pub fn join(config: &NetConfig, wait: Duration) -> Result<Self, NetError> {
+        let deadline = Instant::now() + wait;
+        // The robot site may still be starting: the session is retried until `wait` passes.
+        let session = loop {
+            match open(config) {
+                Ok(s) => break s,
+                Err(_) if Instant::now() + Duration::from_millis(250) < deadline => {
+                    std::thread::sleep(Duration::from_millis(250));
+                }
+                Err(e) => return Err(e),
+            }
+        };
+        let keys = config.keys.clone();
+        let local = SiteClock::start();
+        let info = loop {
+            match query(&session, &keys.info(), Duration::from_millis(1000)) {
+                Some(bytes) => break msg::decode_info(&bytes)?,
+                None if Instant::now() >= deadline => {
+                    return Err(NetError::NoRobotSite {
+                        key: keys.info(),
+                        waited_s: wait.as_secs_f64(),
+                    });
+                }
+                None => std::thread::sleep(Duration::from_millis(100)),
+            }
+        };
+        let offset = Arc::new(std::sync::Mutex::new(estimate_offset(&session, &keys, &local, 9)?));
+        let operator = config.role == crate::Role::Operator;
+        let token = if operator {
+            Some(
+                session
+                    .liveliness()
+                    .declare_token(keys.alive())
+                    .wait()
+                    .map_err(|e| zerr(&keys.alive(), e))?,
+            )
+        } else {
+            None
+        };
+        Ok(Self {
+            target: publisher(
+                &session,
+                keys.target(),
+                Priority::RealTime,
+                true,
+                CongestionControl::Drop,
+            )?,
+            hand: publisher(
+                &session,
+                keys.hand(),
+                Priority::InteractiveLow,
+                true,
+                CongestionControl::Drop,
+            )?,
+            joint_states: subscriber(&session, keys.joint_states())?,
+            status: subscriber(&session, keys.status())?,
+            frames: subscriber(&session, keys.all_erased())?,
+            hands: subscriber(&session, keys.hand())?,
+            _token: token,
+            refresh: refresher(&session, &keys, local, offset.clone()),
+            session,
+            keys,
+            info,
+            local,
+            offset,
+        })
+    }
+
+    /// The robot site's info.
+    pub fn info(&self) -> &RobotInfo {
+        &self.info
+    }
+
+    /// The clock offset's estimate (re-estimated every [`OFFSET_REFRESH`] on a thread of its
+    /// own, so the operator's loop never waits for a round trip).
+    pub fn offset(&self) -> ClockOffset {
+        *self.offset.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Now on the robot site's clock, as estimated (s).
+    pub fn robot_now_s(&self) -> f64 {
+        self.local.now_s() + self.offset().offset_s
+    }
+
+    /// Publishes a target.
+    pub fn publish_target(&self, m: &TargetMsg) -> Result<(), NetError> {
+        let bytes = msg::encode("target", m)?;
+        self.target
+            .put(bytes)
+            .wait()
+            .map_err(|e| zerr(&self.keys.target(), e))
+    }
+
+    /// Publishes the operator's hand.
+    pub fn publish_hand(&self, m: &HandMsg) -> Result<(), NetError> {
+        let bytes = msg::encode("hand", m)?;
+        self.hand.put(bytes).wait().map_err(|e| zerr(&self.keys.hand(), e))
+    }
+
+    /// Publishes raw bytes on the target key: for tests of the robot site's checks (a
+    /// malformed or foreign message must stop the arm, not move it).
+    pub fn publish_raw_target(&self, bytes: Vec<u8>) -> Result<(), NetError> {
+        self.target
+            .put(bytes)
+            .wait()
+            .map_err(|e| zerr(&self.keys.target(), e))
+    }
+
+    /// Everything received since the last poll.
+    pub fn poll(&mut self) -> OperatorInbox {
+        let now = self.robot_now_s();
+        OperatorInbox {
+            joint_states: drain(&self.joint_states)
+                .iter()
+                .map(|s| msg::decode_joint_states(&s.payload().to_bytes()))
+                .collect(),
+            status: drain(&self.status)
+                .iter()
+                .map(|s| msg::decode_status(&s.payload().to_bytes()))
+                .collect(),
+            frames: drain(&self.frames)
+                .iter()
+                .map(|s| {
+                    let payload = s.payload().to_bytes().into_owned();
+                    let header = s.attachment().map(|a| a.to_bytes().into_owned()).ok_or_else(
+                        || NetError::Invalid {
+                            what: "frame".into(),
+                            message: "no header attached".into(),
+                        },
+                    )?;
+                    let h = msg::decode_frame_header(&header, payload.len())?;
+                    Ok((h, payload, now))
+                })
+                .collect(),
+            hands: drain(&self.hands)
+                .iter()
+                .map(|s| msg::decode_hand(&s.payload().to_bytes()))
+                .collect(),
+        }
+    }
+
+    /// Leaves the session (the robot site sees the operator's token go).
+    pub fn close(self) {
+        self.refresh.store(true, std::sync::atomic::Ordering::Relaxed);
+        let _ = self.session.close().wait();
+    }
+}
+
+/// How often the operator re-estimates the robot site's clock (clocks drift, paths change).
+pub const OFFSET_REFRESH: Duration = Duration::from_secs(5);
+
+/// Re-estimates the offset every [`OFFSET_REFRESH`] until the returned flag is set.
+fn refresher(
+    session: &Session,
+    keys: &Keys,
+    local: SiteClock,
+    offset: Arc<std::sync::Mutex<ClockOffset>>,
+) -> Arc<std::sync::atomic::AtomicBool> {
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let (session, keys, flag) = (session.clone(), keys.clone(), stop.clone());
+    let _ = std::thread::Builder::new()
+        .name("clock offset".into())
+        .spawn(move || {
+            let mut last = Instant::now();
+            while !flag.load(std::sync::atomic::Ordering::Relaxed) {
+                std::thread::sleep(Duration::from_millis(100));
+                if last.elapsed() < OFFSET_REFRESH {
+                    continue;
+                }
+                last = Instant::now();
+                if let Ok(o) = estimate_offset(&session, &keys, &local, 5) {
+                    *offset.lock().unwrap_or_else(|e| e.into_inner()) = o;
+                }
+            }
+        });
+    stop
+}
+
+/// The first reply's payload to a query on `key`, or `None` within `timeout`.
+fn query(session: &Session, key: &str, timeout: Duration) -> Option<Vec<u8>> {
+    let replies = session.get(key).timeout(timeout).wait().ok()?;
+    while let Ok(reply) = replies.recv() {
+        if let Ok(sample) = reply.result() {
+            return Some(sample.payload().to_bytes().into_owned());
+        }
+    }
+    None
+}
+
+fn estimate_offset(
+    session: &Session,
+    keys: &Keys,
+    local: &SiteClock,
+    samples: usize,
+) -> Result<ClockOffset, NetError> {
+    let mut best: Option<ClockOffset> = None;
+    for _ in 0..samples {
+        let sent = local.now_s();
+        let Some(bytes) = query(session, &keys.clock(), Duration::from_secs(2)) else {
+            continue;
+        };
+        let received = local.now_s();
+        let Ok(reply) = serde_json::from_slice::<ClockReply>(&bytes) else {
+            continue;
+        };
+        if reply.v != PROTOCOL_VERSION || !reply.now_s.is_finite() {
+            continue;
+        }
+        let rtt_s = received - sent;
+        let estimate = ClockOffset {
+            offset_s: reply.now_s - (sent + received) / 2.0,
+            rtt_s,
+        };
+        if best.is_none_or(|b| rtt_s < b.rtt_s) {
+            best = Some(estimate);
+        }
+    }
+    best.ok_or_else(|| NetError::NoRobotSite {
+        key: keys.clock(),
+        waited_s: 2.0 * samples as f64,
+    })
+}
+
+/// A Zenoh router (`avatarm router`): routes between sites and fans streams out; closes when
+/// dropped.
+pub struct Router {
+    _session: Session,
+}
+
+impl Router {
+    /// Opens the router's session (its configuration's role must be [`crate::Role::Router`]).
+    pub fn open(config: &NetConfig) -> Result<Self, NetError> {
+        if config.role != crate::Role::Router {
+            return Err(NetError::Config {
+                what: "role".into(),
+                message: "a router's configuration is needed".into(),
+            });
+        }
+        Ok(Self {
+            _session: open(config)?,
+        })
+    }
+}

@@ -1,0 +1,222 @@
+//! The two ends over real Zenoh sessions on loopback: info and clock, targets through, the
+//! checks on what arrives, protocol versions, authentication and access control.
+
+use std::time::{Duration, Instant};
+
+use avatarm_core::teleop::mapping::OperatorTarget;
+use avatarm_net::msg::{PROTOCOL_VERSION, RobotInfo, TargetMsg};
+use avatarm_net::{
+    Credentials, Keys, NetConfig, NetError, OperatorSite, Role, RobotInbox, RobotSite, SiteClock,
+};
+use nalgebra::{Isometry3, Vector6};
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free port")
+}
+
+fn info(v: u32) -> RobotInfo {
+    RobotInfo {
+        v,
+        software: "test".into(),
+        scene: "pouring".into(),
+        scene_hash: "0".into(),
+        cameras: vec!["desk".into()],
+        control_rate_hz: 100.0,
+        target_timeout_s: 0.5,
+        robot: "simulated arm".into(),
+    }
+}
+
+fn config(role: Role, endpoint: &str, site: &str) -> NetConfig {
+    let listens = role == Role::RobotSite;
+    NetConfig {
+        role,
+        keys: Keys::new(site).expect("a site name"),
+        listen: if listens { vec![endpoint.into()] } else { vec![] },
+        connect: if listens { vec![] } else { vec![endpoint.into()] },
+        credentials: None,
+        dictionary: None,
+        operators: vec![],
+        tls: None,
+        insecure_lan: true,
+    }
+}
+
+fn target(stamp_s: f64) -> OperatorTarget {
+    OperatorTarget {
+        stamp_s,
+        target: Isometry3::translation(0.6, 0.0, 0.9),
+        object_twist: Vector6::zeros(),
+        twin_twist: Vector6::zeros(),
+        squeeze_n: 2.0,
+        rank: 6,
+        contacts: 3,
+        held: true,
+    }
+}
+
+/// Polls the robot site until `enough` says so or 5 s pass; returns everything received.
+fn collect(site: &mut RobotSite, enough: impl Fn(&RobotInbox) -> bool) -> RobotInbox {
+    let mut all = RobotInbox::default();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while Instant::now() < deadline {
+        let inbox = site.poll();
+        all.operator_present = inbox.operator_present;
+        all.operator_changed = inbox.operator_changed.or(all.operator_changed);
+        all.targets.extend(inbox.targets);
+        if enough(&all) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    all
+}
+
+#[test]
+fn an_operator_joins_estimates_the_clock_and_its_targets_arrive_checked() {
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let clock = SiteClock::start();
+    std::thread::sleep(Duration::from_millis(300));
+    let mut robot =
+        RobotSite::open(&config(Role::RobotSite, &endpoint, "t1"), &info(PROTOCOL_VERSION), clock)
+            .expect("the robot site opens");
+    let operator = OperatorSite::join(&config(Role::Operator, &endpoint, "t1"), Duration::from_secs(5))
+        .expect("joins");
+    assert_eq!(operator.info().scene, "pouring");
+    // The robot's clock started 0.3 s before the operator's: the offset says so, to within
+    // half the round trip.
+    let offset = operator.offset();
+    assert!(offset.rtt_s < 0.05, "{offset:?}");
+    assert!((offset.offset_s - 0.3).abs() < 0.05 + offset.rtt_s, "{offset:?}");
+    let now = operator.robot_now_s();
+    assert!((now - clock.now_s()).abs() < 0.02, "{now} vs {}", clock.now_s());
+    for seq in 0..5 {
+        operator
+            .publish_target(&TargetMsg::new(seq, &target(now), now, true))
+            .expect("sent");
+    }
+    // Malformed, foreign and out-of-range targets arrive refused, each with its reason.
+    operator.publish_raw_target(b"{\"v\":1,".to_vec()).expect("sent");
+    let mut foreign = TargetMsg::new(9, &target(now), now, true);
+    foreign.v = PROTOCOL_VERSION + 1;
+    operator
+        .publish_raw_target(serde_json::to_vec(&foreign).expect("encodes"))
+        .expect("sent");
+    let mut far = TargetMsg::new(10, &target(now), now, true);
+    far.position = [1e3, 0.0, 0.0];
+    operator
+        .publish_raw_target(serde_json::to_vec(&far).expect("encodes"))
+        .expect("sent");
+    operator
+        .publish_raw_target(vec![b'x'; 100_000])
+        .expect("sent");
+    let inbox = collect(&mut robot, |i| i.targets.len() >= 9 && i.operator_present);
+    assert!(inbox.operator_present, "the operator's liveliness token is seen");
+    assert_eq!(inbox.targets.len(), 9);
+    let ok: Vec<u64> = inbox
+        .targets
+        .iter()
+        .filter_map(|t| t.as_ref().ok().map(|(m, _)| m.seq))
+        .collect();
+    assert_eq!(ok, vec![0, 1, 2, 3, 4]);
+    let errors: Vec<String> = inbox
+        .targets
+        .iter()
+        .filter_map(|t| t.as_ref().err().map(|e| e.to_string()))
+        .collect();
+    assert!(errors[0].contains("not a message"), "{errors:?}");
+    assert!(errors[1].contains("protocol version 2"), "{errors:?}");
+    assert!(errors[2].contains("position"), "{errors:?}");
+    assert!(errors[3].contains("more than"), "{errors:?}");
+    // The operator leaves: its token goes.
+    operator.close();
+    let inbox = collect(&mut robot, |i| i.operator_changed == Some(false));
+    assert_eq!(inbox.operator_changed, Some(false));
+    assert!(!inbox.operator_present);
+}
+
+#[test]
+fn a_robot_site_of_another_protocol_version_is_refused_by_name() {
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let _robot = RobotSite::open(
+        &config(Role::RobotSite, &endpoint, "t2"),
+        &info(PROTOCOL_VERSION + 1),
+        SiteClock::start(),
+    )
+    .expect("opens");
+    let e = OperatorSite::join(&config(Role::Operator, &endpoint, "t2"), Duration::from_secs(5))
+        .err()
+        .expect("refused");
+    assert!(matches!(e, NetError::Version { .. }), "{e}");
+    let text = e.to_string();
+    assert!(text.contains(&format!("version {}", PROTOCOL_VERSION + 1)), "{text}");
+    assert!(text.contains(&format!("this build speaks {PROTOCOL_VERSION}")), "{text}");
+}
+
+#[test]
+fn a_listener_without_credentials_is_refused_unless_on_a_trusted_lan() {
+    let mut c = config(Role::RobotSite, "tcp/127.0.0.1:7447", "t3");
+    c.insecure_lan = false;
+    let e = c.validate().expect_err("refused");
+    assert!(e.to_string().contains("--insecure-lan"), "{e}");
+    let mut bad = config(Role::Operator, "http://example.org", "t3");
+    bad.insecure_lan = false;
+    assert!(bad.validate().is_err());
+    assert!(Keys::new("a/b").is_err() && Keys::new("").is_err());
+}
+
+#[test]
+fn only_the_dictionary_s_operator_can_command_the_robot() {
+    let dir = std::env::temp_dir().join(format!("avatarm-net-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("a folder");
+    let dictionary = dir.join("users.txt");
+    std::fs::write(&dictionary, "blair:pour-carefully\nwatcher:just-looking\n").expect("written");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let mut robot_config = config(Role::RobotSite, &endpoint, "t4");
+    robot_config.insecure_lan = false;
+    robot_config.dictionary = Some(dictionary);
+    robot_config.operators = vec!["blair".into()];
+    let mut robot = RobotSite::open(&robot_config, &info(PROTOCOL_VERSION), SiteClock::start())
+        .expect("opens");
+    let as_user = |user: Option<(&str, &str)>| {
+        let mut c = config(Role::Operator, &endpoint, "t4");
+        c.credentials = user.map(|(u, p)| Credentials {
+            user: u.into(),
+            password: p.into(),
+        });
+        c
+    };
+    // No credentials, or a wrong password: no session at all.
+    for user in [None, Some(("blair", "guess"))] {
+        let joined = OperatorSite::join(&as_user(user), Duration::from_secs(2));
+        assert!(joined.is_err(), "{user:?} must not join");
+    }
+    // An observer's credentials: it sees the site, but its targets and its token are denied.
+    let watcher = OperatorSite::join(&as_user(Some(("watcher", "just-looking"))), Duration::from_secs(5))
+        .expect("an observer joins");
+    let now = watcher.robot_now_s();
+    for seq in 0..20 {
+        watcher
+            .publish_target(&TargetMsg::new(seq, &target(now), now, true))
+            .expect("handed to zenoh");
+    }
+    let inbox = collect(&mut robot, |_| false);
+    assert!(inbox.targets.is_empty(), "an observer's targets reached the robot");
+    assert!(!inbox.operator_present, "an observer's liveliness token was accepted");
+    watcher.close();
+    // The operator's do arrive.
+    let blair = OperatorSite::join(&as_user(Some(("blair", "pour-carefully"))), Duration::from_secs(5))
+        .expect("the operator joins");
+    let now = blair.robot_now_s();
+    for seq in 0..20 {
+        blair
+            .publish_target(&TargetMsg::new(seq, &target(now), now, true))
+            .expect("sent");
+    }
+    let inbox = collect(&mut robot, |i| i.targets.len() >= 20 && i.operator_present);
+    assert_eq!(inbox.targets.len(), 20);
+    assert!(inbox.operator_present);
+}

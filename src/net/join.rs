@@ -1,0 +1,371 @@
+//! `avatarm join ENDPOINT`: the operator's site (the hand, the physics twin and the operator's
+//! side of the mapping, so her hand and the twin respond with no network delay) or, with
+//! `--watch`, an observer. Both receive the robot site's video, joint states and status, and
+//! report the latency of each stage of the video on the robot site's clock (the offset
+//! estimated from the shortest of several clock queries).
+//!
+//! The operator steps the scene's `[task]` trial in real time at the control rate: the hand
+//! (the trial's scripted hand) grasps the twin in Rapier, [`Mapper::operator_side`] turns the
+//! contacts into the real object's target and twist, and one [`TargetMsg`] goes out per tick,
+//! stamped on the robot's clock.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use avatarm_core::teleop::grasp::Contact;
+use avatarm_core::teleop::mapping::{Mapper, MappingMode, OperatorInputs};
+use avatarm_hand::{ActiveHand, GraspTarget, HeldObject, ObjectContacts, ScriptedHand};
+use avatarm_net::msg::{HandMsg, PROTOCOL_VERSION, TargetMsg};
+use avatarm_net::{NetConfig, OperatorInbox, OperatorSite};
+use avatarm_scene::Scene;
+use bevy::log::warn;
+use bevy::prelude::*;
+use nalgebra::Vector3;
+use serde::Serialize;
+
+use super::serve::Spread;
+use crate::AppError;
+use crate::teleop::{RobotChoice, trial_parts};
+
+/// How `avatarm join` runs.
+#[derive(Debug, Clone)]
+pub struct JoinOptions {
+    /// The network settings.
+    pub net: NetConfig,
+    /// The scene (the same file as the robot site's).
+    pub scene: Scene,
+    /// Only watch (no hand, no targets).
+    pub watch: bool,
+    /// Stop after this long (s); `None`: the task's duration (operator) or until killed.
+    pub duration_s: Option<f64>,
+    /// The mapping mode the robot site runs (for the report only).
+    pub mode: Option<MappingMode>,
+    /// Where to write the report.
+    pub report: Option<PathBuf>,
+    /// How long to wait for the robot site (s).
+    pub wait_s: f64,
+}
+
+/// Latency of the erased video by stage (ms, robot clock): capture → erased → sent →
+/// received → decoded.
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct VideoLatency {
+    /// Frames received.
+    pub frames: u64,
+    /// Frames refused (bad header or image).
+    pub refused: u64,
+    /// Coded bytes received.
+    pub bytes: u64,
+    /// Frames received per second.
+    pub fps: f64,
+    /// Bit rate (Mbit/s).
+    pub mbit_s: f64,
+    /// Capture → erased (read back).
+    pub erase_ms: Spread,
+    /// Erased → coded and sent.
+    pub encode_ms: Spread,
+    /// Sent → received (the network).
+    pub network_ms: Spread,
+    /// Decoding here.
+    pub decode_ms: Spread,
+    /// Capture → decoded here (glass to glass but the display).
+    pub total_ms: Spread,
+}
+
+/// The operator's (or observer's) report (`--report`).
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct JoinReport {
+    /// Protocol version.
+    pub protocol: u32,
+    /// Operator or observer.
+    pub role: String,
+    /// The robot site's scene and backend.
+    pub scene: String,
+    /// The robot backend.
+    pub robot: String,
+    /// The clock offset (s, robot minus here) and the round trip it came from (ms).
+    pub clock_offset_s: f64,
+    /// The round trip (ms).
+    pub clock_rtt_ms: f64,
+    /// How long it ran (s).
+    pub duration_s: f64,
+    /// Targets sent.
+    pub targets_sent: u64,
+    /// Targets that could not be sent (the operator's side refused a tick).
+    pub targets_failed: u64,
+    /// Joint states received.
+    pub joint_states: u64,
+    /// Status messages received; the last said the arm was stopping.
+    pub status: u64,
+    /// Status messages that said the arm was stopping.
+    pub status_stopping: u64,
+    /// Hand frames received (observers).
+    pub hands: u64,
+    /// Messages refused.
+    pub refused: u64,
+    /// The video.
+    pub video: VideoLatency,
+    /// Highest lift of the twin (m, virtual scene).
+    pub twin_lift_m: f64,
+    /// Age of the joint states on arrival (ms: robot clock now minus their stamp).
+    pub joint_state_age_ms: Spread,
+}
+
+#[derive(Default)]
+struct Collect {
+    report: JoinReport,
+    erase: Vec<f64>,
+    encode: Vec<f64>,
+    network: Vec<f64>,
+    decode: Vec<f64>,
+    total: Vec<f64>,
+    joint_age: Vec<f64>,
+}
+
+impl Collect {
+    fn take(&mut self, inbox: OperatorInbox, robot_now: f64) {
+        let r = &mut self.report;
+        for j in inbox.joint_states {
+            match j {
+                Ok(j) => {
+                    r.joint_states += 1;
+                    self.joint_age.push((robot_now - j.stamp_s) * 1e3);
+                }
+                Err(_) => r.refused += 1,
+            }
+        }
+        for s in inbox.status {
+            match s {
+                Ok(s) => {
+                    r.status += 1;
+                    r.status_stopping += u64::from(s.stopping);
+                }
+                Err(_) => r.refused += 1,
+            }
+        }
+        for h in inbox.hands {
+            match h {
+                Ok(_) => r.hands += 1,
+                Err(_) => r.refused += 1,
+            }
+        }
+        for f in inbox.frames {
+            let Ok((h, payload, received)) = f else {
+                r.video.refused += 1;
+                continue;
+            };
+            let started = Instant::now();
+            let decoded = image::load_from_memory_with_format(&payload, image::ImageFormat::Jpeg);
+            let decode_ms = started.elapsed().as_secs_f64() * 1e3;
+            match decoded {
+                Ok(img) if img.width() == h.width && img.height() == h.height => {
+                    r.video.frames += 1;
+                    r.video.bytes += payload.len() as u64;
+                    self.erase.push((h.erased_s - h.capture_s) * 1e3);
+                    self.encode.push((h.sent_s - h.erased_s) * 1e3);
+                    self.network.push((received - h.sent_s) * 1e3);
+                    self.decode.push(decode_ms);
+                    self.total.push((received - h.capture_s) * 1e3 + decode_ms);
+                }
+                _ => r.video.refused += 1,
+            }
+        }
+    }
+
+    fn finish(mut self, duration_s: f64) -> JoinReport {
+        let r = &mut self.report;
+        r.duration_s = duration_s;
+        r.video.fps = r.video.frames as f64 / duration_s.max(1e-9);
+        r.video.mbit_s = r.video.bytes as f64 * 8.0 / 1e6 / duration_s.max(1e-9);
+        r.video.erase_ms = Spread::of(&self.erase);
+        r.video.encode_ms = Spread::of(&self.encode);
+        r.video.network_ms = Spread::of(&self.network);
+        r.video.decode_ms = Spread::of(&self.decode);
+        r.video.total_ms = Spread::of(&self.total);
+        r.joint_state_age_ms = Spread::of(&self.joint_age);
+        self.report
+    }
+}
+
+/// Joins the session and runs until the duration passes. Errors when the robot site does not
+/// answer, speaks another protocol version or runs another scene.
+pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
+    let mut site = OperatorSite::join(&options.net, Duration::from_secs_f64(options.wait_s))?;
+    let info = site.info().clone();
+    let ours = super::scene_fingerprint(&options.scene)?;
+    if !options.watch && info.scene_hash != ours {
+        return Err(AppError::flag(
+            "--scene",
+            format!(
+                "the robot site runs the scene '{}' (fingerprint {}), this is '{}' ({ours}): \
+                 give the same scene file at both sites",
+                info.scene, info.scene_hash, options.scene.file.name
+            ),
+        ));
+    }
+    let offset = site.offset();
+    info!(
+        "joined '{}' ({} at the robot site, protocol {}): clock offset {:+.3} ms (round trip {:.2} ms)",
+        info.scene,
+        info.robot,
+        PROTOCOL_VERSION,
+        offset.offset_s * 1e3,
+        offset.rtt_s * 1e3
+    );
+    let mut collect = Collect::default();
+    collect.report.protocol = PROTOCOL_VERSION;
+    collect.report.scene = info.scene.clone();
+    collect.report.robot = info.robot.clone();
+    collect.report.clock_offset_s = offset.offset_s;
+    collect.report.clock_rtt_ms = offset.rtt_s * 1e3;
+    let started = Instant::now();
+    if options.watch {
+        collect.report.role = "observer".into();
+        let until = options.duration_s.map(Duration::from_secs_f64);
+        while until.is_none_or(|d| started.elapsed() < d) {
+            std::thread::sleep(Duration::from_millis(5));
+            let now = site.robot_now_s();
+            let inbox = site.poll();
+            collect.take(inbox, now);
+        }
+    } else {
+        collect.report.role = "operator".into();
+        operate(&mut site, options, &mut collect, started)?;
+    }
+    let report = collect.finish(started.elapsed().as_secs_f64());
+    site.close();
+    if let Some(path) = &options.report {
+        let text = serde_json::to_string_pretty(&report)?;
+        std::fs::write(path, text).map_err(|e| AppError::write(path, e))?;
+    }
+    Ok(report)
+}
+
+/// The operator: the trial's hand and twin in real time, one target per control tick.
+fn operate(
+    site: &mut OperatorSite,
+    options: &JoinOptions,
+    collect: &mut Collect,
+    started: Instant,
+) -> Result<(), AppError> {
+    let scene = &options.scene;
+    let (parts, _) = trial_parts(scene, RobotChoice::Sim, options.mode, "avatarm join")?;
+    let Some(task) = &scene.file.task else {
+        return Err(AppError::flag("--scene", "the scene has no [task]"));
+    };
+    let v2r = parts.v2r;
+    let period = parts.period;
+    let spawn = parts.spawn_bodies();
+    let mut app = avatarm_hand::headless_app(period);
+    app.insert_resource(parts.hand_drive)
+        .insert_resource(ActiveHand::new(ScriptedHand::new(
+            parts.script,
+            task.hand_rate_hz,
+        )));
+    app.add_systems(Startup, spawn);
+    let duration = options.duration_s.unwrap_or(task.duration_s);
+    let steps = (duration / period.as_secs_f64()).round() as u64;
+    let z0 = parts.twin_start.translation.z;
+    let mut seq = 0u64;
+    let mut contacts: Vec<Contact> = Vec::new();
+    let mut velocities: Vec<Vector3<f64>> = Vec::new();
+    for i in 0..steps {
+        let due = started + period.mul_f64(i as f64);
+        std::thread::sleep(due.saturating_duration_since(Instant::now()));
+        app.update();
+        let world = app.world_mut();
+        let app_now = world.resource::<Time>().elapsed_secs_f64();
+        let robot_now = site.robot_now_s();
+        let twin = world
+            .query_filtered::<&Transform, With<GraspTarget>>()
+            .single(world)
+            .map(avatarm_twin::transform_to_iso)
+            .map_err(|e| AppError::replay(format!("the twin is gone: {e}")))?;
+        collect.report.twin_lift_m = collect.report.twin_lift_m.max(twin.translation.z - z0);
+        contacts.clear();
+        velocities.clear();
+        for c in &world.resource::<ObjectContacts>().contacts {
+            contacts.push(c.contact);
+            velocities.push(c.object_velocity);
+        }
+        let held = world.resource::<HeldObject>().held.is_some();
+        let (hand_stamp, tracked, frame) = match world.resource::<ActiveHand>().latest.as_ref() {
+            Some(f) => (robot_now - (app_now - f.t_s), f.tracked, Some(f.clone())),
+            None => (f64::NEG_INFINITY, false, None),
+        };
+        let operator = Mapper::operator_side(
+            &OperatorInputs {
+                contacts: &contacts,
+                contact_velocities: &velocities,
+                twin_pose: twin,
+                held,
+                stamp_s: robot_now,
+            },
+            &v2r,
+        );
+        match operator {
+            Ok(target) if hand_stamp.is_finite() => {
+                let m = TargetMsg::new(seq, &target, hand_stamp, tracked);
+                seq += 1;
+                match site.publish_target(&m) {
+                    Ok(()) => collect.report.targets_sent += 1,
+                    Err(e) => {
+                        collect.report.targets_failed += 1;
+                        warn!("operator: {e}");
+                    }
+                }
+            }
+            // No hand yet, or a tick the mapping refuses: nothing goes out, and the robot
+            // site's watchdog stops the arm if it lasts.
+            _ => collect.report.targets_failed += 1,
+        }
+        if let Some(f) = frame
+            && i % 3 == 0
+        {
+            let m = HandMsg {
+                v: PROTOCOL_VERSION,
+                stamp_s: hand_stamp,
+                hand: match f.hand {
+                    avatarm_core::teleop::hand::Handedness::Left => "left".into(),
+                    avatarm_core::teleop::hand::Handedness::Right => "right".into(),
+                },
+                tracked: f.tracked,
+                joints: f
+                    .joints
+                    .iter()
+                    .map(|j| {
+                        let p = v2r.point(&j.pose.translation.vector);
+                        [p.x, p.y, p.z]
+                    })
+                    .collect(),
+            };
+            if let Err(e) = site.publish_hand(&m) {
+                warn!("operator: {e}");
+            }
+        }
+        let inbox = site.poll();
+        collect.take(inbox, robot_now);
+    }
+    Ok(())
+}
+
+/// One line for the terminal.
+pub fn summary(r: &JoinReport) -> String {
+    format!(
+        "{}: {:.1} s, {} targets sent, {} joint states, {} status ({} stopping), {} frames \
+         ({:.1} fps, {:.2} Mbit/s, capture to decoded {:.0} ms median), clock offset {:+.2} ms \
+         (round trip {:.2} ms)",
+        r.role,
+        r.duration_s,
+        r.targets_sent,
+        r.joint_states,
+        r.status,
+        r.status_stopping,
+        r.video.frames,
+        r.video.fps,
+        r.video.mbit_s,
+        r.video.total_ms.median,
+        r.clock_offset_s * 1e3,
+        r.clock_rtt_ms
+    )
+}

@@ -1,0 +1,130 @@
+//! Two sites over Zenoh (`docs/network.md`): `avatarm serve` at the robot ([`serve`]), `avatarm
+//! join` at the operator or an observer ([`join`]), `avatarm router` between them, and the
+//! command-line settings they share ([`NetArgs`]).
+//!
+//! - [`serve`]: the robot site's control loop and report.
+//! - [`join`]: the operator's hand, physics twin and targets; the observer.
+//! - [`video`]: the robot site's erased video, coded and published.
+
+pub mod join;
+pub mod serve;
+pub mod video;
+
+use std::path::PathBuf;
+
+use avatarm_net::{Credentials, Keys, NetConfig, Role, TlsFiles};
+use avatarm_scene::Scene;
+
+use crate::AppError;
+
+/// Network settings on the command line (serve, join, router).
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct NetArgs {
+    /// The session's name: keys are avatarm/SITE/... (letters, digits, '-', '_').
+    #[arg(long, value_name = "SITE", default_value = "desk")]
+    pub site: String,
+    /// serve/router: a dictionary of user:password lines, who may connect; join: a file whose
+    /// first line is this side's user:password.
+    #[arg(long, value_name = "FILE")]
+    pub credentials: Option<PathBuf>,
+    /// serve/router: a user (in the dictionary) allowed to command the robot (repeatable;
+    /// default: the dictionary's first user).
+    #[arg(long = "operator", value_name = "USER")]
+    pub operators: Vec<String>,
+    /// TLS: the certificate authority's certificate (PEM), to check the other side.
+    #[arg(long = "tls-ca", value_name = "FILE")]
+    pub tls_ca: Option<PathBuf>,
+    /// TLS: this side's certificate (PEM; a tls/ listener needs it).
+    #[arg(long = "tls-cert", value_name = "FILE")]
+    pub tls_cert: Option<PathBuf>,
+    /// TLS: this side's private key (PEM).
+    #[arg(long = "tls-key", value_name = "FILE")]
+    pub tls_key: Option<PathBuf>,
+    /// serve/router: listen without authentication (a trusted LAN or a test).
+    #[arg(long = "insecure-lan")]
+    pub insecure_lan: bool,
+}
+
+impl NetArgs {
+    /// The network configuration for `role`, listening on `listen` or connecting to
+    /// `connect`. Errors name the flag.
+    pub fn config(
+        &self,
+        role: Role,
+        listen: Vec<String>,
+        connect: Vec<String>,
+    ) -> Result<NetConfig, AppError> {
+        let keys = Keys::new(&self.site)?;
+        let listens = matches!(role, Role::RobotSite | Role::Router);
+        let (credentials, dictionary, operators) = match (&self.credentials, listens) {
+            (Some(path), true) => {
+                let first = Credentials::from_file(path)?;
+                let operators = if self.operators.is_empty() {
+                    vec![first.user]
+                } else {
+                    self.operators.clone()
+                };
+                (None, Some(path.clone()), operators)
+            }
+            (Some(path), false) => (Some(Credentials::from_file(path)?), None, Vec::new()),
+            (None, _) => (None, None, Vec::new()),
+        };
+        let tls = (self.tls_ca.is_some() || self.tls_cert.is_some() || self.tls_key.is_some())
+            .then(|| TlsFiles {
+                root_ca: self.tls_ca.clone(),
+                certificate: self.tls_cert.clone(),
+                private_key: self.tls_key.clone(),
+            });
+        let config = NetConfig {
+            role,
+            keys,
+            listen,
+            connect,
+            credentials,
+            dictionary,
+            operators,
+            tls,
+            insecure_lan: self.insecure_lan,
+        };
+        config.validate()?;
+        Ok(config)
+    }
+}
+
+/// The scene's fingerprint: its file's text, hashed (both sites must run the same scene).
+pub fn scene_fingerprint(scene: &Scene) -> Result<String, AppError> {
+    let text = std::fs::read(&scene.path).map_err(|source| AppError::Io {
+        path: scene.path.clone(),
+        action: "read",
+        source,
+    })?;
+    Ok(avatarm_net::msg::fingerprint(&text))
+}
+
+/// Logs to stderr for the network commands (their loops run before or without an app):
+/// `RUST_LOG` when set, else Avatarm's info and Zenoh's warnings.
+pub fn init_log() {
+    use bevy::log::tracing_subscriber::{self, EnvFilter};
+    let filter = EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| EnvFilter::new("info,zenoh=warn,zenoh_transport=warn,wgpu=error,naga=warn"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+}
+
+/// `avatarm router`: a Zenoh router until `duration_s` passes (or the process is killed).
+pub fn router(config: &NetConfig, duration_s: Option<f64>) -> Result<(), AppError> {
+    let session = avatarm_net::Router::open(config)?;
+    bevy::log::info!(
+        "router on {:?}, connected to {:?}",
+        config.listen,
+        config.connect
+    );
+    let started = std::time::Instant::now();
+    while duration_s.is_none_or(|d| started.elapsed().as_secs_f64() < d) {
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    drop(session);
+    Ok(())
+}

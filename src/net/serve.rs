@@ -1,0 +1,675 @@
+//! `avatarm serve`: the robot site. The robot's side of the motion mapping runs on a thread of
+//! its own at the control rate ([`ControlLoop`]), next to the robot: each tick it takes the
+//! newest valid target from the operator ([`avatarm_mapping::TickSource::Remote`]), maps it
+//! to joint velocities (Jacobian pseudoinverse, limiter, watchdog) and publishes the joint
+//! states. The erased video, where enabled, comes from the app ([`super::video`]), fed with
+//! the loop's joint states.
+//!
+//! Safety: a target that is malformed, of another protocol version, out of range, non-finite
+//! or oversized is refused (counted, one log line per episode) and the arm stops until a
+//! fresh valid one arrives; so it does when the operator's liveliness token goes or its
+//! targets grow older than the watchdog's timeout. The stop is the limiter's ramp to zero,
+//! then no command at all (a real robot's link then holds position).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::Sender;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use avatarm_core::sim::JointState;
+use avatarm_core::teleop::mapping::{MappingMode, pose_rmse};
+use avatarm_mapping::{RemoteTarget, Teleop, TeleopSample, TickSource};
+use avatarm_net::msg::{JointStatesMsg, PROTOCOL_VERSION, RobotStatusMsg};
+use avatarm_net::RobotSite;
+use bevy::log::{info, warn};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use serde::Serialize;
+
+/// A target stamped further ahead of the robot's clock than this is refused: the operator's
+/// clock estimate is wrong, and its age could not be trusted (s).
+pub const MAX_AHEAD_S: f64 = 0.5;
+
+/// What the video side gets from the loop: each joint state, with the real object's pose
+/// where the robot backend knows it (simulation).
+#[derive(Debug, Clone)]
+pub struct ArmUpdate {
+    /// The joint state (stamp on the site's clock).
+    pub state: JointState,
+    /// The real object's centre (real world).
+    pub object: Option<Isometry3<f64>>,
+}
+
+/// One stop of the arm: when it began (s, site clock), why, and how long it lasted.
+#[derive(Debug, Clone, Serialize)]
+pub struct StopEpisode {
+    /// Start (s).
+    pub t_s: f64,
+    /// Why.
+    pub reason: String,
+    /// Length (s); `None` while still stopped at the end.
+    pub length_s: Option<f64>,
+}
+
+/// Median, 95th percentile and largest of a series (ms).
+#[derive(Debug, Clone, Copy, Serialize, Default, PartialEq)]
+pub struct Spread {
+    /// Median.
+    pub median: f64,
+    /// 95th percentile.
+    pub p95: f64,
+    /// Largest.
+    pub max: f64,
+    /// Samples.
+    pub n: usize,
+}
+
+impl Spread {
+    /// Of `values` (any order).
+    pub fn of(values: &[f64]) -> Self {
+        let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            return Self::default();
+        }
+        v.sort_by(f64::total_cmp);
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+        Self {
+            median: at(0.5),
+            p95: at(0.95),
+            max: v[v.len() - 1],
+            n: v.len(),
+        }
+    }
+}
+
+/// The paper's measure at the robot site: the real object against the twin's target of the
+/// same moment (the target stamped then, interpolated), from the grasp on.
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct TrialMeasure {
+    /// When the gripper first closed (s, site clock).
+    pub grasp_at_s: Option<f64>,
+    /// Position RMSE (m).
+    pub pos_rmse_m: Option<f64>,
+    /// Roll, pitch, yaw RMSE (degrees).
+    pub rpy_rmse_deg: Option<[f64; 3]>,
+    /// Position RMSE against the target as it arrived (m): without the network's delay.
+    pub pos_rmse_as_received_m: Option<f64>,
+    /// Samples compared.
+    pub samples: usize,
+    /// Highest lift of the real object from its start (m).
+    pub real_lift_m: f64,
+    /// Highest commanded tool-point speed (m/s).
+    pub max_tcp_speed: f64,
+    /// Ticks the limiter was stopping the arm.
+    pub stop_ticks: u64,
+}
+
+/// The robot site's report (`--report`).
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct ServeReport {
+    /// Protocol version.
+    pub protocol: u32,
+    /// The scene.
+    pub scene: String,
+    /// The site's name.
+    pub site: String,
+    /// The robot backend.
+    pub robot: String,
+    /// The mapping mode.
+    pub mode: String,
+    /// Control rate (Hz).
+    pub control_rate_hz: f64,
+    /// The watchdog's timeout (s).
+    pub target_timeout_s: f64,
+    /// How long the loop ran (s).
+    pub duration_s: f64,
+    /// Control ticks.
+    pub ticks: u64,
+    /// Targets used.
+    pub targets_used: u64,
+    /// Targets dropped as older than one already used (reordered or duplicated).
+    pub targets_stale: u64,
+    /// Targets refused.
+    pub targets_refused: u64,
+    /// The first refusals' reasons (at most 10).
+    pub refusals: Vec<String>,
+    /// Times an operator joined and left.
+    pub operator_joins: u64,
+    /// Times the operator left.
+    pub operator_leaves: u64,
+    /// The arm's stops.
+    pub stops: Vec<StopEpisode>,
+    /// Age of the target each tick used (ms, site clock minus the hand frame's stamp).
+    pub target_age_ms: Spread,
+    /// The control loop's tick period as run (ms).
+    pub tick_period_ms: Spread,
+    /// The pouring measure.
+    pub trial: TrialMeasure,
+    /// Mapping errors (refused ticks).
+    pub mapping_errors: u64,
+    /// The last one.
+    pub last_error: Option<String>,
+    /// Non-finite values the robot received: must be 0.
+    pub nan_commands: u64,
+    /// Erased frames published.
+    pub video_frames: u64,
+}
+
+/// The robot site's control loop, built before it runs.
+pub struct ControlLoop {
+    /// The teleoperation loop (robot, robot side of the mapping, limiter).
+    pub teleop: Teleop,
+    /// The real object's start height (m), for the lift.
+    pub start_z: f64,
+    /// The control period.
+    pub period: Duration,
+    /// The mapping mode.
+    pub mode: MappingMode,
+    /// The scene's name.
+    pub scene: String,
+}
+
+/// Why the arm is stopped now, if it is.
+fn stop_reason(
+    present: bool,
+    refused: Option<&str>,
+    latest: Option<&RemoteTarget>,
+    now: f64,
+    timeout: f64,
+    stopping: bool,
+) -> Option<String> {
+    if !present {
+        return Some("no operator (liveliness token absent)".into());
+    }
+    if let Some(r) = refused {
+        return Some(format!("refused target: {r}"));
+    }
+    match latest {
+        None => Some("no target from the operator yet".into()),
+        Some(t) if now - t.hand_stamp_s > timeout => Some(format!(
+            "targets stale ({:.0} ms old, timeout {:.0} ms)",
+            (now - t.hand_stamp_s) * 1e3,
+            timeout * 1e3
+        )),
+        Some(t) if !t.hand_tracked => Some("the operator's hand is not tracked".into()),
+        Some(_) if stopping => Some("stopped by the limiter".into()),
+        Some(_) => None,
+    }
+}
+
+impl ControlLoop {
+    /// Runs until `stop` is set or `duration` passes, publishing on `site` and feeding
+    /// `video` (when any). Returns the report.
+    pub fn run(
+        mut self,
+        site: &mut RobotSite,
+        duration: Option<Duration>,
+        stop: &AtomicBool,
+        video: Option<Sender<ArmUpdate>>,
+    ) -> ServeReport {
+        let clock = site.clock();
+        let dt = self.period.as_secs_f64();
+        let timeout = self.teleop.safety().timeout_s;
+        self.teleop.record = true;
+        let mut report = ServeReport {
+            protocol: PROTOCOL_VERSION,
+            scene: self.scene.clone(),
+            site: site.keys().site().to_owned(),
+            robot: self.teleop.robot_name().to_owned(),
+            mode: self.mode.name().to_owned(),
+            control_rate_hz: 1.0 / dt,
+            target_timeout_s: timeout,
+            ..ServeReport::default()
+        };
+        let mut latest: Option<RemoteTarget> = None;
+        let mut last_seq: Option<(u64, f64)> = None;
+        let mut refused: Option<String> = None;
+        let mut stop_since: Option<(f64, String)> = None;
+        let mut samples: Vec<TeleopSample> = Vec::new();
+        // Every target used: (its stamp, the pose), and when it arrived.
+        let mut targets: Vec<(f64, Isometry3<f64>)> = Vec::new();
+        let mut ages = Vec::new();
+        let mut periods = Vec::new();
+        let mut last_status = f64::NEG_INFINITY;
+        let mut last_stopping = None;
+        let started = Instant::now();
+        let mut tick: u64 = 0;
+        let mut last_tick_at: Option<Instant> = None;
+        loop {
+            let due = started + self.period.mul_f64(tick as f64);
+            std::thread::sleep(due.saturating_duration_since(Instant::now()));
+            tick += 1;
+            if stop.load(Ordering::Relaxed) || duration.is_some_and(|d| started.elapsed() >= d) {
+                break;
+            }
+            let at = Instant::now();
+            if let Some(prev) = last_tick_at {
+                periods.push((at - prev).as_secs_f64() * 1e3);
+            }
+            last_tick_at = Some(at);
+            let now = clock.now_s();
+            let inbox = site.poll();
+            match inbox.operator_changed {
+                Some(true) => {
+                    report.operator_joins += 1;
+                    info!("robot site: an operator joined");
+                }
+                Some(false) => {
+                    report.operator_leaves += 1;
+                    warn!("robot site: the operator left; stopping the arm");
+                }
+                None => {}
+            }
+            let present = inbox.operator_present;
+            for received in inbox.targets {
+                match received {
+                    Ok((m, t)) => {
+                        if t.stamp_s > now + MAX_AHEAD_S {
+                            let e = format!(
+                                "stamped {:.3} s ahead of this site's clock (the operator's clock \
+                                 estimate is off)",
+                                t.stamp_s - now
+                            );
+                            refuse(&mut report, &mut refused, &mut latest, e);
+                            continue;
+                        }
+                        // Older than one used (reordered, duplicated): dropped; a restarted
+                        // operator (sequence from 0) is taken once the last is stale.
+                        if let Some((seq, at)) = last_seq
+                            && m.seq <= seq
+                            && now - at <= timeout
+                        {
+                            report.targets_stale += 1;
+                            continue;
+                        }
+                        last_seq = Some((m.seq, now));
+                        refused = None;
+                        targets.push((t.stamp_s, t.target));
+                        latest = Some(RemoteTarget {
+                            target: t,
+                            hand_stamp_s: m.hand_stamp_s.min(now),
+                            hand_tracked: m.hand_tracked,
+                        });
+                        report.targets_used += 1;
+                    }
+                    Err(e) => refuse(&mut report, &mut refused, &mut latest, e.to_string()),
+                }
+            }
+            if !present {
+                latest = None;
+            }
+            let use_target = latest.filter(|_| present && refused.is_none());
+            if let Some(t) = &use_target {
+                ages.push((now - t.hand_stamp_s) * 1e3);
+            }
+            self.teleop.tick(now, dt, TickSource::Remote(use_target));
+            let stopping = self.teleop.log.last().is_some_and(|s| s.stopping);
+            // Joint states to the network and to the video.
+            let object = self.teleop.robot().true_object_pose();
+            for s in self.teleop.received() {
+                let m = JointStatesMsg {
+                    v: PROTOCOL_VERSION,
+                    stamp_s: s.stamp_s,
+                    positions: s.positions.iter().copied().collect(),
+                    velocities: s.velocities.iter().copied().collect(),
+                    object: object.map(pose7),
+                };
+                if let Err(e) = site.publish_joint_states(&m) {
+                    warn!("robot site: {e}");
+                }
+                if let Some(v) = &video {
+                    let _ = v.send(ArmUpdate {
+                        state: s.clone(),
+                        object,
+                    });
+                }
+            }
+            // Stops as episodes, one line each.
+            let reason = stop_reason(
+                present,
+                refused.as_deref(),
+                use_target.as_ref().or(latest.as_ref()),
+                now,
+                timeout,
+                stopping,
+            )
+            .filter(|_| stopping || use_target.is_none());
+            match (&stop_since, &reason) {
+                (None, Some(r)) => {
+                    if tick > 1 && report.targets_used > 0 {
+                        warn!("robot site: stopping the arm: {r}");
+                    }
+                    stop_since = Some((now, r.clone()));
+                }
+                (Some((since, r)), None) => {
+                    if report.targets_used > 0 {
+                        info!(
+                            "robot site: resumed on fresh targets after {:.2} s stopped ({r})",
+                            now - since
+                        );
+                    }
+                    report.stops.push(StopEpisode {
+                        t_s: *since,
+                        reason: r.clone(),
+                        length_s: Some(now - since),
+                    });
+                    stop_since = None;
+                }
+                _ => {}
+            }
+            if now - last_status >= 0.1 || last_stopping != Some(stopping) {
+                last_status = now;
+                last_stopping = Some(stopping);
+                let status = RobotStatusMsg {
+                    v: PROTOCOL_VERSION,
+                    stamp_s: now,
+                    stopping,
+                    reason: reason.clone(),
+                    ticks: self.teleop.status.ticks,
+                    refused_targets: report.targets_refused,
+                    targets: report.targets_used,
+                    operator_present: present,
+                };
+                if let Err(e) = site.publish_status(&status) {
+                    warn!("robot site: {e}");
+                }
+            }
+            samples.append(&mut self.teleop.log);
+        }
+        if let Some((since, r)) = stop_since {
+            report.stops.push(StopEpisode {
+                t_s: since,
+                reason: r,
+                length_s: None,
+            });
+        }
+        report.duration_s = started.elapsed().as_secs_f64();
+        report.ticks = self.teleop.status.ticks;
+        report.mapping_errors = self.teleop.status.errors;
+        report.last_error = self.teleop.status.last_error.clone();
+        report.target_age_ms = Spread::of(&ages);
+        report.tick_period_ms = Spread::of(&periods);
+        report.nan_commands = samples
+            .iter()
+            .filter(|s| s.qdot.iter().any(|v| !v.is_finite()))
+            .count() as u64;
+        report.trial = measure(&samples, &targets, self.start_z, self.teleop.status.max_tcp_speed);
+        report
+    }
+}
+
+fn refuse(
+    report: &mut ServeReport,
+    refused: &mut Option<String>,
+    latest: &mut Option<RemoteTarget>,
+    reason: String,
+) {
+    report.targets_refused += 1;
+    if report.refusals.len() < 10 {
+        report.refusals.push(reason.clone());
+    }
+    if refused.is_none() {
+        warn!("robot site: {reason}; stopping the arm until a fresh valid target");
+    }
+    *refused = Some(reason);
+    *latest = None;
+}
+
+fn pose7(p: Isometry3<f64>) -> [f64; 7] {
+    let t = p.translation.vector;
+    let q = p.rotation.quaternion().coords;
+    [t.x, t.y, t.z, q.x, q.y, q.z, q.w]
+}
+
+/// The target stamped at `t_s`, interpolated between the two around it; `None` outside them
+/// or across a gap of more than 0.2 s.
+fn target_at(targets: &[(f64, Isometry3<f64>)], t_s: f64) -> Option<Isometry3<f64>> {
+    let after = targets.partition_point(|(t, _)| *t <= t_s);
+    if after == 0 || after >= targets.len() {
+        return None;
+    }
+    let (t0, a) = &targets[after - 1];
+    let (t1, b) = &targets[after];
+    if t1 - t0 > 0.2 {
+        return None;
+    }
+    let f = if t1 > t0 { (t_s - t0) / (t1 - t0) } else { 1.0 };
+    Some(Isometry3::from_parts(
+        Translation3::from(a.translation.vector.lerp(&b.translation.vector, f)),
+        a.rotation * UnitQuaternion::from_scaled_axis((a.rotation.inverse() * b.rotation).scaled_axis() * f),
+    ))
+}
+
+fn measure(
+    samples: &[TeleopSample],
+    targets: &[(f64, Isometry3<f64>)],
+    start_z: f64,
+    max_tcp_speed: f64,
+) -> TrialMeasure {
+    let mut sorted = targets.to_vec();
+    sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let grasp = samples.iter().position(|s| s.gripper_closed);
+    let mut m = TrialMeasure {
+        grasp_at_s: grasp.map(|i| samples[i].t_s),
+        max_tcp_speed,
+        stop_ticks: samples.iter().filter(|s| s.stopping).count() as u64,
+        ..TrialMeasure::default()
+    };
+    let real = |s: &TeleopSample| {
+        s.truth.or_else(|| {
+            s.measured
+                .translation
+                .vector
+                .iter()
+                .all(|v| v.is_finite())
+                .then_some(s.measured)
+        })
+    };
+    m.real_lift_m = samples
+        .iter()
+        .filter_map(real)
+        .map(|p| p.translation.z - start_z)
+        .fold(0.0, f64::max);
+    let Some(from) = grasp else { return m };
+    let (mut then, mut actual, mut received, mut actual_r) = (vec![], vec![], vec![], vec![]);
+    for s in &samples[from..] {
+        let Some(r) = real(s) else { continue };
+        if let Some(t) = target_at(&sorted, s.t_s) {
+            then.push(t);
+            actual.push(r);
+        }
+        if s.target.translation.vector.iter().all(|v| v.is_finite()) {
+            received.push(s.target);
+            actual_r.push(r);
+        }
+    }
+    m.samples = then.len();
+    if let Some(e) = pose_rmse(&then, &actual) {
+        m.pos_rmse_m = Some(e[0]);
+        m.rpy_rmse_deg = Some([e[1], e[2], e[3]]);
+    }
+    m.pos_rmse_as_received_m = pose_rmse(&received, &actual_r).map(|e| e[0]);
+    m
+}
+
+/// A place the video side and the loop share: whether the loop should stop.
+pub type StopFlag = Arc<AtomicBool>;
+
+/// The newest report, for the app's exit.
+pub type ReportSlot = Arc<Mutex<Option<ServeReport>>>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_target_of_a_moment_is_interpolated_and_gaps_are_left_out() {
+        let p = |x: f64| Isometry3::translation(x, 0.0, 0.0);
+        let targets = vec![(0.0, p(0.0)), (0.01, p(1.0)), (0.5, p(2.0))];
+        let t = target_at(&targets, 0.005).expect("between two");
+        assert!((t.translation.x - 0.5).abs() < 1e-12);
+        assert!(target_at(&targets, 0.2).is_none(), "across a gap");
+        assert!(target_at(&targets, -1.0).is_none());
+        assert!(target_at(&targets, 1.0).is_none());
+        let s = Spread::of(&[3.0, 1.0, 2.0, f64::NAN]);
+        assert_eq!((s.median, s.max, s.n), (2.0, 3.0, 3));
+    }
+
+    #[test]
+    fn a_stop_says_why() {
+        let t = RemoteTarget {
+            target: avatarm_core::teleop::mapping::OperatorTarget {
+                stamp_s: 1.0,
+                target: Isometry3::identity(),
+                object_twist: nalgebra::Vector6::zeros(),
+                twin_twist: nalgebra::Vector6::zeros(),
+                squeeze_n: 0.0,
+                rank: 0,
+                contacts: 0,
+                held: false,
+            },
+            hand_stamp_s: 1.0,
+            hand_tracked: true,
+        };
+        let r = |present, refused, latest, now| stop_reason(present, refused, latest, now, 0.1, false);
+        assert!(r(false, None, Some(&t), 1.0).is_some_and(|s| s.contains("liveliness")));
+        assert!(r(true, Some("bad"), Some(&t), 1.0).is_some_and(|s| s.contains("refused")));
+        assert!(r(true, None, Some(&t), 1.5).is_some_and(|s| s.contains("stale")));
+        assert!(r(true, None, Some(&t), 1.05).is_none());
+        assert!(r(true, None, None, 1.0).is_some_and(|s| s.contains("yet")));
+    }
+}
+
+/// How `avatarm serve` runs.
+#[derive(Debug, Clone)]
+pub struct ServeOptions {
+    /// The scene (with a `[task]`).
+    pub scene: avatarm_scene::Scene,
+    /// The robot.
+    pub robot: crate::teleop::RobotChoice,
+    /// The mapping mode (default: the task's closed loop).
+    pub mode: Option<MappingMode>,
+    /// The network settings.
+    pub net: avatarm_net::NetConfig,
+    /// Stop after this long (s); `None`: until killed.
+    pub duration_s: Option<f64>,
+    /// Where to write the report.
+    pub report: Option<std::path::PathBuf>,
+    /// Render, erase and publish the video.
+    pub video: bool,
+    /// The watchdog's timeout on the operator's targets (s).
+    pub target_timeout_s: f64,
+}
+
+/// The camera's name on the network (one camera per scene today).
+pub const CAMERA: &str = "desk";
+
+/// Runs the robot site until the duration passes (or the process is killed). Errors when the
+/// scene has no task, the robot or the network cannot be set up.
+pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
+    let scene = &options.scene;
+    let (mut parts, mode) =
+        crate::teleop::trial_parts(scene, options.robot, options.mode, "avatarm serve")?;
+    parts
+        .teleop
+        .set_watchdog_timeout(options.target_timeout_s)
+        .map_err(|e| crate::AppError::flag("--target-timeout", e.to_string()))?;
+    let start_z = scene
+        .trial
+        .as_ref()
+        .map_or(0.0, |s| s.bottle_centre().translation.z);
+    let info = avatarm_net::msg::RobotInfo {
+        v: PROTOCOL_VERSION,
+        software: env!("CARGO_PKG_VERSION").into(),
+        scene: scene.file.name.clone(),
+        scene_hash: super::scene_fingerprint(scene)?,
+        cameras: if options.video {
+            vec![CAMERA.to_owned()]
+        } else {
+            Vec::new()
+        },
+        control_rate_hz: 1.0 / parts.period.as_secs_f64(),
+        target_timeout_s: options.target_timeout_s,
+        robot: parts.teleop.robot_name().to_owned(),
+    };
+    let clock = avatarm_net::SiteClock::start();
+    let mut site = RobotSite::open(&options.net, &info, clock)?;
+    info!(
+        "robot site '{}' on {:?}: scene '{}', {} ({} mode), video {}",
+        options.net.keys.site(),
+        options.net.listen,
+        info.scene,
+        info.robot,
+        mode.name(),
+        if options.video { "on" } else { "off" }
+    );
+    let control = ControlLoop {
+        teleop: parts.teleop,
+        start_z,
+        period: parts.period,
+        mode,
+        scene: scene.file.name.clone(),
+    };
+    let stop: StopFlag = Arc::new(AtomicBool::new(false));
+    let duration = options.duration_s.map(Duration::from_secs_f64);
+    let (report, site) = if options.video {
+        let (tx, rx) = std::sync::mpsc::channel();
+        let video = super::video::ServeVideoOptions {
+            updates: Arc::new(Mutex::new(rx)),
+            sender: site.frame_sender(),
+            camera: CAMERA.to_owned(),
+            clock,
+            stop: stop.clone(),
+            published: Arc::new(std::sync::atomic::AtomicU64::new(0)),
+        };
+        let published = video.published.clone();
+        let loop_stop = stop.clone();
+        let handle = std::thread::Builder::new()
+            .name("control loop".into())
+            .spawn(move || {
+                let report = control.run(&mut site, duration, &loop_stop, Some(tx));
+                loop_stop.store(true, Ordering::Relaxed);
+                (report, site)
+            })
+            .map_err(|e| crate::AppError::replay(format!("cannot start the control loop: {e}")))?;
+        let app = crate::build_app(scene, &crate::Mode::Serve(video));
+        let ran = app.map(|mut app| app.run());
+        stop.store(true, Ordering::Relaxed);
+        let (mut report, site) = handle
+            .join()
+            .map_err(|_| crate::AppError::replay("the control loop panicked"))?;
+        ran?;
+        report.video_frames = published.load(Ordering::Relaxed);
+        (report, site)
+    } else {
+        let report = control.run(&mut site, duration, &stop, None);
+        (report, site)
+    };
+    site.close();
+    if let Some(path) = &options.report {
+        let text = serde_json::to_string_pretty(&report)?;
+        std::fs::write(path, text).map_err(|e| crate::AppError::write(path, e))?;
+    }
+    Ok(report)
+}
+
+/// One line for the terminal.
+pub fn summary(r: &ServeReport) -> String {
+    format!(
+        "robot site: {:.1} s, {} ticks, {} targets used ({} refused, {} stale), {} stops, \
+         position RMSE {} (as received {}), real lift {:.0} mm, {} video frames",
+        r.duration_s,
+        r.ticks,
+        r.targets_used,
+        r.targets_refused,
+        r.targets_stale,
+        r.stops.len(),
+        r.trial
+            .pos_rmse_m
+            .map_or("-".into(), |v| format!("{:.1} mm", v * 1e3)),
+        r.trial
+            .pos_rmse_as_received_m
+            .map_or("-".into(), |v| format!("{:.1} mm", v * 1e3)),
+        r.trial.real_lift_m * 1e3,
+        r.video_frames
+    )
+}
