@@ -12,6 +12,8 @@ packages=(
   python3-rosbag python3-tf2-msgs python3-geometry-msgs
   # pip, for PyPI's MCAP reader below.
   python3-pip
+  # The two-site tests make their TLS certificates with the openssl command.
+  openssl
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -10,9 +10,11 @@ use avatarm_net::impair::{Impairment, Relay};
 use serde_json::Value;
 
 fn out_dir(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("network").join(name);
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("network")
+        .join(name);
     let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::create_dir_all(&dir).expect("the test's set-up");
     dir
 }
 
@@ -20,12 +22,12 @@ fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
         .and_then(|l| l.local_addr())
         .map(|a| a.port())
-        .unwrap()
+        .expect("the test's set-up")
 }
 
 /// `avatarm serve` of the pouring scene on 127.0.0.1:`port`, logging into `dir`.
 fn serve(dir: &Path, port: u16, duration_s: f64, extra: &[&str]) -> Child {
-    let log = std::fs::File::create(dir.join("serve.log")).unwrap();
+    let log = std::fs::File::create(dir.join("serve.log")).expect("the test's set-up");
     Command::new(env!("CARGO_BIN_EXE_avatarm"))
         .args(["serve", "assets/scenes/pouring.toml", "--listen"])
         .arg(format!("tcp/127.0.0.1:{port}"))
@@ -35,12 +37,12 @@ fn serve(dir: &Path, port: u16, duration_s: f64, extra: &[&str]) -> Child {
         .stdout(Stdio::null())
         .stderr(log)
         .spawn()
-        .unwrap()
+        .expect("the test's set-up")
 }
 
 /// `avatarm join` to 127.0.0.1:`port`.
 fn join(dir: &Path, name: &str, port: u16, extra: &[&str]) -> Child {
-    let log = std::fs::File::create(dir.join(format!("{name}.log"))).unwrap();
+    let log = std::fs::File::create(dir.join(format!("{name}.log"))).expect("the test's set-up");
     Command::new(env!("CARGO_BIN_EXE_avatarm"))
         .arg("join")
         .arg(format!("tcp/127.0.0.1:{port}"))
@@ -50,15 +52,28 @@ fn join(dir: &Path, name: &str, port: u16, extra: &[&str]) -> Child {
         .stdout(Stdio::null())
         .stderr(log)
         .spawn()
-        .unwrap()
+        .expect("the test's set-up")
+}
+
+/// Waits until the operator's log says it joined (at most 30 s).
+fn wait_joined(dir: &Path) {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !std::fs::read_to_string(dir.join("join.log"))
+        .unwrap_or_default()
+        .contains("joined")
+    {
+        assert!(Instant::now() < deadline, "the operator never joined");
+        std::thread::sleep(Duration::from_millis(50));
+    }
 }
 
 fn finish(mut child: Child, dir: &Path, name: &str) -> Value {
-    let status = child.wait().unwrap();
+    let status = child.wait().expect("the test's set-up");
     let log = std::fs::read_to_string(dir.join(format!("{name}.log"))).unwrap_or_default();
     assert!(status.success(), "{name} failed:\n{log}");
-    let text = std::fs::read_to_string(dir.join(format!("{name}.json"))).unwrap();
-    serde_json::from_str(&text).unwrap()
+    let text =
+        std::fs::read_to_string(dir.join(format!("{name}.json"))).expect("the test's set-up");
+    serde_json::from_str(&text).expect("the test's set-up")
 }
 
 fn f(v: &Value, path: &str) -> f64 {
@@ -74,7 +89,9 @@ fn pour_through(name: &str, delay_s: f64) -> (Value, Value) {
     let port = free_port();
     let robot = serve(&dir, port, 14.0, &["--insecure-lan", "--video", "off"]);
     let relay = Relay::tcp(
-        format!("127.0.0.1:{port}").parse().unwrap(),
+        format!("127.0.0.1:{port}")
+            .parse()
+            .expect("the test's set-up"),
         Impairment {
             delay_s,
             jitter_s: delay_s * 0.1,
@@ -82,7 +99,7 @@ fn pour_through(name: &str, delay_s: f64) -> (Value, Value) {
             ..Impairment::default()
         },
     )
-    .unwrap();
+    .expect("the test's set-up");
     let operator = join(&dir, "join", relay.local_addr().port(), &["--wait", "20"]);
     let j = finish(operator, &dir, "join");
     let s = finish(robot, &dir, "serve");
@@ -122,33 +139,31 @@ fn a_cut_link_stops_the_arm_and_the_session_resumes() {
     let port = free_port();
     let robot = serve(&dir, port, 14.0, &["--insecure-lan", "--video", "off"]);
     let relay = Relay::tcp(
-        format!("127.0.0.1:{port}").parse().unwrap(),
+        format!("127.0.0.1:{port}")
+            .parse()
+            .expect("the test's set-up"),
         Impairment::default(),
     )
-    .unwrap();
+    .expect("the test's set-up");
     let operator = join(&dir, "join", relay.local_addr().port(), &["--wait", "20"]);
-    // Wait until targets flow (the operator's log says it joined), then cut mid-pour.
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while !std::fs::read_to_string(dir.join("join.log"))
-        .unwrap_or_default()
-        .contains("joined")
-    {
-        assert!(Instant::now() < deadline, "the operator never joined");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    // Wait until targets flow, then cut mid-pour.
+    wait_joined(&dir);
     std::thread::sleep(Duration::from_secs(4));
     relay.cut_for(Duration::from_secs(2));
     let j = finish(operator, &dir, "join");
     let s = finish(robot, &dir, "serve");
     // One stop for stale targets, about as long as the cut, ended by fresh targets.
-    let stops = s["stops"].as_array().unwrap();
+    let stops = s["stops"].as_array().expect("the test's set-up");
     let cut: Vec<&Value> = stops
         .iter()
         .filter(|e| e["reason"].as_str().unwrap_or("").contains("stale"))
         .collect();
     assert_eq!(cut.len(), 1, "{s}");
     let length = f(cut[0], "length_s");
-    assert!((1.4..3.0).contains(&length), "stopped {length} s for a 2 s cut: {s}");
+    assert!(
+        (1.4..3.0).contains(&length),
+        "stopped {length} s for a 2 s cut: {s}"
+    );
     // Neither process restarted: the operator joined once (and left at its end), and targets
     // flowed after the cut.
     assert_eq!(f(&s, "operator_joins"), 1.0, "{s}");
@@ -163,23 +178,163 @@ fn the_operator_killed_the_arm_stops_and_holds() {
     let port = free_port();
     let robot = serve(&dir, port, 9.0, &["--insecure-lan", "--video", "off"]);
     let mut operator = join(&dir, "join", port, &["--wait", "20"]);
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while !std::fs::read_to_string(dir.join("join.log"))
-        .unwrap_or_default()
-        .contains("joined")
-    {
-        assert!(Instant::now() < deadline, "the operator never joined");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    wait_joined(&dir);
     std::thread::sleep(Duration::from_secs(3));
-    operator.kill().unwrap();
+    operator.kill().expect("the test's set-up");
     let _ = operator.wait();
     let s = finish(robot, &dir, "serve");
     assert_eq!(f(&s, "operator_leaves"), 1.0, "{s}");
     // The last stop is still on at the end: the arm holds.
-    let last = s["stops"].as_array().unwrap().last().unwrap().clone();
+    let last = s["stops"]
+        .as_array()
+        .expect("the test's set-up")
+        .last()
+        .expect("the test's set-up")
+        .clone();
     assert!(last["length_s"].is_null(), "{s}");
-    let log = std::fs::read_to_string(dir.join("serve.log")).unwrap();
+    let log = std::fs::read_to_string(dir.join("serve.log")).expect("the test's set-up");
     assert!(log.contains("the operator left; stopping the arm"), "{log}");
     assert_eq!(f(&s, "nan_commands"), 0.0);
+}
+
+/// A certificate authority and the robot site's certificate for localhost and 127.0.0.1,
+/// made with the openssl command line (Debian's `openssl` package).
+fn certificates(dir: &Path) {
+    let sh = |args: &str| {
+        let out = Command::new("sh")
+            .arg("-c")
+            .arg(args)
+            .current_dir(dir)
+            .output()
+            .expect("needs the openssl command (apt install openssl)");
+        assert!(
+            out.status.success(),
+            "{args}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    sh(
+        "openssl req -x509 -newkey rsa:2048 -nodes -keyout ca.key -out ca.pem -days 2 -subj '/CN=avatarm test CA'",
+    );
+    sh("openssl req -newkey rsa:2048 -nodes -keyout site.key -out site.csr -subj '/CN=localhost'");
+    std::fs::write(
+        dir.join("ext.cnf"),
+        "subjectAltName=DNS:localhost,IP:127.0.0.1\n",
+    )
+    .expect("the test's set-up");
+    sh(
+        "openssl x509 -req -in site.csr -CA ca.pem -CAkey ca.key -CAcreateserial -out site.pem -days 2 -extfile ext.cnf",
+    );
+}
+
+#[test]
+fn over_tls_only_the_authenticated_operator_moves_the_robot() {
+    let dir = out_dir("tls");
+    certificates(&dir);
+    std::fs::write(
+        dir.join("users.txt"),
+        "blair:pour-carefully\nwatcher:just-looking\n",
+    )
+    .expect("the test's set-up");
+    std::fs::write(dir.join("blair.txt"), "blair:pour-carefully\n").expect("the test's set-up");
+    std::fs::write(dir.join("watcher.txt"), "watcher:just-looking\n").expect("the test's set-up");
+    let port = free_port();
+    let endpoint = format!("tls/localhost:{port}");
+    let path = |name: &str| {
+        dir.join(name)
+            .to_str()
+            .expect("the test's set-up")
+            .to_owned()
+    };
+    let log = std::fs::File::create(dir.join("serve.log")).expect("the test's set-up");
+    let robot = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args([
+            "serve",
+            "assets/scenes/pouring.toml",
+            "--video",
+            "off",
+            "--listen",
+            &endpoint,
+        ])
+        .args([
+            "--tls-cert",
+            &path("site.pem"),
+            "--tls-key",
+            &path("site.key"),
+        ])
+        .args(["--credentials", &path("users.txt"), "--operator", "blair"])
+        .args(["--duration", "24", "--report", &path("serve.json")])
+        .stdout(Stdio::null())
+        .stderr(log)
+        .spawn()
+        .expect("the test's set-up");
+    let join_as = |name: &str, extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_avatarm"))
+            .args(["join", &endpoint, "--scene", "assets/scenes/pouring.toml"])
+            .args(["--report", &path(&format!("{name}.json"))])
+            .args(extra)
+            .output()
+            .expect("the test's set-up")
+    };
+    // Without the authority's certificate, or without credentials: refused.
+    let out = join_as(
+        "no_ca",
+        &["--credentials", &path("blair.txt"), "--wait", "3"],
+    );
+    assert!(!out.status.success(), "joined without the CA");
+    let out = join_as("no_user", &["--tls-ca", &path("ca.pem"), "--wait", "3"]);
+    assert!(!out.status.success(), "joined without credentials");
+    // An observer's credentials playing an operator: it connects, its targets are denied.
+    let out = join_as(
+        "watcher",
+        &[
+            "--tls-ca",
+            &path("ca.pem"),
+            "--credentials",
+            &path("watcher.txt"),
+            "--duration",
+            "3",
+            "--wait",
+            "10",
+        ],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // The operator.
+    let out = join_as(
+        "blair",
+        &[
+            "--tls-ca",
+            &path("ca.pem"),
+            "--credentials",
+            &path("blair.txt"),
+            "--duration",
+            "4",
+            "--wait",
+            "10",
+        ],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let s = finish(robot, &dir, "serve");
+    let watcher: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("watcher.json")).expect("the test's set-up"),
+    )
+    .expect("the test's set-up");
+    let blair: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("blair.json")).expect("the test's set-up"),
+    )
+    .expect("the test's set-up");
+    assert!(f(&watcher, "targets_sent") > 250.0, "{watcher}");
+    assert!(f(&blair, "targets_sent") > 350.0, "{blair}");
+    // Only the operator's targets reached the robot, and it joined once.
+    let used = f(&s, "targets_used");
+    assert!(used > 0.0 && used <= f(&blair, "targets_sent"), "{s}");
+    assert_eq!(f(&s, "operator_joins"), 1.0, "{s}");
 }

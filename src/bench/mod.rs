@@ -9,10 +9,13 @@
 //!   primitive description): mask GPU time and triangles against leak and needed dilation.
 //! - [`gpu`]: the erase's GPU time per pass at several frame sizes and camera counts, against a
 //!   plain copy of the same images (the floor) measured in the same run.
+//! - [`network`]: the pouring task across two sites through the impairment relay: object RMSE
+//!   against one-way delay and loss, with the paper's RMSE as a line.
 //! - [`chart`]: what all share: the Pareto front and the charts' house style.
 
 pub mod chart;
 pub mod control;
 pub mod dr;
 pub mod gpu;
+pub mod network;
 pub mod twin;

@@ -329,6 +329,9 @@ enum Command {
         /// How long to wait for the robot site (s).
         #[arg(long, value_name = "S", default_value_t = 10.0)]
         wait: f64,
+        /// The task's trial whose seeded hand the operator plays.
+        #[arg(long, value_name = "N", default_value_t = 0)]
+        trial: u32,
         /// Folder searched for package://NAME/... URIs (repeatable).
         #[arg(long = "package-path", value_name = "DIR")]
         package_path: Vec<PathBuf>,
@@ -349,6 +352,35 @@ enum Command {
         duration: Option<f64>,
         #[command(flatten)]
         net: crate::net::NetArgs,
+    },
+    /// The seeded impairment relay between two sites (docs/network.md): TCP or UDP from
+    /// 127.0.0.1:PORT to TO, with one-way delay, jitter, loss (UDP) and a bandwidth cap, for
+    /// trying a session under a bad network where `tc netem` is not available.
+    Relay {
+        /// tcp or udp.
+        #[arg(long, value_parser = ["tcp", "udp"], default_value = "tcp")]
+        transport: String,
+        /// Where the traffic goes (HOST:PORT).
+        #[arg(long, value_name = "HOST:PORT")]
+        to: std::net::SocketAddr,
+        /// One-way delay each direction (ms).
+        #[arg(long = "delay-ms", default_value_t = 0.0)]
+        delay_ms: f64,
+        /// Extra delay uniform in 0..JITTER (ms).
+        #[arg(long = "jitter-ms", default_value_t = 0.0)]
+        jitter_ms: f64,
+        /// Datagrams dropped (%, UDP).
+        #[arg(long = "loss", default_value_t = 0.0)]
+        loss_pct: f64,
+        /// Bandwidth cap each direction (Mbit/s).
+        #[arg(long = "mbit-s")]
+        mbit_s: Option<f64>,
+        /// Seed of the loss and jitter.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Stop after this many seconds (default: until killed).
+        #[arg(long, value_name = "S")]
+        duration: Option<f64>,
     },
     /// Measure speed against accuracy and chart it.
     #[command(subcommand)]
@@ -463,6 +495,34 @@ enum BenchCommand {
         #[arg(long, value_name = "N", default_value_t = 3)]
         trials: u32,
         /// Folder searched for package:// URIs (repeatable).
+        #[arg(long = "package-path", value_name = "DIR")]
+        package_path: Vec<PathBuf>,
+    },
+    /// The pouring task across two sites (robot site and operator in this process, over Zenoh
+    /// through the seeded impairment relay; docs/network.md): object RMSE against one-way
+    /// delay and loss, both mapping modes, with the paper's RMSE as a line. CSV, SVG, PNG.
+    Network {
+        /// The scene (default: the pouring scene).
+        scene: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long, value_name = "DIR", default_value = "out/bench_network")]
+        out: PathBuf,
+        /// One-way delays (ms).
+        #[arg(long, value_delimiter = ',', default_values_t = [0.0, 25.0, 50.0, 100.0, 200.0])]
+        delays: Vec<f64>,
+        /// Datagram loss (%): 0 runs over TCP, more over UDP.
+        #[arg(long, value_delimiter = ',', default_values_t = [0.0, 1.0, 5.0])]
+        losses: Vec<f64>,
+        /// Mapping modes (paper, closed_loop).
+        #[arg(long, value_delimiter = ',', value_parser = mapping_mode, default_values = ["paper", "closed_loop"])]
+        modes: Vec<avatarm_core::teleop::mapping::MappingMode>,
+        /// Trials per point (the task's seeded hands).
+        #[arg(long, value_name = "N", default_value_t = 10)]
+        trials: u32,
+        /// The robot site's watchdog timeout (s).
+        #[arg(long = "target-timeout", value_name = "S", default_value_t = 0.5)]
+        target_timeout: f64,
+        /// Folder searched for package://NAME/... URIs (repeatable).
         #[arg(long = "package-path", value_name = "DIR")]
         package_path: Vec<PathBuf>,
     },
@@ -605,6 +665,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             duration,
             report,
             wait,
+            trial,
             package_path,
             net,
         } => {
@@ -624,9 +685,44 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 mode: None,
                 report,
                 wait_s: wait,
+                trial,
             };
             let r = crate::net::join::join(&options)?;
             println!("{}", crate::net::join::summary(&r));
+            Ok(())
+        }
+        Command::Relay {
+            transport,
+            to,
+            delay_ms,
+            jitter_ms,
+            loss_pct,
+            mbit_s,
+            seed,
+            duration,
+        } => {
+            use avatarm_net::impair::{Impairment, Relay};
+            let impairment = Impairment {
+                delay_s: delay_ms / 1e3,
+                jitter_s: jitter_ms / 1e3,
+                loss: loss_pct / 100.0,
+                bandwidth_bps: mbit_s.map(|m| m * 1e6),
+                seed,
+            };
+            impairment
+                .validate()
+                .map_err(|e| AppError::flag("avatarm relay", e))?;
+            let relay = if transport == "udp" {
+                Relay::udp(to, impairment)
+            } else {
+                Relay::tcp(to, impairment)
+            }
+            .map_err(|e| AppError::flag("avatarm relay", e.to_string()))?;
+            println!("{transport}/{} -> {to}", relay.local_addr());
+            let started = std::time::Instant::now();
+            while duration.is_none_or(|d| started.elapsed().as_secs_f64() < d) {
+                std::thread::sleep(std::time::Duration::from_millis(100));
+            }
             Ok(())
         }
         Command::Router {
@@ -1222,6 +1318,87 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             println!(
                 "table: {}\nchart: {} and {}",
+                outputs.csv.display(),
+                outputs.svg.display(),
+                outputs.png.display()
+            );
+            Ok(())
+        }
+        Command::Bench(BenchCommand::Network {
+            scene,
+            out,
+            delays,
+            losses,
+            modes,
+            trials,
+            target_timeout,
+            package_path,
+        }) => {
+            crate::net::init_log_quiet();
+            let path = scene.unwrap_or_else(pouring_scene);
+            let scene = Scene::load(&path, &packages(package_path))?;
+            let sweep = crate::bench::network::NetworkSweep {
+                delays_ms: delays,
+                losses_pct: losses,
+                modes,
+                trials,
+                target_timeout_s: target_timeout,
+                progress: true,
+            };
+            let outputs = crate::bench::network::run_network(&scene, &sweep, &out)?;
+            println!(
+                "{:<11} {:>8} {:>6} {:>9} {:>7} {:>7} {:>7} {:>6} {:>8} {:>7}",
+                "mode",
+                "delay ms",
+                "loss %",
+                "pos mm",
+                "std",
+                "roll",
+                "yaw",
+                "stops",
+                "age ms",
+                "failed"
+            );
+            let mut seen = Vec::new();
+            for t in &outputs.trials {
+                let key = (t.mode, t.delay_ms.to_bits(), t.loss_pct.to_bits());
+                if seen.contains(&key) {
+                    continue;
+                }
+                seen.push(key);
+                let cell: Vec<_> = outputs
+                    .trials
+                    .iter()
+                    .filter(|u| (u.mode, u.delay_ms.to_bits(), u.loss_pct.to_bits()) == key)
+                    .collect();
+                let (pos, std) =
+                    crate::bench::network::mean_std(cell.iter().map(|u| u.pos_rmse_mm));
+                let (roll, _) =
+                    crate::bench::network::mean_std(cell.iter().map(|u| u.roll_rmse_deg));
+                let (yaw, _) = crate::bench::network::mean_std(cell.iter().map(|u| u.yaw_rmse_deg));
+                let stops: usize = cell.iter().map(|u| u.stops_after_grasp).sum();
+                let (age, _) =
+                    crate::bench::network::mean_std(cell.iter().map(|u| u.target_age_ms));
+                let failed = cell
+                    .iter()
+                    .filter(|u| u.failed.is_some() || !u.grasped)
+                    .count();
+                println!(
+                    "{:<11} {:>8} {:>6} {:>9.2} {:>7.2} {:>7.2} {:>7.2} {:>6} {:>8.1} {:>7}",
+                    t.mode.name(),
+                    t.delay_ms,
+                    t.loss_pct,
+                    pos,
+                    std,
+                    roll,
+                    yaw,
+                    stops,
+                    age,
+                    failed
+                );
+            }
+            println!(
+                "wrote {}, {} and {}",
                 outputs.csv.display(),
                 outputs.svg.display(),
                 outputs.png.display()

@@ -44,6 +44,8 @@ pub struct JoinOptions {
     pub report: Option<PathBuf>,
     /// How long to wait for the robot site (s).
     pub wait_s: f64,
+    /// The task's trial whose seeded hand the operator plays.
+    pub trial: u32,
 }
 
 /// Latency of the erased video by stage (ms, robot clock): capture → erased → sent →
@@ -150,7 +152,12 @@ impl Collect {
             }
         }
         for f in inbox.frames {
-            let Ok((h, payload, received)) = f else {
+            let Ok(avatarm_net::ReceivedFrame {
+                header: h,
+                payload,
+                received_s: received,
+            }) = f
+            else {
                 r.video.refused += 1;
                 continue;
             };
@@ -230,7 +237,15 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
         }
     } else {
         collect.report.role = "operator".into();
-        operate(&mut site, options, &mut collect, started)?;
+        operate_with(
+            &mut site,
+            &options.scene,
+            options.mode,
+            options.trial,
+            options.duration_s,
+            &mut collect,
+            started,
+        )?;
     }
     let report = collect.finish(started.elapsed().as_secs_f64());
     site.close();
@@ -241,15 +256,33 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
     Ok(report)
 }
 
-/// The operator: the trial's hand and twin in real time, one target per control tick.
-fn operate(
+/// The operator on a joined `site`: trial `trial` of `scene`'s task, its hand and twin stepped
+/// in real time, one target per control tick, for `duration_s` (default: the task's). The
+/// report says what was sent and received (no clock or info: [`join`] fills those).
+pub fn operate(
     site: &mut OperatorSite,
-    options: &JoinOptions,
+    scene: &Scene,
+    mode: Option<MappingMode>,
+    trial: u32,
+    duration_s: Option<f64>,
+) -> Result<JoinReport, AppError> {
+    let mut collect = Collect::default();
+    collect.report.role = "operator".into();
+    let started = Instant::now();
+    operate_with(site, scene, mode, trial, duration_s, &mut collect, started)?;
+    Ok(collect.finish(started.elapsed().as_secs_f64()))
+}
+
+fn operate_with(
+    site: &mut OperatorSite,
+    scene: &Scene,
+    mode: Option<MappingMode>,
+    trial: u32,
+    duration_s: Option<f64>,
     collect: &mut Collect,
     started: Instant,
 ) -> Result<(), AppError> {
-    let scene = &options.scene;
-    let (parts, _) = trial_parts(scene, RobotChoice::Sim, options.mode, "avatarm join")?;
+    let (parts, _) = trial_parts(scene, RobotChoice::Sim, mode, trial, "avatarm join")?;
     let Some(task) = &scene.file.task else {
         return Err(AppError::flag("--scene", "the scene has no [task]"));
     };
@@ -263,7 +296,7 @@ fn operate(
             task.hand_rate_hz,
         )));
     app.add_systems(Startup, spawn);
-    let duration = options.duration_s.unwrap_or(task.duration_s);
+    let duration = duration_s.unwrap_or(task.duration_s);
     let steps = (duration / period.as_secs_f64()).round() as u64;
     let z0 = parts.twin_start.translation.z;
     let mut seq = 0u64;

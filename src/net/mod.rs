@@ -105,8 +105,19 @@ pub fn scene_fingerprint(scene: &Scene) -> Result<String, AppError> {
 /// `RUST_LOG` when set, else Avatarm's info and Zenoh's warnings.
 pub fn init_log() {
     use bevy::log::tracing_subscriber::{self, EnvFilter};
-    let filter = EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| EnvFilter::new("info,zenoh=warn,zenoh_transport=warn,wgpu=error,naga=warn"));
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+        EnvFilter::new("info,zenoh=warn,zenoh_transport=warn,wgpu=error,naga=warn")
+    });
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+}
+
+/// [`init_log`] with only warnings and errors (a bench's progress bar owns the terminal).
+pub fn init_log_quiet() {
+    use bevy::log::tracing_subscriber::{self, EnvFilter};
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("error"));
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)

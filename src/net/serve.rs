@@ -19,8 +19,8 @@ use std::time::{Duration, Instant};
 use avatarm_core::sim::JointState;
 use avatarm_core::teleop::mapping::{MappingMode, pose_rmse};
 use avatarm_mapping::{RemoteTarget, Teleop, TeleopSample, TickSource};
-use avatarm_net::msg::{JointStatesMsg, PROTOCOL_VERSION, RobotStatusMsg};
 use avatarm_net::RobotSite;
+use avatarm_net::msg::{JointStatesMsg, PROTOCOL_VERSION, RobotStatusMsg};
 use bevy::log::{info, warn};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use serde::Serialize;
@@ -392,7 +392,12 @@ impl ControlLoop {
             .iter()
             .filter(|s| s.qdot.iter().any(|v| !v.is_finite()))
             .count() as u64;
-        report.trial = measure(&samples, &targets, self.start_z, self.teleop.status.max_tcp_speed);
+        report.trial = measure(
+            &samples,
+            &targets,
+            self.start_z,
+            self.teleop.status.max_tcp_speed,
+        );
         report
     }
 }
@@ -435,7 +440,10 @@ fn target_at(targets: &[(f64, Isometry3<f64>)], t_s: f64) -> Option<Isometry3<f6
     let f = if t1 > t0 { (t_s - t0) / (t1 - t0) } else { 1.0 };
     Some(Isometry3::from_parts(
         Translation3::from(a.translation.vector.lerp(&b.translation.vector, f)),
-        a.rotation * UnitQuaternion::from_scaled_axis((a.rotation.inverse() * b.rotation).scaled_axis() * f),
+        a.rotation
+            * UnitQuaternion::from_scaled_axis(
+                (a.rotation.inverse() * b.rotation).scaled_axis() * f,
+            ),
     ))
 }
 
@@ -454,16 +462,7 @@ fn measure(
         stop_ticks: samples.iter().filter(|s| s.stopping).count() as u64,
         ..TrialMeasure::default()
     };
-    let real = |s: &TeleopSample| {
-        s.truth.or_else(|| {
-            s.measured
-                .translation
-                .vector
-                .iter()
-                .all(|v| v.is_finite())
-                .then_some(s.measured)
-        })
-    };
+    let real = TeleopSample::real_object;
     m.real_lift_m = samples
         .iter()
         .filter_map(real)
@@ -530,7 +529,8 @@ mod tests {
             hand_stamp_s: 1.0,
             hand_tracked: true,
         };
-        let r = |present, refused, latest, now| stop_reason(present, refused, latest, now, 0.1, false);
+        let r =
+            |present, refused, latest, now| stop_reason(present, refused, latest, now, 0.1, false);
         assert!(r(false, None, Some(&t), 1.0).is_some_and(|s| s.contains("liveliness")));
         assert!(r(true, Some("bad"), Some(&t), 1.0).is_some_and(|s| s.contains("refused")));
         assert!(r(true, None, Some(&t), 1.5).is_some_and(|s| s.contains("stale")));
@@ -563,12 +563,32 @@ pub struct ServeOptions {
 /// The camera's name on the network (one camera per scene today).
 pub const CAMERA: &str = "desk";
 
+/// What the robot site says about itself: the scene and its fingerprint, the cameras, the
+/// control rate, the watchdog's timeout and the robot.
+pub fn robot_info(
+    scene: &avatarm_scene::Scene,
+    parts: &avatarm_mapping::pouring::TrialParts,
+    target_timeout_s: f64,
+    cameras: Vec<String>,
+) -> Result<avatarm_net::msg::RobotInfo, crate::AppError> {
+    Ok(avatarm_net::msg::RobotInfo {
+        v: PROTOCOL_VERSION,
+        software: env!("CARGO_PKG_VERSION").into(),
+        scene: scene.file.name.clone(),
+        scene_hash: super::scene_fingerprint(scene)?,
+        cameras,
+        control_rate_hz: 1.0 / parts.period.as_secs_f64(),
+        target_timeout_s,
+        robot: parts.teleop.robot_name().to_owned(),
+    })
+}
+
 /// Runs the robot site until the duration passes (or the process is killed). Errors when the
 /// scene has no task, the robot or the network cannot be set up.
 pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
     let scene = &options.scene;
     let (mut parts, mode) =
-        crate::teleop::trial_parts(scene, options.robot, options.mode, "avatarm serve")?;
+        crate::teleop::trial_parts(scene, options.robot, options.mode, 0, "avatarm serve")?;
     parts
         .teleop
         .set_watchdog_timeout(options.target_timeout_s)
@@ -577,20 +597,12 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
         .trial
         .as_ref()
         .map_or(0.0, |s| s.bottle_centre().translation.z);
-    let info = avatarm_net::msg::RobotInfo {
-        v: PROTOCOL_VERSION,
-        software: env!("CARGO_PKG_VERSION").into(),
-        scene: scene.file.name.clone(),
-        scene_hash: super::scene_fingerprint(scene)?,
-        cameras: if options.video {
-            vec![CAMERA.to_owned()]
-        } else {
-            Vec::new()
-        },
-        control_rate_hz: 1.0 / parts.period.as_secs_f64(),
-        target_timeout_s: options.target_timeout_s,
-        robot: parts.teleop.robot_name().to_owned(),
+    let cameras = if options.video {
+        vec![CAMERA.to_owned()]
+    } else {
+        Vec::new()
     };
+    let info = robot_info(scene, &parts, options.target_timeout_s, cameras)?;
     let clock = avatarm_net::SiteClock::start();
     let mut site = RobotSite::open(&options.net, &info, clock)?;
     info!(

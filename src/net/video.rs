@@ -17,8 +17,8 @@ use avatarm_net::{FrameSender, SiteClock};
 use avatarm_scene::Scene;
 use avatarm_scene::prop::find_prop;
 use avatarm_sim::{SimPropPart, SimRobotState, SimRoomConfig};
+use avatarm_twin::JointStateMessage;
 use avatarm_twin::readback::{ImageRead, read_image_once};
-use avatarm_twin::{JointStateMessage, iso_to_transform};
 use bevy::prelude::*;
 use nalgebra::Isometry3;
 
@@ -138,15 +138,7 @@ fn mirror_loop(
         }
     }
     if let (Some(centre), Some((prop, centre_to_base))) = (last.object, video.carried) {
-        let base = iso_to_transform(&(centre * centre_to_base));
-        for (part, mut t) in &mut parts {
-            if part.prop == prop {
-                let next = base * part.local;
-                if *t != next {
-                    *t = next;
-                }
-            }
-        }
+        crate::teleop::place_prop(&mut parts, prop, &(centre * centre_to_base));
     }
 }
 

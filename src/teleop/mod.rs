@@ -102,7 +102,7 @@ impl LiveTeleop {
         choice: &HandChoice,
         robot: RobotChoice,
     ) -> Result<Self, AppError> {
-        let (parts, mode) = trial_parts(scene, robot, None, "--hand")?;
+        let (parts, mode) = trial_parts(scene, robot, None, 0, "--hand")?;
         let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
             return Err(AppError::flag("--hand", "the scene has no [task]"));
         };
@@ -232,7 +232,7 @@ impl LiveTeleop {
     }
 }
 
-/// The live trial's world for `scene`'s `[task]` (trial 0) on `robot`, in `mode` (default: the
+/// The live trial's world for `scene`'s `[task]` (trial `trial`'s seeded hand) on `robot`, in `mode` (default: the
 /// closed loop where the task has it, else its first mode), and that mode: what `avatarm run`
 /// and the robot site of `avatarm serve` drive. A real robot first moves to the grasp's start
 /// ([`avatarm_mapping::Approach`]). Errors name `flag` when the scene has no task, and the
@@ -241,6 +241,7 @@ pub fn trial_parts(
     scene: &Scene,
     robot: RobotChoice,
     mode: Option<MappingMode>,
+    trial: u32,
     flag: &str,
 ) -> Result<(TrialParts, MappingMode), AppError> {
     let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
@@ -266,7 +267,7 @@ pub fn trial_parts(
         RobotChoice::Sim => None,
         RobotChoice::Ros => Some(ros_arm(scene, setup, prepared.q0())?),
     };
-    let mut parts = TrialParts::on_robot(task, setup, &prepared, mode, 0, link)?;
+    let mut parts = TrialParts::on_robot(task, setup, &prepared, mode, trial, link)?;
     if robot == RobotChoice::Ros {
         // A real arm starts wherever it was left: it moves to the grasp's start first, at
         // the link's speed ratio, before the hand drives it.
@@ -587,13 +588,22 @@ fn mirror_room(
         }
     }
     if let Some(centre) = arm.true_object_pose() {
-        let base = iso_to_transform(&(centre * live.centre_to_base));
-        for (part, mut t) in &mut parts {
-            if part.prop == live.prop {
-                let next = base * part.local;
-                if *t != next {
-                    *t = next;
-                }
+        place_prop(&mut parts, live.prop, &(centre * live.centre_to_base));
+    }
+}
+
+/// Puts the room's prop `prop` (each of its parts) at `base` (its base pose, real world).
+pub fn place_prop(
+    parts: &mut Query<(&SimPropPart, &mut Transform)>,
+    prop: usize,
+    base: &Isometry3<f64>,
+) {
+    let base = iso_to_transform(base);
+    for (part, mut t) in parts {
+        if part.prop == prop {
+            let next = base * part.local;
+            if *t != next {
+                *t = next;
             }
         }
     }

@@ -25,8 +25,7 @@ use avatarm_core::robot::{LinkId, RobotModel};
 use avatarm_core::sim::JointState;
 use avatarm_core::teleop::grasp::Contact;
 use avatarm_core::teleop::mapping::{
-    Mapper, MappingSettings, OperatorInputs, OperatorTarget, RobotInputs, RobotSide,
-    VirtualToReal,
+    Mapper, MappingSettings, OperatorInputs, OperatorTarget, RobotInputs, RobotSide, VirtualToReal,
 };
 use avatarm_core::teleop::safety::{self, Intervention, SafetyLimiter};
 use avatarm_hand::{ActiveHand, GraspTarget, HandSystems, HeldObject, ObjectContacts};
@@ -94,6 +93,21 @@ pub struct TeleopSample {
     pub q: DVector<f64>,
     /// The joint velocities sent (zero when nothing was sent).
     pub qdot: DVector<f64>,
+}
+
+impl TeleopSample {
+    /// The real object: the truth where the backend knows it (simulation), else where the
+    /// measured joint states put it; `None` before any joint state.
+    pub fn real_object(&self) -> Option<Isometry3<f64>> {
+        self.truth.or_else(|| {
+            self.measured
+                .translation
+                .vector
+                .iter()
+                .all(|v| v.is_finite())
+                .then_some(self.measured)
+        })
+    }
 }
 
 /// Counters for the status line and the report.
@@ -402,9 +416,10 @@ fn teleop_tick(
         Some(f) => (Some(f.t_s), f.tracked),
         None => (None, false),
     };
-    let twin_pose = twin.single().map(avatarm_twin::transform_to_iso).map_err(|e| {
-        format!("the mapping needs exactly one object twin (GraspTarget): {e}")
-    });
+    let twin_pose = twin
+        .single()
+        .map(avatarm_twin::transform_to_iso)
+        .map_err(|e| format!("the mapping needs exactly one object twin (GraspTarget): {e}"));
     teleop.tick(
         time.elapsed_secs_f64(),
         time.timestep().as_secs_f64(),
@@ -517,9 +532,11 @@ impl Teleop {
                     *hand_tracked,
                 ),
                 TickSource::Remote(Some(r)) => (Ok(r.target), Some(r.hand_stamp_s), r.hand_tracked),
-                TickSource::Remote(None) => {
-                    (Err("no valid target from the operator".to_string()), None, false)
-                }
+                TickSource::Remote(None) => (
+                    Err("no valid target from the operator".to_string()),
+                    None,
+                    false,
+                ),
             };
         let side = RobotSide {
             model: &t.model,
@@ -599,7 +616,12 @@ impl Teleop {
                 None => (
                     match (&source, &operator) {
                         (_, Ok(op)) => op.target,
-                        (TickSource::Local { twin_pose: Ok(p), .. }, _) => t.v2r.pose(p),
+                        (
+                            TickSource::Local {
+                                twin_pose: Ok(p), ..
+                            },
+                            _,
+                        ) => t.v2r.pose(p),
                         _ => nan,
                     },
                     nan,

@@ -588,16 +588,7 @@ fn run_prepared(
     let from = grasp.unwrap_or(0);
     // The real bottle: the truth where the backend knows it (simulation), else where the
     // measured joint states put it.
-    let real = |s: &TeleopSample| {
-        s.truth.or_else(|| {
-            s.measured
-                .translation
-                .vector
-                .iter()
-                .all(|v| v.is_finite())
-                .then_some(s.measured)
-        })
-    };
+    let real = TeleopSample::real_object;
     let window: Vec<&TeleopSample> = samples[from..]
         .iter()
         .filter(|s| real(s).is_some() && s.target.translation.vector.iter().all(|v| v.is_finite()))

@@ -112,7 +112,10 @@ impl NetConfig {
         };
         let listens = matches!(self.role, Role::RobotSite | Role::Router);
         if listens && self.listen.is_empty() {
-            return bad("--listen", "a robot site or router needs an endpoint to listen on".into());
+            return bad(
+                "--listen",
+                "a robot site or router needs an endpoint to listen on".into(),
+            );
         }
         if !listens && self.connect.is_empty() {
             return bad("ENDPOINT", "an endpoint to connect to is needed".into());
@@ -154,7 +157,10 @@ impl NetConfig {
             }
             let tls_listen = self.listen.iter().any(|e| e.starts_with("tls/"));
             if tls_listen && (tls.certificate.is_none() || tls.private_key.is_none()) {
-                return bad("--tls-cert", "a TLS listener needs --tls-cert and --tls-key".into());
+                return bad(
+                    "--tls-cert",
+                    "a TLS listener needs --tls-cert and --tls-key".into(),
+                );
             }
         }
         Ok(())
@@ -170,10 +176,17 @@ impl NetConfig {
         };
         let mut auth = Vec::new();
         if let Some(c) = &self.credentials {
-            auth.push(format!("user: {}, password: {}", json(&c.user), json(&c.password)));
+            auth.push(format!(
+                "user: {}, password: {}",
+                json(&c.user),
+                json(&c.password)
+            ));
         }
         if let Some(d) = &self.dictionary {
-            auth.push(format!("dictionary_file: {}", json(&d.display().to_string())));
+            auth.push(format!(
+                "dictionary_file: {}",
+                json(&d.display().to_string())
+            ));
         }
         let mut tls = Vec::new();
         if let Some(t) = &self.tls {
@@ -187,12 +200,12 @@ impl NetConfig {
                 }
             }
         }
-        let acl = if self.dictionary.is_some() && matches!(self.role, Role::RobotSite | Role::Router)
-        {
-            self.access_control()
-        } else {
-            String::new()
-        };
+        let acl =
+            if self.dictionary.is_some() && matches!(self.role, Role::RobotSite | Role::Router) {
+                self.access_control()
+            } else {
+                String::new()
+            };
         let text = format!(
             "{{ mode: {mode}, \
                listen: {{ endpoints: {listen} }}, \
@@ -212,8 +225,9 @@ impl NetConfig {
         })
     }
 
-    /// Access control: denied unless allowed; everyone may read the session and use the
-    /// robot site's keys; only [`NetConfig::operators`] may put on the operator's keys.
+    /// Access control: denied unless allowed; everyone authenticated may read the session;
+    /// the robot site's keys only leave the robot site (a router also forwards them in); only
+    /// [`NetConfig::operators`] may put on the operator's keys or declare its token.
     fn access_control(&self) -> String {
         let k = &self.keys;
         let all = r#"["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable", "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"]"#;
@@ -222,6 +236,14 @@ impl NetConfig {
         let session = list(&[k.session_space()]);
         let operator = list(&[k.operator_space()]);
         let operators = list(&self.operators);
+        // At the robot site its own keys only go out: nobody else may publish joint states,
+        // status or video under its name, or answer its info and clock queries. A router
+        // forwards them in from the robot site.
+        let robot_flows = if self.role == Role::RobotSite {
+            r#"["egress"]"#
+        } else {
+            r#"["egress", "ingress"]"#
+        };
         let operator_subject = if self.operators.is_empty() {
             // Nobody may command: a subject no user name matches.
             r#"{ id: "operators", usernames: ["-"] }"#.to_string()
@@ -233,7 +255,7 @@ impl NetConfig {
                 enabled: true,
                 default_permission: "deny",
                 rules: [
-                  {{ id: "robot_site", messages: {all}, flows: ["egress", "ingress"], permission: "allow", key_exprs: {robot} }},
+                  {{ id: "robot_site", messages: {all}, flows: {robot_flows}, permission: "allow", key_exprs: {robot} }},
                   {{ id: "read", messages: {read}, flows: ["egress", "ingress"], permission: "allow", key_exprs: {session} }},
                   {{ id: "forward_operator", messages: ["put", "delete", "liveliness_token"], flows: ["egress"], permission: "allow", key_exprs: {operator} }},
                   {{ id: "command", messages: ["put", "delete", "liveliness_token"], flows: ["ingress"], permission: "allow", key_exprs: {operator} }},

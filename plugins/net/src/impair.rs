@@ -102,6 +102,15 @@ struct Shared {
 }
 
 impl Shared {
+    fn new(impairment: Impairment) -> Arc<Self> {
+        Arc::new(Self {
+            impairment: Mutex::new(impairment),
+            cut_until: Mutex::new(None),
+            stop: AtomicBool::new(false),
+            stats: RelayStats::default(),
+        })
+    }
+
     fn impairment(&self) -> Impairment {
         *self.impairment.lock().unwrap_or_else(|e| e.into_inner())
     }
@@ -133,12 +142,7 @@ impl Relay {
         let listener = TcpListener::bind("127.0.0.1:0")?;
         let addr = listener.local_addr()?;
         listener.set_nonblocking(true)?;
-        let shared = Arc::new(Shared {
-            impairment: Mutex::new(impairment),
-            cut_until: Mutex::new(None),
-            stop: AtomicBool::new(false),
-            stats: RelayStats::default(),
-        });
+        let shared = Shared::new(impairment);
         let s = shared.clone();
         std::thread::Builder::new()
             .name("relay accept".into())
@@ -181,12 +185,7 @@ impl Relay {
         let front = UdpSocket::bind("127.0.0.1:0")?;
         let addr = front.local_addr()?;
         front.set_read_timeout(Some(Duration::from_millis(50)))?;
-        let shared = Arc::new(Shared {
-            impairment: Mutex::new(impairment),
-            cut_until: Mutex::new(None),
-            stop: AtomicBool::new(false),
-            stats: RelayStats::default(),
-        });
+        let shared = Shared::new(impairment);
         let s = shared.clone();
         std::thread::Builder::new()
             .name("relay udp".into())
@@ -210,8 +209,11 @@ impl Relay {
 
     /// Cuts the link for `duration` from now (TCP: held back; UDP: dropped).
     pub fn cut_for(&self, duration: Duration) {
-        *self.shared.cut_until.lock().unwrap_or_else(|e| e.into_inner()) =
-            Some(Instant::now() + duration);
+        *self
+            .shared
+            .cut_until
+            .lock()
+            .unwrap_or_else(|e| e.into_inner()) = Some(Instant::now() + duration);
     }
 
     /// The counters.
@@ -255,7 +257,8 @@ fn pump_tcp(mut from: TcpStream, mut to: TcpStream, shared: Arc<Shared>, seed: u
                 let extra = imp.delay_s + imp.jitter_s * rng.next_f64();
                 let mut due = (arrived + Duration::from_secs_f64(extra)).max(last_due);
                 if let Some(bps) = imp.bandwidth_bps {
-                    due = due.max(last_due + Duration::from_secs_f64(chunk.len() as f64 * 8.0 / bps));
+                    due =
+                        due.max(last_due + Duration::from_secs_f64(chunk.len() as f64 * 8.0 / bps));
                 }
                 std::thread::sleep(due.saturating_duration_since(Instant::now()));
                 while let Some(until) = shared.cut_until() {
@@ -266,7 +269,10 @@ fn pump_tcp(mut from: TcpStream, mut to: TcpStream, shared: Arc<Shared>, seed: u
                     let _ = to.shutdown(std::net::Shutdown::Both);
                     break;
                 }
-                shared.stats.bytes.fetch_add(chunk.len() as u64, Ordering::Relaxed);
+                shared
+                    .stats
+                    .bytes
+                    .fetch_add(chunk.len() as u64, Ordering::Relaxed);
                 shared.stats.packets.fetch_add(1, Ordering::Relaxed);
             }
             let _ = to.shutdown(std::net::Shutdown::Both);
@@ -318,11 +324,9 @@ fn schedule(shared: &Shared, rng: &mut Rng, len: usize, last: &mut Instant) -> O
 fn udp_sender(rx: Receiver<Due>, shared: Arc<Shared>, send: impl Fn(&[u8])) {
     let mut heap = BinaryHeap::new();
     loop {
-        let wait = heap
-            .peek()
-            .map_or(Duration::from_millis(50), |d: &Due| {
-                d.at.saturating_duration_since(Instant::now())
-            });
+        let wait = heap.peek().map_or(Duration::from_millis(50), |d: &Due| {
+            d.at.saturating_duration_since(Instant::now())
+        });
         match rx.recv_timeout(wait) {
             Ok(d) => heap.push(d),
             Err(RecvTimeoutError::Timeout) => {}
@@ -332,7 +336,10 @@ fn udp_sender(rx: Receiver<Due>, shared: Arc<Shared>, send: impl Fn(&[u8])) {
         while heap.peek().is_some_and(|d| d.at <= Instant::now()) {
             if let Some(d) = heap.pop() {
                 send(&d.data);
-                shared.stats.bytes.fetch_add(d.data.len() as u64, Ordering::Relaxed);
+                shared
+                    .stats
+                    .bytes
+                    .fetch_add(d.data.len() as u64, Ordering::Relaxed);
                 shared.stats.packets.fetch_add(1, Ordering::Relaxed);
             }
         }
@@ -390,10 +397,13 @@ fn udp_front(front: UdpSocket, upstream: SocketAddr, shared: Arc<Shared>) {
                         })
                     });
                 let s = shared.clone();
+                // Each client's replies get a stream of their own (the same seed would drop
+                // every new client's first reply alike).
+                let stream = 0x5555 + clients.len() as u64;
                 let _ = std::thread::Builder::new()
                     .name("relay udp back".into())
                     .spawn(move || {
-                        let mut rng = Rng(s.impairment().seed ^ 0x5555);
+                        let mut rng = Rng(s.impairment().seed ^ stream.wrapping_mul(0x9E37_79B9));
                         let mut last = Instant::now();
                         let mut seq = 0u64;
                         let mut buf = vec![0u8; 65536];
@@ -478,7 +488,10 @@ mod tests {
         relay.set(Impairment::default());
         relay.cut_for(Duration::from_millis(300));
         let rtt = round_trip(&relay);
-        assert!(rtt >= Duration::from_millis(250), "{rtt:?}: held through the cut");
+        assert!(
+            rtt >= Duration::from_millis(250),
+            "{rtt:?}: held through the cut"
+        );
         assert!(relay.stats().bytes.load(Ordering::Relaxed) >= 16);
     }
 

@@ -22,7 +22,8 @@ pub mod site;
 pub use config::{Credentials, NetConfig, Role, TlsFiles};
 pub use keys::Keys;
 pub use site::{
-    ClockOffset, FrameSender, OperatorInbox, OperatorSite, RobotInbox, RobotSite, Router, SiteClock,
+    ClockOffset, FrameSender, OperatorInbox, OperatorSite, ReceivedFrame, RobotInbox, RobotSite,
+    Router, SiteClock,
 };
 
 /// What can go wrong on the network; each names the message, setting or key.
@@ -61,7 +62,9 @@ pub enum NetError {
         message: String,
     },
     /// No robot site answered.
-    #[error("no robot site answered on '{key}' within {waited_s:.1} s (is `avatarm serve` running, the endpoint right, the credentials accepted?)")]
+    #[error(
+        "no robot site answered on '{key}' within {waited_s:.1} s (is `avatarm serve` running, the endpoint right, the credentials accepted?)"
+    )]
     NoRobotSite {
         /// The key asked.
         key: String,

@@ -154,7 +154,11 @@ impl JointStatesMsg {
             ));
         }
         let finite = self.stamp_s.is_finite()
-            && self.positions.iter().chain(&self.velocities).all(|v| v.is_finite())
+            && self
+                .positions
+                .iter()
+                .chain(&self.velocities)
+                .all(|v| v.is_finite())
             && self.object.is_none_or(|o| o.iter().all(|v| v.is_finite()));
         if !finite {
             return bad("a value is not finite".into());
@@ -429,13 +433,35 @@ mod tests {
         let cases: Vec<(Vec<u8>, &str)> = vec![
             (b"not json".to_vec(), "not a message"),
             (vec![b' '; MAX_TARGET_BYTES + 1], "more than"),
-            (text.replacen("\"v\":1", "\"v\":2", 1).into_bytes(), "version 2"),
+            (
+                text.replacen("\"v\":1", "\"v\":2", 1).into_bytes(),
+                "version 2",
+            ),
             (text.replacen("\"v\":1,", "", 1).into_bytes(), "no version"),
-            (text.replacen("\"squeeze_n\":3.5", "\"squeeze_n\":-1.0", 1).into_bytes(), "squeeze_n"),
-            (text.replacen("\"position\":[0.6", "\"position\":[60.0", 1).into_bytes(), "position"),
-            (text.replacen("\"rank\":6", "\"rank\":7", 1).into_bytes(), "rank"),
-            (text.replacen("\"held\":true", "\"held\":true,\"extra\":1", 1).into_bytes(), "unknown field"),
-            (text.replacen("\"squeeze_n\":3.5", "\"squeeze_n\":1e999", 1).into_bytes(), ""),
+            (
+                text.replacen("\"squeeze_n\":3.5", "\"squeeze_n\":-1.0", 1)
+                    .into_bytes(),
+                "squeeze_n",
+            ),
+            (
+                text.replacen("\"position\":[0.6", "\"position\":[60.0", 1)
+                    .into_bytes(),
+                "position",
+            ),
+            (
+                text.replacen("\"rank\":6", "\"rank\":7", 1).into_bytes(),
+                "rank",
+            ),
+            (
+                text.replacen("\"held\":true", "\"held\":true,\"extra\":1", 1)
+                    .into_bytes(),
+                "unknown field",
+            ),
+            (
+                text.replacen("\"squeeze_n\":3.5", "\"squeeze_n\":1e999", 1)
+                    .into_bytes(),
+                "",
+            ),
         ];
         for (bytes, says) in cases {
             let e = decode_target(&bytes).expect_err("refused");
@@ -478,6 +504,9 @@ mod tests {
             object: None,
         };
         let e = decode_joint_states(&encode("j", &j).expect("encodes")).expect_err("refused");
-        assert!(e.to_string().contains("9 positions and 8 velocities"), "{e}");
+        assert!(
+            e.to_string().contains("9 positions and 8 velocities"),
+            "{e}"
+        );
     }
 }

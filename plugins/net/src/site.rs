@@ -16,6 +16,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
+use zenoh::Session;
 use zenoh::Wait;
 use zenoh::handlers::FifoChannelHandler;
 use zenoh::liveliness::LivelinessToken;
@@ -23,15 +24,14 @@ use zenoh::pubsub::{Publisher, Subscriber};
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::query::Queryable;
 use zenoh::sample::{Sample, SampleKind};
-use zenoh::Session;
 
+use crate::NetError;
 use crate::config::NetConfig;
 use crate::keys::Keys;
 use crate::msg::{
     self, FrameHeader, HandMsg, JointStatesMsg, PROTOCOL_VERSION, RobotInfo, RobotStatusMsg,
     TargetMsg,
 };
-use crate::NetError;
 
 /// How many messages of a stream wait to be polled; beyond, Zenoh's handler blocks its
 /// thread briefly (the stream's own congestion control applies upstream).
@@ -99,7 +99,10 @@ fn publisher(
         .map_err(|e| zerr(&key, e))
 }
 
-fn subscriber(session: &Session, key: String) -> Result<Subscriber<FifoChannelHandler<Sample>>, NetError> {
+fn subscriber(
+    session: &Session,
+    key: String,
+) -> Result<Subscriber<FifoChannelHandler<Sample>>, NetError> {
     session
         .declare_subscriber(key.clone())
         .with(zenoh::handlers::FifoChannel::new(QUEUE))
@@ -246,7 +249,9 @@ impl RobotSite {
             inbox.operator_changed = Some(inbox.operator_present);
         }
         for s in drain(&self.targets) {
-            inbox.targets.push(msg::decode_target(&s.payload().to_bytes()));
+            inbox
+                .targets
+                .push(msg::decode_target(&s.payload().to_bytes()));
         }
         inbox
     }
@@ -315,6 +320,18 @@ pub struct ClockOffset {
     pub rtt_s: f64,
 }
 
+/// A coded frame as received: its header, the coded image, and when it arrived (s, the robot
+/// site's clock as estimated).
+#[derive(Debug, Clone)]
+pub struct ReceivedFrame {
+    /// The header.
+    pub header: FrameHeader,
+    /// The coded image.
+    pub payload: Vec<u8>,
+    /// Arrival (s, robot clock).
+    pub received_s: f64,
+}
+
 /// What an operator or observer received since the last poll.
 #[derive(Debug, Default)]
 pub struct OperatorInbox {
@@ -322,8 +339,8 @@ pub struct OperatorInbox {
     pub joint_states: Vec<Result<JointStatesMsg, NetError>>,
     /// Status messages.
     pub status: Vec<Result<RobotStatusMsg, NetError>>,
-    /// Erased frames: header, coded image, when received (s, robot clock).
-    pub frames: Vec<Result<(FrameHeader, Vec<u8>, f64), NetError>>,
+    /// Erased frames, checked.
+    pub frames: Vec<Result<ReceivedFrame, NetError>>,
     /// The operator's hand (observers).
     pub hands: Vec<Result<HandMsg, NetError>>,
 }
@@ -376,7 +393,9 @@ impl OperatorSite {
                 None => std::thread::sleep(Duration::from_millis(100)),
             }
         };
-        let offset = Arc::new(std::sync::Mutex::new(estimate_offset(&session, &keys, &local, 9)?));
+        let offset = Arc::new(std::sync::Mutex::new(estimate_offset(
+            &session, &keys, &local, 9,
+        )?));
         let operator = config.role == crate::Role::Operator;
         let token = if operator {
             Some(
@@ -446,7 +465,10 @@ impl OperatorSite {
     /// Publishes the operator's hand.
     pub fn publish_hand(&self, m: &HandMsg) -> Result<(), NetError> {
         let bytes = msg::encode("hand", m)?;
-        self.hand.put(bytes).wait().map_err(|e| zerr(&self.keys.hand(), e))
+        self.hand
+            .put(bytes)
+            .wait()
+            .map_err(|e| zerr(&self.keys.hand(), e))
     }
 
     /// Publishes raw bytes on the target key: for tests of the robot site's checks (a
@@ -474,14 +496,19 @@ impl OperatorSite {
                 .iter()
                 .map(|s| {
                     let payload = s.payload().to_bytes().into_owned();
-                    let header = s.attachment().map(|a| a.to_bytes().into_owned()).ok_or_else(
-                        || NetError::Invalid {
+                    let header = s
+                        .attachment()
+                        .map(|a| a.to_bytes().into_owned())
+                        .ok_or_else(|| NetError::Invalid {
                             what: "frame".into(),
                             message: "no header attached".into(),
-                        },
-                    )?;
-                    let h = msg::decode_frame_header(&header, payload.len())?;
-                    Ok((h, payload, now))
+                        })?;
+                    let header = msg::decode_frame_header(&header, payload.len())?;
+                    Ok(ReceivedFrame {
+                        header,
+                        payload,
+                        received_s: now,
+                    })
                 })
                 .collect(),
             hands: drain(&self.hands)
@@ -493,7 +520,8 @@ impl OperatorSite {
 
     /// Leaves the session (the robot site sees the operator's token go).
     pub fn close(self) {
-        self.refresh.store(true, std::sync::atomic::Ordering::Relaxed);
+        self.refresh
+            .store(true, std::sync::atomic::Ordering::Relaxed);
         let _ = self.session.close().wait();
     }
 }

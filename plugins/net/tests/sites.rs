@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 use avatarm_core::teleop::mapping::OperatorTarget;
 use avatarm_net::msg::{PROTOCOL_VERSION, RobotInfo, TargetMsg};
 use avatarm_net::{
-    Credentials, Keys, NetConfig, NetError, OperatorSite, Role, RobotInbox, RobotSite, SiteClock,
+    Credentials, Keys, NetConfig, NetError, OperatorSite, RobotInbox, RobotSite, Role, SiteClock,
 };
 use nalgebra::{Isometry3, Vector6};
 
@@ -35,8 +35,16 @@ fn config(role: Role, endpoint: &str, site: &str) -> NetConfig {
     NetConfig {
         role,
         keys: Keys::new(site).expect("a site name"),
-        listen: if listens { vec![endpoint.into()] } else { vec![] },
-        connect: if listens { vec![] } else { vec![endpoint.into()] },
+        listen: if listens {
+            vec![endpoint.into()]
+        } else {
+            vec![]
+        },
+        connect: if listens {
+            vec![]
+        } else {
+            vec![endpoint.into()]
+        },
         credentials: None,
         dictionary: None,
         operators: vec![],
@@ -80,26 +88,41 @@ fn an_operator_joins_estimates_the_clock_and_its_targets_arrive_checked() {
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
     let clock = SiteClock::start();
     std::thread::sleep(Duration::from_millis(300));
-    let mut robot =
-        RobotSite::open(&config(Role::RobotSite, &endpoint, "t1"), &info(PROTOCOL_VERSION), clock)
-            .expect("the robot site opens");
-    let operator = OperatorSite::join(&config(Role::Operator, &endpoint, "t1"), Duration::from_secs(5))
-        .expect("joins");
+    let mut robot = RobotSite::open(
+        &config(Role::RobotSite, &endpoint, "t1"),
+        &info(PROTOCOL_VERSION),
+        clock,
+    )
+    .expect("the robot site opens");
+    let operator = OperatorSite::join(
+        &config(Role::Operator, &endpoint, "t1"),
+        Duration::from_secs(5),
+    )
+    .expect("joins");
     assert_eq!(operator.info().scene, "pouring");
     // The robot's clock started 0.3 s before the operator's: the offset says so, to within
     // half the round trip.
     let offset = operator.offset();
     assert!(offset.rtt_s < 0.05, "{offset:?}");
-    assert!((offset.offset_s - 0.3).abs() < 0.05 + offset.rtt_s, "{offset:?}");
+    assert!(
+        (offset.offset_s - 0.3).abs() < 0.05 + offset.rtt_s,
+        "{offset:?}"
+    );
     let now = operator.robot_now_s();
-    assert!((now - clock.now_s()).abs() < 0.02, "{now} vs {}", clock.now_s());
+    assert!(
+        (now - clock.now_s()).abs() < 0.02,
+        "{now} vs {}",
+        clock.now_s()
+    );
     for seq in 0..5 {
         operator
             .publish_target(&TargetMsg::new(seq, &target(now), now, true))
             .expect("sent");
     }
     // Malformed, foreign and out-of-range targets arrive refused, each with its reason.
-    operator.publish_raw_target(b"{\"v\":1,".to_vec()).expect("sent");
+    operator
+        .publish_raw_target(b"{\"v\":1,".to_vec())
+        .expect("sent");
     let mut foreign = TargetMsg::new(9, &target(now), now, true);
     foreign.v = PROTOCOL_VERSION + 1;
     operator
@@ -114,7 +137,10 @@ fn an_operator_joins_estimates_the_clock_and_its_targets_arrive_checked() {
         .publish_raw_target(vec![b'x'; 100_000])
         .expect("sent");
     let inbox = collect(&mut robot, |i| i.targets.len() >= 9 && i.operator_present);
-    assert!(inbox.operator_present, "the operator's liveliness token is seen");
+    assert!(
+        inbox.operator_present,
+        "the operator's liveliness token is seen"
+    );
     assert_eq!(inbox.targets.len(), 9);
     let ok: Vec<u64> = inbox
         .targets
@@ -147,13 +173,22 @@ fn a_robot_site_of_another_protocol_version_is_refused_by_name() {
         SiteClock::start(),
     )
     .expect("opens");
-    let e = OperatorSite::join(&config(Role::Operator, &endpoint, "t2"), Duration::from_secs(5))
-        .err()
-        .expect("refused");
+    let e = OperatorSite::join(
+        &config(Role::Operator, &endpoint, "t2"),
+        Duration::from_secs(5),
+    )
+    .err()
+    .expect("refused");
     assert!(matches!(e, NetError::Version { .. }), "{e}");
     let text = e.to_string();
-    assert!(text.contains(&format!("version {}", PROTOCOL_VERSION + 1)), "{text}");
-    assert!(text.contains(&format!("this build speaks {PROTOCOL_VERSION}")), "{text}");
+    assert!(
+        text.contains(&format!("version {}", PROTOCOL_VERSION + 1)),
+        "{text}"
+    );
+    assert!(
+        text.contains(&format!("this build speaks {PROTOCOL_VERSION}")),
+        "{text}"
+    );
 }
 
 #[test]
@@ -179,8 +214,8 @@ fn only_the_dictionary_s_operator_can_command_the_robot() {
     robot_config.insecure_lan = false;
     robot_config.dictionary = Some(dictionary);
     robot_config.operators = vec!["blair".into()];
-    let mut robot = RobotSite::open(&robot_config, &info(PROTOCOL_VERSION), SiteClock::start())
-        .expect("opens");
+    let mut robot =
+        RobotSite::open(&robot_config, &info(PROTOCOL_VERSION), SiteClock::start()).expect("opens");
     let as_user = |user: Option<(&str, &str)>| {
         let mut c = config(Role::Operator, &endpoint, "t4");
         c.credentials = user.map(|(u, p)| Credentials {
@@ -195,8 +230,11 @@ fn only_the_dictionary_s_operator_can_command_the_robot() {
         assert!(joined.is_err(), "{user:?} must not join");
     }
     // An observer's credentials: it sees the site, but its targets and its token are denied.
-    let watcher = OperatorSite::join(&as_user(Some(("watcher", "just-looking"))), Duration::from_secs(5))
-        .expect("an observer joins");
+    let watcher = OperatorSite::join(
+        &as_user(Some(("watcher", "just-looking"))),
+        Duration::from_secs(5),
+    )
+    .expect("an observer joins");
     let now = watcher.robot_now_s();
     for seq in 0..20 {
         watcher
@@ -204,12 +242,21 @@ fn only_the_dictionary_s_operator_can_command_the_robot() {
             .expect("handed to zenoh");
     }
     let inbox = collect(&mut robot, |_| false);
-    assert!(inbox.targets.is_empty(), "an observer's targets reached the robot");
-    assert!(!inbox.operator_present, "an observer's liveliness token was accepted");
+    assert!(
+        inbox.targets.is_empty(),
+        "an observer's targets reached the robot"
+    );
+    assert!(
+        !inbox.operator_present,
+        "an observer's liveliness token was accepted"
+    );
     watcher.close();
     // The operator's do arrive.
-    let blair = OperatorSite::join(&as_user(Some(("blair", "pour-carefully"))), Duration::from_secs(5))
-        .expect("the operator joins");
+    let blair = OperatorSite::join(
+        &as_user(Some(("blair", "pour-carefully"))),
+        Duration::from_secs(5),
+    )
+    .expect("the operator joins");
     let now = blair.robot_now_s();
     for seq in 0..20 {
         blair

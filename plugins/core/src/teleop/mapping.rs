@@ -237,7 +237,8 @@ impl OperatorTarget {
     /// [`MAX_TARGET_DISTANCE_M`], twists within [`MAX_TARGET_SPEED`], σ in
     /// `0..=`[`MAX_SQUEEZE_N`], a unit rotation, rank ≤ 6); the error names the field.
     pub fn validate(&self) -> crate::Result<()> {
-        let field = |name: &str, message: String| Err(bad_input(format!("target {name}: {message}")));
+        let field =
+            |name: &str, message: String| Err(bad_input(format!("target {name}: {message}")));
         if !self.stamp_s.is_finite() {
             return field("stamp_s", format!("{} is not finite", self.stamp_s));
         }
@@ -250,16 +251,25 @@ impl OperatorTarget {
         }
         let q = self.target.rotation.quaternion();
         if !q.coords.iter().all(|v| v.is_finite()) || (q.norm() - 1.0).abs() > 1e-6 {
-            return field("rotation", format!("{:?} is not a unit quaternion", q.coords));
+            return field(
+                "rotation",
+                format!("{:?} is not a unit quaternion", q.coords),
+            );
         }
         for (name, t) in [
             ("object_twist", &self.object_twist),
             ("twin_twist", &self.twin_twist),
         ] {
-            if !t.iter().all(|v| v.is_finite() && v.abs() <= MAX_TARGET_SPEED) {
+            if !t
+                .iter()
+                .all(|v| v.is_finite() && v.abs() <= MAX_TARGET_SPEED)
+            {
                 return field(
                     name,
-                    format!("{:?} is not finite or beyond {MAX_TARGET_SPEED}", t.as_slice()),
+                    format!(
+                        "{:?} is not finite or beyond {MAX_TARGET_SPEED}",
+                        t.as_slice()
+                    ),
                 );
             }
         }

@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# The erased video's latency by stage at 0, 50 and 150 ms one-way (docs/network.md): the robot
+# site with video, an operator and an observer through `avatarm relay`; the observer's report
+# has each stage. Needs a built target/debug/avatarm. Output: out/network_latency/.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+A=target/debug/avatarm
+S=assets/scenes/pouring.toml
+O=out/network_latency; rm -rf "$O"; mkdir -p "$O"
+port=7600
+for d in 0 50 150; do
+  port=$((port+3))
+  $A serve $S --insecure-lan --listen tcp/127.0.0.1:$port --duration 45 --report $O/serve_$d.json 2>$O/serve_$d.log &
+  sp=$!
+  $A relay --to 127.0.0.1:$port --delay-ms $d --duration 50 > $O/relay_$d.txt &
+  sleep 1
+  rp=$(sed -n 's#^tcp/127.0.0.1:\([0-9]*\) .*#\1#p' $O/relay_$d.txt)
+  $A join tcp/127.0.0.1:$rp --watch --duration 40 --wait 30 --report $O/watch_$d.json 2>$O/watch_$d.log &
+  wp=$!
+  $A join tcp/127.0.0.1:$rp --wait 30 --report $O/join_$d.json 2>$O/join_$d.log
+  wait $wp
+  wait $sp
+  python3 -c "
+import json; v = json.load(open('$O/watch_$d.json'))['video']
+print('$d ms:', ', '.join('%s %.1f/%.1f ms' % (k[:-3], v[k]['median'], v[k]['p95'])
+      for k in ['erase_ms', 'encode_ms', 'network_ms', 'decode_ms', 'total_ms']),
+      '%.1f fps %.2f Mbit/s' % (v['fps'], v['mbit_s']))"
+done
