@@ -197,6 +197,17 @@ impl Collect {
 /// Joins the session and runs until the duration passes. Errors when the robot site does not
 /// answer, speaks another protocol version or runs another scene.
 pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
+    if !(options.wait_s.is_finite() && (0.0..1e6).contains(&options.wait_s)) {
+        return Err(AppError::flag(
+            "--wait",
+            format!("{} s must be >= 0", options.wait_s),
+        ));
+    }
+    if let Some(d) = options.duration_s
+        && !(d.is_finite() && d > 0.0 && d < 1e7)
+    {
+        return Err(AppError::flag("--duration", format!("{d} s must be > 0")));
+    }
     let mut site = OperatorSite::join(&options.net, Duration::from_secs_f64(options.wait_s))?;
     let info = site.info().clone();
     let ours = super::scene_fingerprint(&options.scene)?;

@@ -234,9 +234,20 @@ impl ControlLoop {
         let started = Instant::now();
         let mut tick: u64 = 0;
         let mut last_tick_at: Option<Instant> = None;
+        let mut next_due = started;
+        // When the newest target arrived (s): its twist is fed forward only while it is this
+        // fresh; an older one keeps only its pose, so a lost stream never drives the arm on at
+        // the last velocity until the watchdog.
+        let mut latest_arrival_s = f64::NEG_INFINITY;
+        let fresh_for_s = 3.0 * dt;
         loop {
-            let due = started + self.period.mul_f64(tick as f64);
-            std::thread::sleep(due.saturating_duration_since(Instant::now()));
+            std::thread::sleep(next_due.saturating_duration_since(Instant::now()));
+            // Late by more than a period (the machine stalled): the schedule restarts from now
+            // rather than running the missed ticks back to back.
+            next_due += self.period;
+            if next_due < Instant::now() {
+                next_due = Instant::now() + self.period;
+            }
             tick += 1;
             if stop.load(Ordering::Relaxed) || duration.is_some_and(|d| started.elapsed() >= d) {
                 break;
@@ -289,6 +300,7 @@ impl ControlLoop {
                             hand_stamp_s: m.hand_stamp_s.min(now),
                             hand_tracked: m.hand_tracked,
                         });
+                        latest_arrival_s = now;
                         report.targets_used += 1;
                     }
                     Err(e) => refuse(&mut report, &mut refused, &mut latest, e.to_string()),
@@ -297,7 +309,14 @@ impl ControlLoop {
             if !present {
                 latest = None;
             }
-            let use_target = latest.filter(|_| present && refused.is_none());
+            let use_target = latest
+                .filter(|_| present && refused.is_none())
+                .map(|mut t| {
+                    if now - latest_arrival_s > fresh_for_s {
+                        t.target.object_twist = nalgebra::Vector6::zeros();
+                    }
+                    t
+                });
             if let Some(t) = &use_target {
                 ages.push((now - t.hand_stamp_s) * 1e3);
             }
@@ -560,6 +579,15 @@ pub struct ServeOptions {
     pub target_timeout_s: f64,
 }
 
+/// Sets the flag when dropped.
+struct StopOnDrop(StopFlag);
+
+impl Drop for StopOnDrop {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+}
+
 /// The camera's name on the network (one camera per scene today).
 pub const CAMERA: &str = "desk";
 
@@ -587,6 +615,22 @@ pub fn robot_info(
 /// scene has no task, the robot or the network cannot be set up.
 pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
     let scene = &options.scene;
+    if !(options.target_timeout_s.is_finite() && (0.0..=10.0).contains(&options.target_timeout_s))
+        || options.target_timeout_s == 0.0
+    {
+        return Err(crate::AppError::flag(
+            "--target-timeout",
+            format!("{} s must be > 0 and at most 10", options.target_timeout_s),
+        ));
+    }
+    if let Some(d) = options.duration_s
+        && !(d.is_finite() && d > 0.0 && d < 1e7)
+    {
+        return Err(crate::AppError::flag(
+            "--duration",
+            format!("{d} s must be > 0"),
+        ));
+    }
     let (mut parts, mode) =
         crate::teleop::trial_parts(scene, options.robot, options.mode, 0, "avatarm serve")?;
     parts
@@ -638,8 +682,9 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
         let handle = std::thread::Builder::new()
             .name("control loop".into())
             .spawn(move || {
+                // However the loop ends (a panic included), the video app ends with it.
+                let _stop = StopOnDrop(loop_stop.clone());
                 let report = control.run(&mut site, duration, &loop_stop, Some(tx));
-                loop_stop.store(true, Ordering::Relaxed);
                 (report, site)
             })
             .map_err(|e| crate::AppError::replay(format!("cannot start the control loop: {e}")))?;

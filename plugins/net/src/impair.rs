@@ -3,8 +3,10 @@
 //!
 //! - [`Relay::tcp`]: a TCP proxy. Each direction's bytes are held for the one-way delay plus a
 //!   jitter drawn per chunk (order kept, as TCP keeps it), paced by a bandwidth cap, and held
-//!   back entirely during a cut (TCP's own retransmission does the rest when it ends). No loss:
-//!   a TCP stream cannot lose bytes.
+//!   back entirely during a cut, then delivered. No loss: a TCP stream cannot lose bytes. The
+//!   relay reads the sender's bytes into memory as they come, so the sender never feels
+//!   backpressure from a cut or a cap (a real dead link fills the sender's socket buffer and
+//!   then blocks it).
 //! - [`Relay::udp`]: a UDP forwarder. Each datagram is dropped with the loss probability or
 //!   delayed by the delay plus jitter (datagrams may reorder, as on a real path); a cut drops
 //!   everything.
@@ -50,11 +52,11 @@ impl Default for Impairment {
 impl Impairment {
     /// Checks the numbers; the error names the field.
     pub fn validate(&self) -> Result<(), String> {
-        if !(self.delay_s.is_finite() && self.delay_s >= 0.0) {
-            return Err(format!("delay_s {} must be >= 0", self.delay_s));
+        if !(self.delay_s.is_finite() && (0.0..=60.0).contains(&self.delay_s)) {
+            return Err(format!("delay_s {} must be in 0..=60", self.delay_s));
         }
-        if !(self.jitter_s.is_finite() && self.jitter_s >= 0.0) {
-            return Err(format!("jitter_s {} must be >= 0", self.jitter_s));
+        if !(self.jitter_s.is_finite() && (0.0..=60.0).contains(&self.jitter_s)) {
+            return Err(format!("jitter_s {} must be in 0..=60", self.jitter_s));
         }
         if !(0.0..=1.0).contains(&self.loss) {
             return Err(format!("loss {} must be in 0..=1", self.loss));

@@ -8,7 +8,7 @@
 //! |---|---|---|---|
 //! | targets | real time | yes | drop (the next one is 10 ms away) |
 //! | joint states | interactive high | yes | drop |
-//! | status | data high | no | block (rare, must arrive) |
+//! | status | data high | no | drop (10 Hz; each says everything) |
 //! | erased video | data | no | drop (a late frame is useless) |
 //! | hand | interactive low | yes | drop |
 
@@ -166,12 +166,14 @@ impl RobotSite {
             true,
             CongestionControl::Drop,
         )?;
+        // Drop, not block: this is published from the control loop, which must never wait
+        // for a stalled link (the next status is 0.1 s away and says it all again).
         let status = publisher(
             &session,
             keys.status(),
             Priority::DataHigh,
             false,
-            CongestionControl::Block,
+            CongestionControl::Drop,
         )?;
         let mut frames = Vec::new();
         for camera in &info.cameras {
@@ -526,6 +528,13 @@ impl OperatorSite {
     }
 }
 
+impl Drop for OperatorSite {
+    fn drop(&mut self) {
+        self.refresh
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
 /// How often the operator re-estimates the robot site's clock (clocks drift, paths change).
 pub const OFFSET_REFRESH: Duration = Duration::from_secs(5);
 
@@ -549,7 +558,12 @@ fn refresher(
                 }
                 last = Instant::now();
                 if let Ok(o) = estimate_offset(&session, &keys, &local, 5) {
-                    *offset.lock().unwrap_or_else(|e| e.into_inner()) = o;
+                    let mut current = offset.lock().unwrap_or_else(|e| e.into_inner());
+                    // A worse round trip gives a worse estimate (its queueing is one-sided):
+                    // kept only when close to the one in use.
+                    if o.rtt_s <= current.rtt_s * 1.5 + 0.002 {
+                        *current = o;
+                    }
                 }
             }
         });
