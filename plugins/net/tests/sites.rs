@@ -83,6 +83,29 @@ fn collect(site: &mut RobotSite, enough: impl Fn(&RobotInbox) -> bool) -> RobotI
     all
 }
 
+/// Publishes probe targets until the robot site receives one: a freshly joined session learns
+/// of the robot site's subscription a moment after it opens, and puts before that go nowhere
+/// (a live operator streams targets, so only a test's first burst notices).
+fn until_delivered(operator: &OperatorSite, robot: &mut RobotSite) {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let now = operator.robot_now_s();
+        operator
+            .publish_target(&TargetMsg::new(0, &target(now), now, true))
+            .expect("sent");
+        std::thread::sleep(Duration::from_millis(20));
+        if !robot.poll().targets.is_empty() {
+            std::thread::sleep(Duration::from_millis(50));
+            let _ = robot.poll();
+            return;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no target reached the robot site"
+        );
+    }
+}
+
 #[test]
 fn an_operator_joins_estimates_the_clock_and_its_targets_arrive_checked() {
     let endpoint = format!("tcp/127.0.0.1:{}", free_port());
@@ -235,13 +258,22 @@ fn only_the_dictionary_s_operator_can_command_the_robot() {
         Duration::from_secs(5),
     )
     .expect("an observer joins");
-    let now = watcher.robot_now_s();
-    for seq in 0..20 {
+    // For 2 s, as an operator streams them (longer than a session takes to learn of the
+    // robot site's subscription).
+    let mut inbox = RobotInbox::default();
+    for seq in 0..200 {
+        let now = watcher.robot_now_s();
         watcher
             .publish_target(&TargetMsg::new(seq, &target(now), now, true))
             .expect("handed to zenoh");
+        std::thread::sleep(Duration::from_millis(10));
+        let polled = robot.poll();
+        inbox.operator_present |= polled.operator_present;
+        inbox.targets.extend(polled.targets);
     }
-    let inbox = collect(&mut robot, |_| false);
+    let rest = collect(&mut robot, |_| false);
+    inbox.operator_present |= rest.operator_present;
+    inbox.targets.extend(rest.targets);
     assert!(
         inbox.targets.is_empty(),
         "an observer's targets reached the robot"
@@ -257,6 +289,7 @@ fn only_the_dictionary_s_operator_can_command_the_robot() {
         Duration::from_secs(5),
     )
     .expect("the operator joins");
+    until_delivered(&blair, &mut robot);
     let now = blair.robot_now_s();
     for seq in 0..20 {
         blair
