@@ -1,16 +1,18 @@
 #!/usr/bin/env bash
 # The erased video's latency by stage at 0, 50 and 150 ms one-way (docs/network.md): the robot
 # site with video, an operator and an observer through `avatarm relay`; the observer's report
-# has each stage. Needs a built target/debug/avatarm. Output: out/network_latency/.
+# has each stage. Needs a built target/debug/avatarm. CODEC=h264 codes the video with H.264
+# (default jpeg). Output: out/network_latency_CODEC/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 A=target/debug/avatarm
 S=assets/scenes/pouring.toml
-O=out/network_latency; rm -rf "$O"; mkdir -p "$O"
+codec=${CODEC:-jpeg}
+O=out/network_latency_$codec; rm -rf "$O"; mkdir -p "$O"
 port=7600
 for d in 0 50 150; do
   port=$((port+3))
-  $A serve $S --insecure-lan --listen tcp/127.0.0.1:$port --duration 45 --report $O/serve_$d.json 2>$O/serve_$d.log &
+  $A serve $S --insecure-lan --codec "$codec" --listen tcp/127.0.0.1:$port --duration 45 --report $O/serve_$d.json 2>$O/serve_$d.log &
   sp=$!
   $A relay --to 127.0.0.1:$port --delay-ms $d --duration 50 > $O/relay_$d.txt &
   sleep 1
@@ -24,5 +26,5 @@ for d in 0 50 150; do
 import json; v = json.load(open('$O/watch_$d.json'))['video']
 print('$d ms:', ', '.join('%s %.1f/%.1f ms' % (k[:-3], v[k]['median'], v[k]['p95'])
       for k in ['erase_ms', 'encode_ms', 'network_ms', 'decode_ms', 'total_ms']),
-      '%.1f fps %.2f Mbit/s' % (v['fps'], v['mbit_s']))"
+      '%.1f fps %.2f Mbit/s, %d of %d shown' % (v['fps'], v['mbit_s'], v['shown'], v['frames']))"
 done

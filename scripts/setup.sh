@@ -14,6 +14,8 @@ packages=(
   python3-pip
   # The two-site tests make their TLS certificates with the openssl command.
   openssl
+  # OpenH264's SIMD kernels (the h264 video codec builds without them, several times slower).
+  nasm
 )
 missing=()
 for p in "${packages[@]}"; do

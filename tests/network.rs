@@ -338,3 +338,94 @@ fn over_tls_only_the_authenticated_operator_moves_the_robot() {
     assert!(used > 0.0 && used <= f(&blair, "targets_sent"), "{s}");
     assert_eq!(f(&s, "operator_joins"), 1.0, "{s}");
 }
+
+/// Waits (at most 120 s: the robot site's renderer starts first) until the robot site on
+/// `port` publishes video; watches as an observer in this process.
+fn wait_for_video(port: u16) {
+    let config = avatarm_net::NetConfig {
+        role: avatarm_net::Role::Observer,
+        keys: avatarm_net::Keys::default(),
+        listen: vec![],
+        connect: vec![format!("tcp/127.0.0.1:{port}")],
+        credentials: None,
+        dictionary: None,
+        operators: vec![],
+        tls: None,
+        insecure_lan: true,
+    };
+    let mut probe = avatarm_net::OperatorSite::join(&config, Duration::from_secs(60))
+        .expect("the robot site answers");
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while probe.poll().frames.is_empty() {
+        assert!(Instant::now() < deadline, "no video within 120 s");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    probe.close();
+}
+
+#[test]
+fn h264_video_survives_loss_and_a_late_observer_gets_a_keyframe_on_request() {
+    let dir = out_dir("h264");
+    let (port, udp_port) = (free_port(), free_port());
+    let udp = format!("udp/127.0.0.1:{udp_port}");
+    // Periodic IDR frames every 10 min: every keyframe after the first is a viewer's request.
+    let robot = serve(
+        &dir,
+        port,
+        150.0,
+        &[
+            "--insecure-lan",
+            "--listen",
+            &udp,
+            "--codec",
+            "h264",
+            "--bitrate",
+            "1",
+            "--keyframe-interval",
+            "600",
+        ],
+    );
+    wait_for_video(port);
+    // An observer over UDP through 5 % loss: each lost frame spoils the frames after it until
+    // the keyframe it asks for.
+    let relay = Relay::udp(
+        format!("127.0.0.1:{udp_port}")
+            .parse()
+            .expect("the test's set-up"),
+        Impairment {
+            loss: 0.05,
+            seed: 5,
+            ..Impairment::default()
+        },
+    )
+    .expect("the test's set-up");
+    let lossy = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .arg("join")
+        .arg(format!("udp/{}", relay.local_addr()))
+        .args(["--watch", "--duration", "12", "--report"])
+        .arg(dir.join("lossy.json"))
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(dir.join("lossy.log")).expect("the test's set-up"))
+        .spawn()
+        .expect("the test's set-up");
+    let lossy = finish(lossy, &dir, "lossy");
+    // A late observer: it joins mid-stream, so its first frame refers to frames it never had.
+    let late = join(&dir, "late", port, &["--watch", "--duration", "8"]);
+    let late = finish(late, &dir, "late");
+    let mut robot = robot;
+    let _ = robot.kill();
+    let _ = robot.wait();
+    for (name, v) in [("lossy", &lossy), ("late", &late)] {
+        assert_eq!(v["video"]["codec"], "h264", "{name}: {v}");
+        assert_eq!(f(v, "video.refused"), 0.0, "{name}: {v}");
+        assert!(f(v, "video.shown") >= 5.0, "{name}: {v}");
+    }
+    assert!(f(&late, "video.keyframe_requests") >= 1.0, "{late}");
+    assert!(f(&late, "video.waiting_for_keyframe") >= 1.0, "{late}");
+    // Every frame lost or spoiled was asked for again, and pictures came back after it.
+    if f(&lossy, "video.lost") > 0.0 {
+        assert!(f(&lossy, "video.keyframe_requests") >= 1.0, "{lossy}");
+    }
+    let log = std::fs::read_to_string(dir.join("late.log")).expect("the test's set-up");
+    assert!(log.contains("asking for a keyframe"), "{log}");
+}

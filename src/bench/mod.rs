@@ -11,6 +11,9 @@
 //!   plain copy of the same images (the floor) measured in the same run.
 //! - [`network`]: the pouring task across two sites through the impairment relay: object RMSE
 //!   against one-way delay and loss, with the paper's RMSE as a line.
+//! - [`video`]: the erased video's codecs (JPEG qualities, H.264 bit rates) at several frame
+//!   sizes: PSNR after coding against bit rate, encode and decode time, as ratios against
+//!   JPEG at quality 85 measured in the same run.
 //! - [`chart`]: what all share: the Pareto front and the charts' house style.
 
 pub mod chart;
@@ -19,3 +22,4 @@ pub mod dr;
 pub mod gpu;
 pub mod network;
 pub mod twin;
+pub mod video;

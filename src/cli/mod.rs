@@ -295,6 +295,19 @@ enum Command {
         /// Render, erase and publish the camera's video: on or off (the control loop alone).
         #[arg(long, value_name = "on|off", value_parser = on_off)]
         video: Option<bool>,
+        /// The video's codec: jpeg (each frame stands alone) or h264 (OpenH264, Constrained
+        /// Baseline; IDR frames periodically and when a viewer asks after a loss).
+        #[arg(long, value_name = "CODEC", value_parser = ["jpeg", "h264"], default_value = "jpeg")]
+        codec: String,
+        /// JPEG quality (1-100).
+        #[arg(long = "jpeg-quality", value_name = "Q", default_value_t = 85)]
+        jpeg_quality: u8,
+        /// H.264 target bit rate (Mbit/s).
+        #[arg(long, value_name = "MBIT_S", default_value_t = 2.0)]
+        bitrate: f64,
+        /// Seconds between periodic H.264 IDR frames.
+        #[arg(long = "keyframe-interval", value_name = "S", default_value_t = 2.0)]
+        keyframe_interval: f64,
         /// Stop after this many seconds (default: until killed).
         #[arg(long, value_name = "S")]
         duration: Option<f64>,
@@ -526,6 +539,36 @@ enum BenchCommand {
         #[arg(long = "package-path", value_name = "DIR")]
         package_path: Vec<PathBuf>,
     },
+    /// The erased video's codecs (docs/network.md): a recording's erased frames (`avatarm
+    /// replay SCENE --record`) coded with JPEG and H.264 at each frame size; PSNR after
+    /// coding against bit rate, encode and decode time, as ratios against JPEG at quality 85.
+    /// CSV, SVG, PNG.
+    Video {
+        /// The recording (MCAP): its erased frames, else its camera frames.
+        #[arg(long, value_name = "FILE.mcap")]
+        recording: PathBuf,
+        /// Output folder.
+        #[arg(long, value_name = "DIR", default_value = "out/bench_video")]
+        out: PathBuf,
+        /// Frame sizes, WIDTHxHEIGHT (the frames are cropped to each aspect and scaled).
+        #[arg(long, value_delimiter = ',', value_parser = frame_size, default_values = ["640x480", "1280x720"])]
+        sizes: Vec<(u32, u32)>,
+        /// JPEG qualities.
+        #[arg(long, value_delimiter = ',', default_values_t = [50u8, 70, 85, 95])]
+        jpeg: Vec<u8>,
+        /// H.264 target bit rates (Mbit/s).
+        #[arg(long, value_delimiter = ',', default_values_t = [0.5, 1.0, 2.0, 4.0, 8.0])]
+        h264: Vec<f64>,
+        /// The camera's frame rate (Hz).
+        #[arg(long, value_name = "HZ", default_value_t = 30.0)]
+        fps: f64,
+        /// Seconds between H.264 IDR frames.
+        #[arg(long = "keyframe-interval", value_name = "S", default_value_t = 2.0)]
+        keyframe_interval: f64,
+        /// Frames coded (the recording's first; looped when it has fewer).
+        #[arg(long, value_name = "N", default_value_t = 90)]
+        frames: usize,
+    },
 }
 
 fn packages(dirs: Vec<PathBuf>) -> PackagePath {
@@ -632,6 +675,10 @@ fn run(cli: Cli) -> Result<(), AppError> {
             mode,
             target_timeout,
             video,
+            codec,
+            jpeg_quality,
+            bitrate,
+            keyframe_interval,
             duration,
             report,
             package_path,
@@ -640,6 +687,13 @@ fn run(cli: Cli) -> Result<(), AppError> {
             crate::net::init_log();
             let path = scene.unwrap_or_else(pouring_scene);
             let scene = Scene::load(&path, &packages(package_path))?;
+            let encoder = crate::net::encoder_settings(
+                &codec,
+                jpeg_quality,
+                bitrate,
+                keyframe_interval,
+                scene.file.camera.fps,
+            )?;
             let options = crate::net::serve::ServeOptions {
                 net: net.config(avatarm_net::Role::RobotSite, listen, Vec::new())?,
                 scene,
@@ -653,6 +707,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 report,
                 video: video.unwrap_or(true),
                 target_timeout_s: target_timeout,
+                encoder,
             };
             let r = crate::net::serve::serve(&options)?;
             println!("{}", crate::net::serve::summary(&r));
@@ -1395,6 +1450,70 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     stops,
                     age,
                     failed
+                );
+            }
+            println!(
+                "wrote {}, {} and {}",
+                outputs.csv.display(),
+                outputs.svg.display(),
+                outputs.png.display()
+            );
+            Ok(())
+        }
+        Command::Bench(BenchCommand::Video {
+            recording,
+            out,
+            sizes,
+            jpeg,
+            h264,
+            fps,
+            keyframe_interval,
+            frames,
+        }) => {
+            let sweep = crate::bench::video::VideoSweep {
+                sizes,
+                jpeg_qualities: jpeg,
+                h264_mbit_s: h264,
+                fps,
+                keyframe_interval_s: keyframe_interval,
+                frames,
+                progress: true,
+            };
+            let sources = crate::bench::video::source_frames(&recording, frames)?;
+            let outputs = crate::bench::video::run_video(&sources, &sweep, &out)?;
+            println!("{} frames from {}", sweep.frames, recording.display());
+            println!(
+                "{:<7} {:<10} {:<5} {:>7} {:>8} {:>7} {:>8} {:>8} {:>8} {:>8} {:>7} {:>8} {:>5}",
+                "source",
+                "size",
+                "codec",
+                "setting",
+                "Mbit/s",
+                "x jpeg",
+                "key kB",
+                "delta kB",
+                "enc ms",
+                "dec ms",
+                "PSNR",
+                "min PSNR",
+                "skip"
+            );
+            for p in &outputs.points {
+                println!(
+                    "{:<7} {:<10} {:<5} {:>7} {:>8.2} {:>7.3} {:>8.1} {:>8.1} {:>8.2} {:>8.2} {:>7.2} {:>8.2} {:>5}",
+                    p.source,
+                    format!("{}x{}", p.width, p.height),
+                    p.codec,
+                    p.setting,
+                    p.mbit_s,
+                    p.rate_ratio,
+                    p.keyframe_kb,
+                    p.delta_kb,
+                    p.encode_ms.median,
+                    p.decode_ms.median,
+                    p.psnr_db,
+                    p.psnr_min_db,
+                    p.skipped
                 );
             }
             println!(

@@ -54,8 +54,21 @@ pub struct JoinOptions {
 pub struct VideoLatency {
     /// Frames received.
     pub frames: u64,
+    /// The codec of the last frame (`jpeg` or `h264`).
+    pub codec: String,
     /// Frames refused (bad header or image).
     pub refused: u64,
+    /// Frames decoded and shown.
+    pub shown: u64,
+    /// Keyframes received.
+    pub keyframes: u64,
+    /// H.264 frames not shown for want of a keyframe (joined mid-stream, or a frame they
+    /// refer to was lost).
+    pub waiting_for_keyframe: u64,
+    /// Keyframes asked of the robot site.
+    pub keyframe_requests: u64,
+    /// Frame numbers missing from the stream (lost on the way).
+    pub lost: u64,
     /// Coded bytes received.
     pub bytes: u64,
     /// Frames received per second.
@@ -113,9 +126,21 @@ pub struct JoinReport {
     pub joint_state_age_ms: Spread,
 }
 
+/// The least time between two keyframe requests of one camera (s).
+const KEYFRAME_REQUEST_INTERVAL_S: f64 = 0.5;
+
+/// One camera's decoding state at the viewer.
+#[derive(Default)]
+struct CameraView {
+    decoder: avatarm_net::codec::VideoDecoder,
+    last_seq: Option<u64>,
+    last_request: Option<Instant>,
+}
+
 #[derive(Default)]
 struct Collect {
     report: JoinReport,
+    cameras: std::collections::BTreeMap<String, CameraView>,
     erase: Vec<f64>,
     encode: Vec<f64>,
     network: Vec<f64>,
@@ -125,7 +150,7 @@ struct Collect {
 }
 
 impl Collect {
-    fn take(&mut self, inbox: OperatorInbox, robot_now: f64) {
+    fn take(&mut self, site: &OperatorSite, inbox: OperatorInbox, robot_now: f64) {
         let r = &mut self.report;
         for j in inbox.joint_states {
             match j {
@@ -161,20 +186,47 @@ impl Collect {
                 r.video.refused += 1;
                 continue;
             };
+            r.video.frames += 1;
+            r.video.bytes += payload.len() as u64;
+            r.video.keyframes += u64::from(h.keyframe);
+            r.video.codec.clone_from(&h.codec);
+            let view = self.cameras.entry(h.camera.clone()).or_default();
+            if let Some(last) = view.last_seq
+                && h.seq > last + 1
+            {
+                r.video.lost += h.seq - last - 1;
+            }
+            view.last_seq = Some(view.last_seq.map_or(h.seq, |l| l.max(h.seq)));
             let started = Instant::now();
-            let decoded = image::load_from_memory_with_format(&payload, image::ImageFormat::Jpeg);
+            let decoded = view.decoder.decode(&h, &payload);
             let decode_ms = started.elapsed().as_secs_f64() * 1e3;
             match decoded {
-                Ok(img) if img.width() == h.width && img.height() == h.height => {
-                    r.video.frames += 1;
-                    r.video.bytes += payload.len() as u64;
+                Ok(avatarm_net::codec::Decoded::Image { .. }) => {
+                    r.video.shown += 1;
                     self.erase.push((h.erased_s - h.capture_s) * 1e3);
                     self.encode.push((h.sent_s - h.erased_s) * 1e3);
                     self.network.push((received - h.sent_s) * 1e3);
                     self.decode.push(decode_ms);
                     self.total.push((received - h.capture_s) * 1e3 + decode_ms);
                 }
-                _ => r.video.refused += 1,
+                Ok(avatarm_net::codec::Decoded::NeedKeyframe { reason }) => {
+                    r.video.waiting_for_keyframe += 1;
+                    let due = view
+                        .last_request
+                        .is_none_or(|t| t.elapsed().as_secs_f64() >= KEYFRAME_REQUEST_INTERVAL_S);
+                    if due {
+                        view.last_request = Some(Instant::now());
+                        r.video.keyframe_requests += 1;
+                        info!("video '{}': {reason}; asking for a keyframe", h.camera);
+                        if let Err(e) = site.request_keyframe(&h.camera) {
+                            warn!("video '{}': {e}", h.camera);
+                        }
+                    }
+                }
+                Err(e) => {
+                    r.video.refused += 1;
+                    warn!("video: {e}");
+                }
             }
         }
     }
@@ -244,7 +296,7 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
             std::thread::sleep(Duration::from_millis(5));
             let now = site.robot_now_s();
             let inbox = site.poll();
-            collect.take(inbox, now);
+            collect.take(&site, inbox, now);
         }
     } else {
         collect.report.role = "operator".into();
@@ -388,7 +440,7 @@ fn operate_with(
             }
         }
         let inbox = site.poll();
-        collect.take(inbox, robot_now);
+        collect.take(site, inbox, robot_now);
     }
     Ok(())
 }

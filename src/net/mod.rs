@@ -91,6 +91,35 @@ impl NetArgs {
     }
 }
 
+/// The robot site's video coding from the command line: `codec` (`jpeg` or `h264`), JPEG
+/// quality (1-100), H.264 bit rate (Mbit/s) and keyframe interval (s), at the camera's `fps`.
+/// Errors name the flag.
+pub fn encoder_settings(
+    codec: &str,
+    jpeg_quality: u8,
+    bitrate_mbit_s: f64,
+    keyframe_interval_s: f64,
+    fps: f64,
+) -> Result<avatarm_net::codec::EncoderSettings, AppError> {
+    let codec = avatarm_net::codec::Codec::from_name(codec)
+        .ok_or_else(|| AppError::flag("--codec", format!("'{codec}' must be jpeg or h264")))?;
+    if !(bitrate_mbit_s.is_finite() && (0.01..=200.0).contains(&bitrate_mbit_s)) {
+        return Err(AppError::flag(
+            "--bitrate",
+            format!("{bitrate_mbit_s} Mbit/s must be 0.01..=200"),
+        ));
+    }
+    let settings = avatarm_net::codec::EncoderSettings {
+        codec,
+        jpeg_quality,
+        bitrate_bps: (bitrate_mbit_s * 1e6).round() as u32,
+        fps: fps.clamp(1.0, 240.0) as f32,
+        keyframe_interval_s,
+    };
+    settings.validate()?;
+    Ok(settings)
+}
+
 /// The scene's fingerprint: its file's text, hashed (both sites must run the same scene).
 pub fn scene_fingerprint(scene: &Scene) -> Result<String, AppError> {
     let text = std::fs::read(&scene.path).map_err(|source| AppError::Io {

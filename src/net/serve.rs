@@ -152,6 +152,16 @@ pub struct ServeReport {
     pub nan_commands: u64,
     /// Erased frames published.
     pub video_frames: u64,
+    /// The video's codec (`jpeg` or `h264`).
+    pub video_codec: String,
+    /// Of the frames, keyframes (every JPEG; H.264 IDR frames).
+    pub video_keyframes: u64,
+    /// H.264 IDR frames forced by viewers' requests.
+    pub video_forced_keyframes: u64,
+    /// Frames the encoder refused.
+    pub video_encode_errors: u64,
+    /// Frames H.264's rate control skipped to hold the bit rate.
+    pub video_skipped: u64,
 }
 
 /// The robot site's control loop, built before it runs.
@@ -577,6 +587,8 @@ pub struct ServeOptions {
     pub video: bool,
     /// The watchdog's timeout on the operator's targets (s).
     pub target_timeout_s: f64,
+    /// How the video is coded.
+    pub encoder: avatarm_net::codec::EncoderSettings,
 }
 
 /// Sets the flag when dropped.
@@ -631,6 +643,10 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
             format!("{d} s must be > 0"),
         ));
     }
+    options
+        .encoder
+        .validate()
+        .map_err(|e| crate::AppError::flag("--codec", e.to_string()))?;
     let (mut parts, mode) =
         crate::teleop::trial_parts(scene, options.robot, options.mode, 0, "avatarm serve")?;
     parts
@@ -675,9 +691,10 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
             camera: CAMERA.to_owned(),
             clock,
             stop: stop.clone(),
-            published: Arc::new(std::sync::atomic::AtomicU64::new(0)),
+            encoder: options.encoder,
+            counters: Arc::default(),
         };
-        let published = video.published.clone();
+        let counters = video.counters.clone();
         let loop_stop = stop.clone();
         let handle = std::thread::Builder::new()
             .name("control loop".into())
@@ -695,7 +712,12 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
             .join()
             .map_err(|_| crate::AppError::replay("the control loop panicked"))?;
         ran?;
-        report.video_frames = published.load(Ordering::Relaxed);
+        report.video_frames = counters.published.load(Ordering::Relaxed);
+        report.video_codec = options.encoder.codec.name().into();
+        report.video_keyframes = counters.keyframes.load(Ordering::Relaxed);
+        report.video_forced_keyframes = counters.forced_keyframes.load(Ordering::Relaxed);
+        report.video_encode_errors = counters.encode_errors.load(Ordering::Relaxed);
+        report.video_skipped = counters.skipped.load(Ordering::Relaxed);
         (report, site)
     } else {
         let report = control.run(&mut site, duration, &stop, None);
@@ -713,7 +735,7 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
 pub fn summary(r: &ServeReport) -> String {
     format!(
         "robot site: {:.1} s, {} ticks, {} targets used ({} refused, {} stale), {} stops, \
-         position RMSE {} (as received {}), real lift {:.0} mm, {} video frames",
+         position RMSE {} (as received {}), real lift {:.0} mm, {} video frames ({}, {} keyframes)",
         r.duration_s,
         r.ticks,
         r.targets_used,
@@ -727,6 +749,12 @@ pub fn summary(r: &ServeReport) -> String {
             .pos_rmse_as_received_m
             .map_or("-".into(), |v| format!("{:.1} mm", v * 1e3)),
         r.trial.real_lift_m * 1e3,
-        r.video_frames
+        r.video_frames,
+        if r.video_codec.is_empty() {
+            "-"
+        } else {
+            &r.video_codec
+        },
+        r.video_keyframes
     )
 }

@@ -1,8 +1,9 @@
 //! The robot site's erased video (`avatarm serve`, video on): the app runs headless in real
 //! time; the simulated room's arm (and the app's twin behind the mask) follow the control
 //! loop's joint states ([`super::serve::ArmUpdate`]), the real object where the arm carries
-//! it. Each erased frame is read back once, coded as JPEG on a thread of its own and
-//! published with its stage stamps (capture, erased, sent; the site's clock).
+//! it. Each erased frame is read back once, coded (JPEG, or H.264 with IDR frames on time and
+//! on a viewer's request; [`avatarm_net::codec`]) on a thread of its own and published with
+//! its stage stamps (capture, erased, sent; the site's clock).
 //!
 //! The read-back is the one the live path gets for the network, as `--record` gets one for
 //! the disk.
@@ -25,8 +26,24 @@ use nalgebra::Isometry3;
 use super::serve::ArmUpdate;
 use crate::AppTwin;
 
-/// JPEG quality of the published frames.
-pub const JPEG_QUALITY: u8 = 85;
+/// The least time between two IDR frames forced by viewers' requests (s): many viewers
+/// asking at once, or one asking again and again, cost one keyframe per this long.
+pub const MIN_FORCED_KEYFRAME_INTERVAL_S: f64 = 0.25;
+
+/// The video's counters, for the site's report.
+#[derive(Debug, Default)]
+pub struct VideoCounters {
+    /// Frames published.
+    pub published: AtomicU64,
+    /// Of them, keyframes.
+    pub keyframes: AtomicU64,
+    /// Keyframes forced by viewers' requests.
+    pub forced_keyframes: AtomicU64,
+    /// Frames the encoder refused (each also logged).
+    pub encode_errors: AtomicU64,
+    /// Frames H.264's rate control skipped.
+    pub skipped: AtomicU64,
+}
 
 /// What the video side needs: the loop's updates, the publisher, the site's clock, and the
 /// flag that ends the app.
@@ -42,8 +59,10 @@ pub struct ServeVideoOptions {
     pub clock: SiteClock,
     /// Set when the app should end (the loop finished).
     pub stop: Arc<AtomicBool>,
-    /// Frames published so far.
-    pub published: Arc<AtomicU64>,
+    /// How frames are coded.
+    pub encoder: avatarm_net::codec::EncoderSettings,
+    /// The counters.
+    pub counters: Arc<VideoCounters>,
 }
 
 impl std::fmt::Debug for ServeVideoOptions {
@@ -77,10 +96,12 @@ impl Plugin for ServeVideoPlugin {
         let (tx, rx) = channel::<Coded>();
         let sender = options.sender.clone();
         let clock = options.clock;
-        let published = options.published.clone();
+        let counters = options.counters.clone();
+        let settings = options.encoder;
+        let camera = options.camera.clone();
         let _ = std::thread::Builder::new()
             .name("video encoder".into())
-            .spawn(move || encode_and_send(rx, sender, clock, published));
+            .spawn(move || encode_and_send(rx, sender, clock, settings, &camera, &counters));
         let carried = app
             .world()
             .get_resource::<crate::SceneResource>()
@@ -167,6 +188,7 @@ fn publish_erased(
     let clock = video.options.clock;
     let capture_s = clock.now_s() - (time.elapsed_secs_f64() - t_s);
     let camera = video.options.camera.clone();
+    let codec = video.options.encoder.codec.name();
     let tx = video.encoder.clone();
     read_image_once(&mut commands, targets.composite.clone()).observe(
         move |read: On<ImageRead>| {
@@ -174,7 +196,9 @@ fn publish_erased(
                 v: PROTOCOL_VERSION,
                 camera: camera.clone(),
                 index,
-                codec: "jpeg".into(),
+                codec: codec.into(),
+                seq: 0,
+                keyframe: false,
                 width: read.width,
                 height: read.height,
                 capture_s,
@@ -195,33 +219,62 @@ fn stop_when_done(video: Res<ServeVideo>, mut exit: MessageWriter<AppExit>) {
     }
 }
 
-/// The encoder's thread: RGBA → JPEG → the network, newest first (a frame that waited behind
-/// a newer one is dropped: late video is useless).
+/// The encoder's thread: RGBA → JPEG or H.264 → the network, newest first (a frame that
+/// waited behind a newer one is dropped: late video is useless). An H.264 IDR frame is forced
+/// when a viewer asked, at most once per [`MIN_FORCED_KEYFRAME_INTERVAL_S`].
 fn encode_and_send(
     rx: Receiver<Coded>,
     sender: FrameSender,
     clock: SiteClock,
-    published: Arc<AtomicU64>,
+    settings: avatarm_net::codec::EncoderSettings,
+    camera: &str,
+    counters: &VideoCounters,
 ) {
+    let mut encoder = match avatarm_net::codec::VideoEncoder::new(settings) {
+        Ok(e) => e,
+        Err(e) => {
+            error!("robot site video: {e}; no video is published");
+            return;
+        }
+    };
+    let mut requested = false;
+    let mut last_forced_s = f64::NEG_INFINITY;
     while let Ok(mut frame) = rx.recv() {
         while let Ok(newer) = rx.try_recv() {
             frame = newer;
         }
         let Coded { mut header, rgba } = frame;
-        let Some(img) = image::RgbaImage::from_raw(header.width, header.height, rgba) else {
-            continue;
+        requested |= sender.take_keyframe_request(camera);
+        let now = clock.now_s();
+        let force = requested && now - last_forced_s >= MIN_FORCED_KEYFRAME_INTERVAL_S;
+        let coded = match encoder.encode(&rgba, header.width, header.height, now, force) {
+            Ok(Some(c)) => c,
+            // Skipped by the rate control: viewers keep the frame before.
+            Ok(None) => {
+                counters.skipped.fetch_add(1, Ordering::Relaxed);
+                continue;
+            }
+            Err(e) => {
+                if counters.encode_errors.fetch_add(1, Ordering::Relaxed) == 0 {
+                    warn!("robot site video: {e} (further errors are counted, not logged)");
+                }
+                continue;
+            }
         };
-        let rgb = image::DynamicImage::ImageRgba8(img).to_rgb8();
-        let mut bytes = Vec::new();
-        let mut encoder =
-            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, JPEG_QUALITY);
-        if encoder.encode_image(&rgb).is_err() {
-            continue;
+        if force && coded.keyframe {
+            requested = false;
+            last_forced_s = now;
+            counters.forced_keyframes.fetch_add(1, Ordering::Relaxed);
         }
+        header.seq = coded.seq;
+        header.keyframe = coded.keyframe;
         header.sent_s = clock.now_s();
-        match sender.send(&header, bytes) {
+        match sender.send(&header, coded.bytes) {
             Ok(()) => {
-                published.fetch_add(1, Ordering::Relaxed);
+                counters.published.fetch_add(1, Ordering::Relaxed);
+                if coded.keyframe {
+                    counters.keyframes.fetch_add(1, Ordering::Relaxed);
+                }
             }
             Err(e) => warn!("robot site video: {e}"),
         }

@@ -7,6 +7,7 @@
 //! | `robot/joint_states` | robot site | [`crate::msg::JointStatesMsg`] at the control rate |
 //! | `robot/status` | robot site | [`crate::msg::RobotStatusMsg`] |
 //! | `camera/<name>/erased` | robot site | the erased video ([`crate::msg::FrameHeader`] attached) |
+//! | `camera/<name>/keyframe` | robot site (queryable) | a viewer asks for an H.264 IDR frame |
 //! | `operator/target` | operator | [`crate::msg::TargetMsg`] each control tick |
 //! | `operator/hand` | operator | [`crate::msg::HandMsg`] for observers |
 //! | `operator/alive` | operator (liveliness token) | present while the operator is |
@@ -84,6 +85,14 @@ impl Keys {
     /// Every camera's erased video.
     pub fn all_erased(&self) -> String {
         self.key("camera/*/erased")
+    }
+    /// Camera `name`'s keyframe requests (queryable).
+    pub fn keyframe(&self, camera: &str) -> String {
+        self.key(&format!("camera/{camera}/keyframe"))
+    }
+    /// Every camera's keyframe requests.
+    pub fn all_keyframes(&self) -> String {
+        self.key("camera/*/keyframe")
     }
     /// The operator's targets.
     pub fn target(&self) -> String {

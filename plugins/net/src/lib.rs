@@ -10,9 +10,11 @@
 //!
 //! - [`keys`]: the key space; [`msg`]: the versioned messages and their checks;
 //!   [`config`]: endpoints, authentication, TLS and access control; [`site`]: the two ends;
+//!   [`codec`]: the video's codecs (JPEG, H.264) and the viewer's keyframe handling;
 //!   [`impair`]: a seeded impairment relay (delay, jitter, loss, bandwidth, cuts) for tests
 //!   and `avatarm bench network`, since these machines have no `netem`.
 
+pub mod codec;
 pub mod config;
 pub mod impair;
 pub mod keys;

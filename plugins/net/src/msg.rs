@@ -18,7 +18,7 @@ use crate::NetError;
 
 /// The protocol's version: a peer with another is refused with both versions named. Raised
 /// on every change of a message's fields or meaning.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 
 /// Largest operator target accepted (bytes): one is ~400.
 pub const MAX_TARGET_BYTES: usize = 4096;
@@ -221,8 +221,13 @@ pub struct FrameHeader {
     pub camera: String,
     /// Frame index at the camera.
     pub index: u64,
-    /// Codec: `jpeg`.
+    /// Codec: `jpeg` or `h264` ([`crate::codec::Codec`]).
     pub codec: String,
+    /// Coded frame number of this camera's stream (from 0, one per published frame): a gap
+    /// tells an H.264 viewer that a frame its next ones refer to was lost.
+    pub seq: u64,
+    /// The frame decodes on its own (every JPEG; an H.264 IDR frame with its SPS and PPS).
+    pub keyframe: bool,
     /// Width and height (pixels).
     pub width: u32,
     /// Height (pixels).
@@ -237,7 +242,7 @@ pub struct FrameHeader {
 
 impl FrameHeader {
     fn check(&self) -> Result<(), NetError> {
-        let ok = self.codec == "jpeg"
+        let ok = crate::codec::Codec::from_name(&self.codec).is_some()
             && (1..=8192).contains(&self.width)
             && (1..=8192).contains(&self.height)
             && [self.capture_s, self.erased_s, self.sent_s]
@@ -250,7 +255,7 @@ impl FrameHeader {
             Err(NetError::Invalid {
                 what: "frame header".into(),
                 message: format!(
-                    "codec '{}' (jpeg), {}x{} (1..=8192), stamps {} {} {} (finite)",
+                    "codec '{}' (jpeg or h264), {}x{} (1..=8192), stamps {} {} {} (finite)",
                     self.codec, self.width, self.height, self.capture_s, self.erased_s, self.sent_s
                 ),
             })
@@ -430,14 +435,20 @@ mod tests {
     fn bad_targets_are_refused_with_the_reason() {
         let good = encode("target", &TargetMsg::new(1, &target(), 1.2, true)).expect("encodes");
         let text = String::from_utf8(good.clone()).expect("utf-8");
+        let ours = format!("\"v\":{PROTOCOL_VERSION}");
+        let foreign = format!("version {}", PROTOCOL_VERSION + 1);
         let cases: Vec<(Vec<u8>, &str)> = vec![
             (b"not json".to_vec(), "not a message"),
             (vec![b' '; MAX_TARGET_BYTES + 1], "more than"),
             (
-                text.replacen("\"v\":1", "\"v\":2", 1).into_bytes(),
-                "version 2",
+                text.replacen(&ours, &format!("\"v\":{}", PROTOCOL_VERSION + 1), 1)
+                    .into_bytes(),
+                foreign.as_str(),
             ),
-            (text.replacen("\"v\":1,", "", 1).into_bytes(), "no version"),
+            (
+                text.replacen(&format!("{ours},"), "", 1).into_bytes(),
+                "no version",
+            ),
             (
                 text.replacen("\"squeeze_n\":3.5", "\"squeeze_n\":-1.0", 1)
                     .into_bytes(),
@@ -484,6 +495,8 @@ mod tests {
             camera: "desk".into(),
             index: 3,
             codec: "jpeg".into(),
+            seq: 2,
+            keyframe: true,
             width: 640,
             height: 480,
             capture_s: 1.0,

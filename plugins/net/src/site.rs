@@ -13,6 +13,7 @@
 //! | hand | interactive low | yes | drop |
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
@@ -141,8 +142,10 @@ pub struct RobotSite {
     joint_states: Publisher<'static>,
     status: Publisher<'static>,
     frames: Arc<Vec<(String, Publisher<'static>)>>,
+    keyframe_requests: Arc<Vec<(String, AtomicBool)>>,
     _info: Queryable<()>,
     _clock: Queryable<()>,
+    _keyframe: Queryable<()>,
 }
 
 impl RobotSite {
@@ -188,6 +191,29 @@ impl RobotSite {
                 )?,
             ));
         }
+        // A viewer's keyframe request (any authenticated peer may ask: it is a query, which
+        // the access control lets everyone make) sets its camera's flag; the encoder takes it
+        // ([`FrameSender::take_keyframe_request`]) and limits how often it obliges.
+        let keyframe_requests: Arc<Vec<(String, AtomicBool)>> = Arc::new(
+            info.cameras
+                .iter()
+                .map(|c| (c.clone(), AtomicBool::new(false)))
+                .collect(),
+        );
+        let keyframe_key = keys.all_keyframes();
+        let requests = keyframe_requests.clone();
+        let keyframe_keys: Vec<String> = info.cameras.iter().map(|c| keys.keyframe(c)).collect();
+        let keyframe_queryable = session
+            .declare_queryable(keyframe_key.clone())
+            .callback(move |q| {
+                let key = q.key_expr().as_str();
+                if let Some(i) = keyframe_keys.iter().position(|k| k == key) {
+                    requests[i].1.store(true, Ordering::Relaxed);
+                    let _ = q.reply(q.key_expr().clone(), Vec::<u8>::new()).wait();
+                }
+            })
+            .wait()
+            .map_err(|e| zerr(&keyframe_key, e))?;
         let info_bytes = msg::encode("info", info)?;
         let info_key = keys.info();
         let info_queryable = session
@@ -221,8 +247,10 @@ impl RobotSite {
             joint_states,
             status,
             frames: Arc::new(frames),
+            keyframe_requests,
             _info: info_queryable,
             _clock: clock_queryable,
+            _keyframe: keyframe_queryable,
         })
     }
 
@@ -280,6 +308,7 @@ impl RobotSite {
     pub fn frame_sender(&self) -> FrameSender {
         FrameSender {
             publishers: self.frames.clone(),
+            keyframe_requests: self.keyframe_requests.clone(),
         }
     }
 
@@ -293,9 +322,19 @@ impl RobotSite {
 #[derive(Clone)]
 pub struct FrameSender {
     publishers: Arc<Vec<(String, Publisher<'static>)>>,
+    keyframe_requests: Arc<Vec<(String, AtomicBool)>>,
 }
 
 impl FrameSender {
+    /// Whether a viewer asked for a keyframe of `camera` since the last call (the request is
+    /// taken: a second call says `false` until a viewer asks again).
+    pub fn take_keyframe_request(&self, camera: &str) -> bool {
+        self.keyframe_requests
+            .iter()
+            .find(|(c, _)| c == camera)
+            .is_some_and(|(_, f)| f.swap(false, Ordering::Relaxed))
+    }
+
     /// Publishes one coded frame. Errors for an unknown camera or a frame Zenoh refuses.
     pub fn send(&self, header: &FrameHeader, payload: Vec<u8>) -> Result<(), NetError> {
         let Some((_, p)) = self.publishers.iter().find(|(n, _)| *n == header.camera) else {
@@ -471,6 +510,18 @@ impl OperatorSite {
             .put(bytes)
             .wait()
             .map_err(|e| zerr(&self.keys.hand(), e))
+    }
+
+    /// Asks the robot site for an H.264 IDR frame of `camera` (after a loss, or on joining
+    /// mid-stream); returns at once, the reply is not awaited.
+    pub fn request_keyframe(&self, camera: &str) -> Result<(), NetError> {
+        let key = self.keys.keyframe(camera);
+        self.session
+            .get(&key)
+            .callback(|_| {})
+            .timeout(Duration::from_secs(1))
+            .wait()
+            .map_err(|e| zerr(&key, e))
     }
 
     /// Publishes raw bytes on the target key: for tests of the robot site's checks (a

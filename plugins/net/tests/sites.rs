@@ -137,6 +137,8 @@ fn an_operator_joins_estimates_the_clock_and_its_targets_arrive_checked() {
         "{now} vs {}",
         clock.now_s()
     );
+    until_delivered(&operator, &mut robot);
+    let now = operator.robot_now_s();
     for seq in 0..5 {
         operator
             .publish_target(&TargetMsg::new(seq, &target(now), now, true))
@@ -177,7 +179,10 @@ fn an_operator_joins_estimates_the_clock_and_its_targets_arrive_checked() {
         .filter_map(|t| t.as_ref().err().map(|e| e.to_string()))
         .collect();
     assert!(errors[0].contains("not a message"), "{errors:?}");
-    assert!(errors[1].contains("protocol version 2"), "{errors:?}");
+    assert!(
+        errors[1].contains(&format!("protocol version {}", PROTOCOL_VERSION + 1)),
+        "{errors:?}"
+    );
     assert!(errors[2].contains("position"), "{errors:?}");
     assert!(errors[3].contains("more than"), "{errors:?}");
     // The operator leaves: its token goes.
