@@ -9,6 +9,13 @@ use std::time::{Duration, Instant};
 use avatarm_net::impair::{Impairment, Relay};
 use serde_json::Value;
 
+/// One test at a time: each runs real-time processes (the robot site's control loop, its
+/// renderer) whose timing the others' load would disturb on a small machine.
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 fn out_dir(name: &str) -> PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
         .join("network")
@@ -108,6 +115,7 @@ fn pour_through(name: &str, delay_s: f64) -> (Value, Value) {
 
 #[test]
 fn two_sites_pour_through_the_network_and_delay_costs_accuracy() {
+    let _serial = serial();
     let (s0, j0) = pour_through("pour_0ms", 0.0);
     let (s1, j1) = pour_through("pour_100ms", 0.1);
     for (s, j) in [(&s0, &j0), (&s1, &j1)] {
@@ -135,6 +143,7 @@ fn two_sites_pour_through_the_network_and_delay_costs_accuracy() {
 
 #[test]
 fn a_cut_link_stops_the_arm_and_the_session_resumes() {
+    let _serial = serial();
     let dir = out_dir("cut");
     let port = free_port();
     let robot = serve(&dir, port, 14.0, &["--insecure-lan", "--video", "off"]);
@@ -174,6 +183,7 @@ fn a_cut_link_stops_the_arm_and_the_session_resumes() {
 
 #[test]
 fn the_operator_killed_the_arm_stops_and_holds() {
+    let _serial = serial();
     let dir = out_dir("killed");
     let port = free_port();
     let robot = serve(&dir, port, 9.0, &["--insecure-lan", "--video", "off"]);
@@ -229,6 +239,7 @@ fn certificates(dir: &Path) {
 
 #[test]
 fn over_tls_only_the_authenticated_operator_moves_the_robot() {
+    let _serial = serial();
     let dir = out_dir("tls");
     certificates(&dir);
     std::fs::write(
@@ -263,7 +274,7 @@ fn over_tls_only_the_authenticated_operator_moves_the_robot() {
             &path("site.key"),
         ])
         .args(["--credentials", &path("users.txt"), "--operator", "blair"])
-        .args(["--duration", "24", "--report", &path("serve.json")])
+        .args(["--duration", "30", "--report", &path("serve.json")])
         .stdout(Stdio::null())
         .stderr(log)
         .spawn()
@@ -365,14 +376,16 @@ fn wait_for_video(port: u16) {
 
 #[test]
 fn h264_video_survives_loss_and_a_late_observer_gets_a_keyframe_on_request() {
+    let _serial = serial();
     let dir = out_dir("h264");
     let (port, udp_port) = (free_port(), free_port());
     let udp = format!("udp/127.0.0.1:{udp_port}");
-    // Periodic IDR frames every 10 min: every keyframe after the first is a viewer's request.
+    // Periodic IDR frames every 10 min (and none on scene changes): every keyframe after the
+    // first is a viewer's request. The robot site is killed at the end.
     let robot = serve(
         &dir,
         port,
-        150.0,
+        600.0,
         &[
             "--insecure-lan",
             "--listen",
@@ -387,7 +400,8 @@ fn h264_video_survives_loss_and_a_late_observer_gets_a_keyframe_on_request() {
     );
     wait_for_video(port);
     // An observer over UDP through 5 % loss: each lost frame spoils the frames after it until
-    // the keyframe it asks for.
+    // the keyframe it asks for. (Over plain UDP Zenoh's handshake and declarations are
+    // best-effort too: the seed loses none of the first fifty datagrams either way.)
     let relay = Relay::udp(
         format!("127.0.0.1:{udp_port}")
             .parse()
@@ -402,15 +416,21 @@ fn h264_video_survives_loss_and_a_late_observer_gets_a_keyframe_on_request() {
     let lossy = Command::new(env!("CARGO_BIN_EXE_avatarm"))
         .arg("join")
         .arg(format!("udp/{}", relay.local_addr()))
-        .args(["--watch", "--duration", "12", "--report"])
+        .args(["--watch", "--duration", "12", "--wait", "30", "--report"])
         .arg(dir.join("lossy.json"))
+        .env_remove("RUST_LOG")
         .stdout(Stdio::null())
         .stderr(std::fs::File::create(dir.join("lossy.log")).expect("the test's set-up"))
         .spawn()
         .expect("the test's set-up");
     let lossy = finish(lossy, &dir, "lossy");
     // A late observer: it joins mid-stream, so its first frame refers to frames it never had.
-    let late = join(&dir, "late", port, &["--watch", "--duration", "8"]);
+    let late = join(
+        &dir,
+        "late",
+        port,
+        &["--watch", "--duration", "8", "--wait", "30"],
+    );
     let late = finish(late, &dir, "late");
     let mut robot = robot;
     let _ = robot.kill();
@@ -422,10 +442,21 @@ fn h264_video_survives_loss_and_a_late_observer_gets_a_keyframe_on_request() {
     }
     assert!(f(&late, "video.keyframe_requests") >= 1.0, "{late}");
     assert!(f(&late, "video.waiting_for_keyframe") >= 1.0, "{late}");
-    // Every frame lost or spoiled was asked for again, and pictures came back after it.
+    // Each loss was asked for again, and keyframes came; every frame received was shown, or
+    // waited for a keyframe, or was dropped as stale.
     if f(&lossy, "video.lost") > 0.0 {
         assert!(f(&lossy, "video.keyframe_requests") >= 1.0, "{lossy}");
+        assert!(f(&lossy, "video.keyframes") >= 1.0, "{lossy}");
     }
-    let log = std::fs::read_to_string(dir.join("late.log")).expect("the test's set-up");
-    assert!(log.contains("asking for a keyframe"), "{log}");
+    for v in [&lossy, &late] {
+        let accounted = f(v, "video.shown")
+            + f(v, "video.waiting_for_keyframe")
+            + f(v, "video.stale")
+            + f(v, "video.refused");
+        assert_eq!(accounted, f(v, "video.frames"), "{v}");
+        assert!(
+            f(v, "video.waiting_for_keyframe") * 2.0 < f(v, "video.frames"),
+            "{v}"
+        );
+    }
 }

@@ -194,6 +194,7 @@ fn code(
             index: i as u64,
             codec: settings.codec.name().into(),
             seq: coded.seq,
+            stream: coded.stream,
             keyframe: coded.keyframe,
             width,
             height,
@@ -208,6 +209,12 @@ fn code(
             Decoded::Image { rgba, .. } => {
                 psnr.push(psnr_rgba(frame.as_raw(), &rgba).unwrap_or(f64::NAN));
                 shown = Some(rgba);
+            }
+            Decoded::Stale => {
+                return Err(AppError::replay(format!(
+                    "{} frame {i} of an unbroken stream was taken as stale",
+                    settings.codec
+                )));
             }
             Decoded::NeedKeyframe { reason } => {
                 return Err(AppError::replay(format!(

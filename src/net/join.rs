@@ -69,6 +69,8 @@ pub struct VideoLatency {
     pub keyframe_requests: u64,
     /// Frame numbers missing from the stream (lost on the way).
     pub lost: u64,
+    /// H.264 frames just older than one already shown (reordered or duplicated), dropped.
+    pub stale: u64,
     /// Coded bytes received.
     pub bytes: u64,
     /// Frames received per second.
@@ -133,6 +135,7 @@ const KEYFRAME_REQUEST_INTERVAL_S: f64 = 0.5;
 #[derive(Default)]
 struct CameraView {
     decoder: avatarm_net::codec::VideoDecoder,
+    stream: Option<u64>,
     last_seq: Option<u64>,
     last_request: Option<Instant>,
 }
@@ -191,8 +194,14 @@ impl Collect {
             r.video.keyframes += u64::from(h.keyframe);
             r.video.codec.clone_from(&h.codec);
             let view = self.cameras.entry(h.camera.clone()).or_default();
+            // `seq` is at most MAX_SEQ (the header's check): no overflow. Another stream (the
+            // robot site restarted) starts the count again.
+            if view.stream != Some(h.stream) {
+                view.stream = Some(h.stream);
+                view.last_seq = None;
+            }
             if let Some(last) = view.last_seq
-                && h.seq > last + 1
+                && h.seq > last.saturating_add(1)
             {
                 r.video.lost += h.seq - last - 1;
             }
@@ -223,6 +232,7 @@ impl Collect {
                         }
                     }
                 }
+                Ok(avatarm_net::codec::Decoded::Stale) => r.video.stale += 1,
                 Err(e) => {
                     r.video.refused += 1;
                     warn!("video: {e}");

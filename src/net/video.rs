@@ -199,6 +199,7 @@ fn publish_erased(
                 codec: codec.into(),
                 seq: 0,
                 keyframe: false,
+                stream: 0,
                 width: read.width,
                 height: read.height,
                 capture_s,
@@ -261,12 +262,16 @@ fn encode_and_send(
                 continue;
             }
         };
-        if force && coded.keyframe {
+        if coded.keyframe {
+            // Any keyframe answers the viewers' requests (JPEG: every frame).
             requested = false;
-            last_forced_s = now;
-            counters.forced_keyframes.fetch_add(1, Ordering::Relaxed);
+            if force && settings.codec == avatarm_net::codec::Codec::H264 {
+                last_forced_s = now;
+                counters.forced_keyframes.fetch_add(1, Ordering::Relaxed);
+            }
         }
         header.seq = coded.seq;
+        header.stream = coded.stream;
         header.keyframe = coded.keyframe;
         header.sent_s = clock.now_s();
         match sender.send(&header, coded.bytes) {

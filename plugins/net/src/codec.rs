@@ -13,13 +13,13 @@
 //! [`Decoded::NeedKeyframe`] so that the viewer can ask for one.
 
 use image::ImageEncoder;
-use openh264::OpenH264API;
 use openh264::decoder::Decoder;
 use openh264::encoder::{
     BitRate, Encoder, EncoderConfig, FrameRate, FrameType, IntraFramePeriod, Profile,
     RateControlMode, UsageType,
 };
 use openh264::formats::{RgbaSliceU8, YUVBuffer, YUVSource};
+use openh264::{OpenH264API, Timestamp};
 
 use crate::NetError;
 use crate::msg::FrameHeader;
@@ -70,7 +70,8 @@ pub struct EncoderSettings {
     pub bitrate_bps: u32,
     /// The frame rate the H.264 rate control plans for (Hz): the camera's.
     pub fps: f32,
-    /// Seconds between periodic H.264 IDR frames (a late viewer waits at most this long).
+    /// The longest time between two H.264 IDR frames (s): one is forced when this long has
+    /// passed since the last (viewers' requests bring one sooner).
     pub keyframe_interval_s: f64,
 }
 
@@ -131,6 +132,8 @@ pub struct EncodedFrame {
     pub keyframe: bool,
     /// Its number in the stream (from 0).
     pub seq: u64,
+    /// The stream's identity (one per encoder: a restarted robot site starts another).
+    pub stream: u64,
 }
 
 enum EncoderKind {
@@ -143,6 +146,7 @@ pub struct VideoEncoder {
     settings: EncoderSettings,
     kind: EncoderKind,
     seq: u64,
+    stream: u64,
     last_keyframe_s: Option<f64>,
 }
 
@@ -192,8 +196,10 @@ impl VideoEncoder {
             Codec::Jpeg => EncoderKind::Jpeg,
             Codec::H264 => {
                 // One IDR at the start, the rest when `encode` forces them (on time or on a
-                // viewer's request). OpenH264 holds the bit rate only if it may skip frames.
+                // viewer's request): no IDR frames of OpenH264's own on scene changes. It holds
+                // the bit rate only if it may skip frames.
                 let config = EncoderConfig::new()
+                    .scene_change_detect(false)
                     .profile(Profile::Baseline)
                     .usage_type(UsageType::CameraVideoRealTime)
                     .rate_control_mode(RateControlMode::Bitrate)
@@ -206,10 +212,17 @@ impl VideoEncoder {
                 EncoderKind::H264(Box::new(encoder))
             }
         };
+        // Any value that differs between two encoders: the clock's nanoseconds and the
+        // process id, mixed, below MAX_SEQ.
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64);
+        let stream = (nanos ^ (u64::from(std::process::id()) << 32)) % crate::msg::MAX_SEQ;
         Ok(Self {
             settings,
             kind,
             seq: 0,
+            stream,
             last_keyframe_s: None,
         })
     }
@@ -221,10 +234,12 @@ impl VideoEncoder {
 
     /// Codes one RGBA8 frame captured at `now_s` (s, any clock that only goes forward); an
     /// H.264 frame is an IDR frame when `force_keyframe`, when it is the first, or when the
-    /// keyframe interval has passed. `Ok(None)`: H.264's rate control skipped the frame to
-    /// hold the bit rate (viewers keep showing the one before; a forced keyframe is then
-    /// due again on the next call). Errors for a buffer that does not match its size, or a
-    /// frame the codec refuses; the stream's numbering goes on only for frames coded.
+    /// keyframe interval has passed. The rate control plans with the frames' real times
+    /// (`now_s`), not the nominal frame rate. `Ok(None)`: H.264's rate control skipped the
+    /// frame to hold the bit rate (only ever a P frame; viewers keep showing the one before).
+    /// Errors for a buffer that does not match its size, or a frame the codec refuses
+    /// (OpenH264 takes 16x16 up to 3840x2160); the stream's numbering goes on only for frames
+    /// coded.
     pub fn encode(
         &mut self,
         rgba: &[u8],
@@ -260,8 +275,9 @@ impl VideoEncoder {
                     rgba,
                     (width as usize, height as usize),
                 ));
+                let millis = (now_s.max(0.0) * 1e3).min(1e15) as u64;
                 let stream = encoder
-                    .encode(&yuv)
+                    .encode_at(&yuv, Timestamp::from_millis(millis))
                     .map_err(|e| codec_error("h264 encoder", e))?;
                 let kind = stream.frame_type();
                 let bytes = stream.to_vec();
@@ -286,6 +302,7 @@ impl VideoEncoder {
             bytes,
             keyframe,
             seq,
+            stream: self.stream,
         }))
     }
 }
@@ -309,11 +326,16 @@ pub enum Decoded {
         /// Why: which frame numbers are missing, or the decoder's error.
         reason: String,
     },
+    /// An H.264 frame older than one already decoded in its stream (reordered or duplicated
+    /// on the way): dropped, the stream goes on.
+    Stale,
 }
 
 /// Decodes one camera's received frames (either codec; a stream may switch).
 pub struct VideoDecoder {
     h264: Option<Decoder>,
+    /// The stream being decoded.
+    stream: Option<u64>,
     /// The next H.264 frame number expected, when the stream is decodable.
     next_seq: Option<u64>,
 }
@@ -337,6 +359,7 @@ impl VideoDecoder {
     pub fn new() -> Self {
         Self {
             h264: None,
+            stream: None,
             next_seq: None,
         }
     }
@@ -355,7 +378,8 @@ impl VideoDecoder {
                 (img.width(), img.height(), img.into_rgba8().into_raw())
             }
             Codec::H264 => match self.decode_h264(header, payload) {
-                Ok(image) => image,
+                Ok(Some(image)) => image,
+                Ok(None) => return Ok(Decoded::Stale),
                 Err(reason) => {
                     self.next_seq = None;
                     return Ok(Decoded::NeedKeyframe { reason });
@@ -379,29 +403,31 @@ impl VideoDecoder {
         })
     }
 
-    /// An H.264 frame in order: `Err` says why it cannot be shown.
+    /// An H.264 frame in order: `Ok(None)` for a stale one (dropped), `Err` says why it
+    /// cannot be shown.
     fn decode_h264(
         &mut self,
         header: &FrameHeader,
         payload: &[u8],
-    ) -> Result<(u32, u32, Vec<u8>), String> {
-        if !header.keyframe {
-            match self.next_seq {
-                None => {
-                    return Err(format!(
-                        "frame {} needs the frames before it (joined mid-stream or after a loss)",
-                        header.seq
-                    ));
-                }
-                Some(n) if header.seq != n => {
-                    return Err(if header.seq > n {
-                        format!("frames {n}..{} were lost", header.seq - 1)
-                    } else {
-                        format!("frame {} came after frame {}", header.seq, n - 1)
-                    });
-                }
-                Some(_) => {}
+    ) -> Result<Option<(u32, u32, Vec<u8>)>, String> {
+        if self.stream != Some(header.stream) {
+            // Another stream (the robot site restarted, or the first): begun by its IDR.
+            self.stream = Some(header.stream);
+            self.next_seq = None;
+        }
+        match self.next_seq {
+            // Behind: reordered or duplicated on the way.
+            Some(n) if header.seq < n => return Ok(None),
+            Some(n) if header.seq > n && !header.keyframe => {
+                return Err(format!("frames {n}..={} were lost", header.seq - 1));
             }
+            None if !header.keyframe => {
+                return Err(format!(
+                    "frame {} needs the frames before it (joined mid-stream or after a loss)",
+                    header.seq
+                ));
+            }
+            _ => {}
         }
         if self.h264.is_none() || header.keyframe {
             // A fresh decoder at each IDR: nothing of a broken stream carries over.
@@ -420,8 +446,9 @@ impl VideoDecoder {
         let (w, h) = picture.dimensions();
         let mut rgba = vec![0; w * h * 4];
         picture.write_rgba8(&mut rgba);
-        self.next_seq = Some(header.seq + 1);
-        Ok((w as u32, h as u32, rgba))
+        // `seq` is at most MAX_SEQ (the header's check): no overflow.
+        self.next_seq = Some(header.seq.saturating_add(1));
+        Ok(Some((w as u32, h as u32, rgba)))
     }
 }
 
@@ -463,6 +490,7 @@ mod tests {
             index,
             codec: codec.name().into(),
             seq: f.seq,
+            stream: f.stream,
             keyframe: f.keyframe,
             width: 160,
             height: 120,
@@ -543,12 +571,29 @@ mod tests {
                 Decoded::NeedKeyframe { reason } => {
                     assert!(i == 3 || i == 4, "frame {i}: {reason}");
                     if i == 3 {
-                        assert!(reason.contains("frames 2..2 were lost"), "{reason}");
+                        assert!(reason.contains("frames 2..=2 were lost"), "{reason}");
                     }
                 }
+                Decoded::Stale => panic!("frame {i} taken as stale"),
             }
         }
         assert_eq!(shown, vec![0, 1, 5, 6, 7]);
+        // A duplicated or reordered frame is dropped; the stream goes on.
+        let d = dec.decode(&header(Codec::H264, &frames[6], 6), &frames[6].bytes);
+        assert_eq!(d.unwrap(), Decoded::Stale);
+        // The robot site restarted: a new stream from 0, begun by its IDR frame.
+        let mut again = VideoEncoder::new(settings(Codec::H264)).unwrap();
+        for i in 0..2u32 {
+            let f = again
+                .encode(&picture(160, 120, i), 160, 120, f64::from(i) / 30.0, false)
+                .unwrap()
+                .expect("not skipped at this rate");
+            let d = dec.decode(&header(Codec::H264, &f, u64::from(i)), &f.bytes);
+            assert!(
+                matches!(d, Ok(Decoded::Image { .. })),
+                "restart frame {i}: {d:?}"
+            );
+        }
         // A viewer joining at frame 6 waits too.
         let mut late = VideoDecoder::new();
         let d = late
@@ -601,6 +646,7 @@ mod tests {
             bytes: vec![0xAB; 5000],
             keyframe: true,
             seq: 0,
+            stream: 1,
         };
         assert!(dec.decode(&header(Codec::Jpeg, &f, 0), &f.bytes).is_err());
         let d = dec.decode(&header(Codec::H264, &f, 0), &f.bytes);

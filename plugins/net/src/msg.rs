@@ -28,6 +28,9 @@ pub const MAX_HAND_BYTES: usize = 32 * 1024;
 pub const MAX_SMALL_BYTES: usize = 64 * 1024;
 /// Largest coded video frame accepted (bytes): a 1080p JPEG at quality 95 is under 1 MB.
 pub const MAX_FRAME_BYTES: usize = 8 << 20;
+/// Largest frame index or stream number accepted (2^53: a frame a millisecond for 285 000
+/// years), so that counting on from one never overflows.
+pub const MAX_SEQ: u64 = 1 << 53;
 /// Largest number of joints in a joint state.
 pub const MAX_JOINTS: usize = 64;
 
@@ -228,6 +231,9 @@ pub struct FrameHeader {
     pub seq: u64,
     /// The frame decodes on its own (every JPEG; an H.264 IDR frame with its SPS and PPS).
     pub keyframe: bool,
+    /// The coded stream's identity: `seq` counts within it (a restarted robot site starts
+    /// another).
+    pub stream: u64,
     /// Width and height (pixels).
     pub width: u32,
     /// Height (pixels).
@@ -243,6 +249,9 @@ pub struct FrameHeader {
 impl FrameHeader {
     fn check(&self) -> Result<(), NetError> {
         let ok = crate::codec::Codec::from_name(&self.codec).is_some()
+            && self.seq <= MAX_SEQ
+            && self.index <= MAX_SEQ
+            && self.stream <= MAX_SEQ
             && (1..=8192).contains(&self.width)
             && (1..=8192).contains(&self.height)
             && [self.capture_s, self.erased_s, self.sent_s]
@@ -255,8 +264,15 @@ impl FrameHeader {
             Err(NetError::Invalid {
                 what: "frame header".into(),
                 message: format!(
-                    "codec '{}' (jpeg or h264), {}x{} (1..=8192), stamps {} {} {} (finite)",
-                    self.codec, self.width, self.height, self.capture_s, self.erased_s, self.sent_s
+                    "codec '{}' (jpeg or h264), index {} and seq {} (..={MAX_SEQ}), {}x{} (1..=8192), stamps {} {} {} (finite)",
+                    self.codec,
+                    self.index,
+                    self.seq,
+                    self.width,
+                    self.height,
+                    self.capture_s,
+                    self.erased_s,
+                    self.sent_s
                 ),
             })
         }
@@ -497,6 +513,7 @@ mod tests {
             codec: "jpeg".into(),
             seq: 2,
             keyframe: true,
+            stream: 7,
             width: 640,
             height: 480,
             capture_s: 1.0,
@@ -509,6 +526,10 @@ mod tests {
         let mut bad = h.clone();
         bad.codec = "h265".into();
         assert!(decode_frame_header(&encode("h", &bad).expect("encodes"), 10).is_err());
+        let mut bad = h.clone();
+        bad.seq = u64::MAX;
+        let e = decode_frame_header(&encode("h", &bad).expect("encodes"), 10).expect_err("refused");
+        assert!(e.to_string().contains("seq"), "{e}");
         let j = JointStatesMsg {
             v: PROTOCOL_VERSION,
             stamp_s: 0.5,

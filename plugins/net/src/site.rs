@@ -516,9 +516,11 @@ impl OperatorSite {
     /// mid-stream); returns at once, the reply is not awaited.
     pub fn request_keyframe(&self, camera: &str) -> Result<(), NetError> {
         let key = self.keys.keyframe(camera);
+        // Dropped, never blocking, when the link is congested: the viewer asks again.
         self.session
             .get(&key)
             .callback(|_| {})
+            .congestion_control(CongestionControl::Drop)
             .timeout(Duration::from_secs(1))
             .wait()
             .map_err(|e| zerr(&key, e))
@@ -557,6 +559,17 @@ impl OperatorSite {
                             message: "no header attached".into(),
                         })?;
                     let header = msg::decode_frame_header(&header, payload.len())?;
+                    // The header names the camera of the key it came on, no other.
+                    if s.key_expr().as_str() != self.keys.erased(&header.camera) {
+                        return Err(NetError::Invalid {
+                            what: "frame".into(),
+                            message: format!(
+                                "camera '{}' in its header, on key '{}'",
+                                header.camera,
+                                s.key_expr()
+                            ),
+                        });
+                    }
                     Ok(ReceivedFrame {
                         header,
                         payload,
