@@ -111,13 +111,20 @@ pub enum AppError {
         /// Why.
         source: Box<AppError>,
     },
-    /// `avatarm run` opens a window, and there is no display to open it on.
+    /// `avatarm run` or `avatarm join --window` opens a window, and there is no display to
+    /// open it on.
     #[error(
-        "avatarm run opens a window and there is no display (DISPLAY and WAYLAND_DISPLAY are \
-         unset): run it in a desktop session, under `xvfb-run -a`, or replay the scene headless \
-         with `avatarm replay SCENE --headless --out DIR`"
+        "this command opens a window and there is no display (DISPLAY and WAYLAND_DISPLAY are \
+         unset): run it in a desktop session or under `xvfb-run -a`; headless instead, replay \
+         the scene with `avatarm replay SCENE --headless --out DIR`, or join without --window"
     )]
     NoDisplay,
+    /// The two-site session (`avatarm join`) stopped.
+    #[error("the session: {message}")]
+    Session {
+        /// What happened.
+        message: String,
+    },
     /// The desktop preview or the XR view stopped with an error (logged above it).
     #[error("the preview stopped with an error (see the log above)")]
     Preview,

@@ -460,3 +460,59 @@ fn h264_video_survives_loss_and_a_late_observer_gets_a_keyframe_on_request() {
         );
     }
 }
+
+/// `avatarm join --window` (under Xvfb, on the software renderer): the operator's window shows
+/// the robot site's video on the interaction layer's panel, with the hand and the bottle's twin
+/// in front, while the session runs beside it (targets out, frames in) until the window closes
+/// at its frames; the report counts what the window drew.
+#[test]
+fn the_operator_window_shows_the_received_video_with_the_hand_in_front() {
+    let _serial = serial();
+    let dir = out_dir("window");
+    let port = free_port();
+    let robot = serve(&dir, port, 600.0, &["--insecure-lan"]);
+    wait_for_video(port);
+    let shot = dir.join("window.png");
+    let operator = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1280x720x24"])
+        .arg(env!("CARGO_BIN_EXE_avatarm"))
+        .arg("join")
+        .arg(format!("tcp/127.0.0.1:{port}"))
+        .args(["--scene", "assets/scenes/pouring.toml", "--window"])
+        .args(["--frames", "60", "--wait", "30", "--screenshot"])
+        .arg(&shot)
+        .arg("--report")
+        .arg(dir.join("join.json"))
+        // No OpenXR runtime, even where a developer has one installed.
+        .env("XR_RUNTIME_JSON", dir.join("no_runtime.json"))
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(dir.join("join.log")).expect("the test's set-up"))
+        .spawn()
+        .expect("xvfb-run starts (scripts/setup.sh installs it)");
+    let j = finish(operator, &dir, "join");
+    let mut robot = robot;
+    let _ = robot.kill();
+    let _ = robot.wait();
+    assert_eq!(j["role"], "operator", "{j}");
+    assert!(f(&j, "targets_sent") >= 10.0, "{j}");
+    assert!(f(&j, "video.shown") >= 3.0, "{j}");
+    // The window's own counts: every frame rendered, decoded frames uploaded to the panel,
+    // the hand drawn around the twin in (nearly) every frame.
+    assert!(f(&j, "window.frames") >= 60.0, "{j}");
+    assert!(f(&j, "window.video_frames") >= 3.0, "{j}");
+    assert!(f(&j, "window.hand_frames") >= 50.0, "{j}");
+    let img = image::open(&shot)
+        .expect("the window's screenshot")
+        .to_rgb8();
+    assert_eq!(img.dimensions(), (1280, 720));
+    // The panel shows the video (many colours), and the hand's skeleton is drawn over it in
+    // its own colour (skin, or orange while it holds the bottle: `teleop::hand_colour`).
+    let colours: std::collections::HashSet<[u8; 3]> = img.pixels().map(|p| p.0).collect();
+    assert!(colours.len() > 500, "{} colours", colours.len());
+    let near = |p: &[u8; 3], c: [u8; 3]| p.iter().zip(c).all(|(&a, b)| a.abs_diff(b) <= 6);
+    let hand = img
+        .pixels()
+        .filter(|p| near(&p.0, [242, 217, 178]) || near(&p.0, [255, 140, 51]))
+        .count();
+    assert!(hand >= 100, "{hand} hand-coloured pixels");
+}

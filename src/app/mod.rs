@@ -102,13 +102,7 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
             ));
         }
         Mode::Preview(options) => {
-            // winit panics without a display server; say what to do instead.
-            let no_display = ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"]
-                .iter()
-                .all(|v| std::env::var_os(v).is_none_or(|s| s.is_empty()));
-            if cfg!(all(unix, not(target_os = "macos"))) && no_display {
-                return Err(AppError::NoDisplay);
-            }
+            check_display()?;
             let window = Window {
                 title: format!("Avatarm — {}", scene.file.name),
                 resolution: (1280u32, 720u32).into(),
@@ -134,6 +128,43 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
         live.install(&mut app)?;
     }
     Ok(app)
+}
+
+/// Errors with [`AppError::NoDisplay`] where a window cannot open (no X11 or Wayland display):
+/// winit panics without one, so a windowed mode checks first and says what to do instead.
+pub fn check_display() -> Result<(), AppError> {
+    let no_display = ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"]
+        .iter()
+        .all(|v| std::env::var_os(v).is_none_or(|s| s.is_empty()));
+    if cfg!(all(unix, not(target_os = "macos"))) && no_display {
+        return Err(AppError::NoDisplay);
+    }
+    Ok(())
+}
+
+/// The interaction layer's layout for `scene`: the believed camera (as the interaction camera
+/// and as the real one), the scene's panel distance and object depth, and a twin of each prop
+/// marked `object` at its pose.
+pub fn interaction_config(scene: &Scene) -> InteractionConfig {
+    InteractionConfig {
+        camera: scene.believed_camera,
+        real_camera: scene.believed_camera,
+        panel_distance_m: scene.file.interaction.panel_distance_m,
+        object_depth_m: scene.file.interaction.object_depth_m,
+        objects: scene
+            .file
+            .props
+            .iter()
+            .zip(&scene.props)
+            .filter(|(spec, _)| spec.object)
+            .map(|(_, prop)| ObjectTwinSpec {
+                name: prop.name.clone(),
+                parts: avatarm_sim::prop_parts(&prop.shape),
+                world_from_object: prop.pose,
+                rgba: prop.rgba,
+            })
+            .collect(),
+    }
 }
 
 /// The meshes of the scene's props marked `occluder` (the desk), at their world transforms: what
@@ -302,25 +333,7 @@ impl Plugin for AvatarmSetupPlugin {
                 source_twin: None,
                 occluders: scene_occluders(scene),
             })
-            .insert_resource(InteractionConfig {
-                camera: scene.believed_camera,
-                real_camera: scene.believed_camera,
-                panel_distance_m: scene.file.interaction.panel_distance_m,
-                object_depth_m: scene.file.interaction.object_depth_m,
-                objects: scene
-                    .file
-                    .props
-                    .iter()
-                    .zip(&scene.props)
-                    .filter(|(spec, _)| spec.object)
-                    .map(|(_, prop)| ObjectTwinSpec {
-                        name: prop.name.clone(),
-                        parts: avatarm_sim::prop_parts(&prop.shape),
-                        world_from_object: prop.pose,
-                        rgba: prop.rgba,
-                    })
-                    .collect(),
-            })
+            .insert_resource(interaction_config(scene))
             .add_systems(
                 PreStartup,
                 spawn_app_twin.after(avatarm_sim::SimRoomSystems::Setup),
@@ -352,8 +365,10 @@ impl Plugin for AvatarmSetupPlugin {
     }
 }
 
+/// Adds Bevy's windowed `plugins`, through OpenXR's when `xr` (falling back to the window
+/// without a runtime, or with a warning in a build without the `xr` feature).
 #[cfg(feature = "xr")]
-fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupBuilder, xr: bool) {
+pub(crate) fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupBuilder, xr: bool) {
     if xr {
         // Falls back to the flat renderer, with a log line, when no OpenXR runtime is present.
         app.add_plugins(bevy_mod_openxr::add_xr_plugins(plugins));
@@ -362,8 +377,9 @@ fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupBuilder, xr:
     }
 }
 
+/// Adds Bevy's windowed `plugins`; `xr` only warns in this build (no `xr` feature).
 #[cfg(not(feature = "xr"))]
-fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupBuilder, xr: bool) {
+pub(crate) fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupBuilder, xr: bool) {
     if xr {
         warn!("--xr: this build has no OpenXR support (feature `xr`); using the desktop preview");
     }

@@ -345,6 +345,26 @@ enum Command {
         /// The task's trial whose seeded hand the operator plays.
         #[arg(long, value_name = "N", default_value_t = 0)]
         trial: u32,
+        /// The operator's hand: scripted (the trial's, default), desktop (keys and mouse, with
+        /// --window), xr (OpenXR hand tracking, with --xr), leap (feature `leap`) or a
+        /// recorded FILE.hand.jsonl.
+        #[arg(long, value_name = "SOURCE")]
+        hand: Option<String>,
+        /// Open the window: the robot site's video with the hand and the object's twin in
+        /// front (the interaction view), and the session's figures.
+        #[arg(long)]
+        window: bool,
+        /// The window's view in an OpenXR headset too (implies --window; without a runtime
+        /// the window alone).
+        #[arg(long)]
+        xr: bool,
+        /// Close the window after N frames.
+        #[arg(long, value_name = "N")]
+        frames: Option<u32>,
+        /// Save a screenshot of the window at frame N of --frames (else at frame 120), then
+        /// close it.
+        #[arg(long, value_name = "PATH")]
+        screenshot: Option<PathBuf>,
         /// Folder searched for package://NAME/... URIs (repeatable).
         #[arg(long = "package-path", value_name = "DIR")]
         package_path: Vec<PathBuf>,
@@ -642,6 +662,9 @@ fn live_hand(scene: &Scene, flag: Option<&str>, xr: bool) -> Result<Option<HandC
     }
     match &choice {
         HandChoice::Xr if !xr => Err(refuse("xr needs XR mode (--xr)".into())),
+        HandChoice::Xr if !cfg!(feature = "xr") => Err(refuse(
+            "this avatarm was built without the xr feature (it is on by default)".into(),
+        )),
         HandChoice::Leap if !cfg!(feature = "leap") => Err(refuse(
             "this avatarm was built without the leap feature; rebuild with `cargo build \
              --features leap` (needs the Ultraleap SDK, docs/hardware.md)"
@@ -721,6 +744,11 @@ fn run(cli: Cli) -> Result<(), AppError> {
             report,
             wait,
             trial,
+            hand,
+            window,
+            xr,
+            frames,
+            screenshot,
             package_path,
             net,
         } => {
@@ -732,7 +760,42 @@ fn run(cli: Cli) -> Result<(), AppError> {
             } else {
                 avatarm_net::Role::Operator
             };
+            let window = window || xr;
+            if frames == Some(0) {
+                return Err(AppError::flag(
+                    "--frames",
+                    "0: the window renders at least one",
+                ));
+            }
+            if !window && (frames.is_some() || screenshot.is_some()) {
+                return Err(AppError::flag(
+                    if frames.is_some() {
+                        "--frames"
+                    } else {
+                        "--screenshot"
+                    },
+                    "counts the window's frames: add --window",
+                ));
+            }
+            let hand = match (watch, hand.as_deref()) {
+                (true, Some(_)) => {
+                    return Err(AppError::flag(
+                        "--hand",
+                        "an observer (--watch) has no hand",
+                    ));
+                }
+                (true, None) => HandChoice::Scripted,
+                (false, text) => live_hand(&scene, text, xr)?.ok_or_else(|| {
+                    AppError::flag("--hand", "the operator needs a hand; --watch only watches")
+                })?,
+            };
             let options = crate::net::join::JoinOptions {
+                hand,
+                window: window.then_some(crate::net::window::WindowOptions {
+                    xr,
+                    frames,
+                    screenshot,
+                }),
                 net: net.config(role, Vec::new(), vec![endpoint])?,
                 scene,
                 watch,

@@ -10,20 +10,25 @@
 //! stamped on the robot's clock.
 
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use avatarm_core::teleop::grasp::Contact;
 use avatarm_core::teleop::mapping::{Mapper, MappingMode, OperatorInputs};
 use avatarm_hand::{ActiveHand, GraspTarget, HeldObject, ObjectContacts, ScriptedHand};
+use avatarm_mapping::pouring::TrialParts;
 use avatarm_net::msg::{HandMsg, PROTOCOL_VERSION, TargetMsg};
 use avatarm_net::{NetConfig, OperatorInbox, OperatorSite};
 use avatarm_scene::Scene;
+use avatarm_scene::hand::HandChoice;
 use bevy::log::warn;
 use bevy::prelude::*;
 use nalgebra::Vector3;
 use serde::Serialize;
 
 use super::serve::Spread;
+use super::window::{ViewShared, WindowOptions, WindowReport};
 use crate::AppError;
 use crate::teleop::{RobotChoice, trial_parts};
 
@@ -46,6 +51,10 @@ pub struct JoinOptions {
     pub wait_s: f64,
     /// The task's trial whose seeded hand the operator plays.
     pub trial: u32,
+    /// The operator's hand (the trial's scripted hand by default).
+    pub hand: HandChoice,
+    /// The operator's or observer's window (`None`: headless).
+    pub window: Option<WindowOptions>,
 }
 
 /// Latency of the erased video by stage (ms, robot clock): capture → erased → sent →
@@ -126,6 +135,8 @@ pub struct JoinReport {
     pub twin_lift_m: f64,
     /// Age of the joint states on arrival (ms: robot clock now minus their stamp).
     pub joint_state_age_ms: Spread,
+    /// The window, when there was one.
+    pub window: Option<WindowReport>,
 }
 
 /// The least time between two keyframe requests of one camera (s).
@@ -143,6 +154,14 @@ struct CameraView {
 #[derive(Default)]
 struct Collect {
     report: JoinReport,
+    /// The window's view of the session, when there is a window.
+    view: Option<Arc<ViewShared>>,
+    /// Only watching: the hand shown is the operator's, as received.
+    observer: bool,
+    /// The last status said the arm was stopping.
+    stopping: bool,
+    /// The camera the window shows.
+    window_camera: Option<String>,
     cameras: std::collections::BTreeMap<String, CameraView>,
     erase: Vec<f64>,
     encode: Vec<f64>,
@@ -169,13 +188,24 @@ impl Collect {
                 Ok(s) => {
                     r.status += 1;
                     r.status_stopping += u64::from(s.stopping);
+                    self.stopping = s.stopping;
                 }
                 Err(_) => r.refused += 1,
             }
         }
         for h in inbox.hands {
             match h {
-                Ok(_) => r.hands += 1,
+                Ok(h) => {
+                    r.hands += 1;
+                    if let Some(view) = self.view.as_ref().filter(|_| self.observer) {
+                        let joints = (h.tracked && h.joints.len() == 26)
+                            .then(|| h.joints.iter().map(|p| Vector3::from(*p)).collect());
+                        view.update(|s| {
+                            s.hand = joints;
+                            s.hand_at = Some(Instant::now());
+                        });
+                    }
+                }
                 Err(_) => r.refused += 1,
             }
         }
@@ -210,7 +240,16 @@ impl Collect {
             let decoded = view.decoder.decode(&h, &payload);
             let decode_ms = started.elapsed().as_secs_f64() * 1e3;
             match decoded {
-                Ok(avatarm_net::codec::Decoded::Image { .. }) => {
+                Ok(avatarm_net::codec::Decoded::Image {
+                    width,
+                    height,
+                    rgba,
+                }) => {
+                    // The window shows one camera: the first one received.
+                    let first = self.window_camera.get_or_insert_with(|| h.camera.clone());
+                    if let Some(view) = self.view.as_ref().filter(|_| *first == h.camera) {
+                        view.put_frame(width, height, rgba);
+                    }
                     r.video.shown += 1;
                     self.erase.push((h.erased_s - h.capture_s) * 1e3);
                     self.encode.push((h.sent_s - h.erased_s) * 1e3);
@@ -234,11 +273,64 @@ impl Collect {
                 }
                 Ok(avatarm_net::codec::Decoded::Stale) => r.video.stale += 1,
                 Err(e) => {
+                    // One line for the first and every hundredth: a broken stream at 30 fps
+                    // would otherwise flood the log; the report counts them all.
                     r.video.refused += 1;
-                    warn!("video: {e}");
+                    if r.video.refused % 100 == 1 {
+                        warn!("video: {e} ({} refused so far)", r.video.refused);
+                    }
                 }
             }
         }
+    }
+
+    /// The window closed: the session ends.
+    fn closed(&self) -> bool {
+        self.view
+            .as_ref()
+            .is_some_and(|v| v.closed.load(Ordering::Relaxed))
+    }
+
+    /// Hands the window its status line.
+    fn show_line(&self) {
+        if let Some(view) = &self.view {
+            let line = self.line();
+            view.update(|s| s.line = line);
+        }
+    }
+
+    /// The window's status line: what arrived and how late, what went out, the arm's state.
+    fn line(&self) -> String {
+        let r = &self.report;
+        let last = |v: &[f64]| v.last().map_or("-".to_owned(), |ms| format!("{ms:.0} ms"));
+        let sent = if self.observer {
+            format!("{} operator hand frames", r.hands)
+        } else {
+            format!("{} targets sent", r.targets_sent)
+        };
+        format!(
+            "{}: {} video frames shown of {} ({}, {} lost, {} keyframe requests); last frame \
+             capture to decoded {}, network {}\n{sent}; {} joint states (age {}); arm {}",
+            if self.observer {
+                "observer"
+            } else {
+                "operator"
+            },
+            r.video.shown,
+            r.video.frames,
+            if r.video.codec.is_empty() {
+                "-"
+            } else {
+                &r.video.codec
+            },
+            r.video.lost,
+            r.video.keyframe_requests,
+            last(&self.total),
+            last(&self.network),
+            r.joint_states,
+            last(&self.joint_age),
+            if self.stopping { "STOPPING" } else { "running" },
+        )
     }
 
     fn finish(mut self, duration_s: f64) -> JoinReport {
@@ -270,6 +362,75 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
     {
         return Err(AppError::flag("--duration", format!("{d} s must be > 0")));
     }
+    // Everything that can fail here fails before the network: the hand source (a recording, a
+    // device), the window (a display) and the XR hand.
+    let xr = options.window.as_ref().is_some_and(|w| w.xr);
+    let operator = if options.watch {
+        None
+    } else {
+        match options.hand {
+            HandChoice::Desktop if options.window.is_none() => {
+                return Err(AppError::flag(
+                    "--hand desktop",
+                    "the desktop hand moves with the window's keys: add --window",
+                ));
+            }
+            HandChoice::Xr if !xr => {
+                return Err(AppError::flag(
+                    "--hand xr",
+                    "OpenXR hand tracking comes with the XR view: add --xr",
+                ));
+            }
+            _ => {}
+        }
+        let (parts, _) = trial_parts(
+            &options.scene,
+            RobotChoice::Sim,
+            options.mode,
+            options.trial,
+            "avatarm join",
+        )?;
+        let Some(task) = &options.scene.file.task else {
+            return Err(AppError::flag("--scene", "the scene has no [task]"));
+        };
+        let (hand, desktop) =
+            crate::teleop::hand_source(&options.scene, &options.hand, &parts, task.hand_rate_hz)?;
+        Some((parts, hand, desktop))
+    };
+    let mut window = None;
+    let operator = match (options.window.as_ref(), operator) {
+        (None, Some((parts, Some(hand), None))) => Some((parts, hand)),
+        (None, Some(_)) => {
+            return Err(AppError::flag(
+                "--hand",
+                "this hand needs the window: add --window",
+            ));
+        }
+        (None, None) => None,
+        (Some(w), operator) => {
+            let shared = Arc::new(ViewShared::new());
+            let desktop = operator.as_ref().and_then(|(_, _, d)| d.clone());
+            let (mut app, handle) =
+                super::window::build(&options.scene, w, shared.clone(), options.watch, desktop)?;
+            // The window's hands (keys, OpenXR) are made on its thread, on its clock: the
+            // session stamps their frames as it takes them.
+            let operator = match operator {
+                Some((parts, _, Some(desktop))) => {
+                    let hand = ActiveHand::new(StampedOnArrival(desktop.inbox().clone()));
+                    Some((parts, hand))
+                }
+                Some((parts, Some(hand), None)) => Some((parts, hand)),
+                Some((parts, None, None)) => {
+                    let start = parts.script.wrist_at(0.0).0;
+                    let inbox = crate::teleop::xr_inbox(&mut app, &start)?;
+                    Some((parts, ActiveHand::new(StampedOnArrival(inbox))))
+                }
+                None => None,
+            };
+            window = Some((app, handle, shared));
+            operator
+        }
+    };
     let mut site = OperatorSite::join(&options.net, Duration::from_secs_f64(options.wait_s))?;
     let info = site.info().clone();
     let ours = super::scene_fingerprint(&options.scene)?;
@@ -292,41 +453,123 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
         offset.offset_s * 1e3,
         offset.rtt_s * 1e3
     );
-    let mut collect = Collect::default();
-    collect.report.protocol = PROTOCOL_VERSION;
-    collect.report.scene = info.scene.clone();
-    collect.report.robot = info.robot.clone();
-    collect.report.clock_offset_s = offset.offset_s;
-    collect.report.clock_rtt_ms = offset.rtt_s * 1e3;
-    let started = Instant::now();
-    if options.watch {
-        collect.report.role = "observer".into();
-        let until = options.duration_s.map(Duration::from_secs_f64);
-        while until.is_none_or(|d| started.elapsed() < d) {
-            std::thread::sleep(Duration::from_millis(5));
-            let now = site.robot_now_s();
-            let inbox = site.poll();
-            collect.take(&site, inbox, now);
+    let result = match window {
+        None => run_session(&mut site, options, operator, None),
+        Some((mut app, handle, shared)) => {
+            let site = &mut site;
+            let result = std::thread::scope(|scope| {
+                let view = shared.clone();
+                let session = scope.spawn(move || {
+                    // The window closes when the session ends, however it ends.
+                    let _ended = SetOnDrop(&view.ended);
+                    run_session(site, options, operator, Some(view.clone()))
+                });
+                let exit = {
+                    // The session ends when the window closes, however it closes.
+                    let _closed = SetOnDrop(&shared.closed);
+                    app.run()
+                };
+                let result = session.join().unwrap_or_else(|_| {
+                    Err(AppError::Session {
+                        message: "its thread panicked (see the log above)".into(),
+                    })
+                });
+                if exit.is_error() {
+                    return Err(AppError::Preview);
+                }
+                result
+            });
+            result.map(|mut r| {
+                r.window = handle.report();
+                r
+            })
         }
-    } else {
-        collect.report.role = "operator".into();
-        operate_with(
-            &mut site,
-            &options.scene,
-            options.mode,
-            options.trial,
-            options.duration_s,
-            &mut collect,
-            started,
-        )?;
-    }
-    let report = collect.finish(started.elapsed().as_secs_f64());
+    };
+    let mut report = result?;
+    report.protocol = PROTOCOL_VERSION;
+    report.scene = info.scene.clone();
+    report.robot = info.robot.clone();
+    report.clock_offset_s = offset.offset_s;
+    report.clock_rtt_ms = offset.rtt_s * 1e3;
     site.close();
     if let Some(path) = &options.report {
         let text = serde_json::to_string_pretty(&report)?;
         std::fs::write(path, text).map_err(|e| AppError::write(path, e))?;
     }
     Ok(report)
+}
+
+/// Sets its flag when dropped: at the end of a scope, by return or by panic.
+struct SetOnDrop<'a>(&'a std::sync::atomic::AtomicBool);
+
+impl Drop for SetOnDrop<'_> {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+}
+
+/// A hand source fed from the window's thread (the desktop hand's keys, OpenXR hand tracking):
+/// the window's clock is not the session's hand app's, so each frame is stamped with the hand
+/// app's time as it takes it. The stamp is then late by at most one window frame plus one
+/// control tick (the targets' age at the robot site reads that much younger).
+struct StampedOnArrival(avatarm_hand::openxr::HandInbox);
+
+impl avatarm_hand::HandSource for StampedOnArrival {
+    fn name(&self) -> &str {
+        avatarm_hand::HandSource::name(&self.0)
+    }
+
+    fn poll(&mut self, now_s: f64) -> Option<avatarm_core::teleop::hand::HandFrame> {
+        let mut frame = self.0.poll(f64::INFINITY)?;
+        frame.t_s = now_s;
+        Some(frame)
+    }
+}
+
+/// The session on a joined `site` until `options`' duration passes or the window (`view`)
+/// closes: the operator's trial (`operator`: its parts and hand) or, without one, watching.
+fn run_session(
+    site: &mut OperatorSite,
+    options: &JoinOptions,
+    operator: Option<(TrialParts, ActiveHand)>,
+    view: Option<Arc<ViewShared>>,
+) -> Result<JoinReport, AppError> {
+    let mut collect = Collect {
+        view,
+        observer: operator.is_none(),
+        ..Collect::default()
+    };
+    let started = Instant::now();
+    match operator {
+        None => {
+            collect.report.role = "observer".into();
+            let until = options.duration_s.map(Duration::from_secs_f64);
+            let mut polls = 0u64;
+            while until.is_none_or(|d| started.elapsed() < d) && !collect.closed() {
+                std::thread::sleep(Duration::from_millis(5));
+                let now = site.robot_now_s();
+                let inbox = site.poll();
+                collect.take(site, inbox, now);
+                polls += 1;
+                if polls.is_multiple_of(20) {
+                    collect.show_line();
+                }
+            }
+        }
+        Some((parts, hand)) => {
+            collect.report.role = "operator".into();
+            operate_with(
+                site,
+                &options.scene,
+                parts,
+                hand,
+                options.duration_s,
+                &mut collect,
+                started,
+            )?;
+        }
+    }
+    Ok(collect.finish(started.elapsed().as_secs_f64()))
 }
 
 /// The operator on a joined `site`: trial `trial` of `scene`'s task, its hand and twin stepped
@@ -339,23 +582,30 @@ pub fn operate(
     trial: u32,
     duration_s: Option<f64>,
 ) -> Result<JoinReport, AppError> {
+    let (parts, _) = trial_parts(scene, RobotChoice::Sim, mode, trial, "avatarm join")?;
+    let Some(task) = &scene.file.task else {
+        return Err(AppError::flag("--scene", "the scene has no [task]"));
+    };
+    let hand = ActiveHand::new(ScriptedHand::new(parts.script.clone(), task.hand_rate_hz));
     let mut collect = Collect::default();
     collect.report.role = "operator".into();
     let started = Instant::now();
-    operate_with(site, scene, mode, trial, duration_s, &mut collect, started)?;
+    operate_with(site, scene, parts, hand, duration_s, &mut collect, started)?;
     Ok(collect.finish(started.elapsed().as_secs_f64()))
 }
 
+/// The operator's loop: `parts`' hand app stepped in real time with `hand`, one target per
+/// control tick, for `duration_s` (default: the task's, or until the window closes when there
+/// is one).
 fn operate_with(
     site: &mut OperatorSite,
     scene: &Scene,
-    mode: Option<MappingMode>,
-    trial: u32,
+    parts: TrialParts,
+    hand: ActiveHand,
     duration_s: Option<f64>,
     collect: &mut Collect,
     started: Instant,
 ) -> Result<(), AppError> {
-    let (parts, _) = trial_parts(scene, RobotChoice::Sim, mode, trial, "avatarm join")?;
     let Some(task) = &scene.file.task else {
         return Err(AppError::flag("--scene", "the scene has no [task]"));
     };
@@ -363,21 +613,32 @@ fn operate_with(
     let period = parts.period;
     let spawn = parts.spawn_bodies();
     let mut app = avatarm_hand::headless_app(period);
-    app.insert_resource(parts.hand_drive)
-        .insert_resource(ActiveHand::new(ScriptedHand::new(
-            parts.script,
-            task.hand_rate_hz,
-        )));
+    app.insert_resource(parts.hand_drive).insert_resource(hand);
     app.add_systems(Startup, spawn);
-    let duration = duration_s.unwrap_or(task.duration_s);
-    let steps = (duration / period.as_secs_f64()).round() as u64;
+    let steps = match (duration_s, &collect.view) {
+        (Some(d), _) => Some((d / period.as_secs_f64()).round() as u64),
+        (None, Some(_)) => None,
+        (None, None) => Some((task.duration_s / period.as_secs_f64()).round() as u64),
+    };
+    let centre_to_base = crate::teleop::carried_object(scene).map(|(_, c)| c);
     let z0 = parts.twin_start.translation.z;
     let mut seq = 0u64;
     let mut contacts: Vec<Contact> = Vec::new();
     let mut velocities: Vec<Vector3<f64>> = Vec::new();
-    for i in 0..steps {
+    let twin_start = avatarm_twin::iso_to_transform(&parts.twin_start);
+    let mut tick = 0u64;
+    while steps.is_none_or(|n| tick < n) && !collect.closed() {
+        let i = tick;
+        tick += 1;
         let due = started + period.mul_f64(i as f64);
         std::thread::sleep(due.saturating_duration_since(Instant::now()));
+        if collect
+            .view
+            .as_ref()
+            .is_some_and(|v| v.reset_twin.swap(false, Ordering::Relaxed))
+        {
+            reset_twin(app.world_mut(), twin_start);
+        }
         app.update();
         let world = app.world_mut();
         let app_now = world.resource::<Time>().elapsed_secs_f64();
@@ -386,7 +647,9 @@ fn operate_with(
             .query_filtered::<&Transform, With<GraspTarget>>()
             .single(world)
             .map(avatarm_twin::transform_to_iso)
-            .map_err(|e| AppError::replay(format!("the twin is gone: {e}")))?;
+            .map_err(|e| AppError::Session {
+                message: format!("the twin is gone: {e}"),
+            })?;
         collect.report.twin_lift_m = collect.report.twin_lift_m.max(twin.translation.z - z0);
         contacts.clear();
         velocities.clear();
@@ -426,7 +689,7 @@ fn operate_with(
             _ => collect.report.targets_failed += 1,
         }
         if let Some(f) = frame
-            && i % 3 == 0
+            && i.is_multiple_of(3)
         {
             let m = HandMsg {
                 v: PROTOCOL_VERSION,
@@ -449,10 +712,50 @@ fn operate_with(
                 warn!("operator: {e}");
             }
         }
+        if let Some(view) = &collect.view {
+            let world = app.world();
+            let hand = world
+                .resource::<ActiveHand>()
+                .latest
+                .as_ref()
+                .filter(|f| f.tracked && f.joints.len() == 26)
+                .map(|f| {
+                    f.joints
+                        .iter()
+                        .map(|j| v2r.point(&j.pose.translation.vector))
+                        .collect()
+                });
+            let object = centre_to_base.map(|c| v2r.pose(&twin) * c);
+            view.update(|s| {
+                s.hand = hand;
+                s.hand_at = Some(Instant::now());
+                s.holding = held;
+                s.object = object;
+            });
+            if i.is_multiple_of(10) {
+                collect.show_line();
+            }
+        }
         let inbox = site.poll();
         collect.take(site, inbox, robot_now);
     }
     Ok(())
+}
+
+/// Puts the physics twin back at `start`, at rest, unless the hand holds it (the desktop
+/// hand's Home, as in `avatarm run`).
+fn reset_twin(world: &mut World, start: Transform) {
+    if world.resource::<HeldObject>().held.is_some() {
+        return;
+    }
+    let mut twins = world.query_filtered::<
+        (&mut Transform, &mut bevy_rapier3d::prelude::Velocity),
+        With<GraspTarget>,
+    >();
+    for (mut t, mut v) in twins.iter_mut(world) {
+        *t = start;
+        *v = bevy_rapier3d::prelude::Velocity::zero();
+    }
 }
 
 /// One line for the terminal.

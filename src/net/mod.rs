@@ -5,10 +5,12 @@
 //! - [`serve`]: the robot site's control loop and report.
 //! - [`join`]: the operator's hand, physics twin and targets; the observer.
 //! - [`video`]: the robot site's erased video, coded and published.
+//! - [`window`]: the operator's or observer's window (`join --window`).
 
 pub mod join;
 pub mod serve;
 pub mod video;
+pub mod window;
 
 use std::path::PathBuf;
 

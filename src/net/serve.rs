@@ -643,10 +643,12 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
             format!("{d} s must be > 0"),
         ));
     }
+    // Before the arm moves: the video thread makes its encoder later. The error names the
+    // setting (`net::encoder_settings` checked the flags; this is for other callers).
     options
         .encoder
         .validate()
-        .map_err(|e| crate::AppError::flag("--codec", e.to_string()))?;
+        .map_err(|e| crate::AppError::flag("the video encoder", e.to_string()))?;
     let (mut parts, mode) =
         crate::teleop::trial_parts(scene, options.robot, options.mode, 0, "avatarm serve")?;
     parts

@@ -67,11 +67,11 @@ pub struct DesktopHand {
 
 /// Hand skeletons in the preview's 3-D view (real world).
 #[derive(Default, Reflect, GizmoConfigGroup)]
-struct HandViewGizmos;
+pub(crate) struct HandViewGizmos;
 
 /// Hand skeletons in the interaction view, in front with the object twins.
 #[derive(Default, Reflect, GizmoConfigGroup)]
-struct HandInteractionGizmos;
+pub(crate) struct HandInteractionGizmos;
 
 /// The live trial of a scene's `[task]` with a hand source, prepared before any window or app
 /// exists: every way the set-up can fail (no task, no grasp the arm can reach, a recording that
@@ -107,51 +107,15 @@ impl LiveTeleop {
             return Err(AppError::flag("--hand", "the scene has no [task]"));
         };
         let start = parts.script.wrist_at(0.0).0;
-        let (hand, desktop) = match choice {
-            HandChoice::Scripted => (
-                Some(ActiveHand::new(ScriptedHand::new(
-                    parts.script.clone(),
-                    task.hand_rate_hz,
-                ))),
-                None,
-            ),
-            HandChoice::Desktop => {
-                let inbox = HandInbox::new("desktop hand");
-                (
-                    Some(ActiveHand::new(inbox.clone())),
-                    Some(DesktopHand {
-                        inbox,
-                        start,
-                        wrist: start,
-                        grip: 0.0,
-                        closing: false,
-                    }),
-                )
-            }
-            HandChoice::Xr => (None, None),
-            HandChoice::Leap => (Some(leap_hand(&start, &scene.file.leap)?), None),
-            HandChoice::File(path) => (
-                Some(ActiveHand::new(avatarm_hand::RecordedHand::open(path)?)),
-                None,
-            ),
-            HandChoice::LeapRecording { path, hand } => (
-                Some(leap_recording(path, *hand, &start, &scene.file.leap)?),
-                None,
-            ),
-        };
+        let (hand, desktop) = hand_source(scene, choice, &parts, task.hand_rate_hz)?;
         let (prop, _) = find_prop(&scene.props, &task.object).ok_or_else(|| {
             avatarm_scene::SceneError::field(
                 "task.object",
                 format!("no prop named '{}'", task.object),
             )
         })?;
-        let object_twin = scene
-            .file
-            .props
-            .iter()
-            .zip(&scene.props)
-            .filter(|(spec, _)| spec.object)
-            .position(|(_, p)| p.name == task.object);
+        let (object_twin, centre_to_base) = carried_object(scene)
+            .ok_or_else(|| AppError::flag("--hand", "the scene has no [task]"))?;
         Ok(Self {
             scene_name: scene.file.name.clone(),
             object: task.object.clone(),
@@ -162,7 +126,7 @@ impl LiveTeleop {
             start,
             prop,
             object_twin,
-            centre_to_base: setup.bottle_centre().inverse() * setup.bottle_base,
+            centre_to_base,
             start_z: setup.bottle_centre().translation.z,
         })
     }
@@ -173,7 +137,7 @@ impl LiveTeleop {
     pub fn install(self, app: &mut App) -> Result<(), AppError> {
         let (hand, desktop) = match self.hand {
             Some(hand) => (hand, self.desktop),
-            None => xr_hand(app, &self.start)?,
+            None => (ActiveHand::new(xr_inbox(app, &self.start)?), None),
         };
         info!(
             "live teleoperation: '{}' with the {} ({} mode) on the {}; the arm starts around the {}",
@@ -277,6 +241,62 @@ pub fn trial_parts(
         })?;
     }
     Ok((parts, mode))
+}
+
+/// The hand source `choice` names for a trial (`parts`: its scripted hand and start pose),
+/// polled at `rate_hz` when scripted; the desktop hand also gives its key-driven state. `None`
+/// for OpenXR hand tracking, which comes from an app's XR view ([`xr_inbox`]). Errors when a
+/// recording cannot be read, a device cannot start or a feature is left out of this build.
+pub(crate) fn hand_source(
+    scene: &Scene,
+    choice: &HandChoice,
+    parts: &TrialParts,
+    rate_hz: f64,
+) -> Result<(Option<ActiveHand>, Option<DesktopHand>), AppError> {
+    let start = parts.script.wrist_at(0.0).0;
+    Ok(match choice {
+        HandChoice::Scripted => (
+            Some(ActiveHand::new(ScriptedHand::new(
+                parts.script.clone(),
+                rate_hz,
+            ))),
+            None,
+        ),
+        HandChoice::Desktop => {
+            let desktop = DesktopHand::new(start);
+            (Some(ActiveHand::new(desktop.inbox.clone())), Some(desktop))
+        }
+        HandChoice::Xr => (None, None),
+        HandChoice::Leap => (Some(leap_hand(&start, &scene.file.leap)?), None),
+        HandChoice::File(path) => (
+            Some(ActiveHand::new(avatarm_hand::RecordedHand::open(path)?)),
+            None,
+        ),
+        HandChoice::LeapRecording { path, hand } => (
+            Some(leap_recording(path, *hand, &start, &scene.file.leap)?),
+            None,
+        ),
+    })
+}
+
+/// The scene's carried object (its `[task]` object): its index among the interaction layer's
+/// object twins (`None` when it is not drawn as one) and its base pose from its centre (the
+/// frame the mapping carries). `None` without a task.
+pub(crate) fn carried_object(scene: &Scene) -> Option<(Option<usize>, Isometry3<f64>)> {
+    let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
+        return None;
+    };
+    let object_twin = scene
+        .file
+        .props
+        .iter()
+        .zip(&scene.props)
+        .filter(|(spec, _)| spec.object)
+        .position(|(_, p)| p.name == task.object);
+    Some((
+        object_twin,
+        setup.bottle_centre().inverse() * setup.bottle_base,
+    ))
 }
 
 /// Adds the live trial of the scene's `[task]` to a preview app, driven by `choice`
@@ -420,11 +440,10 @@ fn prepared_q0(teleop: &Teleop) -> Option<nalgebra::DVector<f64>> {
         .map(|r| r.true_positions().clone())
 }
 
+/// OpenXR hand tracking's frames (the app's XR view pushes them), its tracking space placed so
+/// that a hand held at rest lands on the trial's `start`. Errors without the XR view.
 #[cfg(feature = "xr")]
-fn xr_hand(
-    app: &mut App,
-    start: &Isometry3<f64>,
-) -> Result<(ActiveHand, Option<DesktopHand>), AppError> {
+pub(crate) fn xr_inbox(app: &mut App, start: &Isometry3<f64>) -> Result<HandInbox, AppError> {
     let mut xr = app
         .world_mut()
         .get_resource_mut::<crate::preview::xr::XrHand>()
@@ -437,11 +456,12 @@ fn xr_hand(
         nalgebra::Translation3::from(start.translation.vector - r * rest),
         r,
     );
-    Ok((ActiveHand::new(xr.inbox.clone()), None))
+    Ok(xr.inbox.clone())
 }
 
+/// Errors: this build has no XR view.
 #[cfg(not(feature = "xr"))]
-fn xr_hand(_: &mut App, _: &Isometry3<f64>) -> Result<(ActiveHand, Option<DesktopHand>), AppError> {
+pub(crate) fn xr_inbox(_: &mut App, _: &Isometry3<f64>) -> Result<HandInbox, AppError> {
     Err(AppError::flag(
         "--hand xr",
         "this avatarm was built without the xr feature",
@@ -549,7 +569,7 @@ fn leap_hand(_: &Isometry3<f64>, _: &LeapSpec) -> Result<ActiveHand, AppError> {
     ))
 }
 
-fn configure_gizmos(mut store: ResMut<GizmoConfigStore>) {
+pub(crate) fn configure_gizmos(mut store: ResMut<GizmoConfigStore>) {
     let (view, _) = store.config_mut::<HandViewGizmos>();
     view.render_layers = RenderLayers::layer(layers::TWIN);
     view.line.width = 3.0;
@@ -647,11 +667,7 @@ fn draw_hand(
     else {
         return;
     };
-    let colour = if held.held.is_some() {
-        Color::srgb(1.0, 0.55, 0.2)
-    } else {
-        Color::srgb(0.95, 0.85, 0.7)
-    };
+    let colour = hand_colour(held.held.is_some());
     let v2r = teleop.v2r();
     let real: Vec<Vector3<f64>> = frame
         .joints
@@ -662,96 +678,182 @@ fn draw_hand(
     for (a, b) in SKELETON {
         view.line(v(&real[a]), v(&real[b]), colour);
     }
-    // Interaction view: real world -> the twin's drawn frame (the placement's similarity).
     let Some(i) = live.object_twin else { return };
-    let Some(object) = config.objects.get(i) else {
-        return;
-    };
-    // Where the interaction layer draws the twin for the pose `follow_twin` set this update.
-    let Ok((drawn, _)) = twin_transform(&config, object) else {
-        return;
-    };
-    let from_object = object.world_from_object.inverse();
-    for (a, b) in SKELETON {
-        let map = |p: &Vector3<f64>| {
-            drawn.transform_point(v(&(from_object * nalgebra::Point3::from(*p)).coords))
-        };
-        interaction.line(map(&real[a]), map(&real[b]), colour);
+    for (a, b) in hand_in_interaction_view(&real, &config, i) {
+        interaction.line(a, b, colour);
     }
+}
+
+/// The hand skeleton's colour: orange while it holds the object, skin otherwise.
+pub(crate) fn hand_colour(holding: bool) -> Color {
+    if holding {
+        Color::srgb(1.0, 0.55, 0.2)
+    } else {
+        Color::srgb(0.95, 0.85, 0.7)
+    }
+}
+
+/// The hand's bones ([`SKELETON`], 26 joints `real` in the real world, m) as drawn in the
+/// interaction view: mapped by the similarity that places object twin `object` (its real
+/// pose to where [`twin_transform`] draws it), so the hand stays around the twin as drawn.
+/// Empty when the object or its placement is missing, or `real` is not 26 joints.
+pub(crate) fn hand_in_interaction_view(
+    real: &[Vector3<f64>],
+    config: &InteractionConfig,
+    object: usize,
+) -> Vec<(Vec3, Vec3)> {
+    let Some(spec) = config.objects.get(object) else {
+        return Vec::new();
+    };
+    let Ok((drawn, _)) = twin_transform(config, spec) else {
+        return Vec::new();
+    };
+    if real.len() != 26 {
+        return Vec::new();
+    }
+    let from_object = spec.world_from_object.inverse();
+    let map = |p: &Vector3<f64>| {
+        let local = (from_object * nalgebra::Point3::from(*p)).coords;
+        drawn.transform_point(Vec3::new(local.x as f32, local.y as f32, local.z as f32))
+    };
+    SKELETON
+        .iter()
+        .map(|&(a, b)| (map(&real[a]), map(&real[b])))
+        .collect()
 }
 
 /// Keys and mouse move the desktop hand (virtual scene; speeds are the hand's, before the
 /// mapping's scale). Home puts the hand, open, and the twin (when the hand does not hold it,
 /// e.g. knocked over) back at the start.
-#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn drive_desktop_hand(
     live: Res<LiveTask>,
     held: Res<HeldObject>,
     mut twin: Query<(&mut Transform, &mut Velocity), With<GraspTarget>>,
-    keys: Res<ButtonInput<KeyCode>>,
-    buttons: Res<ButtonInput<MouseButton>>,
-    motion: Res<AccumulatedMouseMotion>,
-    scroll: Res<AccumulatedMouseScroll>,
+    controls: DesktopControls,
     time: Res<Time<Real>>,
     fixed: Res<Time<Fixed>>,
     mut hand: ResMut<DesktopHand>,
 ) {
-    let dt = time.delta_secs_f64().min(0.1);
-    let speed = 0.15;
-    let mut step = Vector3::zeros();
-    for (key, dir) in [
-        (KeyCode::ArrowUp, Vector3::x()),
-        (KeyCode::ArrowDown, -Vector3::x()),
-        (KeyCode::ArrowLeft, Vector3::y()),
-        (KeyCode::ArrowRight, -Vector3::y()),
-        (KeyCode::PageUp, Vector3::z()),
-        (KeyCode::PageDown, -Vector3::z()),
-    ] {
-        if keys.pressed(key) {
-            step += dir * speed * dt;
+    let home = hand.step(
+        &controls.input(),
+        time.delta_secs_f64(),
+        fixed.elapsed_secs_f64(),
+    );
+    if home
+        && held.held.is_none()
+        && let Ok((mut t, mut v)) = twin.single_mut()
+    {
+        *t = live.twin_start;
+        *v = Velocity::zero();
+    }
+}
+
+/// The keyboard and mouse a system reads for the desktop hand ([`DesktopControls::input`]).
+#[derive(bevy::ecs::system::SystemParam)]
+pub(crate) struct DesktopControls<'w> {
+    keys: Res<'w, ButtonInput<KeyCode>>,
+    buttons: Res<'w, ButtonInput<MouseButton>>,
+    motion: Res<'w, AccumulatedMouseMotion>,
+    scroll: Res<'w, AccumulatedMouseScroll>,
+}
+
+impl DesktopControls<'_> {
+    /// This update's input.
+    pub(crate) fn input(&self) -> DesktopInput<'_> {
+        DesktopInput {
+            keys: &self.keys,
+            buttons: &self.buttons,
+            mouse: self.motion.delta,
+            scroll: self.scroll.delta.y,
         }
     }
-    if buttons.pressed(MouseButton::Left) {
-        // 1 mm per pixel; screen right is the scene's -y, screen up its +x (the preview looks
-        // along the table).
-        let d = motion.delta;
-        step += Vector3::new(-f64::from(d.y), -f64::from(d.x), 0.0) * 0.001;
-    }
-    step.z += f64::from(scroll.delta.y) * 0.01;
-    let mut roll = 0.0;
-    if keys.pressed(KeyCode::KeyZ) {
-        roll -= 1.2 * dt;
-    }
-    if keys.pressed(KeyCode::KeyX) {
-        roll += 1.2 * dt;
-    }
-    if keys.just_pressed(KeyCode::Space) {
-        hand.closing = !hand.closing;
-    }
-    if keys.just_pressed(KeyCode::Home) {
-        hand.wrist = hand.start;
-        hand.closing = false;
-        hand.grip = 0.0;
-        if held.held.is_none()
-            && let Ok((mut t, mut v)) = twin.single_mut()
-        {
-            *t = live.twin_start;
-            *v = Velocity::zero();
+}
+
+/// One update's keys and mouse for the desktop hand.
+pub(crate) struct DesktopInput<'a> {
+    /// The keyboard.
+    pub keys: &'a ButtonInput<KeyCode>,
+    /// The mouse buttons.
+    pub buttons: &'a ButtonInput<MouseButton>,
+    /// The mouse's motion this update (pixels).
+    pub mouse: Vec2,
+    /// The wheel's vertical scroll this update (lines).
+    pub scroll: f32,
+}
+
+impl DesktopHand {
+    /// The desktop hand at `start` (wrist pose, virtual scene), open.
+    pub(crate) fn new(start: Isometry3<f64>) -> Self {
+        Self {
+            inbox: HandInbox::new("desktop hand"),
+            start,
+            wrist: start,
+            grip: 0.0,
+            closing: false,
         }
     }
-    let h = &mut *hand;
-    h.wrist.translation.vector += step;
-    // Tilt about the hand's own forward axis, as one pours.
-    let forward = h.wrist.rotation * Vector3::x_axis();
-    h.wrist.rotation = UnitQuaternion::from_axis_angle(&forward, roll) * h.wrist.rotation;
-    let target = if h.closing { 1.0 } else { 0.0 };
-    h.grip += (target - h.grip).clamp(-2.0 * dt, 2.0 * dt);
-    h.inbox.push(HandFrame {
-        t_s: fixed.elapsed_secs_f64(),
-        hand: Handedness::Right,
-        tracked: true,
-        joints: skeleton(&h.wrist, h.grip, Handedness::Right),
-    });
+
+    /// The hand source its frames go to.
+    pub(crate) fn inbox(&self) -> &HandInbox {
+        &self.inbox
+    }
+
+    /// Moves the hand by one update's `input` over `dt_s` (capped at 0.1 s) and pushes its
+    /// skeleton, stamped `t_s` (the hand app's clock), to [`DesktopHand::inbox`]. Returns
+    /// whether Home was pressed: the hand went back to the start, open.
+    pub(crate) fn step(&mut self, input: &DesktopInput<'_>, dt_s: f64, t_s: f64) -> bool {
+        let dt = dt_s.clamp(0.0, 0.1);
+        let speed = 0.15;
+        let mut step = Vector3::zeros();
+        for (key, dir) in [
+            (KeyCode::ArrowUp, Vector3::x()),
+            (KeyCode::ArrowDown, -Vector3::x()),
+            (KeyCode::ArrowLeft, Vector3::y()),
+            (KeyCode::ArrowRight, -Vector3::y()),
+            (KeyCode::PageUp, Vector3::z()),
+            (KeyCode::PageDown, -Vector3::z()),
+        ] {
+            if input.keys.pressed(key) {
+                step += dir * speed * dt;
+            }
+        }
+        if input.buttons.pressed(MouseButton::Left) {
+            // 1 mm per pixel; screen right is the scene's -y, screen up its +x (the preview
+            // looks along the table).
+            let d = input.mouse;
+            step += Vector3::new(-f64::from(d.y), -f64::from(d.x), 0.0) * 0.001;
+        }
+        step.z += f64::from(input.scroll) * 0.01;
+        let mut roll = 0.0;
+        if input.keys.pressed(KeyCode::KeyZ) {
+            roll -= 1.2 * dt;
+        }
+        if input.keys.pressed(KeyCode::KeyX) {
+            roll += 1.2 * dt;
+        }
+        if input.keys.just_pressed(KeyCode::Space) {
+            self.closing = !self.closing;
+        }
+        let home = input.keys.just_pressed(KeyCode::Home);
+        if home {
+            self.wrist = self.start;
+            self.closing = false;
+            self.grip = 0.0;
+        }
+        self.wrist.translation.vector += step;
+        // Tilt about the hand's own forward axis, as one pours.
+        let forward = self.wrist.rotation * Vector3::x_axis();
+        self.wrist.rotation = UnitQuaternion::from_axis_angle(&forward, roll) * self.wrist.rotation;
+        let target = if self.closing { 1.0 } else { 0.0 };
+        self.grip += (target - self.grip).clamp(-2.0 * dt, 2.0 * dt);
+        self.inbox.push(HandFrame {
+            t_s,
+            hand: Handedness::Right,
+            tracked: true,
+            joints: skeleton(&self.wrist, self.grip, Handedness::Right),
+        });
+        home
+    }
 }
 
 /// How far the real object is from its twin mapped into the real world (mm), where the robot
@@ -836,4 +938,51 @@ pub fn status_line(
         contacts.contacts.len(),
         s.max_tcp_speed,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn step(hand: &mut DesktopHand, keys: &ButtonInput<KeyCode>, dt_s: f64) -> bool {
+        let buttons = ButtonInput::<MouseButton>::default();
+        let input = DesktopInput {
+            keys,
+            buttons: &buttons,
+            mouse: Vec2::ZERO,
+            scroll: 0.0,
+        };
+        hand.step(&input, dt_s, 1.5)
+    }
+
+    /// Up moves the wrist along +x at 0.15 m/s (one update's time capped at 0.1 s), Space
+    /// closes the hand over half a second, Home puts it back open at the start; each update
+    /// pushes a tracked 26-joint frame at the given time.
+    #[test]
+    fn the_desktop_hand_moves_closes_and_goes_home() {
+        let start = Isometry3::translation(0.1, 0.2, 0.3);
+        let mut hand = DesktopHand::new(start);
+        let mut keys = ButtonInput::<KeyCode>::default();
+        keys.press(KeyCode::ArrowUp);
+        keys.press(KeyCode::Space);
+        assert!(!step(&mut hand, &keys, 1.0));
+        let moved = hand.wrist.translation.vector - start.translation.vector;
+        assert!(
+            (moved - Vector3::new(0.015, 0.0, 0.0)).norm() < 1e-12,
+            "{moved}"
+        );
+        assert!(
+            hand.closing && (hand.grip - 0.2).abs() < 1e-12,
+            "{}",
+            hand.grip
+        );
+        let mut frames = hand.inbox.clone();
+        let frame = avatarm_hand::HandSource::poll(&mut frames, 2.0).unwrap();
+        assert!(frame.tracked && frame.joints.len() == 26 && frame.t_s == 1.5);
+        let mut home = ButtonInput::<KeyCode>::default();
+        home.press(KeyCode::Home);
+        assert!(step(&mut hand, &home, 0.0));
+        assert_eq!(hand.wrist, start);
+        assert!(!hand.closing && hand.grip == 0.0);
+    }
 }

@@ -494,6 +494,11 @@ mod tests {
             rtt >= Duration::from_millis(250),
             "{rtt:?}: held through the cut"
         );
+        // Counted after each write: the last echo's count may land just after the read.
+        let deadline = Instant::now() + Duration::from_secs(2);
+        while relay.stats().bytes.load(Ordering::Relaxed) < 16 && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(5));
+        }
         assert!(relay.stats().bytes.load(Ordering::Relaxed) >= 16);
     }
 

@@ -148,9 +148,24 @@ pub fn psnr_in(a: &[u8], b: &[u8], region: &[u8]) -> Option<f64> {
     if a.len() != b.len() || a.len() != region.len() * 4 {
         return None;
     }
+    psnr_where(a, b, region.iter().map(|&r| r != 0))
+}
+
+/// PSNR (dB) of the RGB channels of two RGBA8 images over all their pixels, capped at 100 dB
+/// (identical images); `None` when the sizes differ or the images are empty. The same
+/// definition as [`psnr_in`], with no region.
+pub fn psnr(a: &[u8], b: &[u8]) -> Option<f64> {
+    if a.len() != b.len() || !a.len().is_multiple_of(4) {
+        return None;
+    }
+    psnr_where(a, b, std::iter::repeat(true))
+}
+
+/// PSNR over the pixels `inside` says (one flag per RGBA8 pixel).
+fn psnr_where(a: &[u8], b: &[u8], inside: impl Iterator<Item = bool>) -> Option<f64> {
     let (mut sum, mut n) = (0f64, 0u64);
-    for ((pa, pb), &r) in a.chunks_exact(4).zip(b.chunks_exact(4)).zip(region) {
-        if r == 0 {
+    for ((pa, pb), inside) in a.chunks_exact(4).zip(b.chunks_exact(4)).zip(inside) {
+        if !inside {
             continue;
         }
         for c in 0..3 {
@@ -191,5 +206,23 @@ mod tests {
         }
         assert!(leak_by_dilation(&mask, &vec![0; mask.len()], w, h, 3).is_none());
         assert_eq!(chebyshev_distance(&[0; 4], 2, 2), vec![u32::MAX; 4]);
+    }
+
+    /// The whole-image PSNR is the region PSNR over every pixel: 20 log10(255 / 2) dB for a
+    /// difference of 2 in every channel, 100 dB for identical images, none for sizes that do
+    /// not match.
+    #[test]
+    fn psnr_is_psnr_in_over_every_pixel() {
+        let mut rng = crate::rng::Rng::new(7);
+        let a: Vec<u8> = (0..4 * 50).map(|_| (rng.uniform() * 255.0) as u8).collect();
+        let b: Vec<u8> = a.iter().map(|&v| v.saturating_add(9)).collect();
+        assert_eq!(psnr(&a, &b), psnr_in(&a, &b, &[1; 50]));
+        let flat = vec![100u8; 4 * 50];
+        let off: Vec<u8> = flat.iter().map(|v| v + 2).collect();
+        let expected = 20.0 * (255.0f64 / 2.0).log10();
+        assert!((psnr(&flat, &off).unwrap() - expected).abs() < 1e-9);
+        assert_eq!(psnr(&flat, &flat), Some(100.0));
+        assert_eq!(psnr(&flat, &flat[..196]), None);
+        assert_eq!(psnr(&[], &[]), None);
     }
 }
