@@ -501,6 +501,25 @@ fn the_operator_window_shows_the_received_video_with_the_hand_in_front() {
     assert!(f(&j, "window.frames") >= 60.0, "{j}");
     assert!(f(&j, "window.video_frames") >= 3.0, "{j}");
     assert!(f(&j, "window.hand_frames") >= 50.0, "{j}");
+    // The display stage's figures: one wait per frame put on the panel, one time per rendered
+    // frame after the first, both finite and positive.
+    assert_eq!(
+        f(&j, "window.panel_wait_ms.n"),
+        f(&j, "window.video_frames"),
+        "{j}"
+    );
+    assert_eq!(
+        f(&j, "window.frame_ms.n"),
+        f(&j, "window.frames") - 1.0,
+        "{j}"
+    );
+    for key in [
+        "window.panel_wait_ms.median",
+        "window.frame_ms.median",
+        "window.fps",
+    ] {
+        assert!(f(&j, key) > 0.0, "{key}: {j}");
+    }
     let img = image::open(&shot)
         .expect("the window's screenshot")
         .to_rgb8();

@@ -311,6 +311,7 @@ fn spawn_ui(mut commands: Commands, state: Res<WindowState>, desktop: Option<Res
     } else {
         "Operator: the robot site's video\n(robot erased) with your hand and\nthe object's twin in front"
     };
+    let about = format!("{about}\n\nEscape or closing the window\nends the session");
     let keys = if desktop.is_some() {
         format!(
             "\n\ndesktop hand:\n{}",
@@ -460,9 +461,11 @@ fn drive_desktop_hand(
     }
 }
 
-/// Counts frames; closes at `frames` (after the screenshot) or when the session has ended.
+/// Counts frames; closes at `frames` (after the screenshot), on Escape (as the preview does)
+/// or when the session has ended.
 fn count_frames(
     mut commands: Commands,
+    keys: Res<ButtonInput<KeyCode>>,
     session: Res<Session>,
     mut state: ResMut<WindowState>,
     outcome: Res<WindowOutcome>,
@@ -493,7 +496,10 @@ fn count_frames(
             .spawn(Screenshot::primary_window())
             .observe(save_to_disk(path));
     }
-    if last == Some(state.report.frames) || session.0.ended.load(Ordering::Relaxed) {
+    if last == Some(state.report.frames)
+        || session.0.ended.load(Ordering::Relaxed)
+        || keys.just_pressed(KeyCode::Escape)
+    {
         state.quit_in.get_or_insert(QUIT_DRAIN);
     }
     match state.quit_in {
