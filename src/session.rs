@@ -43,6 +43,7 @@ const JPEG_QUALITY: u8 = 90;
 /// Adds the session recorder to `app`: creates `path` now (an error names it), records until
 /// the app ends.
 pub fn add_session_recorder(app: &mut App, path: &Path, scene: &Scene) -> Result<(), AppError> {
+    crate::replay::refuse_moving_camera_recording(scene)?;
     let mut writer = RecordingWriter::create(path)?;
     let epoch_ns = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)

@@ -940,6 +940,111 @@ fn latency_compensation_cuts_the_leak_at_full_speed() {
     );
 }
 
+/// Alice's headset camera (`head_camera.toml`): the head sweeps at a peak of 30 degrees/s, its
+/// tracking 20 ms late, frames 50 ms late. Drawing each frame's mask at the head pose of its
+/// capture time keeps the leak under the 1 % goal; drawing it at the newest tracked pose
+/// leaks several times more; the report gives the mask camera's error.
+#[test]
+fn pose_compensation_keeps_a_moving_head_cameras_mask_on_the_robot() {
+    let mut scene = scene("head_camera");
+    scene.file.duration_s = 2.0;
+    scene.file.erase.pose_compensation = true;
+    let on = run(&scene, "head_on");
+    let head = &on["head"];
+    assert!(
+        (num(&on, "head.peak_speed_deg_s") - 30.0).abs() < 0.5,
+        "{head}"
+    );
+    assert!(num(&on, "head.frames") >= 50.0, "{head}");
+    scene.file.erase.pose_compensation = false;
+    let off = run(&scene, "head_off");
+    let (leak_on, leak_off) = (
+        num(&on, "mask.leak_pct_mean"),
+        num(&off, "mask.leak_pct_mean"),
+    );
+    let (err_on, err_off) = (
+        num(&on, "head.mask_camera_error_deg.median"),
+        num(&off, "head.mask_camera_error_deg.median"),
+    );
+    eprintln!(
+        "head camera: leak {leak_on:.3} % compensated, {leak_off:.3} % not; camera error {err_on:.4} / {err_off:.4} deg; IoU {} / {}",
+        on["mask"]["iou_mean"], off["mask"]["iou_mean"]
+    );
+    assert!(leak_on <= 1.0, "the goal: {leak_on}");
+    assert!(leak_off >= 3.0 * leak_on, "on {leak_on} vs off {leak_off}");
+    assert!(err_on < 0.1 && err_off > 0.3, "{err_on} / {err_off}");
+    assert!(num(&on, "mask.iou_mean") >= 0.97, "{}", on["mask"]);
+    // A recording holds one camera pose: a moving camera is refused, by flag.
+    let mut options = ReplayOptions::new(out_dir("head_record"));
+    options.record = Some(out_dir("head_record").join("r.mcap"));
+    let e = replay::run(&scene, options).expect_err("a moving camera is not recorded");
+    assert!(e.to_string().contains("--record"), "{e}");
+}
+
+/// `avatarm bench head` on two speeds and one latency: a row per point, the mount series, the
+/// background series, the chart.
+#[test]
+fn bench_head_writes_the_chart_and_the_table() {
+    let out = out_dir("bench_head");
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["bench", "head", "--out"])
+        .arg(&out)
+        .args([
+            "--speeds",
+            "0,60",
+            "--latencies",
+            "50",
+            "--compensation",
+            "off,on",
+            "--mount-errors",
+            "0,3",
+            "--mount-speed",
+            "60",
+            "--mount-latency",
+            "50",
+            "--background-views",
+            "0,8",
+            "--duration",
+            "0.8",
+            "--camera-size",
+            "320x240",
+        ])
+        .output()
+        .expect("runs avatarm");
+    let stdout = succeeded(&output);
+    let table = Table::read(&out.join("head_erase.csv"));
+    let csv = &table.text;
+    // 2 speeds x 2 settings; the mount series' 3 degrees and the background series' plain
+    // photograph (their other points are in the grid).
+    assert_eq!(table.rows.len(), 6, "{csv}\n{stdout}");
+    let leak = |row: usize| table.number(row, "leak_pct_mean");
+    let psnr = |row: usize| table.number(row, "psnr_db_mean");
+    // Rows: (0, off), (0, on), (60, off), (60, on), (60, on, 3 deg), (60, on, the photograph).
+    assert!(
+        leak(2) > leak(3) + 1.0,
+        "60 deg/s: the newest pose leaks: {csv}"
+    );
+    assert!(
+        leak(4) > leak(3) + 1.0,
+        "a 3 degree mount error leaks: {csv}"
+    );
+    assert!(table.number(3, "camera_error_deg_median") < 0.1, "{csv}");
+    assert_eq!(table.number(5, "background_views"), 0.0, "{csv}");
+    assert!(
+        psnr(3) > psnr(5) + 3.0,
+        "the background that follows the view beats the one photograph: {csv}"
+    );
+    assert!(
+        table.cell(3, "psnr_db_by_photo_angle").contains("deg:"),
+        "{csv}"
+    );
+    let svg = std::fs::read_to_string(out.join("head_erase.svg")).expect("svg");
+    assert!(svg.contains("goal: 1 %") && svg.contains("mount"), "svg");
+    assert!(svg.contains("the photograph as it is"), "svg");
+    let png = image::open(out.join("head_erase.png")).expect("png");
+    assert!(png.width() >= 1500);
+}
+
 /// Exposure drifting by +-30 %: photometric compensation keeps the erased region matched.
 #[test]
 fn photometric_compensation_follows_exposure() {

@@ -6,8 +6,10 @@ use std::sync::Arc;
 
 use avatarm_core::rng::Rng;
 use avatarm_erase::{CaptureBackground, SetBackground};
-use avatarm_sim::SimCameras;
+use avatarm_sim::{SimCameras, SimRobotState};
+use avatarm_twin::camera::RenderSettled;
 use avatarm_twin::readback::{ImageRead, read_image_once};
+use bevy::diagnostic::FrameCount;
 use bevy::prelude::*;
 
 use crate::{AppError, AvatarmSystems, SceneResource};
@@ -71,6 +73,7 @@ fn load_file(scene: Res<SceneResource>, mut out: MessageWriter<SetBackground>) {
                 width,
                 height,
                 origin: path.display().to_string(),
+                camera_pose: None,
             });
         }
         Err(e) => error!("background: {e}; the robot is not erased until one is set"),
@@ -85,6 +88,7 @@ fn empty_room(
     scene: Res<SceneResource>,
     cameras: Option<Res<SimCameras>>,
     mut progress: ResMut<BackgroundProgress>,
+    (robot, frame): (Option<Res<SimRobotState>>, Res<FrameCount>),
 ) {
     if scene.0.file.background != BackgroundSpec::EmptyRoom {
         progress.empty_room_done = true;
@@ -107,11 +111,38 @@ fn empty_room(
         );
         progress.empty_room_done = true;
         commands.queue(move |world: &mut World| {
-            send_empty_room(world, width, height, rgba);
+            send_empty_room(world, width, height, rgba, None);
         });
         return;
     }
     progress.in_flight = true;
+    if let Some(head) = &scene.0.head {
+        // A camera on a head sees another room at every update, so no two captures match: the
+        // photograph is the first complete render (every pipeline compiled), taken from where
+        // the head was then (its true pose and the mount the app believes).
+        let t = robot.map_or(0.0, |r| r.0.time_s());
+        let pose = head.believed_camera_at(t);
+        let requested = frame.0.wrapping_add(1);
+        read_image_once(&mut commands, handle).observe(
+            move |read: On<ImageRead>,
+                  mut commands: Commands,
+                  settled: Res<RenderSettled>,
+                  mut progress: ResMut<BackgroundProgress>| {
+                progress.in_flight = false;
+                let rgba = read.data.clone();
+                let black = rgba.chunks_exact(4).all(|px| px[..3] == [0, 0, 0]);
+                if black || settled.last_complete_frame() < requested || progress.empty_room_done {
+                    return;
+                }
+                progress.empty_room_done = true;
+                let (width, height) = (read.width, read.height);
+                commands.queue(move |world: &mut World| {
+                    send_empty_room(world, width, height, rgba, Some(pose));
+                });
+            },
+        );
+        return;
+    }
     read_image_once(&mut commands, handle).observe(
         |read: On<ImageRead>, mut commands: Commands, mut progress: ResMut<BackgroundProgress>| {
             progress.in_flight = false;
@@ -130,7 +161,7 @@ fn empty_room(
             if progress.identical >= SETTLED_CAPTURES && !progress.empty_room_done {
                 progress.empty_room_done = true;
                 commands.queue(move |world: &mut World| {
-                    send_empty_room(world, width, height, rgba);
+                    send_empty_room(world, width, height, rgba, None);
                 });
             } else {
                 progress.last = Some((width, height, rgba));
@@ -139,7 +170,13 @@ fn empty_room(
     );
 }
 
-fn send_empty_room(world: &mut World, width: u32, height: u32, rgba: Vec<u8>) {
+fn send_empty_room(
+    world: &mut World,
+    width: u32,
+    height: u32,
+    rgba: Vec<u8>,
+    camera_pose: Option<nalgebra::Isometry3<f64>>,
+) {
     let Some(scene) = world.get_resource::<SceneResource>() else {
         return;
     };
@@ -162,6 +199,7 @@ fn send_empty_room(world: &mut World, width: u32, height: u32, rgba: Vec<u8>) {
         width,
         height,
         origin: "the simulated empty room".into(),
+        camera_pose,
     });
 }
 

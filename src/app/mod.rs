@@ -11,7 +11,7 @@ use std::time::Duration;
 use avatarm_core::robot::JointMap;
 use avatarm_erase::interaction::ObjectTwinSpec;
 use avatarm_erase::{EraseConfig, ErasePlugin, InteractionConfig, InteractionPlugin};
-use avatarm_sim::{SimRoomConfig, SimRoomPlugin, SimVideo};
+use avatarm_sim::{SimHead, SimRoomConfig, SimRoomPlugin, SimVideo};
 use avatarm_twin::layers;
 use avatarm_twin::prelude::*;
 use avatarm_video::{LiveVideo, VideoPlugin};
@@ -276,6 +276,27 @@ pub enum AvatarmSystems {
     Score,
 }
 
+/// A camera on a head with `[camera.head.background] views > 0`: the view-following
+/// background, its proxy the scene's boxes that are not objects (desk, wall, floor).
+pub fn view_background(scene: &Scene) -> Option<avatarm_erase::ViewBackgroundConfig> {
+    let head = scene.head.as_ref().filter(|h| h.background_views > 0)?;
+    let boxes: Vec<_> = scene
+        .props
+        .iter()
+        .zip(&scene.file.props)
+        .filter(|(_, spec)| !spec.object)
+        .filter_map(|(prop, _)| match prop.shape {
+            avatarm_scene::prop::PropShape::Box { size } => Some((prop.pose, size)),
+            _ => None,
+        })
+        .collect();
+    Some(avatarm_erase::ViewBackgroundConfig {
+        proxy: avatarm_core::dr::view_background::GeometricProxy::from_boxes(&boxes),
+        max_views: head.background_views,
+        min_separation_rad: head.background_separation_rad,
+    })
+}
+
 /// Inserts the scene's resources (the room, the video, the erase pipeline, the interaction
 /// layer), spawns the app's twin of the robot, and orders [`AvatarmSystems`].
 pub struct AvatarmSetupPlugin {
@@ -313,6 +334,12 @@ impl Plugin for AvatarmSetupPlugin {
                     seed: scene.file.seed,
                     fps: scene.file.camera.fps,
                 }),
+                head: scene.head.as_ref().map(|h| SimHead {
+                    motion: h.motion.clone(),
+                    mount: h.mount,
+                    tracking: h.tracking,
+                    seed: scene.file.seed,
+                }),
                 external_drive: false,
             })
             .insert_resource(LiveVideo::new(
@@ -332,6 +359,8 @@ impl Plugin for AvatarmSetupPlugin {
                 base: scene.robot_base(),
                 source_twin: None,
                 occluders: scene_occluders(scene),
+                head_mount: scene.head.as_ref().map(|h| h.believed_mount),
+                view_background: view_background(scene),
             })
             .insert_resource(interaction_config(scene))
             .add_systems(

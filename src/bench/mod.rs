@@ -14,12 +14,16 @@
 //! - [`video`]: the erased video's codecs (JPEG qualities, H.264 bit rates) at several frame
 //!   sizes: PSNR after coding against bit rate, encode and decode time, as ratios against
 //!   JPEG at quality 85 measured in the same run.
+//! - [`head`]: a camera on a moving head (Alice's headset camera): leak against the head's
+//!   angular speed and tracking latency, with and without pose compensation, and against an
+//!   error in the camera's mount.
 //! - [`chart`]: what all share: the Pareto front and the charts' house style.
 
 pub mod chart;
 pub mod control;
 pub mod dr;
 pub mod gpu;
+pub mod head;
 pub mod network;
 pub mod twin;
 pub mod video;

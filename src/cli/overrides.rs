@@ -37,6 +37,16 @@ pub struct EraseOverrides {
     /// Draw the mask through the camera's lens distortion (off: as a pinhole's).
     #[arg(long, value_name = "on|off", value_parser = on_off)]
     pub lens_distortion: Option<bool>,
+    /// A camera on a head: draw each frame's mask at the head pose of its capture time (off:
+    /// at the newest tracked pose).
+    #[arg(long, value_name = "on|off", value_parser = on_off)]
+    pub pose_compensation: Option<bool>,
+    /// A camera on a head that sweeps: its peak angular speed (degrees/s).
+    #[arg(long, value_name = "DEG_S")]
+    pub head_speed: Option<f64>,
+    /// A camera on a head: the head tracking's latency (ms).
+    #[arg(long, value_name = "MS")]
+    pub tracking_latency_ms: Option<f64>,
     /// Load the background H from an image file (the camera's size).
     #[arg(long, value_name = "PATH", conflicts_with = "capture_background_at")]
     pub background: Option<PathBuf>,
@@ -95,7 +105,78 @@ impl EraseOverrides {
         if let Some(v) = self.lens_distortion {
             e.lens_distortion = v;
         }
+        if let Some(v) = self.pose_compensation {
+            e.pose_compensation = v;
+        }
         e.validate("command line")?;
+        Ok(())
+    }
+
+    /// Applies `--head-speed` and `--tracking-latency-ms` to the scene's head; errors name the
+    /// flag (no head, a keyframed head, a value out of range).
+    fn apply_head(&self, scene: &mut Scene) -> Result<(), AppError> {
+        let (speed, latency) = (self.head_speed, self.tracking_latency_ms);
+        if speed.is_none() && latency.is_none() {
+            return Ok(());
+        }
+        let flag = if speed.is_some() {
+            "--head-speed"
+        } else {
+            "--tracking-latency-ms"
+        };
+        if scene.head.is_none() {
+            return Err(AppError::flag(
+                flag,
+                format!(
+                    "the scene '{}' has a fixed camera; a camera on a head is [camera.head]",
+                    scene.file.name
+                ),
+            ));
+        }
+        if let Some(v) = speed {
+            if !(v.is_finite() && (0.0..=720.0).contains(&v)) {
+                return Err(AppError::flag(
+                    "--head-speed",
+                    format!("{v} must be within 0..=720 degrees/s"),
+                ));
+            }
+            let sweep = scene
+                .file
+                .camera
+                .head
+                .as_mut()
+                .and_then(|h| h.sweep.as_mut());
+            let Some(sweep) = sweep else {
+                return Err(AppError::flag(
+                    "--head-speed",
+                    "the scene's head follows keyframes; a speed needs [camera.head.sweep]",
+                ));
+            };
+            if v > 0.0 && sweep.amplitude_deg <= 0.0 {
+                return Err(AppError::flag(
+                    "--head-speed",
+                    "the head's sweep has no amplitude to move through",
+                ));
+            }
+            sweep.peak_speed_deg_s = v;
+            if let Some(head) = scene.head.as_mut() {
+                head.set_sweep_speed(v);
+            }
+        }
+        if let Some(ms) = latency {
+            let Some(head) = scene.head.as_mut() else {
+                return Ok(());
+            };
+            let mut tracking = head.tracking;
+            tracking.latency_s = ms / 1e3;
+            tracking
+                .validate("tracking")
+                .map_err(|e| AppError::flag("--tracking-latency-ms", e.to_string()))?;
+            head.tracking = tracking;
+            if let Some(h) = scene.file.camera.head.as_mut() {
+                h.tracking.latency_s = tracking.latency_s;
+            }
+        }
         Ok(())
     }
 
@@ -110,7 +191,14 @@ impl EraseOverrides {
             (c.width, c.height) = (width, height);
         }
         self.apply_to_settings(&mut scene.file.erase)?;
+        self.apply_head(scene)?;
         if let Some(path) = &self.believed_pose {
+            if scene.head.is_some() {
+                return Err(AppError::flag(
+                    "--believed-pose",
+                    "the scene's camera rides on a head: its pose is the tracked head's times the mount, not a fixed pose",
+                ));
+            }
             let base_from_camera = avatarm_record::camera::read_pose(path)?;
             scene.believed_camera.world_from_camera = scene.robot_base() * base_from_camera;
         }

@@ -205,6 +205,27 @@ struct Replay {
     recorded: Vec<RecordedFrame>,
     /// The mask's lens map ([`EraseLens`], taken when the replay starts).
     lens: Option<Arc<DistortionMap>>,
+    /// A camera on a head: per erased frame, the error of the pose its mask was drawn from
+    /// against the camera's true pose at capture (degrees, mm), the head's angular speed then
+    /// (degrees/s) and how old the newest tracked pose was (ms).
+    head_errors: Vec<HeadFrameError>,
+}
+
+/// A camera on a head: how far one frame's mask camera was from the truth.
+#[derive(Debug, Clone, Copy)]
+struct HeadFrameError {
+    t_s: f64,
+    angle_deg: f64,
+    offset_mm: f64,
+    speed_deg_s: f64,
+    tracking_age_ms: Option<f64>,
+    /// The view-following background: the angle to the nearest view captured before the frame
+    /// (degrees), and the share of the robot's region some view saw.
+    nearest_view_deg: Option<f64>,
+    seen_share: Option<f64>,
+    /// The angle between the frame's camera and the one the background photograph (the
+    /// scene's camera at t = 0) was taken from (degrees).
+    photo_angle_deg: f64,
 }
 
 /// The images a replay scores each frame with.
@@ -256,6 +277,7 @@ impl Plugin for ReplayPlugin {
             bar,
             recorded: Vec::new(),
             lens: None,
+            head_errors: Vec::new(),
         })
         .add_systems(Startup, pause_for_warmup)
         .add_systems(
@@ -385,6 +407,31 @@ fn drive_replay(
         {
             let fk = frame_key(t_s);
             let save = replay.save_keys.contains(&fk);
+            // A camera on a head: how far the mask's camera was from the truth at capture.
+            if !replay.frames.get(&fk).is_some_and(|e| e.requested)
+                && let (Some(head), Some(pose)) = (&scene.0.head, erase_state.camera_pose)
+            {
+                let truth = head.camera_at(t_s);
+                let (angle, offset) = avatarm_core::vision::head::pose_error(&pose, &truth);
+                let vb = erase_state.view_background.as_ref();
+                replay.head_errors.push(HeadFrameError {
+                    t_s,
+                    angle_deg: angle.to_degrees(),
+                    offset_mm: offset * 1e3,
+                    speed_deg_s: head.motion.angular_speed_at(t_s).to_degrees(),
+                    tracking_age_ms: erase_state
+                        .head_pose_s
+                        .map(|(newest, _)| (t_s - newest) * 1e3),
+                    nearest_view_deg: vb.and_then(|v| v.nearest_rad).map(f64::to_degrees),
+                    seen_share: vb.and_then(|v| v.seen_share),
+                    photo_angle_deg: (pose.rotation * nalgebra::Vector3::z())
+                        .angle(
+                            &(scene.0.believed_camera.world_from_camera.rotation
+                                * nalgebra::Vector3::z()),
+                        )
+                        .to_degrees(),
+                });
+            }
             let entry = replay.frames.entry(fk).or_default();
             if !entry.requested {
                 entry.requested = true;
@@ -878,6 +925,7 @@ fn finish(
             "twin_last_stamp_s": twin.and_then(|t| t.stamp_s),
         },
         "erase": s.file.erase,
+        "head": head_report(s, &replay.head_errors, &replay.scores, erase),
         "background": erase.background_origin,
         "mask": mask,
         "dr": dr_report,
@@ -931,11 +979,112 @@ fn finish(
     Ok(report)
 }
 
+/// The `head` section of a replay's report (null for a fixed camera): the head's motion and
+/// tracking, and how far each frame's mask camera was from the true camera.
+fn head_report(
+    s: &avatarm_scene::Scene,
+    errors: &[HeadFrameError],
+    scores: &[FrameScore],
+    erase: &EraseState,
+) -> serde_json::Value {
+    let Some(head) = &s.head else {
+        return serde_json::Value::Null;
+    };
+    // The background's PSNR in the robot's region against how far the frame's camera was from
+    // the nearest view captured before it.
+    let psnr_at: std::collections::HashMap<i64, f64> = scores
+        .iter()
+        .filter_map(|f| f.psnr_robot_db.map(|p| (frame_key(f.t_s), p)))
+        .collect();
+    let by_angle = |angle: &dyn Fn(&HeadFrameError) -> Option<f64>| -> serde_json::Value {
+        let bins = [
+            (0.0, 1.0),
+            (1.0, 2.0),
+            (2.0, 4.0),
+            (4.0, 8.0),
+            (8.0, 16.0),
+            (16.0, 180.0),
+        ];
+        let rows: Vec<serde_json::Value> = bins
+            .iter()
+            .filter_map(|&(lo, hi)| {
+                let psnrs: Vec<f64> = errors
+                    .iter()
+                    .filter(|e| angle(e).is_some_and(|a| a >= lo && a < hi))
+                    .filter_map(|e| psnr_at.get(&frame_key(e.t_s)).copied())
+                    .collect();
+                (!psnrs.is_empty()).then(|| {
+                    json!({
+                        "angle_deg": [lo, hi],
+                        "frames": psnrs.len(),
+                        "psnr_robot_db_mean": mean(psnrs.iter().copied()),
+                    })
+                })
+            })
+            .collect();
+        json!(rows)
+    };
+    let seen: Vec<f64> = errors.iter().filter_map(|e| e.seen_share).collect();
+    let nearest: Vec<f64> = errors.iter().filter_map(|e| e.nearest_view_deg).collect();
+    let background = match &erase.view_background {
+        Some(vb) => json!({
+            "views_kept": vb.views.len(),
+            "views_offered": vb.views.offered(),
+            "view_times_s": vb.views.times(),
+            "seen_share_of_robot_region": mean(seen.iter().copied()),
+            "nearest_view_deg": spread(&nearest),
+            "psnr_by_nearest_view": by_angle(&|e| e.nearest_view_deg),
+        }),
+        None => json!(null),
+    };
+    let angles: Vec<f64> = errors.iter().map(|e| e.angle_deg).collect();
+    let offsets: Vec<f64> = errors.iter().map(|e| e.offset_mm).collect();
+    let ages: Vec<f64> = errors.iter().filter_map(|e| e.tracking_age_ms).collect();
+    let speeds: Vec<f64> = errors.iter().map(|e| e.speed_deg_s).collect();
+    let t = &head.tracking;
+    json!({
+        "peak_speed_deg_s": head.motion.peak_angular_speed(s.file.duration_s).to_degrees(),
+        "speed_deg_s_at_frames": spread(&speeds),
+        "tracking": {
+            "rate_hz": t.rate_hz,
+            "latency_s": t.latency_s,
+            "position_sigma_mm": t.position_sigma_m * 1e3,
+            "angle_sigma_deg": t.angle_sigma_rad.to_degrees(),
+        },
+        "pose_compensation": s.file.erase.pose_compensation,
+        "mask_camera_error_deg": spread(&angles),
+        "mask_camera_error_mm": spread(&offsets),
+        "newest_tracked_pose_age_ms": spread(&ages),
+        "frames": errors.len(),
+        "view_background": background,
+        "psnr_by_angle_from_photo": by_angle(&|e| Some(e.photo_angle_deg)),
+    })
+}
+
+/// A recording holds one camera pose; a camera on a head moves, so recording one is refused
+/// (`--record`) rather than written with a wrong pose.
+pub(crate) fn refuse_moving_camera_recording(scene: &avatarm_scene::Scene) -> Result<(), AppError> {
+    if scene.head.is_some() {
+        return Err(AppError::flag(
+            "--record",
+            format!(
+                "the scene '{}' has a camera on a head; recordings hold one fixed camera pose, \
+                 so a moving camera is not recorded yet",
+                scene.file.name
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Runs a replay to the end and returns its report.
 pub fn run(
     scene: &avatarm_scene::Scene,
     options: ReplayOptions,
 ) -> Result<serde_json::Value, AppError> {
+    if options.record.is_some() {
+        refuse_moving_camera_recording(scene)?;
+    }
     let slot = options.result.clone();
     let out = options.out.clone();
     let mut app = crate::build_app(scene, &crate::Mode::Headless(options))?;

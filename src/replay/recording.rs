@@ -131,6 +131,8 @@ pub fn run_recording(o: &RecordingOptions) -> Result<serde_json::Value, AppError
             base: Isometry3::identity(),
             source_twin: Some(source),
             occluders: Vec::new(),
+            head_mount: None,
+            view_background: None,
         })
         .add_plugins(ErasePlugin)
         .insert_resource(Driver {
@@ -517,6 +519,7 @@ fn feed(
                     width: d.size.0,
                     height: d.size.1,
                     origin: format!("{origin} (recording replay)"),
+                    camera_pose: None,
                 });
                 // H reaches the pipeline in the next update.
                 d.phase = Phase::Settle(1, pass);

@@ -53,6 +53,10 @@ pub struct LiveTask {
     pub start_z: f64,
     /// The object twin's start (virtual scene), where Home puts it back.
     pub twin_start: Transform,
+    /// Alice's view (the scene's camera rides on a head): while the hand holds the object, the
+    /// object's twin and the hand are drawn on the real object as the robot carries it, not
+    /// where the physics twin is.
+    pub anchor_to_real: bool,
 }
 
 /// The desktop hand's state: wrist pose (virtual scene), grip, and its start.
@@ -90,6 +94,7 @@ pub struct LiveTeleop {
     object_twin: Option<usize>,
     centre_to_base: Isometry3<f64>,
     start_z: f64,
+    anchor_to_real: bool,
 }
 
 impl LiveTeleop {
@@ -128,6 +133,7 @@ impl LiveTeleop {
             object_twin,
             centre_to_base,
             start_z: setup.bottle_centre().translation.z,
+            anchor_to_real: scene.head.is_some(),
         })
     }
 
@@ -167,6 +173,7 @@ impl LiveTeleop {
             mode: self.mode,
             start_z: self.start_z,
             twin_start: avatarm_twin::iso_to_transform(&parts.twin_start),
+            anchor_to_real: self.anchor_to_real,
         })
         .insert_resource(hand)
         .insert_resource(parts.hand_drive)
@@ -634,13 +641,18 @@ pub fn place_prop(
 fn follow_twin(
     live: Res<LiveTask>,
     teleop: Res<Teleop>,
+    held: Res<HeldObject>,
     twin: Query<&Transform, With<GraspTarget>>,
     mut config: ResMut<InteractionConfig>,
 ) {
     let (Some(i), Ok(t)) = (live.object_twin, twin.single()) else {
         return;
     };
-    let centre = teleop.v2r().pose(&transform_to_iso(t));
+    let centre = match teleop.real_object() {
+        // Alice's view: on the real object while the hand holds it.
+        Some(real) if live.anchor_to_real && held.held.is_some() => real,
+        _ => teleop.v2r().pose(&transform_to_iso(t)),
+    };
     let pose = centre * live.centre_to_base;
     if let Some(object) = config.objects.get(i)
         && object.world_from_object != pose
@@ -651,12 +663,14 @@ fn follow_twin(
 
 /// The hand as a skeleton: in the 3-D view where the mapping puts it in the real world, and
 /// in the interaction view around the object's twin as drawn there.
+#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn draw_hand(
     hand: Res<ActiveHand>,
     held: Res<HeldObject>,
     live: Res<LiveTask>,
     teleop: Res<Teleop>,
     config: Res<InteractionConfig>,
+    twin: Query<&Transform, With<GraspTarget>>,
     mut view: Gizmos<HandViewGizmos>,
     mut interaction: Gizmos<HandInteractionGizmos>,
 ) {
@@ -679,6 +693,16 @@ fn draw_hand(
         view.line(v(&real[a]), v(&real[b]), colour);
     }
     let Some(i) = live.object_twin else { return };
+    let real = match (twin.single(), teleop.real_object()) {
+        (Ok(t), Some(object)) if live.anchor_to_real && held.held.is_some() => {
+            avatarm_core::teleop::hand::carried_with(
+                &real,
+                &teleop.v2r().pose(&transform_to_iso(t)),
+                &object,
+            )
+        }
+        _ => real,
+    };
     for (a, b) in hand_in_interaction_view(&real, &config, i) {
         interaction.line(a, b, colour);
     }

@@ -51,6 +51,8 @@ fn app(resolution_scale: f64) -> App {
             base: Isometry3::translation(0.0, 0.0, 0.75),
             source_twin: None,
             occluders: vec![(Cuboid::new(1.0, 1.0, 0.05).into(), Transform::default())],
+            head_mount: None,
+            view_background: None,
         })
         .insert_resource(InteractionConfig {
             camera: camera(),
@@ -222,6 +224,7 @@ fn a_new_background_is_uploaded_once_and_turns_the_composite_on() {
         width: W,
         height: H,
         origin: "a file".into(),
+        camera_pose: None,
     });
     app.update();
     assert_eq!(pipeline(&mut app), (true, true, false, true));
@@ -243,6 +246,7 @@ fn a_background_of_the_camera_size_is_taken_and_another_refused() {
         width: 1,
         height: 1,
         origin: "too small".into(),
+        camera_pose: None,
     });
     app.update();
     assert!(app.world().resource::<EraseState>().background.is_none());
@@ -251,6 +255,7 @@ fn a_background_of_the_camera_size_is_taken_and_another_refused() {
         width: W,
         height: H,
         origin: "a file".into(),
+        camera_pose: None,
     });
     app.update();
     let state = app.world().resource::<EraseState>();

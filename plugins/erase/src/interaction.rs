@@ -92,8 +92,11 @@ impl Plugin for InteractionPlugin {
             .add_systems(PostStartup, setup)
             .add_systems(
                 Update,
-                follow_objects
-                    .run_if(resource_changed::<InteractionConfig>)
+                (
+                    follow_moving_camera,
+                    follow_objects.run_if(resource_changed::<InteractionConfig>),
+                )
+                    .chain()
                     .in_set(crate::EraseSystems::Interaction),
             );
     }
@@ -112,6 +115,26 @@ pub fn twin_transform(
         iso_to_transform(&world_from_twin).with_scale(Vec3::splat(placement.scale as f32)),
         placement.scale,
     ))
+}
+
+/// A camera on a head: the twins are placed for the camera the frame on the panel was erased
+/// with (the object as that frame shows it).
+fn follow_moving_camera(
+    erase: Option<Res<crate::EraseConfig>>,
+    state: Option<Res<crate::EraseState>>,
+    mut config: ResMut<InteractionConfig>,
+) {
+    let (Some(erase), Some(state)) = (erase, state) else {
+        return;
+    };
+    if erase.head_mount.is_none() {
+        return;
+    }
+    if let Some(pose) = state.camera_pose
+        && config.real_camera.world_from_camera != pose
+    {
+        config.real_camera.world_from_camera = pose;
+    }
 }
 
 /// Moves the twins when their objects move (the live teleoperation moves the twin the hand

@@ -44,6 +44,7 @@ pub mod passes;
 use std::collections::VecDeque;
 use std::sync::Arc;
 
+use avatarm_core::dr::view_background::{BackgroundViews, GeometricProxy};
 use avatarm_core::dr::{self, EraseSettings, LinkSphere, Photometric, RgbaView};
 use avatarm_core::robot::{JointMap, RobotModel};
 use avatarm_core::vision::camera::PinholeCamera;
@@ -52,7 +53,7 @@ use avatarm_twin::camera::rgba8_image;
 use avatarm_twin::flat::{FlatPart, FlatView, flat_target_image};
 use avatarm_twin::layers;
 use avatarm_twin::prelude::*;
-use avatarm_video::{LiveVideo, VideoSystems};
+use avatarm_video::{HeadTracking, LiveVideo, VideoSystems};
 use bevy::camera::visibility::RenderLayers;
 use bevy::prelude::*;
 use bevy::render::render_resource::{TextureFormat, TextureUsages};
@@ -93,6 +94,43 @@ pub struct EraseConfig {
     /// the mask's view so that M(t) follows the robot's *visible* pixels. Meshes with their
     /// world transforms.
     pub occluders: Vec<(Mesh, Transform)>,
+    /// The camera rides on a head (Alice's headset camera): its pose is the tracked head's
+    /// ([`HeadTracking`]) times this mount (`head_from_camera`, as calibrated), at the frame's
+    /// capture time with `settings.pose_compensation`, else at the newest tracked pose;
+    /// `camera`'s pose is used until a tracked pose arrives. `None`: a fixed camera.
+    pub head_mount: Option<Isometry3<f64>>,
+    /// A camera on a head: the background follows the view, re-projected from captured views
+    /// ([`ViewBackgroundConfig`]); `None`: the one H serves every frame.
+    pub view_background: Option<ViewBackgroundConfig>,
+}
+
+/// A background that follows a moving camera
+/// ([`avatarm_core::dr::view_background`]): the `[background]` image and each frame's pixels
+/// the robot cannot cover (its links' bounding spheres, grown by the mask's radius) are kept as
+/// views, and each frame's H is re-projected from them into the frame's camera where the robot
+/// may be; elsewhere H is the frame itself.
+#[derive(Debug, Clone)]
+pub struct ViewBackgroundConfig {
+    /// The room as rectangles (the scene's desk, wall and floor boxes).
+    pub proxy: GeometricProxy,
+    /// Views kept.
+    pub max_views: usize,
+    /// A frame becomes a view this far (rad) from every kept one.
+    pub min_separation_rad: f64,
+}
+
+/// The view-following background's state.
+#[derive(Debug, Clone)]
+pub struct ViewBackground {
+    /// The kept views.
+    pub views: BackgroundViews,
+    /// The `[background]` image (the fallback where no view sees a pixel).
+    pub seed: Option<Arc<Vec<u8>>>,
+    /// For the frame on the panel: the share of the robot's region some view saw (0..1).
+    pub seen_share: Option<f64>,
+    /// For the frame on the panel: the angle (rad) between its camera's axis and the nearest
+    /// kept view's.
+    pub nearest_rad: Option<f64>,
 }
 
 /// The mask's lens map: `Some` when the camera's lens distorts and the settings honour it
@@ -160,6 +198,12 @@ pub struct EraseState {
     pub frame_capture_s: Option<f64>,
     /// Joint time the mask twin is posed at.
     pub mask_stamp_s: Option<f64>,
+    /// The camera pose the mask was drawn from for the frame on the panel (`world_from_camera`):
+    /// the head's pose times the mount for a camera on a head, else the configured one.
+    pub camera_pose: Option<Isometry3<f64>>,
+    /// For a camera on a head: the stamp of the newest tracked pose used for it, and the time
+    /// the mask's head pose was taken at (the frame's capture time with pose compensation).
+    pub head_pose_s: Option<(f64, f64)>,
     /// Frames refused (wrong size).
     pub frames_refused: u64,
     /// The conservative robot region used by the last fit (0/1 per pixel), for refresh and
@@ -167,6 +211,8 @@ pub struct EraseState {
     pub robot_region: Option<Arc<Vec<u8>>>,
     /// What the passes work on in this update.
     pub current: Option<PassInputs>,
+    /// A camera on a head with a view-following background ([`EraseConfig::view_background`]).
+    pub view_background: Option<ViewBackground>,
     /// Renders of the pipeline so far (the mask render and every pass). It renders once per
     /// camera frame (and when the settings or H change), however fast the display updates: an
     /// XR headset at 72-90 Hz over a 30 fps camera does not redo the mask.
@@ -205,6 +251,9 @@ pub struct SetBackground {
     pub height: u32,
     /// Where it came from, for the log and the session.
     pub origin: String,
+    /// The camera pose it was taken from (`world_from_camera`), for a camera on a head whose
+    /// view-following background takes it as a view; `None`: the camera's configured pose.
+    pub camera_pose: Option<Isometry3<f64>>,
 }
 
 /// Takes the frame now on the panel as the background H.
@@ -315,8 +364,34 @@ fn setup(
     config: Res<EraseConfig>,
     mut twin_assets: TwinAssets,
     mut images: ResMut<Assets<Image>>,
+    mut state: ResMut<EraseState>,
 ) {
     let k = config.camera.intrinsics;
+    if let Some(v) = &config.view_background {
+        if !config.distortion.is_none() {
+            warn!(
+                "erase: the view-following background re-projects through a pinhole; with a distorting lens the one H serves every frame"
+            );
+        } else {
+            match BackgroundViews::new(
+                k.width,
+                k.height,
+                v.proxy.clone(),
+                v.max_views,
+                v.min_separation_rad,
+            ) {
+                Ok(views) => {
+                    state.view_background = Some(ViewBackground {
+                        views,
+                        seed: None,
+                        seen_share: None,
+                        nearest_rad: None,
+                    });
+                }
+                Err(e) => error!("erase: {e}; the one H serves every frame"),
+            }
+        }
+    }
     let lens = EraseLens::new(&k, &config.distortion, &config.settings).unwrap_or_else(|e| {
         error!("erase: {e}; the mask is drawn as a pinhole's");
         EraseLens(None)
@@ -427,7 +502,7 @@ fn set_background(
     mut state: ResMut<EraseState>,
 ) {
     let k = config.camera.intrinsics;
-    let mut new: Option<(Arc<Vec<u8>>, String)> = None;
+    let mut new: Option<(Arc<Vec<u8>>, String, Option<Isometry3<f64>>)> = None;
     for msg in set.read() {
         if (msg.width, msg.height) != (k.width, k.height)
             || msg.rgba.len() != (k.width * k.height * 4) as usize
@@ -443,7 +518,7 @@ fn set_background(
             );
             continue;
         }
-        new = Some((msg.rgba.clone(), msg.origin.clone()));
+        new = Some((msg.rgba.clone(), msg.origin.clone(), msg.camera_pose));
     }
     if capture.read().count() > 0 {
         match &live.frame {
@@ -451,14 +526,28 @@ fn set_background(
                 new = Some((
                     f.rgba.clone(),
                     format!("live frame captured at {:.3} s", f.capture_s),
+                    state.camera_pose,
                 ));
             }
             Some(_) => error!("background capture: the live frame's size does not match"),
             None => warn!("background capture: no live frame yet"),
         }
     }
-    if let Some((rgba, origin)) = new {
+    if let Some((rgba, origin, pose)) = new {
         info!("background H set from {origin}");
+        // A camera on a head: the image is a view of the room from where the camera was.
+        let camera = PinholeCamera {
+            intrinsics: k,
+            world_from_camera: pose.unwrap_or(config.camera.world_from_camera),
+        };
+        if let Some(vb) = state.view_background.as_mut() {
+            vb.seed = Some(rgba.clone());
+            let offered = RgbaView::new("background", k.width, k.height, &rgba)
+                .and_then(|view| vb.views.add_pinned(&camera, &view, -1.0));
+            if let Err(e) = offered {
+                warn!("view-following background: {e}");
+            }
+        }
         state.background_changed = true;
         state.background = Some(rgba);
         state.background_origin = Some(origin);
@@ -472,17 +561,21 @@ fn prepare_frame(
     history: Res<JointHistory>,
     pipeline: Option<Res<ErasePipeline>>,
     mask_twin: Option<Res<MaskTwin>>,
-    (spheres, lens): (Option<Res<RobotSpheres>>, Option<Res<EraseLens>>),
+    (spheres, lens, head): (
+        Option<Res<RobotSpheres>>,
+        Option<Res<EraseLens>>,
+        Res<HeadTracking>,
+    ),
     mut state: ResMut<EraseState>,
     mut twins: Query<&mut RobotTwin>,
-    mut jobs: Query<&mut EraseJob>,
+    mut jobs: Query<(&mut EraseJob, &mut FlatView)>,
 ) {
     let (Some(pipeline), Some(mask_twin), Some(spheres), Some(lens)) =
         (pipeline, mask_twin, spheres, lens)
     else {
         return;
     };
-    let Ok(mut job) = jobs.get_mut(pipeline.0) else {
+    let Ok((mut job, mut view)) = jobs.get_mut(pipeline.0) else {
         return;
     };
     // Uploads are handed over for one update only.
@@ -529,6 +622,33 @@ fn prepare_frame(
             state.mask_stamp_s = Some(stamp);
         }
     }
+    // The camera the mask is drawn from: a camera on a head at the head's pose for this frame.
+    let mut camera = config.camera;
+    if let (Some(f), Some(mount)) = (frame, config.head_mount) {
+        let at = if s.pose_compensation {
+            head.history.at(f.capture_s).map(|p| (p, f.capture_s))
+        } else {
+            head.history.latest().map(|(t, p)| (p, t))
+        };
+        match at {
+            Some((world_from_head, at_s)) => {
+                camera.world_from_camera = world_from_head * mount;
+                let newest = head.history.latest().map_or(at_s, |l| l.0);
+                state.head_pose_s = Some((newest, at_s));
+            }
+            None => warn_once!(
+                "erase: no tracked head pose yet; the mask is drawn from the camera's configured pose"
+            ),
+        }
+        if view.camera.world_from_camera != camera.world_from_camera {
+            view.camera.world_from_camera = camera.world_from_camera;
+        }
+    } else if let Some(pose) = state.camera_pose {
+        camera.world_from_camera = pose;
+    }
+    if frame.is_some() {
+        state.camera_pose = Some(camera.world_from_camera);
+    }
     let dirty = frame.is_some() || config.is_changed() || state.background_changed;
     state.background_changed = false;
     if let Some(f) = frame {
@@ -536,9 +656,8 @@ fn prepare_frame(
         job.frame = Some(f.rgba.clone());
         state.frame_capture_s = Some(f.capture_s);
         let mut photometric = state.photometric;
-        if let Some(bg) = state.background.clone()
-            && (s.photometric || s.background_refresh > 0.0)
-        {
+        let fit = s.photometric || s.background_refresh > 0.0;
+        if state.view_background.is_some() || (state.background.is_some() && fit) {
             let q = twins
                 .get(mask_twin.0)
                 .map(|t| t.positions.iter().copied().collect::<Vec<_>>())
@@ -552,7 +671,7 @@ fn prepare_frame(
                 Some(map) => {
                     let pinhole = PinholeCamera {
                         intrinsics: map.pinhole,
-                        world_from_camera: config.camera.world_from_camera,
+                        world_from_camera: camera.world_from_camera,
                     };
                     let slack = 6.0 * s.resolution_scale + 1.0;
                     let region = dr::sphere_mask(&pinhole, &poses, &spheres.0, slack);
@@ -561,32 +680,45 @@ fn prepare_frame(
                         Err(_) => vec![1; (k.width * k.height) as usize],
                     }
                 }
-                None => dr::sphere_mask(&config.camera, &poses, &spheres.0, margin),
+                None => dr::sphere_mask(&camera, &poses, &spheres.0, margin),
             };
-            let views = RgbaView::new("live frame", k.width, k.height, &f.rgba)
-                .and_then(|l| RgbaView::new("background", k.width, k.height, &bg).map(|b| (l, b)));
-            match views {
-                Ok((l, b)) => {
-                    if s.photometric {
-                        match dr::fit_photometric(&l, &b, Some(&region), 4) {
-                            Ok(p) => photometric = p,
-                            Err(e) => warn!("photometric fit: {e}"),
+            if let Some(vb) = state.view_background.as_mut() {
+                match follow_view(vb, &camera, f, &region) {
+                    Ok(h) => {
+                        state.background = Some(Arc::new(h));
+                    }
+                    Err(e) => warn!("view-following background: {e}"),
+                }
+            }
+            if let Some(bg) = state.background.clone()
+                && fit
+            {
+                let views = RgbaView::new("live frame", k.width, k.height, &f.rgba).and_then(|l| {
+                    RgbaView::new("background", k.width, k.height, &bg).map(|b| (l, b))
+                });
+                match views {
+                    Ok((l, b)) => {
+                        if s.photometric {
+                            match dr::fit_photometric(&l, &b, Some(&region), 4) {
+                                Ok(p) => photometric = p,
+                                Err(e) => warn!("photometric fit: {e}"),
+                            }
+                        }
+                        if s.background_refresh > 0.0 {
+                            let free: Vec<u8> = region.iter().map(|&r| u8::from(r == 0)).collect();
+                            let mut next = bg.as_ref().clone();
+                            dr::refresh_background(
+                                &mut next,
+                                &l,
+                                &free,
+                                s.background_refresh,
+                                &photometric,
+                            );
+                            state.background = Some(Arc::new(next));
                         }
                     }
-                    if s.background_refresh > 0.0 {
-                        let free: Vec<u8> = region.iter().map(|&r| u8::from(r == 0)).collect();
-                        let mut next = bg.as_ref().clone();
-                        dr::refresh_background(
-                            &mut next,
-                            &l,
-                            &free,
-                            s.background_refresh,
-                            &photometric,
-                        );
-                        state.background = Some(Arc::new(next));
-                    }
+                    Err(e) => warn!("photometric compensation: {e}"),
                 }
-                Err(e) => warn!("photometric compensation: {e}"),
             }
             state.robot_region = Some(Arc::new(region));
         }
@@ -623,6 +755,40 @@ fn prepare_frame(
         );
     }
     state.current = Some(current);
+}
+
+/// A camera on a head: offers the frame's pixels outside the robot's `region` as a view, and
+/// returns the frame's H: the views re-projected into `camera` inside the region (the
+/// `[background]` image where none sees a pixel), the frame itself outside it (where H is
+/// never shown).
+fn follow_view(
+    vb: &mut ViewBackground,
+    camera: &PinholeCamera,
+    frame: &avatarm_video::VideoFrame,
+    region: &[u8],
+) -> avatarm_core::Result<Vec<u8>> {
+    let k = camera.intrinsics;
+    let live = RgbaView::new("live frame", k.width, k.height, &frame.rgba)?;
+    // How far this view is from those captured before it.
+    vb.nearest_rad = vb.views.nearest_angle(camera);
+    vb.views.offer(camera, &live, region, frame.capture_s)?;
+    let mut fallback = frame.rgba.as_ref().clone();
+    if let Some(seed) = vb.seed.as_ref().filter(|s| s.len() == fallback.len()) {
+        for (i, &r) in region.iter().enumerate() {
+            if r > 0 {
+                fallback[i * 4..i * 4 + 4].copy_from_slice(&seed[i * 4..i * 4 + 4]);
+            }
+        }
+    }
+    let out = vb.views.render(camera, Some(&fallback), Some(region))?;
+    let inside = region.iter().filter(|&&r| r > 0).count();
+    let seen = region
+        .iter()
+        .zip(&out.seen)
+        .filter(|(r, s)| **r > 0 && **s > 0)
+        .count();
+    vb.seen_share = (inside > 0).then(|| seen as f64 / inside as f64);
+    Ok(out.rgba)
 }
 
 /// Renders the mask and the passes only in an update with something new to draw (a camera

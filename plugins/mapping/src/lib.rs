@@ -370,6 +370,21 @@ impl Teleop {
         &self.v2r
     }
 
+    /// The real object (its centre, real world): the truth where the backend knows it
+    /// (simulation), else where the newest joint state puts the tool's grasp of it (right only
+    /// while the tool holds it); `None` before a finite joint state.
+    pub fn real_object(&self) -> Option<Isometry3<f64>> {
+        if let Some(truth) = self.robot.true_object_pose() {
+            return Some(truth);
+        }
+        let q = &self.joints.as_ref()?.positions;
+        if q.len() != self.model.dof() || q.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        let q: Vec<f64> = q.iter().copied().collect();
+        Some(self.model.forward_kinematics(&self.base, &q)[self.tcp] * self.tcp_from_object)
+    }
+
     fn count(&mut self, what: Intervention) {
         match self
             .status

@@ -7,15 +7,16 @@ use std::sync::Arc;
 
 use avatarm_core::robot::trajectory::{JointTrajectory, Keyframe};
 use avatarm_core::robot::{PackagePath, RobotModel};
-use avatarm_core::vision::camera::{Intrinsics, PinholeCamera};
+use avatarm_core::vision::camera::{CameraPose, Intrinsics, PinholeCamera};
 use avatarm_core::vision::distortion::{Distortion, DistortionMap};
+use avatarm_core::vision::head::{HeadMotion, TrackingModel, perturbed_mount};
 use nalgebra::{DVector, Isometry3, Vector3};
 
 use crate::error::SceneError;
 use crate::finite::first_non_finite;
 use crate::hand::HandChoice;
 use crate::prop::Prop;
-use crate::spec::{BackgroundSpec, JointValues, SceneFile};
+use crate::spec::{BackgroundSpec, CalibrationError, HeadSpec, JointValues, SceneFile};
 use crate::task::TrialSetup;
 
 /// A loaded, validated scene.
@@ -40,6 +41,9 @@ pub struct Scene {
     /// The camera's lens (`[camera] distortion`; the believed camera's is the true one's, as a
     /// calibrated lens's would be).
     pub lens: Distortion,
+    /// The head a camera rides on (`[camera.head]`), `None` for a fixed camera; then
+    /// `true_camera` and `believed_camera` are the camera at t = 0.
+    pub head: Option<HeadRig>,
     /// Props in the room.
     pub props: Vec<Prop>,
     /// The background image file, resolved (`[background] source = "file"`).
@@ -351,10 +355,33 @@ impl Scene {
         intrinsics
             .validate()
             .map_err(|e| SceneError::value("camera.intrinsics", e).in_file(path))?;
-        let pose = c
-            .pose
-            .to_isometry()
-            .map_err(|e| SceneError::value("camera.pose", e).in_file(path))?;
+        let head = match (&c.pose, &c.head) {
+            (Some(_), Some(_)) => {
+                return Err(invalid(
+                    "camera.pose",
+                    "a camera on a head ([camera.head]) takes its pose from the head and the mount; remove camera.pose".into(),
+                ));
+            }
+            (None, None) => {
+                return Err(invalid(
+                    "camera.pose",
+                    "missing: a fixed camera needs { eye, target, up } (or [camera.head] for one on a head)".into(),
+                ));
+            }
+            (None, Some(h)) => {
+                Some(HeadRig::resolve(h, ce).map_err(|(field, message)| {
+                    invalid(&format!("camera.head.{field}"), message)
+                })?)
+            }
+            (Some(_), None) => None,
+        };
+        let pose = match (&c.pose, &head) {
+            (Some(p), _) => p
+                .to_isometry()
+                .map_err(|e| SceneError::value("camera.pose", e).in_file(path))?,
+            (None, Some(h)) => h.camera_at(0.0),
+            (None, None) => unreachable!("checked above"),
+        };
         let true_camera = PinholeCamera {
             intrinsics,
             world_from_camera: pose,
@@ -382,11 +409,18 @@ impl Scene {
             }
             None => Distortion::None,
         };
-        let believed_camera = true_camera.perturbed(
-            &Vector3::from(ce.axis),
-            ce.rotation_deg.to_radians(),
-            &(Vector3::from(ce.translation_mm) * 1e-3),
-        );
+        // A head camera's error is its mount's (in the head's frame), already in `believed_mount`.
+        let believed_camera = match &head {
+            Some(h) => PinholeCamera {
+                intrinsics,
+                world_from_camera: h.believed_camera_at(0.0),
+            },
+            None => true_camera.perturbed(
+                &Vector3::from(ce.axis),
+                ce.rotation_deg.to_radians(),
+                &(Vector3::from(ce.translation_mm) * 1e-3),
+            ),
+        };
 
         let mut props: Vec<Prop> = Vec::new();
         for (i, p) in file.props.iter().enumerate() {
@@ -443,6 +477,7 @@ impl Scene {
             true_camera,
             believed_camera,
             lens,
+            head,
             props,
             file,
         })
@@ -451,5 +486,172 @@ impl Scene {
     /// The robot base pose.
     pub fn robot_base(&self) -> Isometry3<f64> {
         self.file.robot.base.to_isometry()
+    }
+}
+
+/// A camera on a head (`[camera.head]`), resolved: the head's motion, the mount and how the
+/// head is tracked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HeadRig {
+    /// Where the head is over time (`world_from_head`).
+    pub motion: HeadMotion,
+    /// The camera in the head's frame (`head_from_camera`), true.
+    pub mount: Isometry3<f64>,
+    /// The mount as the app believes it: with `[camera] calibration_error` (head frame).
+    pub believed_mount: Isometry3<f64>,
+    /// How the headset reports the head.
+    pub tracking: TrackingModel,
+    /// Background views kept (0: none, the `[background]` image alone).
+    pub background_views: usize,
+    /// A frame becomes a background view this far (rad) from every kept one.
+    pub background_separation_rad: f64,
+}
+
+impl HeadRig {
+    /// Checks and resolves `spec`; `error` is the mount's calibration error. Errors give the
+    /// field under `camera.head` and the message.
+    pub fn resolve(spec: &HeadSpec, error: &CalibrationError) -> Result<Self, (String, String)> {
+        let motion = match (&spec.sweep, spec.keyframes.is_empty()) {
+            (Some(_), false) => {
+                return Err((
+                    "sweep".into(),
+                    "give either a sweep or keyframes, not both".into(),
+                ));
+            }
+            (None, true) => {
+                return Err((
+                    "keyframes".into(),
+                    "a head needs a motion: a sweep = { eye, target, peak_speed_deg_s } or [[camera.head.keyframes]]".into(),
+                ));
+            }
+            (Some(w), true) => {
+                if !(0.0..=90.0).contains(&w.amplitude_deg) {
+                    return Err((
+                        "sweep.amplitude_deg".into(),
+                        format!("{} must be within 0..=90", w.amplitude_deg),
+                    ));
+                }
+                if !(0.0..=720.0).contains(&w.peak_speed_deg_s) {
+                    return Err((
+                        "sweep.peak_speed_deg_s".into(),
+                        format!("{} must be within 0..=720", w.peak_speed_deg_s),
+                    ));
+                }
+                if w.peak_speed_deg_s > 0.0 && w.amplitude_deg <= 0.0 {
+                    return Err((
+                        "sweep.amplitude_deg".into(),
+                        "a moving sweep needs an amplitude > 0".into(),
+                    ));
+                }
+                if !(0.0..=0.3).contains(&w.pivot_back_m) {
+                    return Err((
+                        "sweep.pivot_back_m".into(),
+                        format!("{} must be within 0..=0.3 m", w.pivot_back_m),
+                    ));
+                }
+                let centre = CameraPose {
+                    eye: w.eye,
+                    target: w.target,
+                    up: [0.0, 0.0, 1.0],
+                }
+                .to_isometry()
+                .map_err(|e| ("sweep".to_owned(), e.to_string()))?;
+                HeadMotion::Sweep {
+                    centre,
+                    amplitude_rad: w.amplitude_deg.to_radians(),
+                    peak_speed_rad_s: w.peak_speed_deg_s.to_radians(),
+                    pivot_back_m: w.pivot_back_m,
+                }
+            }
+            (None, false) => {
+                let mut keys = Vec::with_capacity(spec.keyframes.len());
+                for (i, k) in spec.keyframes.iter().enumerate() {
+                    if k.t_s < 0.0 || (i > 0 && k.t_s <= spec.keyframes[i - 1].t_s) {
+                        return Err((
+                            format!("keyframes[{i}].t_s"),
+                            format!("{} must be >= 0 and after the previous keyframe's", k.t_s),
+                        ));
+                    }
+                    let pose = CameraPose {
+                        eye: k.eye,
+                        target: k.target,
+                        up: k.up,
+                    };
+                    pose.to_isometry()
+                        .map_err(|e| (format!("keyframes[{i}]"), e.to_string()))?;
+                    keys.push((k.t_s, pose));
+                }
+                HeadMotion::look_at(&keys).map_err(|e| ("keyframes".to_owned(), e.to_string()))?
+            }
+        };
+        let t = &spec.tracking;
+        let tracking = TrackingModel {
+            rate_hz: t.rate_hz,
+            latency_s: t.latency_s,
+            position_sigma_m: t.position_sigma_mm * 1e-3,
+            angle_sigma_rad: t.angle_sigma_deg.to_radians(),
+        };
+        tracking
+            .validate("tracking")
+            .map_err(|e| ("tracking".to_owned(), e.to_string()))?;
+        let mount = spec.mount.to_isometry();
+        if mount.translation.vector.norm() > 1.0 {
+            return Err((
+                "mount.xyz".into(),
+                "the camera is more than 1 m from the head".into(),
+            ));
+        }
+        let b = &spec.background;
+        if b.views > 32 {
+            return Err((
+                "background.views".into(),
+                format!("{} must be within 0..=32", b.views),
+            ));
+        }
+        if !(0.0..=90.0).contains(&b.min_separation_deg) {
+            return Err((
+                "background.min_separation_deg".into(),
+                format!("{} must be within 0..=90", b.min_separation_deg),
+            ));
+        }
+        let believed_mount = perturbed_mount(
+            &mount,
+            &Vector3::from(error.axis),
+            error.rotation_deg.to_radians(),
+            &(Vector3::from(error.translation_mm) * 1e-3),
+        );
+        Ok(Self {
+            motion,
+            mount,
+            believed_mount,
+            tracking,
+            background_views: b.views as usize,
+            background_separation_rad: b.min_separation_deg.to_radians(),
+        })
+    }
+
+    /// The camera's true pose (`world_from_camera`, optical frame) at `t_s`.
+    pub fn camera_at(&self, t_s: f64) -> Isometry3<f64> {
+        self.motion.pose_at(t_s) * self.mount
+    }
+
+    /// The pose the app would believe at `t_s` from a perfect tracker: the head's true pose
+    /// times the believed mount.
+    pub fn believed_camera_at(&self, t_s: f64) -> Isometry3<f64> {
+        self.motion.pose_at(t_s) * self.believed_mount
+    }
+
+    /// With the sweep's peak speed set to `deg_s` (a keyframed motion is left as it is; returns
+    /// whether it was a sweep).
+    pub fn set_sweep_speed(&mut self, deg_s: f64) -> bool {
+        match &mut self.motion {
+            HeadMotion::Sweep {
+                peak_speed_rad_s, ..
+            } => {
+                *peak_speed_rad_s = deg_s.to_radians();
+                true
+            }
+            HeadMotion::Keyframes(_) => false,
+        }
     }
 }

@@ -250,8 +250,13 @@ pub struct CameraSpec {
     /// Height (px), with `fov_y_deg`.
     #[serde(default = "default_height")]
     pub height: u32,
-    /// True pose.
-    pub pose: CameraPose,
+    /// True pose of a fixed camera (required unless the camera rides on a head, `head`).
+    #[serde(default)]
+    pub pose: Option<CameraPose>,
+    /// The camera moves with a head (`[camera.head]`: Alice's headset camera): its pose is the
+    /// head's times the mount, and the mask follows the tracked head.
+    #[serde(default)]
+    pub head: Option<HeadSpec>,
     /// Frames per second.
     #[serde(default = "default_fps")]
     pub fps: f64,
@@ -268,6 +273,121 @@ pub struct CameraSpec {
     /// by it and the mask honours it (`[erase] lens_distortion`).
     #[serde(default)]
     pub distortion: Option<LensSpec>,
+}
+
+/// `[camera.head]`: a camera on a head. The head's frame is an optical one (x right, y down,
+/// z forward, the way the face points); `mount` places the camera in it. Exactly one of
+/// `sweep` and `keyframes` says how the head moves. The camera's `calibration_error` is the
+/// mount's error, in the head's frame.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeadSpec {
+    /// `head_from_camera` (default: the camera at the head's origin, looking where it looks).
+    #[serde(default)]
+    pub mount: PoseSpec,
+    /// How the headset reports the head.
+    #[serde(default)]
+    pub tracking: TrackingSpec,
+    /// Looking left and right about a centre pose.
+    #[serde(default)]
+    pub sweep: Option<HeadSweepSpec>,
+    /// Look-at keyframes (minimum jerk between them).
+    #[serde(default)]
+    pub keyframes: Vec<HeadKeyframeSpec>,
+    /// The background that follows the view.
+    #[serde(default)]
+    pub background: HeadBackgroundSpec,
+}
+
+/// `[camera.head.background]`: a background H that follows the moving camera, re-projected
+/// from views captured at other head poses (the `[background]` image and the frames' pixels the
+/// robot cannot cover) through the scene's boxes that are not objects (desk, wall, floor).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct HeadBackgroundSpec {
+    /// Views kept (0..=32; 0: the `[background]` image alone, as for a fixed camera).
+    pub views: u32,
+    /// A frame becomes a view when it looks at least this far (degrees) from every kept one.
+    pub min_separation_deg: f64,
+}
+
+impl Default for HeadBackgroundSpec {
+    fn default() -> Self {
+        Self {
+            views: 8,
+            min_separation_deg: 4.0,
+        }
+    }
+}
+
+/// `[camera.head.tracking]`: a headset's head tracking (defaults: 90 Hz, no latency, no noise).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrackingSpec {
+    /// Samples per second.
+    pub rate_hz: f64,
+    /// From the moment a sample describes to its arrival (s).
+    pub latency_s: f64,
+    /// Position noise per axis (mm).
+    pub position_sigma_mm: f64,
+    /// Orientation noise per axis (degrees).
+    pub angle_sigma_deg: f64,
+}
+
+impl Default for TrackingSpec {
+    fn default() -> Self {
+        Self {
+            rate_hz: 90.0,
+            latency_s: 0.0,
+            position_sigma_mm: 0.0,
+            angle_sigma_deg: 0.0,
+        }
+    }
+}
+
+/// `[camera.head.sweep]`: the head at `eye` looking at `target` turns about the vertical
+/// through a pivot `pivot_back_m` behind the eye, yaw(t) = A sin(t ω / A).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeadSweepSpec {
+    /// The eye at the sweep's centre (m).
+    pub eye: [f64; 3],
+    /// What it looks at there (m).
+    pub target: [f64; 3],
+    /// A (degrees, 0..=90).
+    #[serde(default = "default_sweep_amplitude")]
+    pub amplitude_deg: f64,
+    /// ω, the peak angular speed (degrees/s, 0..=720; 0: still).
+    pub peak_speed_deg_s: f64,
+    /// The neck's distance behind the eye (m, 0..=0.3).
+    #[serde(default = "default_pivot_back")]
+    pub pivot_back_m: f64,
+}
+
+fn default_sweep_amplitude() -> f64 {
+    15.0
+}
+fn default_pivot_back() -> f64 {
+    0.09
+}
+
+/// `[[camera.head.keyframes]]`: the head at `eye` looking at `target` at `t_s`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeadKeyframeSpec {
+    /// Time (s, strictly increasing).
+    pub t_s: f64,
+    /// Eye (m).
+    pub eye: [f64; 3],
+    /// Looked-at point (m).
+    pub target: [f64; 3],
+    /// The world direction that appears up.
+    #[serde(default = "default_up")]
+    pub up: [f64; 3],
+}
+
+fn default_up() -> [f64; 3] {
+    [0.0, 0.0, 1.0]
 }
 
 /// `[camera] distortion = { model = "plumb_bob", coefficients = [k1, k2, p1, p2, k3] }`: a lens

@@ -319,3 +319,105 @@ fn the_twin_and_package_descriptions_are_checked() {
         }
     }
 }
+
+/// A camera on a head (`[camera.head]`): the head scene loads with its camera at the head's
+/// pose times the mount, and every inconsistent head is refused naming its field.
+#[test]
+fn a_camera_on_a_head_is_resolved_and_checked() {
+    let (path, text) = scene_text("head_camera.toml");
+    let parse = |t: &str| Scene::parse(t, &path, &PackagePath::default());
+    let scene = parse(&text).expect("the head scene loads");
+    let head = scene.head.as_ref().expect("a head");
+    for t in [0.0, 0.7, 2.3] {
+        let camera = head.camera_at(t);
+        let expected = head.motion.pose_at(t) * head.mount;
+        assert!((camera.translation.vector - expected.translation.vector).norm() < 1e-12);
+    }
+    assert_eq!(scene.true_camera.world_from_camera, head.camera_at(0.0));
+    assert_eq!(scene.believed_camera.world_from_camera, head.camera_at(0.0));
+    let peak = head
+        .motion
+        .peak_angular_speed(scene.file.duration_s)
+        .to_degrees();
+    assert!((peak - 30.0).abs() < 0.3, "peak {peak}");
+    assert!((head.tracking.latency_s - 0.02).abs() < 1e-12);
+    assert!(scene.file.erase.pose_compensation);
+    // The camera 8 cm ahead of the eye: it looks at the desk from the head's side.
+    let eye = nalgebra::Vector3::new(0.75, -1.15, 1.2);
+    let d = (scene.true_camera.world_from_camera.translation.vector - eye).norm();
+    assert!(
+        (d - (0.08f64.powi(2) + 0.03f64.powi(2)).sqrt()).abs() < 1e-9,
+        "{d}"
+    );
+
+    // A mount error is the believed camera's only error.
+    let with_error = text.replace(
+        "sensor = { noise_sigma = 1.0 }",
+        "sensor = { noise_sigma = 1.0 }\ncalibration_error = { rotation_deg = 1.0, axis = [0.0, 1.0, 0.0] }",
+    );
+    let s = parse(&with_error).expect("mount error");
+    let h = s.head.as_ref().expect("head");
+    let angle = h
+        .mount
+        .rotation
+        .angle_to(&h.believed_mount.rotation)
+        .to_degrees();
+    assert!((angle - 1.0).abs() < 1e-9);
+
+    let fails = |t: String, field: &str| {
+        let e = parse(&t).expect_err(field).to_string();
+        assert!(e.contains(field), "expected {field} in: {e}");
+    };
+    fails(
+        text.replace(
+            "fps = 30.0",
+            "fps = 30.0\npose = { eye = [1.0, 0.0, 1.0], target = [0.0, 0.0, 1.0] }",
+        ),
+        "camera.pose",
+    );
+    let without_head = {
+        let start = text.find("[camera.head]").unwrap();
+        let end = text.find("\n[erase]").unwrap() + 1;
+        format!("{}{}", &text[..start], &text[end..])
+    };
+    fails(without_head, "camera.pose");
+    fails(
+        text.replace("[camera.head]", "[camera.head]\nkeyframes = [{ t_s = 0.0, eye = [1.0, 0.0, 1.0], target = [0.0, 0.0, 1.0] }]"),
+        "camera.head.sweep",
+    );
+    fails(
+        text.replace("latency_s = 0.02, position", "latency_s = -0.02, position"),
+        "camera.head.tracking",
+    );
+    fails(
+        text.replace("peak_speed_deg_s = 30.0", "peak_speed_deg_s = 900.0"),
+        "camera.head.sweep.peak_speed_deg_s",
+    );
+    fails(
+        text.replace("amplitude_deg = 15.0", "amplitude_deg = 0.0"),
+        "camera.head.sweep.amplitude_deg",
+    );
+    fails(
+        text.replace("target = [0.3, 0.0, 0.95]", "target = [0.75, -1.15, 1.2]"),
+        "camera.head.sweep",
+    );
+    fails(
+        text.replace("rate_hz = 90.0", "rate_hz = nan"),
+        "camera.head.tracking.rate_hz",
+    );
+    // Keyframes instead of a sweep: strictly increasing times.
+    let keyed = text.replace(
+        "sweep = { eye = [0.75, -1.15, 1.2], target = [0.3, 0.0, 0.95], amplitude_deg = 15.0, peak_speed_deg_s = 30.0, pivot_back_m = 0.09 }",
+        "keyframes = [{ t_s = 0.0, eye = [0.75, -1.15, 1.2], target = [0.3, 0.0, 0.95] }, { t_s = 2.0, eye = [0.5, -0.9, 1.1], target = [0.3, 0.0, 0.95] }]",
+    );
+    let s = parse(&keyed).expect("keyframes");
+    let h = s.head.as_ref().expect("head");
+    assert!(
+        (h.motion.pose_at(2.0).translation.vector - nalgebra::Vector3::new(0.5, -0.9, 1.1)).norm()
+            < 1e-12
+    );
+    fails(
+        keyed.replace("t_s = 2.0", "t_s = 0.0"),
+        "camera.head.keyframes[1].t_s",
+    );
+}

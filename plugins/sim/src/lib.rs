@@ -15,16 +15,18 @@ use avatarm_core::robot::trajectory::JointTrajectory;
 use avatarm_core::sim::{JointCommand, SimRobot, SimRobotParams};
 use avatarm_core::vision::camera::PinholeCamera;
 use avatarm_core::vision::distortion::{Distortion, DistortionMap};
+use avatarm_core::vision::head::{HeadMotion, HeadTracker, TrackingModel};
 use avatarm_core::vision::sensor::SensorModel;
 use avatarm_scene::prop::{BOTTLE_BODY_FRACTION, BOTTLE_NECK_RADIUS_FRACTION};
 pub use avatarm_scene::prop::{Prop, PropShape};
+use avatarm_twin::camera::camera_transform;
 use avatarm_twin::camera::{RenderSettled, SCENERY_DEPTH_BIAS, add_render_settled};
 pub use avatarm_twin::camera::{spawn_pinhole_camera, target_image};
 use avatarm_twin::flat::{FlatPart, FlatView, add_flat_render, flat_target_image};
 use avatarm_twin::layers;
 use avatarm_twin::prelude::*;
 use avatarm_twin::readback::{ImageRead, ImageReadbackPlugin, read_image_once};
-use avatarm_video::{VideoFrame, VideoInbox};
+use avatarm_video::{HeadPoseMessage, VideoFrame, VideoInbox};
 use bevy::camera::visibility::RenderLayers;
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::core_pipeline::prepass::DepthPrepass;
@@ -56,6 +58,9 @@ pub enum SimRoomSystems {
     /// The robot-free view renders only when the room changed (`PostUpdate`, after transform
     /// propagation).
     GateTruth,
+    /// A camera on a head: the room's views follow the head at the robot's time (`PostUpdate`,
+    /// before transform propagation).
+    MoveCamera,
 }
 
 /// Everything the room needs to know. Insert it before the app starts.
@@ -86,6 +91,10 @@ pub struct SimRoomConfig {
     pub twin: Option<Entity>,
     /// Deliver the real camera's frames as a video source (sensor model, latency).
     pub video: Option<SimVideo>,
+    /// The camera rides on a head (Alice's headset camera): the real camera and the ground
+    /// truth's views follow `head(t) · mount` at the robot's time, and the head's tracked poses
+    /// are sent as [`HeadPoseMessage`]s. `camera`'s pose is then the one at t = 0.
+    pub head: Option<SimHead>,
     /// Something else drives the robot (the live teleoperation steps its own simulated arm,
     /// writes it into [`SimRobotState`] and delivers its joint states): the room neither
     /// commands, steps nor reads out the robot, it renders it.
@@ -115,6 +124,23 @@ pub struct SimVideo {
     /// updates (a headset's 72-90 Hz, a replay's one update per frame).
     pub fps: f64,
 }
+
+/// A head that the simulated camera rides on.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimHead {
+    /// Where the head is over time (`world_from_head`).
+    pub motion: HeadMotion,
+    /// The camera in the head's frame (`head_from_camera`).
+    pub mount: Isometry3<f64>,
+    /// How the headset reports the head.
+    pub tracking: TrackingModel,
+    /// Seed of the tracking noise (sample `k` uses stream `k`).
+    pub seed: u64,
+}
+
+/// The simulated head's tracker (a camera on a head).
+#[derive(Resource, Debug, Clone)]
+pub struct SimHeadTracker(pub HeadTracker);
 
 /// The simulated robot (ground truth of its joints lives here).
 #[derive(Resource, Debug, Clone)]
@@ -193,6 +219,7 @@ impl Plugin for SimRoomPlugin {
         add_flat_render(app);
         add_render_settled(app);
         app.insert_resource(Time::<Fixed>::from_hz(rate))
+            .add_message::<HeadPoseMessage>()
             .configure_sets(FixedUpdate, SimRoomSystems::Step)
             .configure_sets(
                 PostUpdate,
@@ -208,6 +235,19 @@ impl Plugin for SimRoomPlugin {
             .add_systems(
                 PostUpdate,
                 gate_no_robot_view.in_set(SimRoomSystems::GateTruth),
+            )
+            .add_systems(
+                PostUpdate,
+                move_head_camera
+                    .in_set(SimRoomSystems::MoveCamera)
+                    .after(RobotTwinSystems::PoseLinks)
+                    .before(TransformSystems::Propagate),
+            )
+            .add_systems(
+                FixedUpdate,
+                track_head
+                    .in_set(SimRoomSystems::Step)
+                    .run_if(resource_exists::<SimHeadTracker>),
             )
             .add_systems(Last, capture_video.in_set(SimRoomSystems::Capture))
             .add_systems(
@@ -336,7 +376,7 @@ fn setup_room(
         -30,
         "real camera",
     );
-    commands.entity(real).insert(DepthPrepass);
+    commands.entity(real).insert((DepthPrepass, RoomView));
     let (mut no_robot, mut silhouette_image) = (None, None);
     if config.ground_truth {
         let image = images.add(target_image(k.width, k.height));
@@ -351,7 +391,7 @@ fn setup_room(
         );
         commands
             .entity(no_robot_camera)
-            .insert((DepthPrepass, NoRobotCamera));
+            .insert((DepthPrepass, NoRobotCamera, RoomView));
         no_robot = Some(image);
         // White robot, black scenery, drawn flat (no camera: avatarm_twin::flat).
         let image = images.add(flat_target_image(k.width, k.height));
@@ -365,6 +405,7 @@ fn setup_room(
                 name: "ground truth: robot silhouette".to_owned(),
             },
             RenderLayers::layer(layers::SIM_SILHOUETTE),
+            RoomView,
         ));
         silhouette_image = Some(image);
     }
@@ -374,6 +415,9 @@ fn setup_room(
         silhouette: silhouette_image,
         lens,
     });
+    if let Some(head) = &config.head {
+        commands.insert_resource(SimHeadTracker(HeadTracker::new(head.tracking, head.seed)));
+    }
     commands.insert_resource(SimRobotState(SimRobot::new(
         config.robot,
         config.model.dof_limits(),
@@ -463,6 +507,56 @@ type PropChanged = (
     )>,
 );
 
+/// Marks the room's views that follow a camera on a head (the real camera, the robot-free
+/// view, the silhouette's flat view).
+#[derive(Component, Debug, Clone, Copy)]
+struct RoomView;
+
+/// A camera on a head: the room's views at `head(t) · mount`, `t` the robot's time (the time
+/// the capture in `Last` stamps the frame with).
+fn move_head_camera(
+    config: Res<SimRoomConfig>,
+    robot: Option<Res<SimRobotState>>,
+    mut transforms: Query<&mut Transform, (With<RoomView>, With<Camera>)>,
+    mut flat: Query<&mut FlatView, With<RoomView>>,
+) {
+    let (Some(head), Some(robot)) = (&config.head, robot) else {
+        return;
+    };
+    let pose = head.motion.pose_at(robot.0.time_s()) * head.mount;
+    let camera = PinholeCamera {
+        intrinsics: config.camera.intrinsics,
+        world_from_camera: pose,
+    };
+    let transform = camera_transform(&camera);
+    for mut t in &mut transforms {
+        if *t != transform {
+            *t = transform;
+        }
+    }
+    for mut view in &mut flat {
+        if view.camera.world_from_camera != pose {
+            view.camera.world_from_camera = pose;
+        }
+    }
+}
+
+/// Samples the head's tracker at the control rate and sends the poses that have arrived.
+fn track_head(
+    config: Res<SimRoomConfig>,
+    time: Res<Time<Fixed>>,
+    mut tracker: ResMut<SimHeadTracker>,
+    mut out: MessageWriter<HeadPoseMessage>,
+) {
+    let Some(head) = &config.head else { return };
+    for p in tracker.0.poll(&head.motion, time.elapsed_secs_f64()) {
+        out.write(HeadPoseMessage {
+            stamp_s: p.stamp_s,
+            world_from_head: p.pose,
+        });
+    }
+}
+
 /// Marks the robot-free ground-truth camera.
 #[derive(Component, Debug, Clone, Copy)]
 struct NoRobotCamera;
@@ -482,10 +576,16 @@ fn gate_no_robot_view(
     mut removed: RemovedComponents<SimPropPart>,
     mut last_change: Local<Option<u32>>,
     mut cameras: Query<&mut Camera, With<NoRobotCamera>>,
+    config: Res<SimRoomConfig>,
 ) {
     // The frame number this update's render carries (the count goes up in `Last`).
     let this = frame.0.wrapping_add(1);
-    if last_change.is_none() || !changed.is_empty() || removed.read().count() > 0 {
+    // A camera on a head sees another room at every update.
+    if last_change.is_none()
+        || config.head.is_some()
+        || !changed.is_empty()
+        || removed.read().count() > 0
+    {
         *last_change = Some(this);
     }
     let active = last_change.is_some_and(|c| settled.last_complete_frame() <= c);

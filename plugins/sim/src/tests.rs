@@ -40,6 +40,7 @@ fn config(ground_truth: bool) -> SimRoomConfig {
             world_from_camera: pose.to_isometry().expect("pose"),
         },
         distortion: Default::default(),
+        head: None,
         props: vec![
             Prop {
                 name: "desk".into(),
@@ -221,4 +222,88 @@ fn the_robot_follows_its_trajectory_and_reports_joint_states() {
     let real = app.world().resource::<SimTwins>().real;
     let shown = app.world().get::<RobotTwin>(real).expect("twin").positions[0];
     assert!((shown - q).abs() < 1e-9);
+}
+
+/// A camera on a head: the room's views follow head(t) · mount at the robot's time, and the
+/// tracker's poses arrive stamped at its rate, after its latency.
+#[test]
+fn a_camera_on_a_head_moves_with_it_and_the_head_is_tracked() {
+    use avatarm_core::vision::head::{HeadMotion, TrackingModel, pose_error};
+    let mut c = config(true);
+    let centre = c.camera.world_from_camera;
+    let motion = HeadMotion::Sweep {
+        centre,
+        amplitude_rad: 20f64.to_radians(),
+        peak_speed_rad_s: 60f64.to_radians(),
+        pivot_back_m: 0.09,
+    };
+    let mount = Isometry3::translation(0.0, -0.03, 0.08);
+    c.head = Some(SimHead {
+        motion: motion.clone(),
+        mount,
+        tracking: TrackingModel {
+            rate_hz: 50.0,
+            latency_s: 0.1,
+            ..TrackingModel::default()
+        },
+        seed: 1,
+    });
+    let mut app = room(c);
+    #[derive(Resource, Default)]
+    struct Got(Vec<HeadPoseMessage>);
+    app.init_resource::<Got>().add_systems(
+        Update,
+        |mut r: MessageReader<HeadPoseMessage>, mut got: ResMut<Got>| {
+            got.0.extend(r.read().copied());
+        },
+    );
+    for _ in 0..40 {
+        app.update();
+    }
+    let t = app.world().resource::<SimRobotState>().0.time_s();
+    assert!(t > 0.3, "the room's time moved: {t}");
+    let expected = motion.pose_at(t) * mount;
+    let mut cameras = app
+        .world_mut()
+        .query_filtered::<(&Name, &Transform), With<Camera>>();
+    let moved: Vec<(String, Transform)> = cameras
+        .iter(app.world())
+        .map(|(n, t)| (n.to_string(), *t))
+        .collect();
+    assert_eq!(moved.len(), 2, "the real camera and the robot-free view");
+    for (name, transform) in &moved {
+        let shown = avatarm_twin::transform_to_iso(transform);
+        let want = avatarm_core::vision::camera::PinholeCamera {
+            intrinsics: app.world().resource::<SimRoomConfig>().camera.intrinsics,
+            world_from_camera: expected,
+        }
+        .world_from_view();
+        let (angle, offset) = pose_error(&shown, &want);
+        assert!(
+            angle < 1e-5 && offset < 1e-5,
+            "{name}: {angle} rad, {offset} m"
+        );
+    }
+    let view = app
+        .world_mut()
+        .query::<&FlatView>()
+        .single(app.world())
+        .expect("the silhouette's view")
+        .camera
+        .world_from_camera;
+    assert_eq!(view, expected);
+    // Every 20 ms a sample, arriving 100 ms later; none early.
+    let got = &app.world().resource::<Got>().0;
+    assert!(!got.is_empty());
+    for (i, p) in got.iter().enumerate() {
+        assert!(
+            (p.stamp_s - i as f64 * 0.02).abs() < 1e-9,
+            "{i}: {}",
+            p.stamp_s
+        );
+        assert!(p.stamp_s <= t - 0.1 + 1e-9, "arrived before its latency");
+        let (angle, _) = pose_error(&p.world_from_head, &motion.pose_at(p.stamp_s));
+        assert!(angle < 1e-12, "no noise set");
+    }
+    assert!(got.last().unwrap().stamp_s > t - 0.1 - 0.03);
 }

@@ -11,6 +11,10 @@
 //!
 //! Modules: [`folder`], [`pixels`], `webcam` (feature `webcam`), [`error`].
 //!
+//! A camera that moves with a head (Alice's headset camera) also has a pose stream: the head's
+//! tracked poses arrive as [`HeadPoseMessage`]s and are kept in [`HeadTracking`], whose
+//! history gives the head's pose at a frame's capture time.
+//!
 //! Clock: frame times are on the app clock, `Time<Fixed>`'s elapsed time, which is also the
 //! clock of joint states (the simulated robot steps in `FixedUpdate`).
 
@@ -22,13 +26,39 @@ pub mod webcam;
 
 use std::sync::Arc;
 
+use avatarm_core::vision::head::PoseHistory;
 use bevy::prelude::*;
+use nalgebra::Isometry3;
 
 pub use error::VideoError;
 
 /// What most users of the video need.
 pub mod prelude {
-    pub use crate::{LiveVideo, VideoError, VideoFrame, VideoInbox, VideoPlugin, VideoSystems};
+    pub use crate::{
+        HeadPoseMessage, HeadTracking, LiveVideo, VideoError, VideoFrame, VideoInbox, VideoPlugin,
+        VideoSystems,
+    };
+}
+
+/// A tracked pose of the head the camera rides on, as the headset reports it.
+#[derive(Message, Debug, Clone, Copy, PartialEq)]
+pub struct HeadPoseMessage {
+    /// The moment it describes (s, app clock).
+    pub stamp_s: f64,
+    /// `world_from_head`, the head's optical frame (x right, y down, z forward;
+    /// `avatarm_core::vision::head`), in the robot's world (m).
+    pub world_from_head: Isometry3<f64>,
+}
+
+/// The head's tracked poses received so far (a camera on a head; empty for a fixed camera).
+#[derive(Resource, Debug, Clone, Default)]
+pub struct HeadTracking {
+    /// About the last second of poses, oldest first.
+    pub history: PoseHistory,
+    /// Poses taken.
+    pub received: u64,
+    /// Poses refused: not finite, or not newer than the newest (one warning per 100).
+    pub refused: u64,
 }
 
 /// One camera frame, RGBA8, top row first.
@@ -144,17 +174,38 @@ impl Plugin for VideoPlugin {
             app.insert_resource(LiveVideo::new("camera", 0.5));
         }
         app.init_resource::<VideoInbox>()
+            .init_resource::<HeadTracking>()
+            .add_message::<HeadPoseMessage>()
             .configure_sets(
                 Update,
                 (VideoSystems::Receive, VideoSystems::Publish).chain(),
             )
-            .add_systems(Update, publish.in_set(VideoSystems::Publish));
+            .add_systems(
+                Update,
+                (record_head_poses, publish).in_set(VideoSystems::Publish),
+            );
     }
 }
 
 /// Now on the app clock.
 pub fn app_clock(time: &Time<Fixed>) -> f64 {
     time.elapsed_secs_f64()
+}
+
+fn record_head_poses(mut poses: MessageReader<HeadPoseMessage>, mut head: ResMut<HeadTracking>) {
+    for p in poses.read() {
+        if head.history.push(p.stamp_s, p.world_from_head) {
+            head.received += 1;
+        } else {
+            head.refused += 1;
+            if head.refused % 100 == 1 {
+                warn!(
+                    "head tracking: pose stamped {} s refused (not finite, or not newer than the newest); {} so far",
+                    p.stamp_s, head.refused
+                );
+            }
+        }
+    }
 }
 
 fn publish(mut inbox: ResMut<VideoInbox>, mut live: ResMut<LiveVideo>, time: Res<Time<Fixed>>) {

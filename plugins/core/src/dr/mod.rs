@@ -19,13 +19,16 @@
 //! Modules (their items are re-exported here): [`mask`] (threshold, dilation, feathering, the
 //! links' bounding spheres), [`background`] (a background H built from the footage itself),
 //! [`composite`] (the composite and the background refresh),
-//! [`photometric`] (the background's gain and offset), [`scores`] (IoU, leak, overmask, PSNR).
+//! [`photometric`] (the background's gain and offset), [`scores`] (IoU, leak, overmask, PSNR);
+//! and, not re-exported, [`view_background`] (a background that follows a moving camera,
+//! re-projected from captured views through a geometric proxy of the room).
 
 pub mod background;
 pub mod composite;
 pub mod mask;
 pub mod photometric;
 pub mod scores;
+pub mod view_background;
 
 pub use background::*;
 pub use composite::*;
@@ -101,6 +104,11 @@ pub struct EraseSettings {
     /// where its ray lands, [`crate::vision::distortion::DistortionMap`]); off draws it as a
     /// pinhole's, to measure what ignoring the lens costs. No effect on a pinhole camera.
     pub lens_distortion: bool,
+    /// For a camera that moves with a head: draw each frame's mask at the head pose of the
+    /// frame's capture time, from the tracked poses' history
+    /// ([`crate::vision::head::PoseHistory::at`]); off draws it at the newest tracked pose
+    /// received. No effect on a fixed camera.
+    pub pose_compensation: bool,
 }
 
 impl Default for EraseSettings {
@@ -116,6 +124,7 @@ impl Default for EraseSettings {
             photometric: false,
             background_refresh: 0.0,
             lens_distortion: true,
+            pose_compensation: true,
         }
     }
 }

@@ -317,6 +317,22 @@ pub struct HandScript {
     tremor: [(f64, f64, Vector3<f64>); 2],
 }
 
+/// Points rigidly attached to an object at `from` (e.g. the hand holding the object's twin),
+/// carried with it to `to` (the real object): `to · from⁻¹ · p` for each point (m, world).
+/// Alice's view draws the operator's hand this way while she holds the object, so the hand
+/// holds the bottle Alice sees even when the robot lags the twin.
+pub fn carried_with(
+    points: &[nalgebra::Vector3<f64>],
+    from: &nalgebra::Isometry3<f64>,
+    to: &nalgebra::Isometry3<f64>,
+) -> Vec<nalgebra::Vector3<f64>> {
+    let moved = to * from.inverse();
+    points
+        .iter()
+        .map(|p| (moved * nalgebra::Point3::from(*p)).coords)
+        .collect()
+}
+
 /// The minimum-jerk profile `10τ³ − 15τ⁴ + 6τ⁵` on [0, 1].
 pub fn min_jerk(tau: f64) -> f64 {
     let t = tau.clamp(0.0, 1.0);
@@ -652,6 +668,31 @@ pub fn skeleton(wrist: &Isometry3<f64>, grip: f64, hand: Handedness) -> Vec<Hand
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_carried_hand_keeps_its_grip_on_the_moved_object() {
+        use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+        let twin = Isometry3::from_parts(
+            Translation3::new(0.6, -0.1, 0.9),
+            UnitQuaternion::from_euler_angles(0.0, 0.2, 0.5),
+        );
+        let real = Isometry3::from_parts(
+            Translation3::new(0.58, -0.12, 0.88),
+            UnitQuaternion::from_euler_angles(0.05, 0.15, 0.45),
+        );
+        let hand = vec![
+            Vector3::new(0.62, -0.05, 0.95),
+            Vector3::new(0.55, -0.1, 0.9),
+        ];
+        let carried = carried_with(&hand, &twin, &real);
+        for (p, q) in hand.iter().zip(&carried) {
+            // Where the point sits on the twin is where it sits on the real object.
+            let on_twin = twin.inverse_transform_point(&nalgebra::Point3::from(*p));
+            let on_real = real.inverse_transform_point(&nalgebra::Point3::from(*q));
+            assert!((on_twin - on_real).norm() < 1e-12);
+        }
+        assert!((carried_with(&hand, &twin, &twin)[0] - hand[0]).norm() < 1e-12);
+    }
+
     use super::*;
 
     fn keys() -> Vec<HandKeyframe> {

@@ -480,7 +480,11 @@ impl Mapper {
                     .flat_map(|v| v.iter().copied()),
             );
             let nu = grasp::object_twist_from_pinv(&a.g_pinv, &vc)?;
-            (nu, a.squeeze, a.rank)
+            // σ < 0 (contacts pulling apart, or a rounding error around 0) squeezes nothing:
+            // the squeezing force is 0 then, not a malformed target that stops the robot. NaN
+            // stays NaN and is refused below.
+            let squeeze = if a.squeeze < 0.0 { 0.0 } else { a.squeeze };
+            (nu, squeeze, a.rank)
         };
         let target = OperatorTarget {
             stamp_s: input.stamp_s,
@@ -784,6 +788,30 @@ mod tests {
         );
         // Fingers are not driven by the arm mapping.
         assert_eq!((out.qdot[7], out.qdot[8]), (0.0, 0.0));
+    }
+
+    /// Fingertips pulling outward (or a rounding error: σ = -3e-16 was seen live) give a
+    /// negative internal force along the normals: no squeeze, a valid target, not a stop.
+    #[test]
+    fn contacts_pulling_apart_squeeze_nothing_and_the_target_is_valid() {
+        let pose = Isometry3::translation(0.6, -0.1, 0.9);
+        let (mut contacts, vel) = grasp_contacts(&pose, &Vector6::zeros());
+        for c in &mut contacts {
+            c.force = -c.force;
+        }
+        let target = Mapper::operator_side(
+            &OperatorInputs {
+                stamp_s: 0.0,
+                contacts: &contacts,
+                contact_velocities: &vel,
+                twin_pose: pose,
+                held: false,
+            },
+            &VirtualToReal::identity(),
+        )
+        .expect("a valid target");
+        assert_eq!(target.squeeze_n, 0.0);
+        assert!(target.validate().is_ok());
     }
 
     #[test]

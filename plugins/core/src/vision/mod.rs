@@ -7,9 +7,12 @@
 //! - [`distortion`]: lens distortion (OpenCV's plumb_bob, rational_polynomial, equidistant).
 //! - [`calibrate`]: the camera's pose fitted to the robot's silhouettes.
 //! - [`sensor`]: the simulated camera's sensor (noise, exposure).
+//! - [`head`]: a camera that moves with a head: the head's motion, its tracking, the tracked
+//!   poses' history (pose compensation).
 
 pub mod calibrate;
 pub mod camera;
 pub mod distortion;
+pub mod head;
 pub mod placement;
 pub mod sensor;

@@ -1,0 +1,696 @@
+//! A background H that follows a moving camera (Alice's headset camera), for which one
+//! photograph cannot serve: the room is re-projected into each frame's view from background
+//! views captured at other poses, through a geometric proxy of the room.
+//!
+//! - [`GeometricProxy`]: the room as rectangles (the faces of the scene's desk, wall and floor
+//!   boxes). A pixel's ray hits the nearest rectangle at a point `X`; what is not on the proxy
+//!   (the bottle, the glass) is drawn where the proxy is behind it, which is right only near the
+//!   view it was captured from (parallax).
+//! - [`BackgroundViews`]: captured views (an image, the camera, and which of its pixels may be
+//!   used: not covered by the robot); a view is kept when its viewing direction is at least
+//!   `min_separation` from every kept one, the oldest going when `max_views` are kept.
+//! - [`BackgroundViews::render`]: for each pixel of the target camera, `X` is projected into
+//!   every kept view that sees it (the view's own ray through that pixel hits the same
+//!   rectangle first, and the pixel is usable), sampled bilinearly, and the samples blended with
+//!   weights `1 / (θ + θ₀)²`, θ the angle at `X` between the target's and the view's rays
+//!   (closest views dominate, as in unstructured lumigraph rendering: Buehler et al., SIGGRAPH
+//!   2001), θ₀ = 0.5°. A ray that meets no rectangle looks at infinity (the sky, a far room):
+//!   its direction is projected into the views that see nothing of the proxy there either.
+//!   Pixels no view sees keep a fallback image's pixel, marked unseen.
+//!
+//! Pixel maps are row-major, top row first; images RGBA8; masks 0/1 per pixel.
+
+use nalgebra::{Isometry3, Point3, Vector3};
+
+use crate::dr::RgbaView;
+use crate::error::{Error, Result};
+use crate::vision::camera::PinholeCamera;
+
+/// A rectangle of the proxy: `centre ± half_u · u ± half_v · v`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProxyRect {
+    /// Centre (m, world).
+    pub centre: Point3<f64>,
+    /// First in-plane unit axis.
+    pub u: Vector3<f64>,
+    /// Second in-plane unit axis (orthogonal to `u`).
+    pub v: Vector3<f64>,
+    /// Half extents along `u` and `v` (m).
+    pub half: [f64; 2],
+}
+
+impl ProxyRect {
+    /// The ray's parameter `t > 1e-6` where `origin + t · dir` meets the rectangle.
+    pub fn hit(&self, origin: &Point3<f64>, dir: &Vector3<f64>) -> Option<f64> {
+        let n = self.u.cross(&self.v);
+        let denom = n.dot(dir);
+        if denom.abs() < 1e-12 {
+            return None;
+        }
+        let t = n.dot(&(self.centre - origin)) / denom;
+        if t <= 1e-6 {
+            return None;
+        }
+        let d = origin + dir * t - self.centre;
+        (d.dot(&self.u).abs() <= self.half[0] && d.dot(&self.v).abs() <= self.half[1]).then_some(t)
+    }
+}
+
+/// The room as rectangles.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GeometricProxy {
+    /// The rectangles.
+    pub rects: Vec<ProxyRect>,
+}
+
+impl GeometricProxy {
+    /// The six faces of each box; `pose` places the centre of the box's base (as scene props
+    /// rest), `size` its extents along its own x, y, z (m).
+    pub fn from_boxes(boxes: &[(Isometry3<f64>, [f64; 3])]) -> Self {
+        let mut rects = Vec::with_capacity(boxes.len() * 6);
+        for (pose, size) in boxes {
+            let h = [size[0] / 2.0, size[1] / 2.0, size[2] / 2.0];
+            let centre = pose * Point3::new(0.0, 0.0, h[2]);
+            let axes = [
+                pose.rotation * Vector3::x(),
+                pose.rotation * Vector3::y(),
+                pose.rotation * Vector3::z(),
+            ];
+            for a in 0..3 {
+                let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+                for sign in [-1.0, 1.0] {
+                    rects.push(ProxyRect {
+                        centre: centre + axes[a] * (sign * h[a]),
+                        u: axes[b],
+                        v: axes[c],
+                        half: [h[b], h[c]],
+                    });
+                }
+            }
+        }
+        Self { rects }
+    }
+
+    /// The nearest rectangle the ray meets: its index and the ray's parameter.
+    pub fn hit(&self, origin: &Point3<f64>, dir: &Vector3<f64>) -> Option<(usize, f64)> {
+        let mut best: Option<(usize, f64)> = None;
+        for (i, r) in self.rects.iter().enumerate() {
+            if let Some(t) = r.hit(origin, dir)
+                && best.is_none_or(|b| t < b.1)
+            {
+                best = Some((i, t));
+            }
+        }
+        best
+    }
+
+    /// For each pixel of `camera`, the index of the rectangle its ray meets first
+    /// ([`NO_RECT`] where none).
+    pub fn rect_map(&self, camera: &PinholeCamera) -> Vec<u16> {
+        let k = &camera.intrinsics;
+        let origin = Point3::from(camera.world_from_camera.translation.vector);
+        let mut out = Vec::with_capacity(k.width as usize * k.height as usize);
+        for y in 0..k.height {
+            for x in 0..k.width {
+                let dir = camera.ray(f64::from(x), f64::from(y));
+                out.push(self.hit(&origin, &dir).map_or(NO_RECT, |(i, _)| i as u16));
+            }
+        }
+        out
+    }
+}
+
+/// In a rectangle map: the pixel's ray meets no rectangle.
+pub const NO_RECT: u16 = u16::MAX;
+
+/// One captured background view.
+#[derive(Debug, Clone)]
+struct CapturedView {
+    camera: PinholeCamera,
+    rgba: Vec<u8>,
+    /// 1 where the pixel shows the room (not the robot).
+    usable: Vec<u8>,
+    /// [`GeometricProxy::rect_map`] of the view.
+    rects: Vec<u16>,
+    /// The view's optical axis (world).
+    axis: Vector3<f64>,
+    /// When it was taken (s), for reports.
+    at_s: f64,
+    /// Never evicted nor replaced (the empty room's photograph).
+    pinned: bool,
+}
+
+/// Background views of one image size, and the room re-projected into any view.
+#[derive(Debug, Clone)]
+pub struct BackgroundViews {
+    width: u32,
+    height: u32,
+    proxy: GeometricProxy,
+    /// At most this many views are kept (the oldest goes).
+    pub max_views: usize,
+    /// A view is kept only this far (rad, between optical axes) from every kept one, or when
+    /// it shows a larger share of the room than the nearest kept one.
+    pub min_separation_rad: f64,
+    views: Vec<CapturedView>,
+    offered: u64,
+}
+
+/// What [`BackgroundViews::render`] made.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderedBackground {
+    /// H, RGBA8 (opaque).
+    pub rgba: Vec<u8>,
+    /// 1 where some view saw the pixel, 0 where it kept the fallback.
+    pub seen: Vec<u8>,
+    /// Views kept.
+    pub views: usize,
+}
+
+impl BackgroundViews {
+    /// No views yet; images of `width × height`. Errors: an empty size, `max_views` 0, or a
+    /// separation that is not finite and ≥ 0.
+    pub fn new(
+        width: u32,
+        height: u32,
+        proxy: GeometricProxy,
+        max_views: usize,
+        min_separation_rad: f64,
+    ) -> Result<Self> {
+        if width == 0 || height == 0 || max_views == 0 || proxy.rects.len() >= usize::from(NO_RECT)
+        {
+            return Err(Error::BadSetting {
+                what: "background views".into(),
+                message: format!(
+                    "{width}x{height}, {max_views} views, {} rectangles: need a size, at least one view and fewer than {NO_RECT} rectangles",
+                    proxy.rects.len()
+                ),
+            });
+        }
+        if !(min_separation_rad.is_finite() && min_separation_rad >= 0.0) {
+            return Err(Error::BadSetting {
+                what: "background views".into(),
+                message: format!("separation {min_separation_rad} rad is not finite and >= 0"),
+            });
+        }
+        Ok(Self {
+            width,
+            height,
+            proxy,
+            max_views,
+            min_separation_rad,
+            views: Vec::new(),
+            offered: 0,
+        })
+    }
+
+    /// The proxy.
+    pub fn proxy(&self) -> &GeometricProxy {
+        &self.proxy
+    }
+
+    /// Views kept.
+    pub fn len(&self) -> usize {
+        self.views.len()
+    }
+
+    /// No view yet.
+    pub fn is_empty(&self) -> bool {
+        self.views.is_empty()
+    }
+
+    /// Views offered so far.
+    pub fn offered(&self) -> u64 {
+        self.offered
+    }
+
+    /// The capture times of the kept views (s).
+    pub fn times(&self) -> Vec<f64> {
+        self.views.iter().map(|v| v.at_s).collect()
+    }
+
+    /// The smallest angle (rad) between `camera`'s optical axis and a kept view's; `None`
+    /// without views.
+    pub fn nearest_angle(&self, camera: &PinholeCamera) -> Option<f64> {
+        let axis = camera.world_from_camera.rotation * Vector3::z();
+        self.views
+            .iter()
+            .map(|v| v.axis.angle(&axis))
+            .reduce(f64::min)
+    }
+
+    /// Offers a view taken at `at_s` by `camera` (its intrinsics must be of this size):
+    /// `frame`, with `covered` (0/1 per pixel) marking what may not be used (the robot and its
+    /// margin). Kept when it is far enough from every kept view (see
+    /// [`BackgroundViews::min_separation_rad`]); returns whether it was.
+    pub fn offer(
+        &mut self,
+        camera: &PinholeCamera,
+        frame: &RgbaView,
+        covered: &[u8],
+        at_s: f64,
+    ) -> Result<bool> {
+        let n = self.width as usize * self.height as usize;
+        let k = &camera.intrinsics;
+        if (frame.width, frame.height) != (self.width, self.height)
+            || (k.width, k.height) != (self.width, self.height)
+            || covered.len() != n
+        {
+            return Err(Error::BadImage {
+                what: "background view".into(),
+                message: format!(
+                    "frame {}x{}, camera {}x{}, {} mask pixels; the views are {}x{}",
+                    frame.width,
+                    frame.height,
+                    k.width,
+                    k.height,
+                    covered.len(),
+                    self.width,
+                    self.height
+                ),
+            });
+        }
+        self.offered += 1;
+        let axis = camera.world_from_camera.rotation * Vector3::z();
+        let usable_share = covered.iter().filter(|&&c| c == 0).count() as f64 / n as f64;
+        let nearest = self
+            .views
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i, v.axis.angle(&axis)))
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        let replace = match nearest {
+            None => None,
+            Some((_, angle)) if angle >= self.min_separation_rad => None,
+            // As near as a kept view: kept instead of it only when it shows more of the room.
+            Some((i, _)) => {
+                let kept = &self.views[i];
+                let kept_share = kept.usable.iter().filter(|&&u| u > 0).count() as f64 / n as f64;
+                if usable_share > kept_share + 0.01 {
+                    Some(i)
+                } else {
+                    return Ok(false);
+                }
+            }
+        };
+        let view = CapturedView {
+            camera: *camera,
+            rgba: frame.data.to_vec(),
+            usable: covered.iter().map(|&c| u8::from(c == 0)).collect(),
+            rects: self.proxy.rect_map(camera),
+            axis,
+            at_s,
+            pinned: false,
+        };
+        match replace {
+            Some(i) if !self.views[i].pinned => self.views[i] = view,
+            Some(_) => return Ok(false),
+            None => {
+                if self.views.len() >= self.max_views {
+                    match self.views.iter().position(|v| !v.pinned) {
+                        Some(oldest) => {
+                            self.views.remove(oldest);
+                        }
+                        None => return Ok(false),
+                    }
+                }
+                self.views.push(view);
+            }
+        }
+        Ok(true)
+    }
+
+    /// Adds a view of the room with nothing in the way (an empty room's photograph, every pixel
+    /// usable) that is never evicted nor replaced; errors as [`BackgroundViews::offer`]'s.
+    pub fn add_pinned(
+        &mut self,
+        camera: &PinholeCamera,
+        frame: &RgbaView,
+        at_s: f64,
+    ) -> Result<()> {
+        let n = self.width as usize * self.height as usize;
+        self.offer(camera, frame, &vec![0; n], at_s)?;
+        // Offered last: it is the newest view, unless refused as a near duplicate of a pinned
+        // one.
+        if let Some(v) = self.views.last_mut()
+            && v.at_s.to_bits() == at_s.to_bits()
+            && v.camera == *camera
+        {
+            v.pinned = true;
+        }
+        Ok(())
+    }
+
+    /// The room as `target` sees it, re-projected from the kept views, at the pixels where
+    /// `only` (0/1 per pixel) is 1, or everywhere; pixels not rendered or that no view sees take
+    /// `fallback`'s (an RGBA8 image of this size), else opaque black.
+    pub fn render(
+        &self,
+        target: &PinholeCamera,
+        fallback: Option<&[u8]>,
+        only: Option<&[u8]>,
+    ) -> Result<RenderedBackground> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let k = &target.intrinsics;
+        if (k.width, k.height) != (self.width, self.height)
+            || fallback.is_some_and(|f| f.len() != w * h * 4)
+            || only.is_some_and(|o| o.len() != w * h)
+        {
+            return Err(Error::BadImage {
+                what: "background target".into(),
+                message: format!(
+                    "camera {}x{}; the views are {}x{}",
+                    k.width, k.height, self.width, self.height
+                ),
+            });
+        }
+        let mut rgba = match fallback {
+            Some(f) => f.to_vec(),
+            None => [0, 0, 0, 255].repeat(w * h),
+        };
+        let mut seen = vec![0u8; w * h];
+        let origin = Point3::from(target.world_from_camera.translation.vector);
+        let theta0 = 0.5f64.to_radians();
+        for y in 0..h {
+            for x in 0..w {
+                if only.is_some_and(|o| o[y * w + x] == 0) {
+                    continue;
+                }
+                let dir = target.ray(x as f64, y as f64);
+                // Past the proxy: the point is at infinity (the view turns, it does not move).
+                let point = self
+                    .proxy
+                    .hit(&origin, &dir)
+                    .map(|(r, t)| (r, origin + dir * t));
+                let rect = point.map_or(NO_RECT, |(r, _)| r as u16);
+                let mut acc = [0.0f64; 3];
+                let mut total = 0.0;
+                for v in &self.views {
+                    let (projected, theta) = match point {
+                        Some((_, p)) => {
+                            let eye = Point3::from(v.camera.world_from_camera.translation.vector);
+                            (v.camera.project(&p), dir.angle(&(p - eye)))
+                        }
+                        None => (project_direction(&v.camera, &dir), 0.0),
+                    };
+                    let Some((u, vv, _)) = projected else {
+                        continue;
+                    };
+                    let Some(sample) = v.sample(u, vv, rect) else {
+                        continue;
+                    };
+                    let weight = 1.0 / (theta + theta0).powi(2);
+                    for c in 0..3 {
+                        acc[c] += weight * sample[c];
+                    }
+                    total += weight;
+                }
+                if total > 0.0 {
+                    let i = y * w + x;
+                    for c in 0..3 {
+                        rgba[i * 4 + c] = (acc[c] / total).round().clamp(0.0, 255.0) as u8;
+                    }
+                    rgba[i * 4 + 3] = 255;
+                    seen[i] = 1;
+                }
+            }
+        }
+        Ok(RenderedBackground {
+            rgba,
+            seen,
+            views: self.views.len(),
+        })
+    }
+}
+
+/// Where `camera` sees the world direction `dir` (a point at infinity): `(u, v, 1)`, or `None`
+/// behind it.
+fn project_direction(camera: &PinholeCamera, dir: &Vector3<f64>) -> Option<(f64, f64, f64)> {
+    let d = camera.world_from_camera.rotation.inverse() * dir;
+    if d.z <= 1e-9 {
+        return None;
+    }
+    let k = &camera.intrinsics;
+    Some((k.fx * d.x / d.z + k.cx, k.fy * d.y / d.z + k.cy, 1.0))
+}
+
+impl CapturedView {
+    /// The view's colour at `(u, v)` (bilinear over its four texels), when all four are usable
+    /// and show rectangle `rect` (the point is not hidden from this view by another part of the
+    /// proxy); at the image's rim, the nearest texel on the same terms.
+    fn sample(&self, u: f64, v: f64, rect: u16) -> Option<[f64; 3]> {
+        let k = &self.camera.intrinsics;
+        if !self.camera.in_image(u, v) {
+            return None;
+        }
+        let (w, h) = (k.width as usize, k.height as usize);
+        let ok = |x: usize, y: usize| {
+            let i = y * w + x;
+            self.usable[i] > 0 && self.rects[i] == rect
+        };
+        let px = |x: usize, y: usize, c: usize| f64::from(self.rgba[(y * w + x) * 4 + c]);
+        let (x0, y0) = (u.floor(), v.floor());
+        if x0 < 0.0 || y0 < 0.0 || x0 as usize + 1 >= w || y0 as usize + 1 >= h {
+            let (x, y) = (
+                (u.round().max(0.0) as usize).min(w - 1),
+                (v.round().max(0.0) as usize).min(h - 1),
+            );
+            return ok(x, y).then(|| [px(x, y, 0), px(x, y, 1), px(x, y, 2)]);
+        }
+        let (x, y) = (x0 as usize, y0 as usize);
+        if !(ok(x, y) && ok(x + 1, y) && ok(x, y + 1) && ok(x + 1, y + 1)) {
+            return None;
+        }
+        let (fx, fy) = (u - x0, v - y0);
+        let mut out = [0.0; 3];
+        for (c, o) in out.iter_mut().enumerate() {
+            let top = px(x, y, c) * (1.0 - fx) + px(x + 1, y, c) * fx;
+            let bottom = px(x, y + 1, c) * (1.0 - fx) + px(x + 1, y + 1, c) * fx;
+            *o = top * (1.0 - fy) + bottom * fy;
+        }
+        Some(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vision::camera::{CameraPose, Intrinsics};
+
+    fn camera(eye: [f64; 3], target: [f64; 3]) -> PinholeCamera {
+        PinholeCamera {
+            intrinsics: Intrinsics::from_fov_y(50f64.to_radians(), 64, 48),
+            world_from_camera: CameraPose {
+                eye,
+                target,
+                up: [0.0, 0.0, 1.0],
+            }
+            .to_isometry()
+            .expect("pose"),
+        }
+    }
+
+    /// A wall at x = 0 (a thin box) whose colour is a function of the point: what a view sees
+    /// at each pixel, computed exactly.
+    fn wall() -> GeometricProxy {
+        GeometricProxy::from_boxes(&[(Isometry3::translation(-0.01, 0.0, 0.0), [0.02, 4.0, 3.0])])
+    }
+
+    fn paint(p: &Point3<f64>) -> [u8; 3] {
+        [
+            (128.0 + 100.0 * (p.y * 2.0).sin()) as u8,
+            (128.0 + 100.0 * (p.z * 3.0).cos()) as u8,
+            90,
+        ]
+    }
+
+    fn photograph(proxy: &GeometricProxy, cam: &PinholeCamera) -> Vec<u8> {
+        let k = &cam.intrinsics;
+        let origin = Point3::from(cam.world_from_camera.translation.vector);
+        let mut out = Vec::new();
+        for y in 0..k.height {
+            for x in 0..k.width {
+                let dir = cam.ray(f64::from(x), f64::from(y));
+                let c = match proxy.hit(&origin, &dir) {
+                    Some((_, t)) => paint(&(origin + dir * t)),
+                    None => [0, 0, 0],
+                };
+                out.extend_from_slice(&[c[0], c[1], c[2], 255]);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_box_has_six_faces_and_the_nearest_is_hit() {
+        let proxy = GeometricProxy::from_boxes(&[(Isometry3::identity(), [1.0, 2.0, 0.5])]);
+        assert_eq!(proxy.rects.len(), 6);
+        // From above, straight down: the top face at z = 0.5.
+        let (i, t) = proxy
+            .hit(&Point3::new(0.1, 0.2, 2.0), &-Vector3::z())
+            .expect("hit");
+        assert!((t - 1.5).abs() < 1e-12);
+        assert!((proxy.rects[i].centre.z - 0.5).abs() < 1e-12);
+        assert!(
+            proxy
+                .hit(&Point3::new(3.0, 0.0, 2.0), &-Vector3::z())
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn a_view_reprojects_exactly_through_a_plane_and_misses_stay_unseen() {
+        let proxy = wall();
+        let a = camera([1.5, -0.3, 1.0], [0.0, 0.0, 1.0]);
+        let b = camera([1.4, 0.25, 1.05], [0.0, 0.1, 1.0]);
+        let mut views = BackgroundViews::new(64, 48, proxy.clone(), 4, 0.0).expect("views");
+        let photo = photograph(&proxy, &a);
+        let frame = RgbaView::new("a", 64, 48, &photo).expect("view");
+        assert!(
+            views
+                .offer(&a, &frame, &vec![0; 64 * 48], 0.0)
+                .expect("offer")
+        );
+        let out = views.render(&b, None, None).expect("render");
+        let truth = photograph(&proxy, &b);
+        let mut diffs = Vec::new();
+        for i in 0..64 * 48 {
+            if out.seen[i] > 0 {
+                for c in 0..3 {
+                    diffs
+                        .push((i32::from(out.rgba[i * 4 + c]) - i32::from(truth[i * 4 + c])).abs());
+                }
+            }
+        }
+        let seen = out.seen.iter().filter(|&&s| s > 0).count();
+        assert!(seen > 64 * 48 / 2, "most of b's view is in a's: {seen}");
+        let mean = diffs.iter().sum::<i32>() as f64 / diffs.len() as f64;
+        assert!(mean < 3.0, "bilinear resampling of a smooth wall: {mean}");
+        // What a never saw stays unseen and keeps the fallback.
+        let fallback = vec![7u8; 64 * 48 * 4];
+        let out2 = views.render(&b, Some(&fallback), None).expect("render");
+        for i in 0..64 * 48 {
+            if out2.seen[i] == 0 {
+                assert_eq!(out2.rgba[i * 4], 7);
+            }
+        }
+        assert!(out2.seen.iter().any(|&s| s == 0), "b sees past a's edge");
+        // Only where asked.
+        let mut only = vec![0u8; 64 * 48];
+        only[24 * 64 + 32] = 1;
+        let out3 = views
+            .render(&b, Some(&fallback), Some(&only))
+            .expect("render");
+        assert_eq!(out3.seen.iter().filter(|&&s| s > 0).count(), 1);
+        assert_eq!(out3.rgba[(24 * 64 + 32) * 4], out.rgba[(24 * 64 + 32) * 4]);
+    }
+
+    #[test]
+    fn past_the_proxy_the_room_is_at_infinity() {
+        // No proxy at all: a turning camera sees the same sky, painted by direction.
+        let proxy = GeometricProxy::default();
+        let sky = |cam: &PinholeCamera| -> Vec<u8> {
+            let k = &cam.intrinsics;
+            let mut out = Vec::new();
+            for y in 0..k.height {
+                for x in 0..k.width {
+                    let d = cam.ray(f64::from(x), f64::from(y));
+                    out.extend_from_slice(&[
+                        (128.0 + 120.0 * d.y) as u8,
+                        (128.0 + 120.0 * d.z) as u8,
+                        60,
+                        255,
+                    ]);
+                }
+            }
+            out
+        };
+        let a = camera([0.0, 0.0, 1.0], [1.0, 0.0, 1.0]);
+        let b = camera([0.0, 0.0, 1.0], [1.0, 0.1, 1.05]);
+        let mut views = BackgroundViews::new(64, 48, proxy, 2, 0.0).expect("views");
+        let photo = sky(&a);
+        let f = RgbaView::new("a", 64, 48, &photo).expect("a");
+        views.offer(&a, &f, &vec![0; 64 * 48], 0.0).expect("offer");
+        let out = views.render(&b, None, None).expect("render");
+        let truth = sky(&b);
+        let seen: Vec<usize> = (0..64 * 48).filter(|&i| out.seen[i] > 0).collect();
+        assert!(seen.len() > 64 * 48 / 2, "{}", seen.len());
+        for i in seen {
+            let e = (i32::from(out.rgba[i * 4]) - i32::from(truth[i * 4])).abs();
+            assert!(e <= 2, "pixel {i}: {e}");
+        }
+    }
+
+    #[test]
+    fn covered_pixels_are_not_used_and_the_nearer_view_wins() {
+        let proxy = wall();
+        let a = camera([1.5, -0.3, 1.0], [0.0, 0.0, 1.0]);
+        let b = camera([1.5, 0.3, 1.0], [0.0, 0.0, 1.0]);
+        let target = camera([1.5, 0.25, 1.0], [0.0, 0.0, 1.0]);
+        let mut views = BackgroundViews::new(64, 48, proxy.clone(), 4, 0.0).expect("views");
+        // a's picture is uniformly wrong (a lighting change), b's right.
+        let wrong = [200u8, 10, 10, 255].repeat(64 * 48);
+        let right = photograph(&proxy, &b);
+        let fa = RgbaView::new("a", 64, 48, &wrong).expect("a");
+        let fb = RgbaView::new("b", 64, 48, &right).expect("b");
+        views.offer(&a, &fa, &vec![0; 64 * 48], 0.0).expect("a");
+        views.offer(&b, &fb, &vec![0; 64 * 48], 1.0).expect("b");
+        let out = views.render(&target, None, None).expect("render");
+        let truth = photograph(&proxy, &target);
+        let centre = (24 * 64 + 32) * 4;
+        let err = (i32::from(out.rgba[centre]) - i32::from(truth[centre])).abs();
+        assert!(err < 25, "b (3 deg away) outweighs a (20 deg away): {err}");
+        // Covered everywhere: a view that may not be used adds nothing.
+        let mut only_covered = BackgroundViews::new(64, 48, proxy, 4, 0.0).expect("views");
+        only_covered
+            .offer(&a, &fa, &vec![1; 64 * 48], 0.0)
+            .expect("offer");
+        let out = only_covered.render(&target, None, None).expect("render");
+        assert!(out.seen.iter().all(|&s| s == 0));
+    }
+
+    #[test]
+    fn views_are_kept_by_separation_and_bad_sizes_are_refused() {
+        let proxy = wall();
+        let mut views =
+            BackgroundViews::new(64, 48, proxy.clone(), 2, 5f64.to_radians()).expect("views");
+        let photo = [50u8; 64 * 48 * 4];
+        let f = RgbaView::new("f", 64, 48, &photo).expect("f");
+        let free = vec![0u8; 64 * 48];
+        let a = camera([1.5, 0.0, 1.0], [0.0, 0.0, 1.0]);
+        let near = camera([1.5, 0.0, 1.0], [0.0, 0.05, 1.0]);
+        let far = camera([1.5, 0.0, 1.0], [0.0, 0.5, 1.0]);
+        let farther = camera([1.5, 0.0, 1.0], [0.0, -0.5, 1.0]);
+        assert!(views.offer(&a, &f, &free, 0.0).expect("a"));
+        assert!(
+            !views.offer(&near, &f, &free, 0.1).expect("near"),
+            "2 deg away"
+        );
+        assert!(views.offer(&far, &f, &free, 0.2).expect("far"));
+        assert!(views.offer(&farther, &f, &free, 0.3).expect("farther"));
+        assert_eq!(views.len(), 2, "the oldest went");
+        assert_eq!(views.times(), vec![0.2, 0.3]);
+        assert_eq!(views.offered(), 4);
+        assert!(views.nearest_angle(&a).expect("angle") > 0.3);
+        // A pinned view stays when the others come and go.
+        let mut pinned =
+            BackgroundViews::new(64, 48, proxy.clone(), 2, 5f64.to_radians()).expect("views");
+        pinned.add_pinned(&a, &f, -1.0).expect("pinned");
+        for (i, cam) in [&far, &farther, &near].into_iter().enumerate() {
+            pinned.offer(cam, &f, &free, i as f64).expect("offer");
+        }
+        assert_eq!(pinned.times(), vec![-1.0, 1.0]);
+        let small = RgbaView::new("s", 32, 24, &photo[..32 * 24 * 4]).expect("s");
+        assert!(views.offer(&a, &small, &free, 0.4).is_err());
+        assert!(
+            views
+                .render(
+                    &camera([1.0, 0.0, 1.0], [0.0, 0.0, 1.0]),
+                    Some(&[0u8; 3]),
+                    None
+                )
+                .is_err()
+        );
+        assert!(BackgroundViews::new(64, 48, proxy.clone(), 0, 0.0).is_err());
+        assert!(BackgroundViews::new(64, 48, proxy, 2, f64::NAN).is_err());
+    }
+}

@@ -1,0 +1,581 @@
+//! A camera that moves with a head: Alice's headset camera (the paper's second viewpoint).
+//!
+//! - [`HeadMotion`]: where the head is at each time, scripted (look-at keyframes, or a yaw
+//!   sweep at a set peak angular speed for measurements).
+//! - [`TrackingModel`] and [`HeadTracker`]: the head as a tracker reports it, sampled at a rate,
+//!   with Gaussian noise, arriving after a latency (a simulated headset's tracking).
+//! - [`PoseHistory`]: the tracked poses received so far, and the pose at any time
+//!   ([`PoseHistory::at`]: interpolated between samples, extrapolated a little past the last).
+//!   *Pose compensation* draws a frame's mask at the head pose of the frame's capture time,
+//!   as the joint history does for the arm.
+//!
+//! Frames: the head's frame follows the OpenCV optical convention, as cameras here do (x right,
+//! y down, z forward: the direction the face points). The camera's optical frame is the head's
+//! times the *mount* (`head_from_camera`): `world_from_camera = world_from_head * mount`. An
+//! OpenXR view pose (x right, y up, -z forward) is turned into this frame by a rotation of π
+//! about x ([`head_from_openxr_view`]).
+
+use std::collections::VecDeque;
+
+use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
+
+use crate::error::{Error, Result};
+use crate::rng::Rng;
+use crate::vision::camera::CameraPose;
+
+/// A head keyframe: the head's optical frame (x right, y down, z forward) at a time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeadKeyframe {
+    /// Time (s, the robot's clock).
+    pub t_s: f64,
+    /// `world_from_head`.
+    pub pose: Isometry3<f64>,
+}
+
+/// Where the head is over time.
+#[derive(Debug, Clone, PartialEq)]
+pub enum HeadMotion {
+    /// Keyframes in time order; between two, the position moves by minimum jerk and the
+    /// rotation by a spherical interpolation with the same timing (still at each keyframe);
+    /// before the first and after the last, the head holds.
+    Keyframes(Vec<HeadKeyframe>),
+    /// Looking around a centre pose: the head turns about the world's vertical axis through a
+    /// pivot `pivot_back_m` behind the eye (the neck), yaw(t) = A sin(t ω / A), so that the
+    /// angular speed peaks at ω when crossing the centre and is 0 at ±A.
+    Sweep {
+        /// The pose at yaw 0.
+        centre: Isometry3<f64>,
+        /// A (rad, > 0 when ω > 0).
+        amplitude_rad: f64,
+        /// ω, the peak angular speed (rad/s; 0: the head holds still at the centre).
+        peak_speed_rad_s: f64,
+        /// The pivot's distance behind the eye, horizontally (m; 0: the head turns about the
+        /// eye).
+        pivot_back_m: f64,
+    },
+}
+
+impl HeadMotion {
+    /// Look-at keyframes (`(t_s, eye/target/up)`): sorted by time; errors name the keyframe
+    /// whose eye equals its target or whose up is along the view.
+    pub fn look_at(keyframes: &[(f64, CameraPose)]) -> Result<Self> {
+        let mut out = Vec::with_capacity(keyframes.len());
+        for (i, (t_s, pose)) in keyframes.iter().enumerate() {
+            let pose = pose.to_isometry().map_err(|e| Error::BadSetting {
+                what: format!("head keyframe {i}"),
+                message: e.to_string(),
+            })?;
+            out.push(HeadKeyframe { t_s: *t_s, pose });
+        }
+        out.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+        Ok(Self::Keyframes(out))
+    }
+
+    /// `world_from_head` at `t_s`; a motion with no keyframes is the identity.
+    pub fn pose_at(&self, t_s: f64) -> Isometry3<f64> {
+        match self {
+            Self::Keyframes(k) => keyframes_at(k, t_s),
+            Self::Sweep {
+                centre,
+                amplitude_rad,
+                peak_speed_rad_s,
+                pivot_back_m,
+            } => {
+                let yaw = sweep_yaw(*amplitude_rad, *peak_speed_rad_s, t_s);
+                let forward = centre.rotation * Vector3::z();
+                let flat = Vector3::new(forward.x, forward.y, 0.0)
+                    .try_normalize(1e-9)
+                    .unwrap_or_else(Vector3::zeros);
+                let pivot = centre.translation.vector - flat * *pivot_back_m;
+                let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw);
+                let eye = pivot + turn * (centre.translation.vector - pivot);
+                Isometry3::from_parts(Translation3::from(eye), turn * centre.rotation)
+            }
+        }
+    }
+
+    /// The head's angular speed at `t_s` (rad/s), by a central difference of 1 ms.
+    pub fn angular_speed_at(&self, t_s: f64) -> f64 {
+        let h = 5e-4;
+        let a = self.pose_at(t_s - h).rotation;
+        let b = self.pose_at(t_s + h).rotation;
+        a.angle_to(&b) / (2.0 * h)
+    }
+
+    /// The largest angular speed over `[0, duration_s]` (rad/s), sampled every 5 ms.
+    pub fn peak_angular_speed(&self, duration_s: f64) -> f64 {
+        let n = (duration_s / 0.005).ceil().max(1.0) as usize;
+        (0..=n)
+            .map(|i| self.angular_speed_at(i as f64 * duration_s / n as f64))
+            .fold(0.0, f64::max)
+    }
+}
+
+/// yaw(t) = A sin(t ω / A): peak speed ω at the centre, turning back smoothly at ±A.
+fn sweep_yaw(amplitude: f64, peak_speed: f64, t: f64) -> f64 {
+    if amplitude <= 0.0 || peak_speed <= 0.0 {
+        return 0.0;
+    }
+    amplitude * (t * peak_speed / amplitude).sin()
+}
+
+fn keyframes_at(k: &[HeadKeyframe], t: f64) -> Isometry3<f64> {
+    let Some(first) = k.first() else {
+        return Isometry3::identity();
+    };
+    if t <= first.t_s {
+        return first.pose;
+    }
+    for w in k.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        if t <= b.t_s {
+            let span = (b.t_s - a.t_s).max(1e-9);
+            let s = ((t - a.t_s) / span).clamp(0.0, 1.0);
+            let blend = s * s * s * (10.0 - 15.0 * s + 6.0 * s * s);
+            return interpolate(&a.pose, &b.pose, blend);
+        }
+    }
+    k.last().map_or(first.pose, |l| l.pose)
+}
+
+/// `a` at 0, `b` at 1: the translation linearly, the rotation by slerp (shortest way).
+pub fn interpolate(a: &Isometry3<f64>, b: &Isometry3<f64>, s: f64) -> Isometry3<f64> {
+    let p = a.translation.vector.lerp(&b.translation.vector, s);
+    let r = a
+        .rotation
+        .try_slerp(&b.rotation, s, 1e-12)
+        .unwrap_or(if s < 0.5 { a.rotation } else { b.rotation });
+    Isometry3::from_parts(Translation3::from(p), r)
+}
+
+/// The head's optical frame (x right, y down, z forward) from an OpenXR view pose (x right,
+/// y up, -z forward; OpenXR 1.0 spec, "Reference Spaces"): a rotation of π about x.
+pub fn head_from_openxr_view(world_from_view: &Isometry3<f64>) -> Isometry3<f64> {
+    world_from_view * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+}
+
+/// How a headset reports its head pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackingModel {
+    /// Samples per second (> 0; a Quest 2 reports its head at the display's 72–120 Hz).
+    pub rate_hz: f64,
+    /// From the moment a sample describes to the moment the app receives it (s, ≥ 0).
+    pub latency_s: f64,
+    /// Position noise, per axis (m, ≥ 0).
+    pub position_sigma_m: f64,
+    /// Orientation noise, per axis of a small rotation (rad, ≥ 0).
+    pub angle_sigma_rad: f64,
+}
+
+impl Default for TrackingModel {
+    fn default() -> Self {
+        Self {
+            rate_hz: 90.0,
+            latency_s: 0.0,
+            position_sigma_m: 0.0,
+            angle_sigma_rad: 0.0,
+        }
+    }
+}
+
+impl TrackingModel {
+    /// Checks the numbers; `what` names where they came from.
+    pub fn validate(&self, what: &str) -> Result<()> {
+        let bad = |message: String| {
+            Err(Error::BadSetting {
+                what: what.to_owned(),
+                message,
+            })
+        };
+        if !(self.rate_hz.is_finite() && self.rate_hz > 0.0 && self.rate_hz <= 10_000.0) {
+            return bad(format!("rate_hz = {} is outside (0, 10000]", self.rate_hz));
+        }
+        if !(self.latency_s.is_finite() && (0.0..=2.0).contains(&self.latency_s)) {
+            return bad(format!("latency = {} s is outside [0, 2]", self.latency_s));
+        }
+        if !(self.position_sigma_m.is_finite() && (0.0..=0.1).contains(&self.position_sigma_m)) {
+            return bad(format!(
+                "position noise = {} m is outside [0, 0.1]",
+                self.position_sigma_m
+            ));
+        }
+        if !(self.angle_sigma_rad.is_finite()
+            && (0.0..=10f64.to_radians()).contains(&self.angle_sigma_rad))
+        {
+            return bad(format!(
+                "angle noise = {}° is outside [0, 10]",
+                self.angle_sigma_rad.to_degrees()
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A stamped tracked pose: `world_from_head` as the tracker measured it at `stamp_s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackedPose {
+    /// The moment it describes (s, the robot's clock).
+    pub stamp_s: f64,
+    /// When the app receives it (s).
+    pub arrival_s: f64,
+    /// `world_from_head`.
+    pub pose: Isometry3<f64>,
+}
+
+/// A simulated head tracker: samples a [`HeadMotion`] at the model's rate, adds its noise
+/// (seeded: sample `k` uses stream `k`) and hands each sample over once its latency has passed.
+#[derive(Debug, Clone)]
+pub struct HeadTracker {
+    model: TrackingModel,
+    seed: u64,
+    next_sample: u64,
+    in_flight: VecDeque<TrackedPose>,
+}
+
+impl HeadTracker {
+    /// A tracker whose first sample is at t = 0.
+    pub fn new(model: TrackingModel, seed: u64) -> Self {
+        Self {
+            model,
+            seed,
+            next_sample: 0,
+            in_flight: VecDeque::new(),
+        }
+    }
+
+    /// The model.
+    pub fn model(&self) -> &TrackingModel {
+        &self.model
+    }
+
+    /// Takes every sample due up to `now_s` and returns, oldest first, those that have arrived
+    /// by then.
+    pub fn poll(&mut self, motion: &HeadMotion, now_s: f64) -> Vec<TrackedPose> {
+        let period = 1.0 / self.model.rate_hz;
+        loop {
+            let stamp_s = self.next_sample as f64 * period;
+            if stamp_s > now_s + 1e-9 {
+                break;
+            }
+            let mut rng = Rng::stream(self.seed, self.next_sample);
+            self.next_sample += 1;
+            let truth = motion.pose_at(stamp_s);
+            let dp = Vector3::new(rng.gaussian(), rng.gaussian(), rng.gaussian())
+                * self.model.position_sigma_m;
+            let dr = Vector3::new(rng.gaussian(), rng.gaussian(), rng.gaussian())
+                * self.model.angle_sigma_rad;
+            let pose = Isometry3::from_parts(
+                Translation3::from(truth.translation.vector + dp),
+                UnitQuaternion::from_scaled_axis(dr) * truth.rotation,
+            );
+            self.in_flight.push_back(TrackedPose {
+                stamp_s,
+                arrival_s: stamp_s + self.model.latency_s,
+                pose,
+            });
+        }
+        let mut out = Vec::new();
+        while self
+            .in_flight
+            .front()
+            .is_some_and(|p| p.arrival_s <= now_s + 1e-9)
+        {
+            out.extend(self.in_flight.pop_front());
+        }
+        out
+    }
+}
+
+/// Tracked poses received so far (about the last second), and the pose at any time.
+#[derive(Debug, Clone)]
+pub struct PoseHistory {
+    samples: VecDeque<(f64, Isometry3<f64>)>,
+    /// How far past the newest sample [`PoseHistory::at`] extrapolates (s).
+    pub max_ahead_s: f64,
+    /// The velocity for extrapolation is taken between the newest sample and the newest one at
+    /// least this much older (s): a longer baseline averages the tracker's noise.
+    pub velocity_baseline_s: f64,
+}
+
+impl Default for PoseHistory {
+    fn default() -> Self {
+        Self {
+            samples: VecDeque::new(),
+            max_ahead_s: 0.1,
+            velocity_baseline_s: 0.03,
+        }
+    }
+}
+
+impl PoseHistory {
+    /// Adds a sample if it is newer than the newest and finite; returns whether it was taken.
+    pub fn push(&mut self, stamp_s: f64, pose: Isometry3<f64>) -> bool {
+        let finite = stamp_s.is_finite()
+            && pose.translation.vector.iter().all(|v| v.is_finite())
+            && pose.rotation.coords.iter().all(|v| v.is_finite());
+        if !finite || self.samples.back().is_some_and(|s| s.0 >= stamp_s) {
+            return false;
+        }
+        self.samples.push_back((stamp_s, pose));
+        while self.samples.front().is_some_and(|s| stamp_s - s.0 > 1.0) {
+            self.samples.pop_front();
+        }
+        true
+    }
+
+    /// The newest sample, `(stamp_s, world_from_head)`.
+    pub fn latest(&self) -> Option<(f64, Isometry3<f64>)> {
+        self.samples.back().copied()
+    }
+
+    /// Samples held.
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    /// No sample yet.
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+
+    /// The pose at `t_s`: interpolated between the samples around it (translation linearly,
+    /// rotation by slerp); past the newest, extrapolated with the velocity over
+    /// [`PoseHistory::velocity_baseline_s`] (constant linear and angular velocity), at most
+    /// [`PoseHistory::max_ahead_s`] ahead; before the oldest, the oldest.
+    pub fn at(&self, t_s: f64) -> Option<Isometry3<f64>> {
+        let &(t1, p1) = self.samples.back()?;
+        if t_s >= t1 {
+            let ahead = (t_s - t1).min(self.max_ahead_s);
+            let older = self
+                .samples
+                .iter()
+                .rev()
+                .find(|s| t1 - s.0 >= self.velocity_baseline_s)
+                .or_else(|| self.samples.front().filter(|s| s.0 < t1));
+            let Some(&(t0, p0)) = older else {
+                return Some(p1);
+            };
+            let dt = t1 - t0;
+            let v = (p1.translation.vector - p0.translation.vector) / dt;
+            let w = (p1.rotation * p0.rotation.inverse()).scaled_axis() / dt;
+            return Some(Isometry3::from_parts(
+                Translation3::from(p1.translation.vector + v * ahead),
+                UnitQuaternion::from_scaled_axis(w * ahead) * p1.rotation,
+            ));
+        }
+        let &(t0, p0) = self.samples.front()?;
+        if t_s <= t0 {
+            return Some(p0);
+        }
+        let i = self.samples.partition_point(|s| s.0 <= t_s);
+        let (a, b) = (&self.samples[i - 1], &self.samples[i]);
+        Some(interpolate(&a.1, &b.1, (t_s - a.0) / (b.0 - a.0)))
+    }
+}
+
+/// The angle between two poses' rotations (rad) and the distance between their origins (m).
+pub fn pose_error(a: &Isometry3<f64>, b: &Isometry3<f64>) -> (f64, f64) {
+    (
+        a.rotation.angle_to(&b.rotation),
+        (a.translation.vector - b.translation.vector).norm(),
+    )
+}
+
+/// A mount perturbed by a calibration error: a rotation of `angle_rad` about `axis` (in the
+/// head's frame, through the camera's centre) and a translation `offset_m` (head frame).
+pub fn perturbed_mount(
+    mount: &Isometry3<f64>,
+    axis: &Vector3<f64>,
+    angle_rad: f64,
+    offset_m: &Vector3<f64>,
+) -> Isometry3<f64> {
+    let axis = Unit::try_new(*axis, 1e-12).unwrap_or(Vector3::y_axis());
+    Isometry3::from_parts(
+        Translation3::from(mount.translation.vector + offset_m),
+        UnitQuaternion::from_axis_angle(&axis, angle_rad) * mount.rotation,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn look(eye: [f64; 3], target: [f64; 3]) -> Isometry3<f64> {
+        CameraPose {
+            eye,
+            target,
+            up: [0.0, 0.0, 1.0],
+        }
+        .to_isometry()
+        .expect("pose")
+    }
+
+    fn sweep(speed_deg_s: f64, pivot: f64) -> HeadMotion {
+        HeadMotion::Sweep {
+            centre: look([1.6, 0.0, 1.2], [0.0, 0.0, 0.4]),
+            amplitude_rad: 20f64.to_radians(),
+            peak_speed_rad_s: speed_deg_s.to_radians(),
+            pivot_back_m: pivot,
+        }
+    }
+
+    #[test]
+    fn a_sweep_peaks_at_its_speed_and_stays_within_its_amplitude() {
+        for speed in [15.0, 30.0, 60.0] {
+            let m = sweep(speed, 0.1);
+            let peak = m.peak_angular_speed(10.0).to_degrees();
+            assert!((peak - speed).abs() < 0.01 * speed, "{peak} vs {speed}");
+            let centre = m.pose_at(0.0);
+            for i in 0..200 {
+                let (angle, _) = pose_error(&centre, &m.pose_at(i as f64 * 0.05));
+                assert!(angle <= 20f64.to_radians() + 1e-9);
+            }
+        }
+        let still = sweep(0.0, 0.1);
+        assert_eq!(still.pose_at(3.0), still.pose_at(0.0));
+        // Turning about the neck moves the eye; about the eye it does not.
+        let t = 20f64.to_radians() / 30f64.to_radians() * std::f64::consts::FRAC_PI_2;
+        let (_, moved) = pose_error(&sweep(30.0, 0.1).pose_at(0.0), &sweep(30.0, 0.1).pose_at(t));
+        assert!((moved - 2.0 * 0.1 * (10f64.to_radians()).sin()).abs() < 1e-6);
+        let (_, moved) = pose_error(&sweep(30.0, 0.0).pose_at(0.0), &sweep(30.0, 0.0).pose_at(t));
+        assert!(moved < 1e-12);
+    }
+
+    #[test]
+    fn keyframes_pass_through_and_hold_outside() {
+        let a = look([1.6, 0.0, 1.2], [0.0, 0.0, 0.4]);
+        let b = look([1.2, 0.3, 1.0], [0.0, 0.0, 0.4]);
+        let m = HeadMotion::Keyframes(vec![
+            HeadKeyframe { t_s: 1.0, pose: a },
+            HeadKeyframe { t_s: 3.0, pose: b },
+        ]);
+        assert_eq!(m.pose_at(0.0), a);
+        assert_eq!(m.pose_at(1.0), a);
+        let end = m.pose_at(3.0);
+        assert!(pose_error(&end, &b).0 < 1e-9 && pose_error(&end, &b).1 < 1e-12);
+        assert_eq!(m.pose_at(9.0), b);
+        // Half-way in time is half-way in space (minimum jerk is symmetric).
+        let mid = m.pose_at(2.0);
+        let half = interpolate(&a, &b, 0.5);
+        assert!(pose_error(&mid, &half).0 < 1e-9 && pose_error(&mid, &half).1 < 1e-12);
+        assert!(m.angular_speed_at(1.0) < 1e-3, "still at a keyframe");
+        let bad = HeadMotion::look_at(&[(
+            0.0,
+            CameraPose {
+                eye: [1.0, 0.0, 0.0],
+                target: [1.0, 0.0, 0.0],
+                up: [0.0, 0.0, 1.0],
+            },
+        )]);
+        assert!(bad.unwrap_err().to_string().contains("head keyframe 0"));
+    }
+
+    #[test]
+    fn history_interpolates_extrapolates_and_refuses_bad_samples() {
+        // Constant angular velocity about z and linear motion: interpolation and
+        // extrapolation are both exact.
+        let w = 0.5;
+        let pose = |t: f64| {
+            Isometry3::from_parts(
+                Translation3::new(0.1 * t, 0.0, 1.0),
+                UnitQuaternion::from_axis_angle(&Vector3::z_axis(), w * t),
+            )
+        };
+        let mut h = PoseHistory::default();
+        for i in 0..10 {
+            assert!(h.push(i as f64 * 0.01, pose(i as f64 * 0.01)));
+        }
+        assert!(!h.push(0.05, pose(0.05)), "out of order");
+        let mut nan = pose(1.0);
+        nan.translation.vector.x = f64::NAN;
+        assert!(!h.push(1.0, nan), "not finite");
+        for t in [0.033, 0.0875, 0.1, 0.15] {
+            let (angle, dist) = pose_error(&h.at(t).expect("pose"), &pose(t));
+            assert!(
+                angle < 1e-9 && dist < 1e-12,
+                "t = {t}: {angle} rad, {dist} m"
+            );
+        }
+        // Capped: 0.1 s past the newest sample at most.
+        let (angle, _) = pose_error(&h.at(5.0).expect("pose"), &pose(0.09 + 0.1));
+        assert!(angle < 1e-9);
+        assert_eq!(h.at(-1.0), Some(pose(0.0)));
+        assert!(PoseHistory::default().at(0.0).is_none());
+    }
+
+    #[test]
+    fn the_tracker_samples_at_its_rate_and_delivers_after_its_latency() {
+        let m = sweep(30.0, 0.1);
+        let model = TrackingModel {
+            rate_hz: 100.0,
+            latency_s: 0.05,
+            ..TrackingModel::default()
+        };
+        let mut tracker = HeadTracker::new(model, 7);
+        assert!(tracker.poll(&m, 0.04).is_empty(), "nothing arrived yet");
+        let got = tracker.poll(&m, 0.1);
+        assert_eq!(got.len(), 6, "samples at 0..=0.05 s");
+        for p in &got {
+            assert!((p.arrival_s - p.stamp_s - 0.05).abs() < 1e-12);
+            assert_eq!(p.pose, m.pose_at(p.stamp_s), "no noise set");
+        }
+        // Noise: its spread is the model's.
+        let noisy = TrackingModel {
+            rate_hz: 1000.0,
+            position_sigma_m: 0.001,
+            angle_sigma_rad: 0.1f64.to_radians(),
+            ..TrackingModel::default()
+        };
+        let mut tracker = HeadTracker::new(noisy, 3);
+        let samples = tracker.poll(&m, 4.0);
+        let n = samples.len() as f64;
+        let (mut angles, mut dists) = (0.0, 0.0);
+        for p in &samples {
+            let (a, d) = pose_error(&p.pose, &m.pose_at(p.stamp_s));
+            angles += a * a;
+            dists += d * d;
+        }
+        // The norm of a 3-D Gaussian vector: E|x|² = 3σ².
+        let rms_angle = (angles / n / 3.0).sqrt().to_degrees();
+        let rms_dist = (dists / n / 3.0).sqrt();
+        assert!((rms_angle - 0.1).abs() < 0.01, "{rms_angle}°");
+        assert!((rms_dist - 0.001).abs() < 0.0001, "{rms_dist} m");
+        // Same seed, same samples.
+        let again = HeadTracker::new(noisy, 3).poll(&m, 4.0);
+        assert_eq!(again, samples);
+    }
+
+    #[test]
+    fn tracking_settings_are_checked() {
+        assert!(TrackingModel::default().validate("t").is_ok());
+        let bad = TrackingModel {
+            latency_s: -0.01,
+            ..TrackingModel::default()
+        };
+        assert!(
+            bad.validate("head.tracking")
+                .unwrap_err()
+                .to_string()
+                .contains("latency")
+        );
+        let bad = TrackingModel {
+            rate_hz: f64::NAN,
+            ..TrackingModel::default()
+        };
+        assert!(bad.validate("t").is_err());
+    }
+
+    #[test]
+    fn an_openxr_view_looks_down_its_minus_z() {
+        let view = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, 1.5),
+            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 0.3),
+        );
+        let head = head_from_openxr_view(&view);
+        let forward = head.rotation * Vector3::z();
+        let expected = view.rotation * -Vector3::z();
+        assert!((forward - expected).norm() < 1e-12);
+        let down = head.rotation * Vector3::y();
+        assert!((down + view.rotation * Vector3::y()).norm() < 1e-12);
+    }
+}
