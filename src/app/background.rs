@@ -82,7 +82,9 @@ fn load_file(scene: Res<SceneResource>, mut out: MessageWriter<SetBackground>) {
 
 /// The simulated room without the robot, through the camera's sensor model at t = 0 (as if
 /// photographed before the robot was installed). One capture in flight at a time; the room is
-/// static, so the render has settled when consecutive captures are identical and not black.
+/// static, so the render has settled when consecutive captures are identical and not black. A
+/// camera on a head never sees the same room twice: its photograph is the first complete render
+/// (no pipeline compiling), with the pose it was taken from.
 fn empty_room(
     mut commands: Commands,
     scene: Res<SceneResource>,

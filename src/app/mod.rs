@@ -276,6 +276,18 @@ pub enum AvatarmSystems {
     Score,
 }
 
+/// The head's tracked poses (empty for a fixed camera), kept long enough for a frame's capture
+/// time to stay inside them: the frames' and the tracking's latency and half a second more.
+fn head_tracking(scene: &Scene) -> avatarm_video::HeadTracking {
+    let mut tracking = avatarm_video::HeadTracking::default();
+    if let Some(head) = &scene.head {
+        tracking.history.window_s =
+            (scene.file.camera.frame_latency_s + head.tracking.latency_s + 0.5)
+                .max(tracking.history.window_s);
+    }
+    tracking
+}
+
 /// A camera on a head with `[camera.head.background] views > 0`: the view-following
 /// background, its proxy the scene's boxes that are not objects (desk, wall, floor).
 pub fn view_background(scene: &Scene) -> Option<avatarm_erase::ViewBackgroundConfig> {
@@ -349,6 +361,7 @@ impl Plugin for AvatarmSetupPlugin {
                 },
                 (3.0 / scene.file.camera.fps).max(0.2) + scene.file.camera.frame_latency_s,
             ))
+            .insert_resource(head_tracking(scene))
             .insert_resource(EraseConfig {
                 settings: scene.file.erase,
                 camera: scene.believed_camera,

@@ -82,8 +82,8 @@ pub struct HeadPoint {
     pub leak_pct_max: f64,
     /// Mean over-masking (% of the robot's pixels).
     pub overmask_pct_mean: f64,
-    /// Mean PSNR in the true robot region (dB; the background is the empty room photographed
-    /// from the head's pose at t = 0, so it falls as the head turns away).
+    /// Mean PSNR of the erased frame in the true robot region (dB): how well the background
+    /// replaces the robot.
     pub psnr_db_mean: f64,
     /// Median angle between the mask's camera and the true camera (degrees).
     pub camera_error_deg_median: f64,

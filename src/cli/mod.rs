@@ -1080,6 +1080,16 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 }
                 scene.file.leap.mount = mount;
             }
+            if webcam.is_some() && scene.head.is_some() {
+                return Err(AppError::flag(
+                    "--webcam",
+                    format!(
+                        "the scene '{}' has a camera on a head, whose poses only the simulated \
+                         head gives yet; use a scene with a fixed camera",
+                        scene.file.name
+                    ),
+                ));
+            }
             if webcam.is_some() && scene.file.background == BackgroundSpec::EmptyRoom {
                 eprintln!(
                     "webcam: the simulated empty room is no background for it; press B with the \

@@ -16,8 +16,8 @@
 
 use avatarm_core::teleop::hand::{HandFrame, Handedness, SKELETON, skeleton};
 use avatarm_core::teleop::mapping::MappingMode;
-use avatarm_erase::InteractionConfig;
 use avatarm_erase::interaction::twin_transform;
+use avatarm_erase::{EraseState, InteractionConfig, JointHistory};
 use avatarm_hand::openxr::HandInbox;
 use avatarm_hand::{ActiveHand, GraspTarget, HandPlugin, HeldObject, ObjectContacts, ScriptedHand};
 use avatarm_mapping::pouring::{TrialParts, prepare};
@@ -642,13 +642,14 @@ fn follow_twin(
     live: Res<LiveTask>,
     teleop: Res<Teleop>,
     held: Res<HeldObject>,
+    (history, erase): (Res<JointHistory>, Res<EraseState>),
     twin: Query<&Transform, With<GraspTarget>>,
     mut config: ResMut<InteractionConfig>,
 ) {
     let (Some(i), Ok(t)) = (live.object_twin, twin.single()) else {
         return;
     };
-    let centre = match teleop.real_object() {
+    let centre = match object_on_panel(&teleop, &history, &erase) {
         // Alice's view: on the real object while the hand holds it.
         Some(real) if live.anchor_to_real && held.held.is_some() => real,
         _ => teleop.v2r().pose(&transform_to_iso(t)),
@@ -670,6 +671,7 @@ fn draw_hand(
     live: Res<LiveTask>,
     teleop: Res<Teleop>,
     config: Res<InteractionConfig>,
+    (history, erase): (Res<JointHistory>, Res<EraseState>),
     twin: Query<&Transform, With<GraspTarget>>,
     mut view: Gizmos<HandViewGizmos>,
     mut interaction: Gizmos<HandInteractionGizmos>,
@@ -693,7 +695,7 @@ fn draw_hand(
         view.line(v(&real[a]), v(&real[b]), colour);
     }
     let Some(i) = live.object_twin else { return };
-    let real = match (twin.single(), teleop.real_object()) {
+    let real = match (twin.single(), object_on_panel(&teleop, &history, &erase)) {
         (Ok(t), Some(object)) if live.anchor_to_real && held.held.is_some() => {
             avatarm_core::teleop::hand::carried_with(
                 &real,
@@ -706,6 +708,21 @@ fn draw_hand(
     for (a, b) in hand_in_interaction_view(&real, &config, i) {
         interaction.line(a, b, colour);
     }
+}
+
+/// The real object as the frame on the panel shows it: where the tool held it at the frame's
+/// capture time (the joint states interpolated to it, as the mask's twin is posed), else where
+/// it is now.
+fn object_on_panel(
+    teleop: &Teleop,
+    history: &JointHistory,
+    erase: &EraseState,
+) -> Option<Isometry3<f64>> {
+    erase
+        .frame_capture_s
+        .and_then(|t| history.at(t))
+        .and_then(|q| teleop.object_at(&q))
+        .or_else(|| teleop.real_object())
 }
 
 /// The hand skeleton's colour: orange while it holds the object, skin otherwise.

@@ -381,6 +381,12 @@ fn setup(
                 v.min_separation_rad,
             ) {
                 Ok(views) => {
+                    let s = &config.settings;
+                    if s.photometric || s.background_refresh > 0.0 {
+                        warn!(
+                            "erase: photometric compensation and background refresh have no effect with the view-following background (its H is the frame itself outside the robot's region)"
+                        );
+                    }
                     state.view_background = Some(ViewBackground {
                         views,
                         seed: None,
@@ -499,10 +505,11 @@ fn set_background(
     mut capture: MessageReader<CaptureBackground>,
     config: Res<EraseConfig>,
     live: Res<LiveVideo>,
+    head: Res<HeadTracking>,
     mut state: ResMut<EraseState>,
 ) {
     let k = config.camera.intrinsics;
-    let mut new: Option<(Arc<Vec<u8>>, String, Option<Isometry3<f64>>)> = None;
+    let mut new: Option<SetBackground> = None;
     for msg in set.read() {
         if (msg.width, msg.height) != (k.width, k.height)
             || msg.rgba.len() != (k.width * k.height * 4) as usize
@@ -518,22 +525,33 @@ fn set_background(
             );
             continue;
         }
-        new = Some((msg.rgba.clone(), msg.origin.clone(), msg.camera_pose));
+        new = Some(msg.clone());
     }
     if capture.read().count() > 0 {
         match &live.frame {
             Some(f) if (f.width, f.height) == (k.width, k.height) => {
-                new = Some((
-                    f.rgba.clone(),
-                    format!("live frame captured at {:.3} s", f.capture_s),
-                    state.camera_pose,
-                ));
+                new = Some(SetBackground {
+                    rgba: f.rgba.clone(),
+                    width: f.width,
+                    height: f.height,
+                    origin: format!("live frame captured at {:.3} s", f.capture_s),
+                    // A camera on a head: where it was at the frame's capture.
+                    camera_pose: config
+                        .head_mount
+                        .and_then(|mount| Some(head.history.at(f.capture_s)? * mount)),
+                });
             }
             Some(_) => error!("background capture: the live frame's size does not match"),
             None => warn!("background capture: no live frame yet"),
         }
     }
-    if let Some((rgba, origin, pose)) = new {
+    if let Some(SetBackground {
+        rgba,
+        origin,
+        camera_pose: pose,
+        ..
+    }) = new
+    {
         info!("background H set from {origin}");
         // A camera on a head: the image is a view of the room from where the camera was.
         let camera = PinholeCamera {
@@ -543,7 +561,7 @@ fn set_background(
         if let Some(vb) = state.view_background.as_mut() {
             vb.seed = Some(rgba.clone());
             let offered = RgbaView::new("background", k.width, k.height, &rgba)
-                .and_then(|view| vb.views.add_pinned(&camera, &view, -1.0));
+                .and_then(|view| vb.views.set_photograph(&camera, &view, -1.0));
             if let Err(e) = offered {
                 warn!("view-following background: {e}");
             }
@@ -624,6 +642,8 @@ fn prepare_frame(
     }
     // The camera the mask is drawn from: a camera on a head at the head's pose for this frame.
     let mut camera = config.camera;
+    // The camera is where the frame was taken from: fixed, or a tracked head's pose for it.
+    let mut camera_known = config.head_mount.is_none();
     if let (Some(f), Some(mount)) = (frame, config.head_mount) {
         let at = if s.pose_compensation {
             head.history.at(f.capture_s).map(|p| (p, f.capture_s))
@@ -633,6 +653,7 @@ fn prepare_frame(
         match at {
             Some((world_from_head, at_s)) => {
                 camera.world_from_camera = world_from_head * mount;
+                camera_known = true;
                 let newest = head.history.latest().map_or(at_s, |l| l.0);
                 state.head_pose_s = Some((newest, at_s));
             }
@@ -643,7 +664,8 @@ fn prepare_frame(
         if view.camera.world_from_camera != camera.world_from_camera {
             view.camera.world_from_camera = camera.world_from_camera;
         }
-    } else if let Some(pose) = state.camera_pose {
+    } else if let (Some(pose), Some(_)) = (state.camera_pose, config.head_mount) {
+        // Between frames a camera on a head stays where the last frame put it.
         camera.world_from_camera = pose;
     }
     if frame.is_some() {
@@ -682,8 +704,15 @@ fn prepare_frame(
                 }
                 None => dr::sphere_mask(&camera, &poses, &spheres.0, margin),
             };
+            // A frame becomes a view only where its camera and the robot's region are known: the
+            // mask twin posed at joints of the frame's time, the camera at a tracked pose (else
+            // the robot's pixels would be kept as the room's).
+            let robot_known = state
+                .mask_stamp_s
+                .is_some_and(|m| (m - f.capture_s).abs() <= 0.1);
+            let offer = camera_known && robot_known;
             if let Some(vb) = state.view_background.as_mut() {
-                match follow_view(vb, &camera, f, &region) {
+                match follow_view(vb, &camera, f, &region, offer) {
                     Ok(h) => {
                         state.background = Some(Arc::new(h));
                     }
@@ -757,7 +786,8 @@ fn prepare_frame(
     state.current = Some(current);
 }
 
-/// A camera on a head: offers the frame's pixels outside the robot's `region` as a view, and
+/// A camera on a head: offers the frame's pixels outside the robot's `region` as a view (when
+/// `offer`: its camera and the robot's region are known), and
 /// returns the frame's H: the views re-projected into `camera` inside the region (the
 /// `[background]` image where none sees a pixel), the frame itself outside it (where H is
 /// never shown).
@@ -766,12 +796,15 @@ fn follow_view(
     camera: &PinholeCamera,
     frame: &avatarm_video::VideoFrame,
     region: &[u8],
+    offer: bool,
 ) -> avatarm_core::Result<Vec<u8>> {
     let k = camera.intrinsics;
     let live = RgbaView::new("live frame", k.width, k.height, &frame.rgba)?;
     // How far this view is from those captured before it.
     vb.nearest_rad = vb.views.nearest_angle(camera);
-    vb.views.offer(camera, &live, region, frame.capture_s)?;
+    if offer {
+        vb.views.offer(camera, &live, region, frame.capture_s)?;
+    }
     let mut fallback = frame.rgba.as_ref().clone();
     if let Some(seed) = vb.seed.as_ref().filter(|s| s.len() == fallback.len()) {
         for (i, &r) in region.iter().enumerate() {

@@ -377,7 +377,13 @@ impl Teleop {
         if let Some(truth) = self.robot.true_object_pose() {
             return Some(truth);
         }
-        let q = &self.joints.as_ref()?.positions;
+        self.object_at(&self.joints.as_ref()?.positions)
+    }
+
+    /// Where the tool holds the object (its centre, real world) at joint positions `q` (the
+    /// robot's joint vector): the tool's forward kinematics times the grasp; `None` for a
+    /// vector of another length or with a value that is not finite.
+    pub fn object_at(&self, q: &DVector<f64>) -> Option<Isometry3<f64>> {
         if q.len() != self.model.dof() || q.iter().any(|v| !v.is_finite()) {
             return None;
         }

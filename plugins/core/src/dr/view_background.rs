@@ -269,6 +269,15 @@ impl BackgroundViews {
                 ),
             });
         }
+        let pose = &camera.world_from_camera;
+        if !(pose.translation.vector.iter().all(|v| v.is_finite())
+            && pose.rotation.coords.iter().all(|v| v.is_finite()))
+        {
+            return Err(Error::BadSetting {
+                what: "background view".into(),
+                message: "the camera's pose is not finite".into(),
+            });
+        }
         self.offered += 1;
         let axis = camera.world_from_camera.rotation * Vector3::z();
         let usable_share = covered.iter().filter(|&&c| c == 0).count() as f64 / n as f64;
@@ -305,13 +314,8 @@ impl BackgroundViews {
             Some(i) if !self.views[i].pinned => self.views[i] = view,
             Some(_) => return Ok(false),
             None => {
-                if self.views.len() >= self.max_views {
-                    match self.views.iter().position(|v| !v.pinned) {
-                        Some(oldest) => {
-                            self.views.remove(oldest);
-                        }
-                        None => return Ok(false),
-                    }
+                if self.views.len() >= self.max_views && !self.evict_oldest() {
+                    return Ok(false);
                 }
                 self.views.push(view);
             }
@@ -319,24 +323,68 @@ impl BackgroundViews {
         Ok(true)
     }
 
-    /// Adds a view of the room with nothing in the way (an empty room's photograph, every pixel
-    /// usable) that is never evicted nor replaced; errors as [`BackgroundViews::offer`]'s.
-    pub fn add_pinned(
+    /// Removes the unpinned view taken first; false when every view is pinned.
+    fn evict_oldest(&mut self) -> bool {
+        let oldest = self
+            .views
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| !v.pinned)
+            .min_by(|a, b| a.1.at_s.total_cmp(&b.1.at_s))
+            .map(|(i, _)| i);
+        match oldest {
+            Some(i) => {
+                self.views.remove(i);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Sets the photograph of the room with nothing in the way (the empty room, every pixel
+    /// usable), taken at `at_s` by `camera`: it replaces the previous photograph and is never
+    /// evicted nor replaced by a frame's view. Errors as [`BackgroundViews::offer`]'s.
+    pub fn set_photograph(
         &mut self,
         camera: &PinholeCamera,
         frame: &RgbaView,
         at_s: f64,
     ) -> Result<()> {
         let n = self.width as usize * self.height as usize;
-        self.offer(camera, frame, &vec![0; n], at_s)?;
-        // Offered last: it is the newest view, unless refused as a near duplicate of a pinned
-        // one.
-        if let Some(v) = self.views.last_mut()
-            && v.at_s.to_bits() == at_s.to_bits()
-            && v.camera == *camera
+        let k = &camera.intrinsics;
+        let pose = &camera.world_from_camera;
+        if (frame.width, frame.height) != (self.width, self.height)
+            || (k.width, k.height) != (self.width, self.height)
+            || !pose.translation.vector.iter().all(|v| v.is_finite())
+            || !pose.rotation.coords.iter().all(|v| v.is_finite())
         {
-            v.pinned = true;
+            return Err(Error::BadImage {
+                what: "background photograph".into(),
+                message: format!(
+                    "frame {}x{}, camera {}x{} (its pose finite: {}); the views are {}x{}",
+                    frame.width,
+                    frame.height,
+                    k.width,
+                    k.height,
+                    pose.translation.vector.iter().all(|v| v.is_finite()),
+                    self.width,
+                    self.height
+                ),
+            });
         }
+        self.views.retain(|v| !v.pinned);
+        if self.views.len() >= self.max_views {
+            self.evict_oldest();
+        }
+        self.views.push(CapturedView {
+            camera: *camera,
+            rgba: frame.data.to_vec(),
+            usable: vec![1; n],
+            rects: self.proxy.rect_map(camera),
+            axis: camera.world_from_camera.rotation * Vector3::z(),
+            at_s,
+            pinned: true,
+        });
         Ok(())
     }
 
@@ -573,7 +621,7 @@ mod tests {
                 assert_eq!(out2.rgba[i * 4], 7);
             }
         }
-        assert!(out2.seen.iter().any(|&s| s == 0), "b sees past a's edge");
+        assert!(out2.seen.contains(&0), "b sees past a's edge");
         // Only where asked.
         let mut only = vec![0u8; 64 * 48];
         only[24 * 64 + 32] = 1;
@@ -674,11 +722,18 @@ mod tests {
         // A pinned view stays when the others come and go.
         let mut pinned =
             BackgroundViews::new(64, 48, proxy.clone(), 2, 5f64.to_radians()).expect("views");
-        pinned.add_pinned(&a, &f, -1.0).expect("pinned");
+        pinned.set_photograph(&a, &f, -1.0).expect("pinned");
         for (i, cam) in [&far, &farther, &near].into_iter().enumerate() {
             pinned.offer(cam, &f, &free, i as f64).expect("offer");
         }
         assert_eq!(pinned.times(), vec![-1.0, 1.0]);
+        // A new photograph replaces the old one, wherever it was taken.
+        pinned.set_photograph(&far, &f, -2.0).expect("again");
+        assert_eq!(pinned.times(), vec![1.0, -2.0]);
+        let mut bad = a;
+        bad.world_from_camera.translation.vector.x = f64::NAN;
+        assert!(pinned.offer(&bad, &f, &free, 5.0).is_err());
+        assert!(pinned.set_photograph(&bad, &f, 5.0).is_err());
         let small = RgbaView::new("s", 32, 24, &photo[..32 * 24 * 4]).expect("s");
         assert!(views.offer(&a, &small, &free, 0.4).is_err());
         assert!(

@@ -13,7 +13,7 @@
 //! y down, z forward: the direction the face points). The camera's optical frame is the head's
 //! times the *mount* (`head_from_camera`): `world_from_camera = world_from_head * mount`. An
 //! OpenXR view pose (x right, y up, -z forward) is turned into this frame by a rotation of π
-//! about x ([`head_from_openxr_view`]).
+//! about x ([`openxr_view_from_head`]).
 
 use std::collections::VecDeque;
 
@@ -130,8 +130,7 @@ fn keyframes_at(k: &[HeadKeyframe], t: f64) -> Isometry3<f64> {
         let (a, b) = (&w[0], &w[1]);
         if t <= b.t_s {
             let span = (b.t_s - a.t_s).max(1e-9);
-            let s = ((t - a.t_s) / span).clamp(0.0, 1.0);
-            let blend = s * s * s * (10.0 - 15.0 * s + 6.0 * s * s);
+            let blend = crate::teleop::hand::min_jerk((t - a.t_s) / span);
             return interpolate(&a.pose, &b.pose, blend);
         }
     }
@@ -148,10 +147,11 @@ pub fn interpolate(a: &Isometry3<f64>, b: &Isometry3<f64>, s: f64) -> Isometry3<
     Isometry3::from_parts(Translation3::from(p), r)
 }
 
-/// The head's optical frame (x right, y down, z forward) from an OpenXR view pose (x right,
-/// y up, -z forward; OpenXR 1.0 spec, "Reference Spaces"): a rotation of π about x.
-pub fn head_from_openxr_view(world_from_view: &Isometry3<f64>) -> Isometry3<f64> {
-    world_from_view * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+/// `view_from_head`: the head's optical frame (x right, y down, z forward) in an OpenXR view
+/// space (x right, y up, -z forward; OpenXR 1.0 spec, "Reference Spaces"), a rotation of π
+/// about x: `world_from_head = world_from_view * openxr_view_from_head()`.
+pub fn openxr_view_from_head() -> UnitQuaternion<f64> {
+    UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
 }
 
 /// How a headset reports its head pose.
@@ -251,6 +251,9 @@ impl HeadTracker {
     /// Takes every sample due up to `now_s` and returns, oldest first, those that have arrived
     /// by then.
     pub fn poll(&mut self, motion: &HeadMotion, now_s: f64) -> Vec<TrackedPose> {
+        if !now_s.is_finite() {
+            return Vec::new();
+        }
         let period = 1.0 / self.model.rate_hz;
         loop {
             let stamp_s = self.next_sample as f64 * period;
@@ -295,6 +298,9 @@ pub struct PoseHistory {
     /// The velocity for extrapolation is taken between the newest sample and the newest one at
     /// least this much older (s): a longer baseline averages the tracker's noise.
     pub velocity_baseline_s: f64,
+    /// Samples older than this before the newest are dropped (s): at least the frames'
+    /// latency, so that a frame's capture time stays inside the history.
+    pub window_s: f64,
 }
 
 impl Default for PoseHistory {
@@ -303,6 +309,7 @@ impl Default for PoseHistory {
             samples: VecDeque::new(),
             max_ahead_s: 0.1,
             velocity_baseline_s: 0.03,
+            window_s: 1.0,
         }
     }
 }
@@ -317,7 +324,11 @@ impl PoseHistory {
             return false;
         }
         self.samples.push_back((stamp_s, pose));
-        while self.samples.front().is_some_and(|s| stamp_s - s.0 > 1.0) {
+        while self
+            .samples
+            .front()
+            .is_some_and(|s| stamp_s - s.0 > self.window_s)
+        {
             self.samples.pop_front();
         }
         true
@@ -341,8 +352,12 @@ impl PoseHistory {
     /// The pose at `t_s`: interpolated between the samples around it (translation linearly,
     /// rotation by slerp); past the newest, extrapolated with the velocity over
     /// [`PoseHistory::velocity_baseline_s`] (constant linear and angular velocity), at most
-    /// [`PoseHistory::max_ahead_s`] ahead; before the oldest, the oldest.
+    /// [`PoseHistory::max_ahead_s`] ahead; before the oldest, the oldest. `None` without samples
+    /// or for a time that is not finite.
     pub fn at(&self, t_s: f64) -> Option<Isometry3<f64>> {
+        if !t_s.is_finite() {
+            return None;
+        }
         let &(t1, p1) = self.samples.back()?;
         if t_s >= t1 {
             let ahead = (t_s - t1).min(self.max_ahead_s);
@@ -500,6 +515,7 @@ mod tests {
         let (angle, _) = pose_error(&h.at(5.0).expect("pose"), &pose(0.09 + 0.1));
         assert!(angle < 1e-9);
         assert_eq!(h.at(-1.0), Some(pose(0.0)));
+        assert!(h.at(f64::NAN).is_none());
         assert!(PoseHistory::default().at(0.0).is_none());
     }
 
@@ -513,6 +529,10 @@ mod tests {
         };
         let mut tracker = HeadTracker::new(model, 7);
         assert!(tracker.poll(&m, 0.04).is_empty(), "nothing arrived yet");
+        assert!(
+            tracker.poll(&m, f64::NAN).is_empty(),
+            "a time that is not finite"
+        );
         let got = tracker.poll(&m, 0.1);
         assert_eq!(got.len(), 6, "samples at 0..=0.05 s");
         for p in &got {
@@ -571,7 +591,7 @@ mod tests {
             Translation3::new(0.0, 0.0, 1.5),
             UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 0.3),
         );
-        let head = head_from_openxr_view(&view);
+        let head = view * openxr_view_from_head();
         let forward = head.rotation * Vector3::z();
         let expected = view.rotation * -Vector3::z();
         assert!((forward - expected).norm() < 1e-12);
