@@ -16,13 +16,11 @@ use crate::{AppError, AvatarmSystems, SceneResource};
 use avatarm_scene::spec::BackgroundSpec;
 
 /// Sets the background from the scene's `[background]`. The simulated empty room is
-/// photographed once its render has settled: renderers compile pipelines over a varying number
+/// photographed once its render is complete: renderers compile pipelines over a varying number
 /// of frames, and a capture taken before that is black or misses meshes.
 pub struct BackgroundSourcePlugin;
 
-/// Identical consecutive empty-room captures needed before one is used.
-const SETTLED_CAPTURES: u32 = 3;
-/// Updates after which the newest empty-room capture is used even if it never settled.
+/// Updates after which the newest empty-room capture is used even if no render completed.
 const EMPTY_ROOM_GIVE_UP: u32 = 240;
 
 impl Plugin for BackgroundSourcePlugin {
@@ -38,15 +36,19 @@ impl Plugin for BackgroundSourcePlugin {
     }
 }
 
+/// An empty-room capture: width, height, RGBA8, and the pose it was taken from (a camera on a
+/// head).
+type EmptyRoomCapture = (u32, u32, Vec<u8>, Option<nalgebra::Isometry3<f64>>);
+
 /// How far the scene's background source has got.
 #[derive(Resource, Debug, Default)]
 pub struct BackgroundProgress {
     updates: u32,
     captured: bool,
     in_flight: bool,
-    /// The last empty-room capture (before the sensor model) and how many in a row matched it.
-    last: Option<(u32, u32, Vec<u8>)>,
-    identical: u32,
+    /// The newest empty-room capture of an incomplete render (before the sensor model), with
+    /// its camera pose for a camera on a head.
+    last: Option<EmptyRoomCapture>,
     /// The empty room has been set as the background (or the scene uses another source).
     pub empty_room_done: bool,
 }
@@ -81,10 +83,10 @@ fn load_file(scene: Res<SceneResource>, mut out: MessageWriter<SetBackground>) {
 }
 
 /// The simulated room without the robot, through the camera's sensor model at t = 0 (as if
-/// photographed before the robot was installed). One capture in flight at a time; the room is
-/// static, so the render has settled when consecutive captures are identical and not black. A
-/// camera on a head never sees the same room twice: its photograph is the first complete render
-/// (no pipeline compiling), with the pose it was taken from.
+/// photographed before the robot was installed): the first capture of a render that ended with
+/// every pipeline compiled ([`RenderSettled`]) and is not black, with the pose it was taken
+/// from (a camera on a head: where the head was then, with the mount the app believes). One
+/// capture in flight at a time.
 fn empty_room(
     mut commands: Commands,
     scene: Res<SceneResource>,
@@ -105,69 +107,43 @@ fn empty_room(
         return;
     };
     if progress.updates >= EMPTY_ROOM_GIVE_UP
-        && let Some((width, height, rgba)) = progress.last.take()
+        && let Some((width, height, rgba, pose)) = progress.last.take()
     {
         warn!(
-            "background: the empty room's render did not settle in {EMPTY_ROOM_GIVE_UP} updates; \
-             using the newest capture"
+            "background: the empty room's render did not complete in {EMPTY_ROOM_GIVE_UP} \
+             updates; using the newest capture"
         );
         progress.empty_room_done = true;
         commands.queue(move |world: &mut World| {
-            send_empty_room(world, width, height, rgba, None);
+            send_empty_room(world, width, height, rgba, pose);
         });
         return;
     }
     progress.in_flight = true;
-    if let Some(head) = &scene.0.head {
-        // A camera on a head sees another room at every update, so no two captures match: the
-        // photograph is the first complete render (every pipeline compiled), taken from where
-        // the head was then (its true pose and the mount the app believes).
-        let t = robot.map_or(0.0, |r| r.0.time_s());
-        let pose = head.believed_camera_at(t);
-        let requested = frame.0.wrapping_add(1);
-        read_image_once(&mut commands, handle).observe(
-            move |read: On<ImageRead>,
-                  mut commands: Commands,
-                  settled: Res<RenderSettled>,
-                  mut progress: ResMut<BackgroundProgress>| {
-                progress.in_flight = false;
-                let rgba = read.data.clone();
-                let black = rgba.chunks_exact(4).all(|px| px[..3] == [0, 0, 0]);
-                if black || settled.last_complete_frame() < requested || progress.empty_room_done {
-                    return;
-                }
-                progress.empty_room_done = true;
-                let (width, height) = (read.width, read.height);
-                commands.queue(move |world: &mut World| {
-                    send_empty_room(world, width, height, rgba, Some(pose));
-                });
-            },
-        );
-        return;
-    }
+    let t = robot.map_or(0.0, |r| r.0.time_s());
+    let pose = scene.0.head.as_ref().map(|h| h.believed_camera_at(t));
+    // The frame number this update's render carries (the count goes up in `Last`).
+    let requested = frame.0.wrapping_add(1);
     read_image_once(&mut commands, handle).observe(
-        |read: On<ImageRead>, mut commands: Commands, mut progress: ResMut<BackgroundProgress>| {
+        move |read: On<ImageRead>,
+              mut commands: Commands,
+              settled: Res<RenderSettled>,
+              mut progress: ResMut<BackgroundProgress>| {
             progress.in_flight = false;
             let rgba = read.data.clone();
             // A render with no mesh drawn yet is black: not a room.
-            if rgba.chunks_exact(4).all(|px| px[..3] == [0, 0, 0]) {
-                progress.identical = 0;
+            if rgba.chunks_exact(4).all(|px| px[..3] == [0, 0, 0]) || progress.empty_room_done {
                 return;
             }
-            let same = progress
-                .last
-                .as_ref()
-                .is_some_and(|(_, _, last)| *last == rgba);
-            progress.identical = if same { progress.identical + 1 } else { 1 };
             let (width, height) = (read.width, read.height);
-            if progress.identical >= SETTLED_CAPTURES && !progress.empty_room_done {
-                progress.empty_room_done = true;
-                commands.queue(move |world: &mut World| {
-                    send_empty_room(world, width, height, rgba, None);
-                });
-            } else {
-                progress.last = Some((width, height, rgba));
+            if settled.last_complete_frame() < requested {
+                progress.last = Some((width, height, rgba, pose));
+                return;
             }
+            progress.empty_room_done = true;
+            commands.queue(move |world: &mut World| {
+                send_empty_room(world, width, height, rgba, pose);
+            });
         },
     );
 }

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use plotters::coord::Shift;
+use plotters::coord::combinators::LogCoord;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
@@ -140,6 +141,18 @@ pub fn padded(values: impl Iterator<Item = f64>) -> (f64, f64) {
 /// A scatter/line panel on `area` with labelled axes over `x` × `y`.
 pub type Panel<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
+/// A panel like [`Panel`] whose y axis is logarithmic.
+pub type LogPanel<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, LogCoord<f64>>>;
+
+/// The house style's margins and label areas.
+fn builder<'a, 'b, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+) -> ChartBuilder<'a, 'b, DB> {
+    let mut b = ChartBuilder::on(area);
+    b.margin(18).x_label_area_size(48).y_label_area_size(64);
+    b
+}
+
 /// Builds a panel with the house style (margins, fonts, grid).
 pub fn axes<'a, DB: DrawingBackend>(
     area: &'a DrawingArea<DB, Shift>,
@@ -152,10 +165,7 @@ where
     DB::ErrorType: 'static,
 {
     let err = drawing_error::<DB::ErrorType>;
-    let mut chart = ChartBuilder::on(area)
-        .margin(18)
-        .x_label_area_size(48)
-        .y_label_area_size(64)
+    let mut chart = builder(area)
         .build_cartesian_2d(x.0..x.1, y.0..y.1)
         .map_err(err)?;
     chart
@@ -169,9 +179,35 @@ where
     Ok(chart)
 }
 
+/// [`axes`] with a logarithmic y axis over `y` (both ends > 0).
+pub fn log_axes<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    x: (f64, f64),
+    y: (f64, f64),
+    x_desc: &str,
+    y_desc: &str,
+) -> Result<LogPanel<'a, DB>, AppError>
+where
+    DB::ErrorType: 'static,
+{
+    let err = drawing_error::<DB::ErrorType>;
+    let mut chart = builder(area)
+        .build_cartesian_2d(x.0..x.1, (y.0..y.1).log_scale())
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .label_style(("sans-serif", 14))
+        .axis_desc_style(("sans-serif", 16))
+        .draw()
+        .map_err(err)?;
+    Ok(chart)
+}
+
 /// Draws the panel's legend at `position`.
-pub fn legend<'a, DB: DrawingBackend + 'a>(
-    chart: &mut Panel<'a, DB>,
+pub fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
     position: SeriesLabelPosition,
 ) -> Result<(), AppError>
 where

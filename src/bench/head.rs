@@ -14,7 +14,9 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use serde::Serialize;
 
-use super::chart::{Chart, axes, drawing_error, legend, padded, save_chart, write_table};
+use super::chart::{
+    Chart, LogPanel, axes, drawing_error, legend, log_axes, padded, save_chart, write_table,
+};
 use crate::AppError;
 use crate::replay::{self, ReplayOptions};
 
@@ -371,44 +373,6 @@ struct HeadChart<'a> {
     views: usize,
 }
 
-/// A panel whose y axis is logarithmic over `y` (both > 0).
-type LogPanel<'a, DB> = ChartContext<
-    'a,
-    DB,
-    Cartesian2d<
-        plotters::coord::types::RangedCoordf64,
-        plotters::coord::combinators::LogCoord<f64>,
-    >,
->;
-
-fn log_axes<'a, DB: DrawingBackend>(
-    area: &'a DrawingArea<DB, Shift>,
-    x: (f64, f64),
-    y: (f64, f64),
-    x_desc: &str,
-    y_desc: &str,
-) -> Result<LogPanel<'a, DB>, AppError>
-where
-    DB::ErrorType: 'static,
-{
-    let err = drawing_error::<DB::ErrorType>;
-    let mut chart = ChartBuilder::on(area)
-        .margin(18)
-        .x_label_area_size(48)
-        .y_label_area_size(64)
-        .build_cartesian_2d(x.0..x.1, (y.0..y.1).log_scale())
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc(x_desc)
-        .y_desc(y_desc)
-        .label_style(("sans-serif", 14))
-        .axis_desc_style(("sans-serif", 16))
-        .draw()
-        .map_err(err)?;
-    Ok(chart)
-}
-
 /// The log axis's range over `values` (and the 1 % goal), clamped above 0.
 fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = values
@@ -444,19 +408,11 @@ impl Chart for HeadChart<'_> {
             "head's peak angular speed (deg/s)",
             "mean leak (% of the robot's pixels, log)",
         )?;
-        chart
-            .draw_series(LineSeries::new(
-                [(x.0, 1.0), (x.1, 1.0)],
-                BLACK.stroke_width(1),
-            ))
-            .map_err(err)?
-            .label("goal: 1 %")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK));
+        goal_line(&mut chart, x)?;
         let mut latencies: Vec<f64> = speed_series.iter().map(|p| p.latency_ms).collect();
         latencies.sort_by(f64::total_cmp);
         latencies.dedup();
         for (i, &latency) in latencies.iter().enumerate() {
-            let colour = Palette99::pick(i).to_rgba();
             for compensation in [true, false] {
                 let mut line: Vec<(f64, f64)> = speed_series
                     .iter()
@@ -467,26 +423,16 @@ impl Chart for HeadChart<'_> {
                     continue;
                 }
                 line.sort_by(|a, b| a.0.total_cmp(&b.0));
-                let style = colour.stroke_width(if compensation { 3 } else { 1 });
-                let name = format!(
-                    "tracking {latency} ms, {}",
-                    if compensation {
-                        "pose compensation"
-                    } else {
-                        "newest pose"
-                    }
-                );
-                chart
-                    .draw_series(LineSeries::new(line.clone(), style))
-                    .map_err(err)?
-                    .label(name)
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
-                chart
-                    .draw_series(line.iter().map(|&p| Circle::new(p, 4, colour.filled())))
-                    .map_err(err)?;
+                let (width, how) = if compensation {
+                    (3, "pose compensation")
+                } else {
+                    (1, "newest pose")
+                };
+                let name = format!("tracking {latency} ms, {how}");
+                dotted_line(&mut chart, &line, Palette99::pick(i).to_rgba(), width, name)?;
             }
         }
-        legend_log(&mut chart)?;
+        legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
         // Leak against the mount's error.
         let mounts: Vec<&HeadPoint> = self
             .points
@@ -514,27 +460,13 @@ impl Chart for HeadChart<'_> {
                 .collect();
             line.sort_by(|a, b| a.0.total_cmp(&b.0));
             line.dedup_by(|a, b| a.0 == b.0);
-            chart
-                .draw_series(LineSeries::new(
-                    [(x.0, 1.0), (x.1, 1.0)],
-                    BLACK.stroke_width(1),
-                ))
-                .map_err(err)?
-                .label("goal: 1 %")
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK));
-            let style = RED.stroke_width(3);
-            chart
-                .draw_series(LineSeries::new(line.clone(), style))
-                .map_err(err)?
-                .label(format!(
-                    "mount error: {} deg/s, tracking {} ms, compensated",
-                    self.mount_speed, self.mount_latency
-                ))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
-            chart
-                .draw_series(line.iter().map(|&p| Circle::new(p, 4, RED.filled())))
-                .map_err(err)?;
-            legend_log(&mut chart)?;
+            goal_line(&mut chart, x)?;
+            let name = format!(
+                "mount error: {} deg/s, tracking {} ms, compensated",
+                self.mount_speed, self.mount_latency
+            );
+            dotted_line(&mut chart, &line, RED.to_rgba(), 3, name)?;
+            legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
         }
         // The background's PSNR against how far the view is from the photograph's.
         let backgrounds: Vec<&HeadPoint> = self
@@ -568,8 +500,6 @@ impl Chart for HeadChart<'_> {
                 "PSNR in the robot's region (dB)",
             )?;
             for (i, p) in backgrounds.iter().enumerate() {
-                let colour = Palette99::pick(i + 5).to_rgba();
-                let style = colour.stroke_width(2);
                 let line: Vec<(f64, f64)> = p
                     .psnr_by_photo_angle
                     .iter()
@@ -580,14 +510,7 @@ impl Chart for HeadChart<'_> {
                     1 => "the photograph re-projected".to_owned(),
                     n => format!("re-projected, {} views from the frames", n - 1),
                 };
-                chart
-                    .draw_series(LineSeries::new(line.clone(), style))
-                    .map_err(err)?
-                    .label(name)
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
-                chart
-                    .draw_series(line.iter().map(|&q| Circle::new(q, 4, colour.filled())))
-                    .map_err(err)?;
+                dotted_line(&mut chart, &line, Palette99::pick(i + 5).to_rgba(), 2, name)?;
             }
             legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         }
@@ -595,18 +518,47 @@ impl Chart for HeadChart<'_> {
     }
 }
 
-fn legend_log<'a, DB: DrawingBackend + 'a>(chart: &mut LogPanel<'a, DB>) -> Result<(), AppError>
+/// The 1 % leak goal as a black line across `x`.
+fn goal_line<'a, DB: DrawingBackend + 'a>(
+    chart: &mut LogPanel<'a, DB>,
+    x: (f64, f64),
+) -> Result<(), AppError>
 where
     DB::ErrorType: 'static,
 {
     chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 13))
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(drawing_error)
+        .draw_series(LineSeries::new(
+            [(x.0, 1.0), (x.1, 1.0)],
+            BLACK.stroke_width(1),
+        ))
+        .map_err(drawing_error)?
+        .label("goal: 1 %")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK));
+    Ok(())
+}
+
+/// A named line through `line` with a dot at each point.
+fn dotted_line<'a, DB: DrawingBackend + 'a, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    line: &[(f64, f64)],
+    colour: RGBAColor,
+    width: u32,
+    name: String,
+) -> Result<(), AppError>
+where
+    DB::ErrorType: 'static,
+    CT: CoordTranslate<From = (f64, f64)>,
+{
+    let style = colour.stroke_width(width);
+    chart
+        .draw_series(LineSeries::new(line.iter().copied(), style))
+        .map_err(drawing_error)?
+        .label(name)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
+    chart
+        .draw_series(line.iter().map(|&p| Circle::new(p, 4, colour.filled())))
+        .map_err(drawing_error)?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -223,6 +223,8 @@ struct HeadFrameError {
     /// (degrees), and the share of the robot's region some view saw.
     nearest_view_deg: Option<f64>,
     seen_share: Option<f64>,
+    /// Its CPU time for the frame (ms).
+    view_background_ms: Option<f64>,
     /// The angle between the frame's camera and the one the background photograph (the
     /// scene's camera at t = 0) was taken from (degrees).
     photo_angle_deg: f64,
@@ -289,6 +291,11 @@ impl Plugin for ReplayPlugin {
     }
 }
 
+/// Updates the replay's warm-up goes on after the empty room is photographed: the GPU times of
+/// the warm-up's renders arrive up to this many frames late, and must not count as the
+/// replay's.
+const WARMUP_AFTER_ROOM: u32 = avatarm_twin::gpu_timing::READBACKS as u32;
+
 /// Updates the replay waits for its background before it gives up.
 const MAX_WARMUP_UPDATES: u32 = 300;
 
@@ -349,7 +356,9 @@ fn drive_replay(
         replay.warmup_left = replay.warmup_left.saturating_sub(1);
         replay.warmup_updates += 1;
         if waiting_for_room && replay.warmup_updates < MAX_WARMUP_UPDATES {
-            replay.warmup_left = replay.warmup_left.max(1);
+            // Then a few more updates, so that the GPU times of the warm-up's renders (read
+            // back up to READBACKS frames late) belong to the warm-up.
+            replay.warmup_left = replay.warmup_left.max(WARMUP_AFTER_ROOM);
             return;
         }
         if waiting_for_room {
@@ -424,6 +433,7 @@ fn drive_replay(
                         .map(|(newest, _)| (t_s - newest) * 1e3),
                     nearest_view_deg: vb.and_then(|v| v.nearest_rad).map(f64::to_degrees),
                     seen_share: vb.and_then(|v| v.seen_share),
+                    view_background_ms: vb.and_then(|v| v.cpu_ms),
                     photo_angle_deg: (pose.rotation * nalgebra::Vector3::z())
                         .angle(
                             &(scene.0.believed_camera.world_from_camera.rotation
@@ -1026,6 +1036,7 @@ fn head_report(
     };
     let seen: Vec<f64> = errors.iter().filter_map(|e| e.seen_share).collect();
     let nearest: Vec<f64> = errors.iter().filter_map(|e| e.nearest_view_deg).collect();
+    let cpu: Vec<f64> = errors.iter().filter_map(|e| e.view_background_ms).collect();
     let background = match &erase.view_background {
         Some(vb) => json!({
             "views_kept": vb.views.len(),
@@ -1033,6 +1044,7 @@ fn head_report(
             "view_times_s": vb.views.times(),
             "seen_share_of_robot_region": mean(seen.iter().copied()),
             "nearest_view_deg": spread(&nearest),
+            "cpu_ms": spread(&cpu),
             "psnr_by_nearest_view": by_angle(&|e| e.nearest_view_deg),
         }),
         None => json!(null),

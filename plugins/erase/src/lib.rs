@@ -131,6 +131,8 @@ pub struct ViewBackground {
     /// For the frame on the panel: the angle (rad) between its camera's axis and the nearest
     /// kept view's.
     pub nearest_rad: Option<f64>,
+    /// For the frame on the panel: the CPU time of offering it and making its H (ms).
+    pub cpu_ms: Option<f64>,
 }
 
 /// The mask's lens map: `Some` when the camera's lens distorts and the settings honour it
@@ -392,6 +394,7 @@ fn setup(
                         seed: None,
                         seen_share: None,
                         nearest_rad: None,
+                        cpu_ms: None,
                     });
                 }
                 Err(e) => error!("erase: {e}; the one H serves every frame"),
@@ -798,6 +801,7 @@ fn follow_view(
     region: &[u8],
     offer: bool,
 ) -> avatarm_core::Result<Vec<u8>> {
+    let started = std::time::Instant::now();
     let k = camera.intrinsics;
     let live = RgbaView::new("live frame", k.width, k.height, &frame.rgba)?;
     // How far this view is from those captured before it.
@@ -813,7 +817,7 @@ fn follow_view(
             }
         }
     }
-    let out = vb.views.render(camera, Some(&fallback), Some(region))?;
+    let out = vb.views.render(camera, Some(fallback), Some(region))?;
     let inside = region.iter().filter(|&&r| r > 0).count();
     let seen = region
         .iter()
@@ -821,6 +825,7 @@ fn follow_view(
         .filter(|(r, s)| **r > 0 && **s > 0)
         .count();
     vb.seen_share = (inside > 0).then(|| seen as f64 / inside as f64);
+    vb.cpu_ms = Some(started.elapsed().as_secs_f64() * 1e3);
     Ok(out.rgba)
 }
 

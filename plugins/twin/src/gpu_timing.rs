@@ -38,8 +38,9 @@ pub const KEPT: usize = 10_000;
 /// Spans a frame can time at most; more are not timed that frame.
 pub const MAX_SPANS: usize = 256;
 
-/// Read-back buffers in flight at most; a frame whose buffer is not free is not timed.
-const READBACKS: usize = 8;
+/// Read-back buffers in flight at most; a frame whose buffer is not free is not timed. A
+/// frame's times arrive at most this many frames after it.
+pub const READBACKS: usize = 8;
 
 /// Bytes per resolved timestamp pair, at the alignment `resolve_query_set` needs.
 const SLOT: u64 = wgpu::QUERY_RESOLVE_BUFFER_ALIGNMENT;

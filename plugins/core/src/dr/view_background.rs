@@ -162,8 +162,6 @@ pub struct RenderedBackground {
     pub rgba: Vec<u8>,
     /// 1 where some view saw the pixel, 0 where it kept the fallback.
     pub seen: Vec<u8>,
-    /// Views kept.
-    pub views: usize,
 }
 
 impl BackgroundViews {
@@ -201,11 +199,6 @@ impl BackgroundViews {
             views: Vec::new(),
             offered: 0,
         })
-    }
-
-    /// The proxy.
-    pub fn proxy(&self) -> &GeometricProxy {
-        &self.proxy
     }
 
     /// Views kept.
@@ -389,18 +382,18 @@ impl BackgroundViews {
     }
 
     /// The room as `target` sees it, re-projected from the kept views, at the pixels where
-    /// `only` (0/1 per pixel) is 1, or everywhere; pixels not rendered or that no view sees take
-    /// `fallback`'s (an RGBA8 image of this size), else opaque black.
+    /// `only` (0/1 per pixel) is 1, or everywhere; pixels not rendered or that no view sees keep
+    /// `fallback`'s (an RGBA8 image of this size, drawn over in place), else opaque black.
     pub fn render(
         &self,
         target: &PinholeCamera,
-        fallback: Option<&[u8]>,
+        fallback: Option<Vec<u8>>,
         only: Option<&[u8]>,
     ) -> Result<RenderedBackground> {
         let (w, h) = (self.width as usize, self.height as usize);
         let k = &target.intrinsics;
         if (k.width, k.height) != (self.width, self.height)
-            || fallback.is_some_and(|f| f.len() != w * h * 4)
+            || fallback.as_ref().is_some_and(|f| f.len() != w * h * 4)
             || only.is_some_and(|o| o.len() != w * h)
         {
             return Err(Error::BadImage {
@@ -411,10 +404,7 @@ impl BackgroundViews {
                 ),
             });
         }
-        let mut rgba = match fallback {
-            Some(f) => f.to_vec(),
-            None => [0, 0, 0, 255].repeat(w * h),
-        };
+        let mut rgba = fallback.unwrap_or_else(|| [0, 0, 0, 255].repeat(w * h));
         let mut seen = vec![0u8; w * h];
         let origin = Point3::from(target.world_from_camera.translation.vector);
         let theta0 = 0.5f64.to_radians();
@@ -462,11 +452,7 @@ impl BackgroundViews {
                 }
             }
         }
-        Ok(RenderedBackground {
-            rgba,
-            seen,
-            views: self.views.len(),
-        })
+        Ok(RenderedBackground { rgba, seen })
     }
 }
 
@@ -615,7 +601,9 @@ mod tests {
         assert!(mean < 3.0, "bilinear resampling of a smooth wall: {mean}");
         // What a never saw stays unseen and keeps the fallback.
         let fallback = vec![7u8; 64 * 48 * 4];
-        let out2 = views.render(&b, Some(&fallback), None).expect("render");
+        let out2 = views
+            .render(&b, Some(fallback.clone()), None)
+            .expect("render");
         for i in 0..64 * 48 {
             if out2.seen[i] == 0 {
                 assert_eq!(out2.rgba[i * 4], 7);
@@ -626,7 +614,7 @@ mod tests {
         let mut only = vec![0u8; 64 * 48];
         only[24 * 64 + 32] = 1;
         let out3 = views
-            .render(&b, Some(&fallback), Some(&only))
+            .render(&b, Some(fallback.clone()), Some(&only))
             .expect("render");
         assert_eq!(out3.seen.iter().filter(|&&s| s > 0).count(), 1);
         assert_eq!(out3.rgba[(24 * 64 + 32) * 4], out.rgba[(24 * 64 + 32) * 4]);
@@ -740,7 +728,7 @@ mod tests {
             views
                 .render(
                     &camera([1.0, 0.0, 1.0], [0.0, 0.0, 1.0]),
-                    Some(&[0u8; 3]),
+                    Some(vec![0u8; 3]),
                     None
                 )
                 .is_err()

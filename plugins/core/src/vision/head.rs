@@ -243,11 +243,6 @@ impl HeadTracker {
         }
     }
 
-    /// The model.
-    pub fn model(&self) -> &TrackingModel {
-        &self.model
-    }
-
     /// Takes every sample due up to `now_s` and returns, oldest first, those that have arrived
     /// by then.
     pub fn poll(&mut self, motion: &HeadMotion, now_s: f64) -> Vec<TrackedPose> {
@@ -337,16 +332,6 @@ impl PoseHistory {
     /// The newest sample, `(stamp_s, world_from_head)`.
     pub fn latest(&self) -> Option<(f64, Isometry3<f64>)> {
         self.samples.back().copied()
-    }
-
-    /// Samples held.
-    pub fn len(&self) -> usize {
-        self.samples.len()
-    }
-
-    /// No sample yet.
-    pub fn is_empty(&self) -> bool {
-        self.samples.is_empty()
     }
 
     /// The pose at `t_s`: interpolated between the samples around it (translation linearly,
