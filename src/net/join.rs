@@ -16,8 +16,8 @@ use std::time::{Duration, Instant};
 
 use avatarm_core::teleop::grasp::Contact;
 use avatarm_core::teleop::mapping::{Mapper, MappingMode, OperatorInputs};
-use avatarm_hand::{ActiveHand, GraspTarget, HeldObject, ObjectContacts, ScriptedHand};
-use avatarm_mapping::pouring::TrialParts;
+use avatarm_hand::{ActiveHand, GraspTarget, HeldObject, ScriptedHand};
+use avatarm_mapping::pouring::{TrialParts, read_hand_world};
 use avatarm_net::msg::{HandMsg, PROTOCOL_VERSION, TargetMsg};
 use avatarm_net::{NetConfig, OperatorInbox, OperatorSite};
 use avatarm_scene::Scene;
@@ -611,10 +611,8 @@ fn operate_with(
     };
     let v2r = parts.v2r;
     let period = parts.period;
-    let spawn = parts.spawn_bodies();
-    let mut app = avatarm_hand::headless_app(period);
-    app.insert_resource(parts.hand_drive).insert_resource(hand);
-    app.add_systems(Startup, spawn);
+    // The same world as the one-process trials': the same hand moves the same twin.
+    let mut app = parts.hand_app(hand);
     let steps = match (duration_s, &collect.view) {
         (Some(d), _) => Some((d / period.as_secs_f64()).round() as u64),
         (None, Some(_)) => None,
@@ -641,26 +639,19 @@ fn operate_with(
         }
         app.update();
         let world = app.world_mut();
-        let app_now = world.resource::<Time>().elapsed_secs_f64();
+        let state = read_hand_world(world, &mut contacts, &mut velocities).map_err(|e| {
+            AppError::Session {
+                message: e.to_string(),
+            }
+        })?;
         let robot_now = site.robot_now_s();
-        let twin = world
-            .query_filtered::<&Transform, With<GraspTarget>>()
-            .single(world)
-            .map(avatarm_twin::transform_to_iso)
-            .map_err(|e| AppError::Session {
-                message: format!("the twin is gone: {e}"),
-            })?;
+        let twin = state.twin;
         collect.report.twin_lift_m = collect.report.twin_lift_m.max(twin.translation.z - z0);
-        contacts.clear();
-        velocities.clear();
-        for c in &world.resource::<ObjectContacts>().contacts {
-            contacts.push(c.contact);
-            velocities.push(c.object_velocity);
-        }
-        let held = world.resource::<HeldObject>().held.is_some();
-        let (hand_stamp, tracked, frame) = match world.resource::<ActiveHand>().latest.as_ref() {
-            Some(f) => (robot_now - (app_now - f.t_s), f.tracked, Some(f.clone())),
-            None => (f64::NEG_INFINITY, false, None),
+        let held = state.held;
+        let frame = world.resource::<ActiveHand>().latest.clone();
+        let (hand_stamp, tracked) = match state.hand_stamp_s {
+            Some(t) => (robot_now - (state.now_s - t), state.hand_tracked),
+            None => (f64::NEG_INFINITY, false),
         };
         let operator = Mapper::operator_side(
             &OperatorInputs {

@@ -18,7 +18,7 @@ use avatarm_core::sim::SimRobot;
 use avatarm_core::teleop::hand::{HandKeyframe, HandNoise, HandScript, Handedness};
 use avatarm_core::teleop::mapping::{MappingMode, MappingSettings, VirtualToReal, pose_rmse};
 use avatarm_core::teleop::safety::SafetySettings;
-use avatarm_hand::{ActiveHand, GraspTarget, HandDrive, ObjectContacts, ScriptedHand};
+use avatarm_hand::{ActiveHand, GraspTarget, HandDrive, HeldObject, ObjectContacts, ScriptedHand};
 use avatarm_scene::prop::BOTTLE_NECK_RADIUS_FRACTION;
 pub use avatarm_scene::task::{PouringTask, TrialSetup};
 use bevy::prelude::*;
@@ -27,9 +27,7 @@ use nalgebra::{DVector, Isometry3, Matrix3, Translation3, UnitQuaternion, Vector
 use serde::Serialize;
 
 use crate::robot::RobotInterface;
-use crate::{
-    CarriedObject, MappingError, MappingPlugin, SimArm, Teleop, TeleopConfig, TeleopSample,
-};
+use crate::{CarriedObject, MappingError, SimArm, Teleop, TeleopConfig, TeleopSample, TickSource};
 
 /// The arm of `setup` with its open gripper around the bottle: a side grasp at the body's
 /// centre, approaching horizontally from the robot's base, fingers closing horizontally.
@@ -457,6 +455,20 @@ impl TrialParts {
         })
     }
 
+    /// The operator's physics world for this trial: [`avatarm_hand::headless_app`] (one fixed
+    /// step of the control period per `App::update`) with the hand driven by `hand` and the
+    /// trial's bodies. The one-process trials ([`run_trial`]) and the operator's site of a
+    /// two-site session step this same world, so the same hand moves the same twin to the bit:
+    /// Rapier's contacts depend on the order bodies enter it, which anything else in the world
+    /// (a resource more) can change, and a grasp that brushes the bottle first turns a
+    /// micrometre into a different grasp.
+    pub fn hand_app(&self, hand: ActiveHand) -> App {
+        let mut app = avatarm_hand::headless_app(self.period);
+        app.insert_resource(self.hand_drive).insert_resource(hand);
+        app.add_systems(Startup, self.spawn_bodies());
+        app
+    }
+
     /// A startup system that spawns the trial's bodies (needs Rapier and the hand plugin).
     pub fn spawn_bodies(&self) -> impl FnMut(Commands) + Send + Sync + 'static {
         let b = self.bodies;
@@ -529,6 +541,59 @@ pub fn run_trial_on_robot(
     )
 }
 
+/// The operator's side of a control tick as the hand's world holds it after a step
+/// ([`read_hand_world`]).
+#[derive(Debug, Clone, Copy)]
+pub struct HandWorldState {
+    /// The fixed step's time (s, the world's `Time<Fixed>`).
+    pub now_s: f64,
+    /// The twin's pose (virtual scene, its centre).
+    pub twin: Isometry3<f64>,
+    /// The hand holds the twin ([`avatarm_hand::HeldObject`]).
+    pub held: bool,
+    /// When the newest hand frame was captured (s, the world's clock), if any.
+    pub hand_stamp_s: Option<f64>,
+    /// The newest hand frame is tracked.
+    pub hand_tracked: bool,
+    /// The largest contact force of the step (N).
+    pub max_force_n: f64,
+}
+
+/// Reads the hand's world after a step: the state above, and the hand's contacts on the twin
+/// and their points' velocities (virtual scene, m/s) into `contacts` and `velocities`
+/// (cleared first; the same length). Errors when the world has no single twin
+/// ([`GraspTarget`]).
+pub fn read_hand_world(
+    world: &mut World,
+    contacts: &mut Vec<avatarm_core::teleop::grasp::Contact>,
+    velocities: &mut Vec<Vector3<f64>>,
+) -> Result<HandWorldState, MappingError> {
+    let twin = world
+        .query_filtered::<&Transform, With<GraspTarget>>()
+        .single(world)
+        .map(avatarm_twin::transform_to_iso)
+        .map_err(|e| MappingError::Trial {
+            message: format!("the twin is gone: {e}"),
+        })?;
+    contacts.clear();
+    velocities.clear();
+    let found = world.resource::<ObjectContacts>();
+    for c in &found.contacts {
+        contacts.push(c.contact);
+        velocities.push(c.object_velocity);
+    }
+    let max_force_n = found.max_force_n;
+    let latest = world.resource::<ActiveHand>().latest.as_ref();
+    Ok(HandWorldState {
+        now_s: world.resource::<Time<Fixed>>().elapsed_secs_f64(),
+        twin,
+        held: world.resource::<HeldObject>().held.is_some(),
+        hand_stamp_s: latest.map(|f| f.t_s),
+        hand_tracked: latest.is_some_and(|f| f.tracked),
+        max_force_n,
+    })
+}
+
 fn run_prepared(
     task: &PouringTask,
     setup: &TrialSetup,
@@ -544,18 +609,14 @@ fn run_prepared(
     let twin_start = parts.twin_start;
     let period = parts.period;
     let dt = period.as_secs_f64();
-    let spawn = parts.spawn_bodies();
+    let hand = hand(ScriptedHand::new(parts.script.clone(), task.hand_rate_hz));
+    let mut app = parts.hand_app(hand);
     let mut teleop = parts.teleop;
     teleop.record = true;
-    let mut app = avatarm_hand::headless_app(period);
-    app.add_plugins(MappingPlugin)
-        .insert_resource(parts.hand_drive)
-        .insert_resource(hand(ScriptedHand::new(parts.script, task.hand_rate_hz)))
-        .insert_resource(teleop);
-    app.add_systems(Startup, spawn);
     let steps = (task.duration_s / dt).round() as usize;
     let mut twin = Vec::with_capacity(steps);
     let mut max_contact: f64 = 0.0;
+    let (mut contacts, mut velocities) = (Vec::new(), Vec::new());
     let started = std::time::Instant::now();
     for i in 0..steps {
         if realtime {
@@ -563,26 +624,26 @@ fn run_prepared(
             std::thread::sleep(due.saturating_duration_since(std::time::Instant::now()));
         }
         app.update();
-        let mut q = app
-            .world_mut()
-            .query_filtered::<&Transform, With<GraspTarget>>();
-        let pose = q
-            .single(app.world())
-            .map(avatarm_twin::transform_to_iso)
-            .map_err(|e| MappingError::Trial {
-                message: format!("the twin is gone: {e}"),
-            })?;
-        twin.push(pose);
-        max_contact = max_contact.max(app.world().resource::<ObjectContacts>().max_force_n);
+        // The mapping's tick after the step, as the operator's site runs it: the world the
+        // hand moves is the same with or without a robot in this process.
+        let state = read_hand_world(app.world_mut(), &mut contacts, &mut velocities)?;
+        teleop.tick(
+            state.now_s,
+            dt,
+            TickSource::Local {
+                contacts: &contacts,
+                contact_velocities: &velocities,
+                twin_pose: Ok(state.twin),
+                held: state.held,
+                hand_stamp_s: state.hand_stamp_s,
+                hand_tracked: state.hand_tracked,
+            },
+        );
+        twin.push(state.twin);
+        max_contact = max_contact.max(state.max_force_n);
     }
     let wall_s = started.elapsed().as_secs_f64();
     let hand_frames_refused = app.world().resource::<ActiveHand>().refused;
-    let teleop =
-        app.world_mut()
-            .remove_resource::<Teleop>()
-            .ok_or_else(|| MappingError::Trial {
-                message: "the teleoperation state is gone".into(),
-            })?;
     let samples = teleop.log;
     let grasp = samples.iter().position(|s| s.gripper_closed);
     let from = grasp.unwrap_or(0);
