@@ -987,6 +987,13 @@ fn pose_compensation_keeps_a_moving_head_cameras_mask_on_the_robot() {
         "{vb}"
     );
     assert!(num(&on, "head.view_background.views_kept") >= 2.0, "{vb}");
+    // The replay warms up before its first frame: no blank frame reaches the views (the live
+    // preview's first one is black, and is refused: `a_blank_frame_is_not_a_view`).
+    assert_eq!(
+        num(&on, "head.view_background.blank_frames_refused"),
+        0.0,
+        "{vb}"
+    );
     assert!(num(&on, "head.view_background.cpu_ms.median") > 0.0, "{vb}");
     assert!(num(&on, "dr.psnr_robot_db_mean") >= 27.0, "{}", on["dr"]);
     assert!(

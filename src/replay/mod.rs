@@ -1041,6 +1041,7 @@ fn head_report(
         Some(vb) => json!({
             "views_kept": vb.views.len(),
             "views_offered": vb.views.offered(),
+            "blank_frames_refused": vb.views.blank(),
             "view_times_s": vb.views.times(),
             "seen_share_of_robot_region": mean(seen.iter().copied()),
             "nearest_view_deg": spread(&nearest),

@@ -140,6 +140,33 @@ struct CapturedView {
     pinned: bool,
 }
 
+/// Largest standard deviation of luma (0–255, Rec. 601) over a frame's usable pixels for
+/// which the frame is blank ([`BackgroundViews::offer`]): above a sensor's own noise (σ of 1–2
+/// levels), below any room (tens of levels). A camera facing a plain wall close up can be
+/// blank too; its frames are then not kept as views, which costs nothing but the view.
+pub const BLANK_LUMA_STD: f64 = 3.0;
+
+/// Whether `frame`'s pixels outside `covered` have a luma standard deviation below
+/// [`BLANK_LUMA_STD`] (true when none is outside).
+fn is_blank(frame: &RgbaView, covered: &[u8]) -> bool {
+    let (mut n, mut sum, mut sum_sq) = (0u64, 0f64, 0f64);
+    for (px, &c) in frame.data.chunks_exact(4).zip(covered) {
+        if c != 0 {
+            continue;
+        }
+        let y = 0.299 * f64::from(px[0]) + 0.587 * f64::from(px[1]) + 0.114 * f64::from(px[2]);
+        n += 1;
+        sum += y;
+        sum_sq += y * y;
+    }
+    if n == 0 {
+        return true;
+    }
+    let mean = sum / n as f64;
+    let variance = (sum_sq / n as f64 - mean * mean).max(0.0);
+    variance.sqrt() < BLANK_LUMA_STD
+}
+
 /// Background views of one image size, and the room re-projected into any view.
 #[derive(Debug, Clone)]
 pub struct BackgroundViews {
@@ -153,6 +180,7 @@ pub struct BackgroundViews {
     pub min_separation_rad: f64,
     views: Vec<CapturedView>,
     offered: u64,
+    blank: u64,
 }
 
 /// What [`BackgroundViews::render`] made.
@@ -198,6 +226,7 @@ impl BackgroundViews {
             min_separation_rad,
             views: Vec::new(),
             offered: 0,
+            blank: 0,
         })
     }
 
@@ -214,6 +243,11 @@ impl BackgroundViews {
     /// Views offered so far.
     pub fn offered(&self) -> u64 {
         self.offered
+    }
+
+    /// Views refused as blank (see [`BackgroundViews::offer`]).
+    pub fn blank(&self) -> u64 {
+        self.blank
     }
 
     /// The capture times of the kept views (s).
@@ -234,7 +268,10 @@ impl BackgroundViews {
     /// Offers a view taken at `at_s` by `camera` (its intrinsics must be of this size):
     /// `frame`, with `covered` (0/1 per pixel) marking what may not be used (the robot and its
     /// margin). Kept when it is far enough from every kept view (see
-    /// [`BackgroundViews::min_separation_rad`]); returns whether it was.
+    /// [`BackgroundViews::min_separation_rad`]); returns whether it was. A blank frame (its
+    /// usable pixels' luma varying less than [`BLANK_LUMA_STD`]: a camera that is not streaming
+    /// yet, a renderer before its first frame, a lens cap) is refused: blended with the room,
+    /// it would darken H wherever its angle is near.
     pub fn offer(
         &mut self,
         camera: &PinholeCamera,
@@ -272,6 +309,10 @@ impl BackgroundViews {
             });
         }
         self.offered += 1;
+        if is_blank(frame, covered) {
+            self.blank += 1;
+            return Ok(false);
+        }
         let axis = camera.world_from_camera.rotation * Vector3::z();
         let usable_share = covered.iter().filter(|&&c| c == 0).count() as f64 / n as f64;
         let nearest = self
@@ -689,7 +730,7 @@ mod tests {
         let proxy = wall();
         let mut views =
             BackgroundViews::new(64, 48, proxy.clone(), 2, 5f64.to_radians()).expect("views");
-        let photo = [50u8; 64 * 48 * 4];
+        let photo: Vec<u8> = (0..64 * 48 * 4).map(|i| (i % 251) as u8).collect();
         let f = RgbaView::new("f", 64, 48, &photo).expect("f");
         let free = vec![0u8; 64 * 48];
         let a = camera([1.5, 0.0, 1.0], [0.0, 0.0, 1.0]);
@@ -735,5 +776,34 @@ mod tests {
         );
         assert!(BackgroundViews::new(64, 48, proxy.clone(), 0, 0.0).is_err());
         assert!(BackgroundViews::new(64, 48, proxy, 2, f64::NAN).is_err());
+    }
+
+    #[test]
+    fn a_blank_frame_is_not_a_view() {
+        // The live preview's first frame is black (the simulated camera has not rendered yet):
+        // kept as a view, it darkened H by half wherever Alice looked back the same way.
+        let mut views = BackgroundViews::new(64, 48, wall(), 4, 0.0).expect("views");
+        let cam = camera([1.5, 0.0, 1.0], [0.0, 0.0, 1.0]);
+        let free = vec![0u8; 64 * 48];
+        let black = vec![0u8; 64 * 48 * 4];
+        let f = RgbaView::new("black", 64, 48, &black).expect("f");
+        assert!(!views.offer(&cam, &f, &free, 0.0).expect("offered"));
+        // One colour with a sensor's noise (σ 1.5 levels, as the simulated camera adds) is as
+        // blank; covered pixels do not count.
+        let mut rng = crate::rng::Rng::stream(1, 2);
+        let mut grey: Vec<u8> = (0..64 * 48 * 4)
+            .map(|_| (128.0 + 1.5 * rng.gaussian()).round() as u8)
+            .collect();
+        grey[4 * 100] = 0;
+        let mut covered = vec![0u8; 64 * 48];
+        covered[100] = 1;
+        let f = RgbaView::new("grey", 64, 48, &grey).expect("f");
+        assert!(!views.offer(&cam, &f, &covered, 0.1).expect("offered"));
+        assert_eq!((views.len(), views.offered(), views.blank()), (0, 2, 2));
+        // The room is a view.
+        let room = photograph(&wall(), &cam);
+        let f = RgbaView::new("room", 64, 48, &room).expect("f");
+        assert!(views.offer(&cam, &f, &free, 0.2).expect("offered"));
+        assert_eq!(views.blank(), 2);
     }
 }
