@@ -239,7 +239,7 @@ fn setup_preview(
                 StatusText,
                 Text::new(""),
                 TextFont {
-                    font_size: FontSize::Px(15.0),
+                    font_size: FontSize::Px(13.0),
                     ..default()
                 },
                 TextColor(Color::srgb(0.85, 0.9, 0.95)),
@@ -369,6 +369,7 @@ fn update_status(
     live_dr: Option<Res<LiveDr>>,
     time: Res<Time<Real>>,
     teleop: LiveTeleopStatus,
+    scene: Res<crate::app::SceneResource>,
 ) {
     let (config, erase_state, live, gpu_times) = erase;
     let (Some(robot), Some(twin)) = (robot, twin) else {
@@ -398,13 +399,40 @@ fn update_status(
         None => String::new(),
     };
     let teleop_line = teleop.line();
+    let head = head_line(&scene.0, &erase_state);
     for mut line in &mut text {
         **line = format!(
-            "{teleop_line}sim {t:6.2} s   frame {:5.1} ms   refused joint states {}{stale}\ncamera frame age {frame_age_ms:5.1} ms   joint state age {age_ms:5.1} ms\nmask renders per camera frame {per_frame:.2}{gpu}\n{erasing}{scores}",
+            "{teleop_line}sim {t:6.2} s   frame {:5.1} ms   refused joint states {}{stale}\ncamera frame age {frame_age_ms:5.1} ms   joint state age {age_ms:5.1} ms{head}\nmask renders per camera frame {per_frame:.2}{gpu}\n{erasing}{scores}",
             time.delta_secs_f64() * 1e3,
             twin.rejected
         );
     }
+}
+
+/// A camera on a head: a line (with its leading line break) on the newest frame's mask camera:
+/// how much newer than the frame the newest tracked head pose is, the mask camera's error
+/// against the simulated head's truth at the frame's capture, and the background's views kept.
+/// Empty for a fixed camera, or before the first frame.
+fn head_line(scene: &avatarm_scene::Scene, erase: &EraseState) -> String {
+    let (Some(head), Some(pose), Some(capture_s)) =
+        (&scene.head, erase.camera_pose, erase.frame_capture_s)
+    else {
+        return String::new();
+    };
+    let newest = match erase.head_pose_s {
+        Some((newest_s, _)) => format!("{:+5.1} ms", (newest_s - capture_s) * 1e3),
+        None => "none".to_owned(),
+    };
+    let (angle, offset) = avatarm_core::vision::head::pose_error(&pose, &head.camera_at(capture_s));
+    let views = erase
+        .view_background
+        .as_ref()
+        .map_or(String::new(), |vb| format!("  {} views", vb.views.len()));
+    format!(
+        "\nhead pose {newest} vs frame  mask cam off {:.3} deg {:.1} mm{views}",
+        angle.to_degrees(),
+        offset * 1e3
+    )
 }
 
 fn handle_keys(
