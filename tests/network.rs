@@ -502,6 +502,8 @@ fn the_operator_window_shows_the_received_video_with_the_hand_in_front() {
         .arg(&shot)
         .arg("--report")
         .arg(dir.join("join.json"))
+        .arg("--record")
+        .arg(dir.join("join.mcap"))
         // No OpenXR runtime, even where a developer has one installed.
         .env("XR_RUNTIME_JSON", dir.join("no_runtime.json"))
         .stdout(Stdio::null())
@@ -538,6 +540,35 @@ fn the_operator_window_shows_the_received_video_with_the_hand_in_front() {
         "window.fps",
     ] {
         assert!(f(&j, key) > 0.0, "{key}: {j}");
+    }
+    // `--record`: what the operator received, as a recording: every frame shown (one
+    // camera), every joint state, the scene's camera, on the robot site's clock.
+    let rec = avatarm_record::Recording::open(&dir.join("join.mcap")).expect("the recording");
+    assert_eq!(f(&j, "recording.refused"), 0.0, "{j}");
+    assert_eq!(rec.erased.len() as f64, f(&j, "video.shown"), "{j}");
+    assert_eq!(
+        rec.erased.len() as f64,
+        f(&j, "recording.erased_frames"),
+        "{j}"
+    );
+    assert_eq!(rec.joint_states.len() as f64, f(&j, "joint_states"), "{j}");
+    assert!(rec.calibration.is_some());
+    assert!(rec.erased.windows(2).all(|w| w[0].stamp_ns < w[1].stamp_ns));
+    let first = image::load_from_memory(&rec.erased[0].data).expect("a JPEG");
+    assert_eq!((first.width(), first.height()), (640, 480));
+    // The frames' and the joint states' stamps are on one clock: every frame was captured
+    // between 5 s before the first joint state received (the video's own latency: software
+    // rendering, coding) and the last one.
+    let (first_js, last_js) = (
+        rec.joint_states[0].stamp_ns,
+        rec.joint_states[rec.joint_states.len() - 1].stamp_ns,
+    );
+    for frame in &rec.erased {
+        assert!(
+            (first_js.saturating_sub(5_000_000_000)..=last_js).contains(&frame.stamp_ns),
+            "a frame at {} ns, joint states from {first_js} to {last_js} ns",
+            frame.stamp_ns
+        );
     }
     let img = image::open(&shot)
         .expect("the window's screenshot")

@@ -339,6 +339,11 @@ enum Command {
         /// Write the report (JSON) here when it stops.
         #[arg(long, value_name = "FILE")]
         report: Option<PathBuf>,
+        /// Record what this site received (MCAP, docs/recording.md): the first camera's erased
+        /// frames as they arrived, the robot's joint states and its stops, on the robot site's
+        /// clock
+        #[arg(long, value_name = "FILE.mcap")]
+        record: Option<PathBuf>,
         /// How long to wait for the robot site (s).
         #[arg(long, value_name = "S", default_value_t = 10.0)]
         wait: f64,
@@ -786,6 +791,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             watch,
             duration,
             report,
+            record,
             wait,
             trial,
             hand,
@@ -846,6 +852,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 duration_s: duration,
                 mode: None,
                 report,
+                record,
                 wait_s: wait,
                 trial,
             };

@@ -20,6 +20,7 @@ use avatarm_hand::{ActiveHand, GraspTarget, HeldObject, ScriptedHand};
 use avatarm_mapping::pouring::{TrialParts, read_hand_world};
 use avatarm_net::msg::{HandMsg, PROTOCOL_VERSION, TargetMsg};
 use avatarm_net::{NetConfig, OperatorInbox, OperatorSite};
+use avatarm_record::RecordingWriter;
 use avatarm_scene::Scene;
 use avatarm_scene::hand::HandChoice;
 use bevy::log::warn;
@@ -47,6 +48,8 @@ pub struct JoinOptions {
     pub mode: Option<MappingMode>,
     /// Where to write the report.
     pub report: Option<PathBuf>,
+    /// Where to record what this site receives (MCAP), if anywhere.
+    pub record: Option<PathBuf>,
     /// How long to wait for the robot site (s).
     pub wait_s: f64,
     /// The task's trial whose seeded hand the operator plays.
@@ -137,6 +140,182 @@ pub struct JoinReport {
     pub joint_state_age_ms: Spread,
     /// The window, when there was one.
     pub window: Option<WindowReport>,
+    /// What `--record` wrote, when it was given.
+    pub recording: Option<JoinRecording>,
+}
+
+/// What `join --record` wrote.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct JoinRecording {
+    /// The file.
+    pub path: PathBuf,
+    /// The camera whose erased frames were recorded (the first one received).
+    pub camera: Option<String>,
+    /// Erased frames written.
+    pub erased_frames: u64,
+    /// Joint states written.
+    pub joint_states: u64,
+    /// The robot site's stops written (as safety events).
+    pub stops: u64,
+    /// Messages the recording refused (bad values, a failed write), and the first reason.
+    pub refused: u64,
+    /// The first refusal.
+    pub first_refusal: Option<String>,
+}
+
+/// `join --record`: what the operator's (or observer's) site receives, written as it arrives:
+/// the first camera's erased frames (JPEG as received; an H.264 frame coded to JPEG), the
+/// robot's joint states and its stops, stamped on the robot site's clock moved to the Unix
+/// epoch at the join (so that MCAP tools show wall time).
+struct JoinRecorder {
+    writer: RecordingWriter,
+    /// Unix time (ns) of the robot site's clock's 0 s.
+    epoch_ns: i128,
+    names: Vec<String>,
+    report: JoinRecording,
+}
+
+impl JoinRecorder {
+    /// Creates `path` and writes the scene's camera calibration; errors name the file.
+    fn create(path: &std::path::Path, scene: &Scene) -> Result<Self, AppError> {
+        let mut writer = RecordingWriter::create(path)?;
+        let now_ns = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64);
+        writer.calibration(now_ns, &crate::replay::scene_calibration(scene))?;
+        Ok(Self {
+            writer,
+            epoch_ns: i128::from(now_ns),
+            names: scene
+                .model
+                .dof_names()
+                .iter()
+                .map(|n| n.to_string())
+                .collect(),
+            report: JoinRecording {
+                path: path.to_owned(),
+                ..JoinRecording::default()
+            },
+        })
+    }
+
+    /// The robot site's clock is `robot_now_s` now: its 0 s is that long before the epoch's
+    /// now.
+    fn set_clock(&mut self, robot_now_s: f64) {
+        if robot_now_s.is_finite() {
+            let now_ns = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_nanos() as i128);
+            self.epoch_ns = now_ns - (robot_now_s * 1e9) as i128;
+        }
+    }
+
+    /// `t_s` on the robot site's clock as a recording's stamp; `None` when not finite or
+    /// before the epoch.
+    fn stamp_ns(&self, t_s: f64) -> Option<u64> {
+        if !t_s.is_finite() || t_s.abs() > 1e9 {
+            return None;
+        }
+        u64::try_from(self.epoch_ns + (t_s * 1e9) as i128).ok()
+    }
+
+    fn refused(&mut self, why: String) {
+        self.report.refused += 1;
+        if self.report.first_refusal.is_none() {
+            warn!("join --record: {why}");
+            self.report.first_refusal = Some(why);
+        }
+    }
+
+    fn joint_states(&mut self, m: &avatarm_net::msg::JointStatesMsg) {
+        let Some(stamp_ns) = self.stamp_ns(m.stamp_s) else {
+            return self.refused(format!("joint states stamped {} s", m.stamp_s));
+        };
+        let names = if self.names.len() == m.positions.len() {
+            self.names.clone()
+        } else {
+            (0..m.positions.len()).map(|i| format!("q{i}")).collect()
+        };
+        let states = avatarm_record::JointStates {
+            stamp_ns,
+            names,
+            positions: m.positions.clone(),
+            velocities: m.velocities.clone(),
+        };
+        match self.writer.joint_states(&states) {
+            Ok(()) => self.report.joint_states += 1,
+            Err(e) => self.refused(e.to_string()),
+        }
+    }
+
+    fn stop(&mut self, m: &avatarm_net::msg::RobotStatusMsg) {
+        let Some(stamp_ns) = self.stamp_ns(m.stamp_s) else {
+            return self.refused(format!("robot status stamped {} s", m.stamp_s));
+        };
+        let event = avatarm_record::SafetyEvent {
+            stamp_ns,
+            level: avatarm_record::LogLevel::Error,
+            source: "robot site".into(),
+            message: format!(
+                "stopping the arm: {}",
+                m.reason.as_deref().unwrap_or("no reason given")
+            ),
+        };
+        match self.writer.safety_event(&event) {
+            Ok(()) => self.report.stops += 1,
+            Err(e) => self.refused(e.to_string()),
+        }
+    }
+
+    /// One decoded frame of `camera` (the first camera received is the one recorded).
+    fn frame(&mut self, h: &avatarm_net::msg::FrameHeader, payload: &[u8], rgba: &[u8]) {
+        if self.report.camera.get_or_insert_with(|| h.camera.clone()) != &h.camera {
+            return;
+        }
+        let Some(stamp_ns) = self.stamp_ns(h.capture_s) else {
+            return self.refused(format!("a frame captured at {} s", h.capture_s));
+        };
+        let data = if h.codec == avatarm_net::codec::Codec::Jpeg.name() {
+            payload.to_vec()
+        } else {
+            match jpeg(h.width, h.height, rgba) {
+                Ok(d) => d,
+                Err(e) => return self.refused(format!("frame {}: {e}", h.index)),
+            }
+        };
+        let frame = avatarm_record::CompressedFrame {
+            stamp_ns,
+            format: avatarm_record::ImageFormat::Jpeg,
+            data,
+        };
+        match self.writer.erased(&frame) {
+            Ok(()) => self.report.erased_frames += 1,
+            Err(e) => self.refused(e.to_string()),
+        }
+    }
+
+    /// Closes the file; a failure is counted in the report.
+    fn finish(mut self) -> JoinRecording {
+        let mut report = std::mem::take(&mut self.report);
+        if let Err(e) = self.writer.finish() {
+            report.refused += 1;
+            report.first_refusal.get_or_insert_with(|| e.to_string());
+            warn!("join --record: {e}");
+        }
+        report
+    }
+}
+
+/// An RGBA image as a JPEG (quality 90, as `run --record` writes erased frames).
+fn jpeg(width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>, String> {
+    let image = image::RgbaImage::from_raw(width, height, rgba.to_vec())
+        .ok_or_else(|| format!("{} bytes for {width}x{height}", rgba.len()))?;
+    let rgb = image::DynamicImage::ImageRgba8(image).to_rgb8();
+    let mut out = std::io::Cursor::new(Vec::new());
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 90)
+        .encode_image(&rgb)
+        .map_err(|e| e.to_string())?;
+    Ok(out.into_inner())
 }
 
 /// The least time between two keyframe requests of one camera (s).
@@ -169,6 +348,7 @@ struct Collect {
     decode: Vec<f64>,
     total: Vec<f64>,
     joint_age: Vec<f64>,
+    recorder: Option<JoinRecorder>,
 }
 
 impl Collect {
@@ -179,6 +359,9 @@ impl Collect {
                 Ok(j) => {
                     r.joint_states += 1;
                     self.joint_age.push((robot_now - j.stamp_s) * 1e3);
+                    if let Some(rec) = &mut self.recorder {
+                        rec.joint_states(&j);
+                    }
                 }
                 Err(_) => r.refused += 1,
             }
@@ -188,6 +371,12 @@ impl Collect {
                 Ok(s) => {
                     r.status += 1;
                     r.status_stopping += u64::from(s.stopping);
+                    if s.stopping
+                        && !self.stopping
+                        && let Some(rec) = &mut self.recorder
+                    {
+                        rec.stop(&s);
+                    }
                     self.stopping = s.stopping;
                 }
                 Err(_) => r.refused += 1,
@@ -245,6 +434,9 @@ impl Collect {
                     height,
                     rgba,
                 }) => {
+                    if let Some(rec) = &mut self.recorder {
+                        rec.frame(&h, &payload, &rgba);
+                    }
                     // The window shows one camera: the first one received.
                     let first = self.window_camera.get_or_insert_with(|| h.camera.clone());
                     if let Some(view) = self.view.as_ref().filter(|_| *first == h.camera) {
@@ -344,6 +536,7 @@ impl Collect {
         r.video.decode_ms = Spread::of(&self.decode);
         r.video.total_ms = Spread::of(&self.total);
         r.joint_state_age_ms = Spread::of(&self.joint_age);
+        r.recording = self.recorder.take().map(JoinRecorder::finish);
         self.report
     }
 }
@@ -431,6 +624,11 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
             operator
         }
     };
+    // The recording's file is made before the network: a bad path fails here.
+    let recorder = match &options.record {
+        Some(path) => Some(JoinRecorder::create(path, &options.scene)?),
+        None => None,
+    };
     let mut site = OperatorSite::join(&options.net, Duration::from_secs_f64(options.wait_s))?;
     let info = site.info().clone();
     let ours = super::scene_fingerprint(&options.scene)?;
@@ -454,7 +652,7 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
         offset.rtt_s * 1e3
     );
     let result = match window {
-        None => run_session(&mut site, options, operator, None),
+        None => run_session(&mut site, options, operator, None, recorder),
         Some((mut app, handle, shared)) => {
             let site = &mut site;
             let result = std::thread::scope(|scope| {
@@ -462,7 +660,7 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
                 let session = scope.spawn(move || {
                     // The window closes when the session ends, however it ends.
                     let _ended = SetOnDrop(&view.ended);
-                    run_session(site, options, operator, Some(view.clone()))
+                    run_session(site, options, operator, Some(view.clone()), recorder)
                 });
                 let exit = {
                     // The session ends when the window closes, however it closes.
@@ -533,12 +731,17 @@ fn run_session(
     options: &JoinOptions,
     operator: Option<(TrialParts, ActiveHand)>,
     view: Option<Arc<ViewShared>>,
+    recorder: Option<JoinRecorder>,
 ) -> Result<JoinReport, AppError> {
     let mut collect = Collect {
         view,
         observer: operator.is_none(),
+        recorder,
         ..Collect::default()
     };
+    if let Some(rec) = &mut collect.recorder {
+        rec.set_clock(site.robot_now_s());
+    }
     let started = Instant::now();
     match operator {
         None => {
