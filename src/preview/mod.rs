@@ -427,7 +427,8 @@ fn head_line(scene: &avatarm_scene::Scene, erase: &EraseState) -> String {
     let views = erase
         .view_background
         .as_ref()
-        .map_or(String::new(), |vb| format!("  {} views", vb.views.len()));
+        .map(|vb| format!("  {} views", vb.views.len()))
+        .unwrap_or_default();
     format!(
         "\nhead pose {newest} vs frame  mask cam off {:.3} deg {:.1} mm{views}",
         angle.to_degrees(),

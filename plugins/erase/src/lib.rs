@@ -807,7 +807,14 @@ fn follow_view(
     // How far this view is from those captured before it.
     vb.nearest_rad = vb.views.nearest_angle(camera);
     if offer {
+        let blank = vb.views.blank();
         vb.views.offer(camera, &live, region, frame.capture_s)?;
+        if blank == 0 && vb.views.blank() > 0 {
+            info!(
+                "background views: frame {} is blank (one colour: the camera not streaming yet?); not kept",
+                frame.index
+            );
+        }
     }
     let mut fallback = frame.rgba.as_ref().clone();
     if let Some(seed) = vb.seed.as_ref().filter(|s| s.len() == fallback.len()) {

@@ -10,9 +10,10 @@
 //!
 //! Modules: [`robot`] (the robot-interface trait and the simulated arm), [`pouring`], [`error`].
 //!
-//! [`pouring`] is the paper's experiment on top of it: a scripted hand grasps the bottle's
-//! twin, lifts, pours and raises it, and the simulated arm carries the real bottle; the error
-//! between them is the paper's measure.
+//! [`pouring`] is the paper's experiment with the same [`Teleop`] (ticked after each physics
+//! step of a headless hand world, as a two-site session's operator steps it): a scripted hand
+//! grasps the bottle's twin, lifts, pours and raises it, and the simulated arm carries the real
+//! bottle; the error between them is the paper's measure.
 
 pub mod error;
 pub mod pouring;

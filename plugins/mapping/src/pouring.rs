@@ -456,7 +456,7 @@ impl TrialParts {
     }
 
     /// The operator's physics world for this trial: [`avatarm_hand::headless_app`] (one fixed
-    /// step of the control period per `App::update`) with the hand driven by `hand` and the
+    /// step of the control period per `App::update` after the first, which has none) with the hand driven by `hand` and the
     /// trial's bodies. The one-process trials ([`run_trial`]) and the operator's site of a
     /// two-site session step this same world, so the same hand moves the same twin to the bit:
     /// Rapier's contacts depend on the order bodies enter it, which anything else in the world
@@ -545,7 +545,8 @@ pub fn run_trial_on_robot(
 /// ([`read_hand_world`]).
 #[derive(Debug, Clone, Copy)]
 pub struct HandWorldState {
-    /// The fixed step's time (s, the world's `Time<Fixed>`).
+    /// The newest fixed step's time (s, the world's `Time<Fixed>`): 0 after the first
+    /// `App::update`, which runs no step (Bevy's first update has no elapsed time).
     pub now_s: f64,
     /// The twin's pose (virtual scene, its centre).
     pub twin: Isometry3<f64>,
@@ -562,7 +563,7 @@ pub struct HandWorldState {
 /// Reads the hand's world after a step: the state above, and the hand's contacts on the twin
 /// and their points' velocities (virtual scene, m/s) into `contacts` and `velocities`
 /// (cleared first; the same length). Errors when the world has no single twin
-/// ([`GraspTarget`]).
+/// ([`GraspTarget`]) or lacks the hand plugin's resources.
 pub fn read_hand_world(
     world: &mut World,
     contacts: &mut Vec<avatarm_core::teleop::grasp::Contact>,
@@ -575,19 +576,35 @@ pub fn read_hand_world(
         .map_err(|e| MappingError::Trial {
             message: format!("the twin is gone: {e}"),
         })?;
+    let missing = |what: &str| MappingError::Trial {
+        message: format!("the hand's world has no {what} (it is not TrialParts::hand_app's)"),
+    };
     contacts.clear();
     velocities.clear();
-    let found = world.resource::<ObjectContacts>();
+    let found = world
+        .get_resource::<ObjectContacts>()
+        .ok_or_else(|| missing("ObjectContacts"))?;
     for c in &found.contacts {
         contacts.push(c.contact);
         velocities.push(c.object_velocity);
     }
     let max_force_n = found.max_force_n;
-    let latest = world.resource::<ActiveHand>().latest.as_ref();
+    let latest = world
+        .get_resource::<ActiveHand>()
+        .ok_or_else(|| missing("ActiveHand"))?
+        .latest
+        .as_ref();
     Ok(HandWorldState {
-        now_s: world.resource::<Time<Fixed>>().elapsed_secs_f64(),
+        now_s: world
+            .get_resource::<Time<Fixed>>()
+            .ok_or_else(|| missing("Time<Fixed>"))?
+            .elapsed_secs_f64(),
         twin,
-        held: world.resource::<HeldObject>().held.is_some(),
+        held: world
+            .get_resource::<HeldObject>()
+            .ok_or_else(|| missing("HeldObject"))?
+            .held
+            .is_some(),
         hand_stamp_s: latest.map(|f| f.t_s),
         hand_tracked: latest.is_some_and(|f| f.tracked),
         max_force_n,
@@ -617,6 +634,7 @@ fn run_prepared(
     let mut twin = Vec::with_capacity(steps);
     let mut max_contact: f64 = 0.0;
     let (mut contacts, mut velocities) = (Vec::new(), Vec::new());
+    let mut last_step_s: Option<f64> = None;
     let started = std::time::Instant::now();
     for i in 0..steps {
         if realtime {
@@ -627,6 +645,15 @@ fn run_prepared(
         // The mapping's tick after the step, as the operator's site runs it: the world the
         // hand moves is the same with or without a robot in this process.
         let state = read_hand_world(app.world_mut(), &mut contacts, &mut velocities)?;
+        twin.push(state.twin);
+        max_contact = max_contact.max(state.max_force_n);
+        // Bevy's first update runs no physics step (the fixed clock is still at 0): nothing new
+        // to tick on, as for an in-step tick.
+        let stepped = state.now_s > 0.0 && last_step_s != Some(state.now_s);
+        last_step_s = Some(state.now_s);
+        if !stepped {
+            continue;
+        }
         teleop.tick(
             state.now_s,
             dt,
@@ -639,8 +666,6 @@ fn run_prepared(
                 hand_tracked: state.hand_tracked,
             },
         );
-        twin.push(state.twin);
-        max_contact = max_contact.max(state.max_force_n);
     }
     let wall_s = started.elapsed().as_secs_f64();
     let hand_frames_refused = app.world().resource::<ActiveHand>().refused;

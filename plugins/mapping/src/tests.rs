@@ -396,14 +396,14 @@ fn a_jittery_hand_still_pours_within_the_limits() {
 }
 
 #[test]
-fn closed_loop_meets_the_goal_over_the_ten_default_trials() {
+fn closed_loop_meets_the_goal_over_the_trials_grasped_before_the_lift() {
     // The goal at the default latencies (20 ms command, 50 ms response, 100 Hz joint
     // states 10 ms late, 100 Hz control, 0.25 m/s cap): position RMSE <= 5 mm and each angle
     // <= 1 degree, as the mean over the task's seeded trials whose hand takes the twin before
     // the lift (2.5 s). Hands 4 and 5 brush the bottle on their way in, and micrometres decide
     // whether the grasp assist catches it then or the fingers push it off and take it mid-pour
     // (docs/grasp.md): a twin that jumps into the hand, which the capped arm follows late.
-    // They are held to their own bound, and no more than two of ten may grasp late.
+    // They are held to their own bound, and only they may grasp late (here hand 5 does).
     let task = PouringTask::default();
     let setup = setup();
     let results: Vec<_> = (0..task.trials)
@@ -431,7 +431,11 @@ fn closed_loop_meets_the_goal_over_the_ten_default_trials() {
     let (on_time, late): (Vec<_>, Vec<_>) = results
         .into_iter()
         .partition(|r| r.grasp_at_s.is_some_and(|t| t < 2.5));
-    assert!(late.len() <= 2, "{} of 10 grasped after 2.5 s", late.len());
+    assert!(
+        late.iter().all(|r| r.trial == 4 || r.trial == 5),
+        "grasped after 2.5 s: trials {:?}",
+        late.iter().map(|r| r.trial).collect::<Vec<_>>()
+    );
     for r in &late {
         // Still carried: the real bottle rises with its twin, within the pour's limits.
         assert!(
@@ -455,8 +459,9 @@ fn closed_loop_meets_the_goal_over_the_ten_default_trials() {
         m.yaw_rmse_deg.mean,
     );
     eprintln!(
-        "closed loop, {} trials grasped on time: {:.2} mm, roll {roll:.2} pitch {pitch:.2} yaw {yaw:.2} deg",
-        10 - late.len(),
+        "closed loop, {} of {} trials grasped on time: {:.2} mm, roll {roll:.2} pitch {pitch:.2} yaw {yaw:.2} deg",
+        task.trials as usize - late.len(),
+        task.trials,
         pos * 1e3
     );
     assert!(pos <= 0.005, "{pos}");

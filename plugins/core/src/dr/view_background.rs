@@ -147,7 +147,7 @@ struct CapturedView {
 pub const BLANK_LUMA_STD: f64 = 3.0;
 
 /// Whether `frame`'s pixels outside `covered` have a luma standard deviation below
-/// [`BLANK_LUMA_STD`] (true when none is outside).
+/// [`BLANK_LUMA_STD`] (false when none is outside: such a view adds nothing anyway).
 fn is_blank(frame: &RgbaView, covered: &[u8]) -> bool {
     let (mut n, mut sum, mut sum_sq) = (0u64, 0f64, 0f64);
     for (px, &c) in frame.data.chunks_exact(4).zip(covered) {
@@ -160,7 +160,7 @@ fn is_blank(frame: &RgbaView, covered: &[u8]) -> bool {
         sum_sq += y * y;
     }
     if n == 0 {
-        return true;
+        return false;
     }
     let mean = sum / n as f64;
     let variance = (sum_sq / n as f64 - mean * mean).max(0.0);
@@ -309,10 +309,6 @@ impl BackgroundViews {
             });
         }
         self.offered += 1;
-        if is_blank(frame, covered) {
-            self.blank += 1;
-            return Ok(false);
-        }
         let axis = camera.world_from_camera.rotation * Vector3::z();
         let usable_share = covered.iter().filter(|&&c| c == 0).count() as f64 / n as f64;
         let nearest = self
@@ -335,6 +331,11 @@ impl BackgroundViews {
                 }
             }
         };
+        // Checked only for a frame that would be kept: the scan costs a pass over the image.
+        if is_blank(frame, covered) {
+            self.blank += 1;
+            return Ok(false);
+        }
         let view = CapturedView {
             camera: *camera,
             rgba: frame.data.to_vec(),
@@ -704,13 +705,17 @@ mod tests {
         let b = camera([1.5, 0.3, 1.0], [0.0, 0.0, 1.0]);
         let target = camera([1.5, 0.25, 1.0], [0.0, 0.0, 1.0]);
         let mut views = BackgroundViews::new(64, 48, proxy.clone(), 4, 0.0).expect("views");
-        // a's picture is uniformly wrong (a lighting change), b's right.
-        let wrong = [200u8, 10, 10, 255].repeat(64 * 48);
+        // a's picture is wrong (a lighting change: the room, red and darker), b's right.
+        let wrong: Vec<u8> = photograph(&proxy, &a)
+            .chunks_exact(4)
+            .flat_map(|p| [p[0].saturating_add(80), p[1] / 2, p[2] / 2, 255])
+            .collect();
         let right = photograph(&proxy, &b);
         let fa = RgbaView::new("a", 64, 48, &wrong).expect("a");
         let fb = RgbaView::new("b", 64, 48, &right).expect("b");
-        views.offer(&a, &fa, &vec![0; 64 * 48], 0.0).expect("a");
-        views.offer(&b, &fb, &vec![0; 64 * 48], 1.0).expect("b");
+        assert!(views.offer(&a, &fa, &vec![0; 64 * 48], 0.0).expect("a"));
+        assert!(views.offer(&b, &fb, &vec![0; 64 * 48], 1.0).expect("b"));
+        assert_eq!(views.len(), 2);
         let out = views.render(&target, None, None).expect("render");
         let truth = photograph(&proxy, &target);
         let centre = (24 * 64 + 32) * 4;
@@ -718,9 +723,13 @@ mod tests {
         assert!(err < 25, "b (3 deg away) outweighs a (20 deg away): {err}");
         // Covered everywhere: a view that may not be used adds nothing.
         let mut only_covered = BackgroundViews::new(64, 48, proxy, 4, 0.0).expect("views");
-        only_covered
-            .offer(&a, &fa, &vec![1; 64 * 48], 0.0)
-            .expect("offer");
+        assert!(
+            only_covered
+                .offer(&a, &fa, &vec![1; 64 * 48], 0.0)
+                .expect("offer"),
+            "kept: the first view, even with nothing usable"
+        );
+        assert_eq!(only_covered.blank(), 0, "covered is not blank");
         let out = only_covered.render(&target, None, None).expect("render");
         assert!(out.seen.iter().all(|&s| s == 0));
     }
