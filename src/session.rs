@@ -124,33 +124,41 @@ struct Written {
 }
 
 fn encode(stream: Stream, width: u32, height: u32, data: &[u8]) -> Result<CompressedFrame, String> {
-    let bad = || {
-        format!(
-            "{stream:?} image: {} bytes for {width}x{height}",
-            data.len()
-        )
-    };
-    let mut out = std::io::Cursor::new(Vec::new());
-    let format = if stream == Stream::Mask {
+    let (format, data) = if stream == Stream::Mask {
         let grey: Vec<u8> = data.iter().map(|&v| if v > 0 { 255 } else { 0 }).collect();
-        let image = image::GrayImage::from_raw(width, height, grey).ok_or_else(bad)?;
+        let image = image::GrayImage::from_raw(width, height, grey).ok_or_else(|| {
+            format!(
+                "{stream:?} image: {} bytes for {width}x{height}",
+                data.len()
+            )
+        })?;
+        let mut out = std::io::Cursor::new(Vec::new());
         image
             .write_to(&mut out, image::ImageFormat::Png)
             .map_err(|e| e.to_string())?;
-        ImageFormat::Png
+        (ImageFormat::Png, out.into_inner())
     } else {
-        let rgba = image::RgbaImage::from_raw(width, height, data.to_vec()).ok_or_else(bad)?;
-        let rgb = image::DynamicImage::ImageRgba8(rgba).to_rgb8();
-        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, JPEG_QUALITY)
-            .encode_image(&rgb)
-            .map_err(|e| e.to_string())?;
-        ImageFormat::Jpeg
+        let jpeg = jpeg(width, height, data).map_err(|e| format!("{stream:?} image: {e}"))?;
+        (ImageFormat::Jpeg, jpeg)
     };
     Ok(CompressedFrame {
         stamp_ns: 0,
         format,
-        data: out.into_inner(),
+        data,
     })
+}
+
+/// An RGBA8 image (`width × height`) as a JPEG of the recorded frames' quality
+/// ([`JPEG_QUALITY`]); errors when the buffer does not match the size, or the encoder fails.
+pub(crate) fn jpeg(width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>, String> {
+    let image = image::RgbaImage::from_raw(width, height, rgba.to_vec())
+        .ok_or_else(|| format!("{} bytes for {width}x{height}", rgba.len()))?;
+    let rgb = image::DynamicImage::ImageRgba8(image).to_rgb8();
+    let mut out = std::io::Cursor::new(Vec::new());
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, JPEG_QUALITY)
+        .encode_image(&rgb)
+        .map_err(|e| e.to_string())?;
+    Ok(out.into_inner())
 }
 
 fn write_session(mut writer: RecordingWriter, rx: Receiver<Item>) -> Result<Written, RecordError> {

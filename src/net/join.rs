@@ -164,9 +164,9 @@ pub struct JoinRecording {
 }
 
 /// `join --record`: what the operator's (or observer's) site receives, written as it arrives:
-/// the first camera's erased frames (JPEG as received; an H.264 frame coded to JPEG), the
-/// robot's joint states and its stops, stamped on the robot site's clock moved to the Unix
-/// epoch at the join (so that MCAP tools show wall time).
+/// the first camera's erased frames (JPEG as received; an H.264 frame coded to JPEG as
+/// `run --record` codes its frames), the robot's joint states and its stops, stamped on the
+/// robot site's clock moved to the Unix epoch at the join (so that MCAP tools show wall time).
 struct JoinRecorder {
     writer: RecordingWriter,
     /// Unix time (ns) of the robot site's clock's 0 s.
@@ -278,7 +278,7 @@ impl JoinRecorder {
         let data = if h.codec == avatarm_net::codec::Codec::Jpeg.name() {
             payload.to_vec()
         } else {
-            match jpeg(h.width, h.height, rgba) {
+            match crate::session::jpeg(h.width, h.height, rgba) {
                 Ok(d) => d,
                 Err(e) => return self.refused(format!("frame {}: {e}", h.index)),
             }
@@ -304,18 +304,6 @@ impl JoinRecorder {
         }
         report
     }
-}
-
-/// An RGBA image as a JPEG (quality 90, as `run --record` writes erased frames).
-fn jpeg(width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>, String> {
-    let image = image::RgbaImage::from_raw(width, height, rgba.to_vec())
-        .ok_or_else(|| format!("{} bytes for {width}x{height}", rgba.len()))?;
-    let rgb = image::DynamicImage::ImageRgba8(image).to_rgb8();
-    let mut out = std::io::Cursor::new(Vec::new());
-    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 90)
-        .encode_image(&rgb)
-        .map_err(|e| e.to_string())?;
-    Ok(out.into_inner())
 }
 
 /// The least time between two keyframe requests of one camera (s).
