@@ -866,6 +866,9 @@ fn operate_with(
                     }
                 }
             }
+            // Bevy's first update runs no physics step (the fixed clock still at 0): there is
+            // no hand yet, and nothing failed.
+            _ if state.now_s <= 0.0 => {}
             // No hand yet, or a tick the mapping refuses: nothing goes out, and the robot
             // site's watchdog stops the arm if it lasts.
             _ => collect.report.targets_failed += 1,
