@@ -147,6 +147,7 @@ fn run_cell(
         credentials: None,
         dictionary: None,
         operators: vec![],
+        robot_sites: vec![],
         tls: None,
         insecure_lan: true,
     };

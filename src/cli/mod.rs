@@ -125,6 +125,9 @@ enum Command {
     Run {
         /// The scene file.
         scene: Option<PathBuf>,
+        /// Look through the scene's camera NAME (one of its [[cameras]]; default: the first).
+        #[arg(long, value_name = "NAME")]
+        view: Option<String>,
         /// Start an OpenXR session; without a runtime the preview window is used.
         #[arg(long)]
         xr: bool,
@@ -190,6 +193,10 @@ enum Command {
         /// used for the background built from the footage (px).
         #[arg(long = "background-margin", value_name = "PX", default_value_t = 8)]
         background_margin: u32,
+        /// With a scene: replay only its camera NAME (one of its [[cameras]]; default: each
+        /// camera in turn, into DIR/NAME/).
+        #[arg(long, value_name = "NAME", conflicts_with = "recording")]
+        view: Option<String>,
         /// With a scene: also write the replay as a recording (MCAP): the frames, the robot's
         /// joints at each capture, the believed camera, the true silhouettes as reference
         /// masks, Avatarm's erased frames and masks.
@@ -280,12 +287,21 @@ enum Command {
     Serve {
         /// The scene file.
         scene: Option<PathBuf>,
+        /// Look through the scene's camera NAME (one of its [[cameras]]; default: the first; the robot site serves one camera).
+        #[arg(long, value_name = "NAME")]
+        view: Option<String>,
         /// The robot: sim (the simulated arm) or ros (the scene's [robot.link], ROS 1).
         #[arg(long, value_name = "ROBOT", value_parser = ["sim", "ros"], default_value = "sim")]
         robot: String,
-        /// Where to listen (tcp/HOST:PORT, udp/HOST:PORT or tls/HOST:PORT).
-        #[arg(long, value_name = "ENDPOINT", default_value = "tcp/0.0.0.0:7447")]
+        /// Where to listen (tcp/HOST:PORT, udp/HOST:PORT or tls/HOST:PORT; default
+        /// tcp/0.0.0.0:7447 unless --connect is given).
+        #[arg(long, value_name = "ENDPOINT")]
         listen: Vec<String>,
+        /// Connect to a router instead of listening (`avatarm router`, docs/network.md):
+        /// nothing listens at the robot site, which logs in to the router with --credentials
+        /// (its user:password line).
+        #[arg(long, value_name = "ENDPOINT")]
+        connect: Vec<String>,
         /// The mapping mode: paper or closed_loop (default: the task's closed loop).
         #[arg(long, value_name = "MODE", value_parser = mapping_mode)]
         mode: Option<avatarm_core::teleop::mapping::MappingMode>,
@@ -329,6 +345,10 @@ enum Command {
         /// The scene file, the same as the robot site's (default: the pouring scene).
         #[arg(long, value_name = "FILE")]
         scene: Option<PathBuf>,
+        /// The scene's camera NAME whose video the robot site serves (its `serve --view`;
+        /// default: the first).
+        #[arg(long, value_name = "NAME")]
+        view: Option<String>,
         /// Only watch: no hand, no targets.
         #[arg(long)]
         watch: bool,
@@ -382,7 +402,8 @@ enum Command {
         /// Where to listen.
         #[arg(long, value_name = "ENDPOINT", default_value = "tcp/0.0.0.0:7448")]
         listen: Vec<String>,
-        /// Robot sites or other routers to connect to.
+        /// Robot sites or other routers to connect to (on a trusted network, --insecure-lan;
+        /// with a dictionary the robot site connects to the router instead).
         #[arg(long, value_name = "ENDPOINT")]
         connect: Vec<String>,
         /// Stop after this many seconds (default: until killed).
@@ -743,7 +764,8 @@ fn run(cli: Cli) -> Result<(), AppError> {
         Command::Serve {
             scene,
             robot,
-            listen,
+            mut listen,
+            connect,
             mode,
             target_timeout,
             video,
@@ -755,10 +777,11 @@ fn run(cli: Cli) -> Result<(), AppError> {
             report,
             package_path,
             net,
+            view,
         } => {
             crate::net::init_log();
             let path = scene.unwrap_or_else(pouring_scene);
-            let scene = Scene::load(&path, &packages(package_path))?;
+            let scene = Scene::load_view(&path, &packages(package_path), view.as_deref())?;
             let encoder = crate::net::encoder_settings(
                 &codec,
                 jpeg_quality,
@@ -767,7 +790,12 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 scene.file.camera.fps,
             )?;
             let options = crate::net::serve::ServeOptions {
-                net: net.config(avatarm_net::Role::RobotSite, listen, Vec::new())?,
+                net: {
+                    if listen.is_empty() && connect.is_empty() {
+                        listen.push("tcp/0.0.0.0:7447".to_owned());
+                    }
+                    net.config(avatarm_net::Role::RobotSite, listen, connect)?
+                },
                 scene,
                 robot: if robot == "ros" {
                     crate::teleop::RobotChoice::Ros
@@ -801,10 +829,11 @@ fn run(cli: Cli) -> Result<(), AppError> {
             screenshot,
             package_path,
             net,
+            view,
         } => {
             crate::net::init_log();
             let path = scene.unwrap_or_else(pouring_scene);
-            let scene = Scene::load(&path, &packages(package_path))?;
+            let scene = Scene::load_view(&path, &packages(package_path), view.as_deref())?;
             let role = if watch {
                 avatarm_net::Role::Observer
             } else {
@@ -1066,6 +1095,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             robot,
             record,
             overrides,
+            view,
         } => {
             if webcam.is_some() && !cfg!(feature = "webcam") {
                 return Err(AppError::flag(
@@ -1075,7 +1105,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 ));
             }
             let path = scene.unwrap_or_else(default_scene);
-            let mut scene = Scene::load(&path, &packages(package_path))?;
+            let mut scene = Scene::load_view(&path, &packages(package_path), view.as_deref())?;
             overrides.apply(&mut scene)?;
             if let Some(mount) = leap_mount {
                 if mount == LeapMountKind::FirstWrist && scene.file.leap.device_at.is_some() {
@@ -1105,6 +1135,14 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 scene.file.background = BackgroundSpec::None;
             }
             let xr = xr || scene.file.xr;
+            // In XR a camera on a head rides on the wearer's head (the scripted motion until
+            // the headset reports; docs/alice-view.md).
+            #[cfg(feature = "xr")]
+            if xr && let Some(head) = scene.head.as_mut() {
+                head.motion = avatarm_core::vision::head::HeadMotion::Live(
+                    avatarm_core::vision::head::LiveHead::new(head.motion.clone()),
+                );
+            }
             let hand = live_hand(&scene, hand.as_deref(), xr)?;
             let robot = if robot == "ros" {
                 if hand.is_none() {
@@ -1117,6 +1155,10 @@ fn run(cli: Cli) -> Result<(), AppError> {
             } else {
                 crate::teleop::RobotChoice::Sim
             };
+            // The C key's next camera; a recording holds one camera.
+            let next_view = record
+                .is_none()
+                .then(std::sync::Arc::<std::sync::Mutex<Option<String>>>::default);
             let mode = Mode::Preview(PreviewOptions {
                 frames,
                 screenshot,
@@ -1127,6 +1169,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 webcam,
                 hand,
                 robot,
+                next_view: next_view.clone(),
             });
             let mut app = build_app(&scene, &mode)?;
             if let Some(path) = &record {
@@ -1135,6 +1178,11 @@ fn run(cli: Cli) -> Result<(), AppError> {
             let exit = app.run();
             if exit.is_error() {
                 return Err(AppError::Preview);
+            }
+            let next = next_view.and_then(|slot| slot.lock().ok().and_then(|mut v| v.take()));
+            if let Some(view) = next {
+                eprintln!("looking through the camera '{view}': starting again");
+                return Err(crate::preview::restart_with_view(&view));
             }
             Ok(())
         }
@@ -1194,16 +1242,52 @@ fn run(cli: Cli) -> Result<(), AppError> {
             package_path,
             overrides,
             record,
+            view,
             ..
         } => {
-            let scene =
+            let path =
                 scene.ok_or_else(|| AppError::flag("replay", "give a scene or --recording"))?;
-            let mut scene = Scene::load(&scene, &packages(package_path))?;
+            let packages = packages(package_path);
+            let mut scene = Scene::load_view(&path, &packages, view.as_deref())?;
             overrides.apply(&mut scene)?;
             let mut options = ReplayOptions::new(out.clone());
             options.frames_every = frames_every;
             options.progress = true;
             options.record = record;
+            if view.is_none() && scene.cameras.len() > 1 {
+                // Each camera in turn.
+                let others = scene.cameras[1..].to_vec();
+                let mut scenes = vec![scene];
+                for name in others {
+                    let mut other = Scene::load_view(&path, &packages, Some(&name))?;
+                    overrides.apply(&mut other)?;
+                    scenes.push(other);
+                }
+                let report = crate::replay::run_views(&scenes, options)?;
+                for camera in report["cameras"].as_array().into_iter().flatten() {
+                    eprintln!(
+                        "camera '{}': {} frames, mask IoU {}, leak {} %, PSNR in the robot's region {} dB",
+                        camera["name"].as_str().unwrap_or_default(),
+                        camera["frames"],
+                        camera["mask"]["iou_mean"]
+                            .as_f64()
+                            .map_or("-".into(), |v| format!("{v:.3}")),
+                        camera["mask"]["leak_pct_mean"]
+                            .as_f64()
+                            .map_or("-".into(), |v| format!("{v:.2}")),
+                        camera["dr"]["psnr_robot_db_mean"]
+                            .as_f64()
+                            .map_or("-".into(), |v| format!("{v:.1}")),
+                    );
+                }
+                eprintln!(
+                    "replayed '{}' through {} cameras; report: {}",
+                    scenes[0].file.name,
+                    scenes.len(),
+                    out.join("report.json").display()
+                );
+                return Ok(());
+            }
             let report = crate::replay::run(&scene, options)?;
             eprintln!(
                 "replayed '{}': {} frames, {:.2} s simulated in {:.2} s ({:.2} sim s per wall s); report: {}",

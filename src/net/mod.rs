@@ -25,14 +25,19 @@ pub struct NetArgs {
     /// The session's name: keys are avatarm/SITE/... (letters, digits, '-', '_').
     #[arg(long, value_name = "SITE", default_value = "desk")]
     pub site: String,
-    /// serve/router: a dictionary of user:password lines, who may connect; join: a file whose
-    /// first line is this side's user:password.
+    /// serve (listening) and router: a dictionary of user:password lines, who may connect;
+    /// join and serve --connect: a file whose first line is this side's user:password.
     #[arg(long, value_name = "FILE")]
     pub credentials: Option<PathBuf>,
     /// serve/router: a user (in the dictionary) allowed to command the robot (repeatable;
     /// default: the dictionary's first user).
     #[arg(long = "operator", value_name = "USER")]
     pub operators: Vec<String>,
+    /// router: a user (in its dictionary) that a robot site logs in as when it connects
+    /// (`serve --connect`); only such users may publish the robot's joint states, status and
+    /// video through the router (repeatable).
+    #[arg(long = "robot-site", value_name = "USER")]
+    pub robot_sites: Vec<String>,
     /// TLS: the certificate authority's certificate (PEM), to check the other side.
     #[arg(long = "tls-ca", value_name = "FILE")]
     pub tls_ca: Option<PathBuf>,
@@ -57,7 +62,7 @@ impl NetArgs {
         connect: Vec<String>,
     ) -> Result<NetConfig, AppError> {
         let keys = Keys::new(&self.site)?;
-        let listens = matches!(role, Role::RobotSite | Role::Router);
+        let listens = !listen.is_empty();
         let (credentials, dictionary, operators) = match (&self.credentials, listens) {
             (Some(path), true) => {
                 let first = Credentials::from_file(path)?;
@@ -85,6 +90,7 @@ impl NetArgs {
             credentials,
             dictionary,
             operators,
+            robot_sites: self.robot_sites.clone(),
             tls,
             insecure_lan: self.insecure_lan,
         };

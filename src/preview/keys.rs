@@ -2,11 +2,12 @@
 //! test checks that the README lists every key with its action).
 
 /// The preview's keys and what each does.
-pub const PREVIEW_KEYS: [(&str, &str); 8] = [
+pub const PREVIEW_KEYS: [(&str, &str); 9] = [
     (
         "V",
         "cycles the panel (interaction view, camera feed, mask)",
     ),
+    ("C", "switches to the next camera"),
     ("E", "switches erasure on and off"),
     ("M", "tints the mask over the panel"),
     ("W", "draws the twin as a wireframe"),

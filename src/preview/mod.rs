@@ -14,6 +14,7 @@ pub mod live_scores;
 pub mod xr;
 
 use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
 
 use avatarm_erase::{
     CaptureBackground, EraseConfig, EraseState, EraseTargets, InteractionTargets, toggle_erasure,
@@ -33,7 +34,7 @@ use bevy::ui_render::UiMaterialPlugin;
 use bevy::ui_render::ui_material::{MaterialNode, UiMaterial};
 
 use crate::preview::live_scores::LiveDr;
-use crate::{AvatarmSystems, SceneResource};
+use crate::{AppError, AvatarmSystems, SceneResource};
 
 /// Options of the preview.
 #[derive(Debug, Clone, Default)]
@@ -55,6 +56,11 @@ pub struct PreviewOptions {
     pub hand: Option<avatarm_scene::hand::HandChoice>,
     /// The robot the live task commands: the simulated arm or the scene's ROS link.
     pub robot: crate::teleop::RobotChoice,
+    /// Where the `C` key leaves the name of the scene's camera to look through next (a scene
+    /// with several `[[cameras]]`): the preview then quits, and the caller starts it again
+    /// through that camera ([`crate::preview::restart_with_view`]). `None`: the camera cannot
+    /// be switched (a recording holds one camera).
+    pub next_view: Option<Arc<Mutex<Option<String>>>>,
 }
 
 /// The preview's cameras, panels and keys.
@@ -101,6 +107,10 @@ struct PreviewState {
     /// Updates left before quitting: read-backs already asked for (camera frames, scores,
     /// screenshots) come back first, so none is sent to a closed app.
     quit_in: Option<u32>,
+    /// The scene's camera the `C` key switches to ([`next_camera`]).
+    next_camera: Option<String>,
+    /// After the panel's title: the camera looked through, for a scene with several.
+    camera_title: String,
 }
 
 /// Updates between asking to quit and quitting, with no new read-backs.
@@ -158,6 +168,8 @@ impl Plugin for PreviewPlugin {
             mask_overlay: false,
             wireframe: false,
             quit_in: None,
+            next_camera: None,
+            camera_title: String::new(),
         })
         .add_systems(Startup, setup_preview)
         .add_systems(
@@ -181,7 +193,18 @@ fn setup_preview(
     scene: Res<SceneResource>,
     mut materials: ResMut<Assets<PanelMaterial>>,
     desktop_hand: Option<Res<crate::teleop::DesktopHand>>,
+    mut state: ResMut<PreviewState>,
 ) {
+    let s = &scene.0;
+    state.next_camera = next_camera(s).map(str::to_owned);
+    if s.cameras.len() > 1 {
+        state.camera_title = format!(
+            " - camera '{}' ({} of {}, C switches)",
+            s.camera_name(),
+            s.camera_index + 1,
+            s.cameras.len()
+        );
+    }
     let base = scene.0.robot_base().translation.vector;
     let focus = Vec3::new(base.x as f32 + 0.45, base.y as f32, base.z as f32 + 0.25);
     // Aimed a little left of the robot so that the twin shows right of the camera feed panel.
@@ -312,9 +335,10 @@ fn show_panel(
             }
         }
     }
+    let wanted = format!("{}{}", state.view.title(), state.camera_title);
     for mut text in &mut title {
-        if text.0 != state.view.title() {
-            text.0 = state.view.title().to_owned();
+        if text.0 != wanted {
+            text.0.clone_from(&wanted);
         }
     }
 }
@@ -452,6 +476,24 @@ fn handle_keys(
         state.view = state.view.next();
         info!("panel: {}", state.view.title());
     }
+    if keys.just_pressed(KeyCode::KeyC) {
+        if let Some(next) = state.next_camera.clone() {
+            match &state.options.next_view {
+                Some(slot) => {
+                    info!("camera: switching to '{next}' (the preview starts again through it)");
+                    if let Ok(mut slot) = slot.lock() {
+                        *slot = Some(next);
+                    }
+                    state.quit_in.get_or_insert(QUIT_DRAIN);
+                }
+                None => info!(
+                    "camera: not switched while recording (a recording holds one camera); start again with --view {next}"
+                ),
+            }
+        } else {
+            info!("camera: the scene has one camera (name several with [[cameras]])");
+        }
+    }
     if keys.just_pressed(KeyCode::KeyE) {
         let on = toggle_erasure(&mut config);
         info!("robot erasure {}", if on { "on" } else { "off" });
@@ -583,6 +625,63 @@ fn count_frames(
     }
 }
 
+/// The camera the `C` key switches to: the scene's next one (after the last, the first);
+/// `None` for a scene with one camera.
+pub fn next_camera(scene: &avatarm_scene::Scene) -> Option<&str> {
+    let n = scene.cameras.len();
+    (n > 1).then(|| scene.cameras[(scene.camera_index + 1) % n].as_str())
+}
+
+/// The command line that starts this preview again through the scene's camera `view`: this
+/// process's arguments with `--view` set to it.
+pub fn args_with_view(args: &[std::ffi::OsString], view: &str) -> Vec<std::ffi::OsString> {
+    let mut out = Vec::with_capacity(args.len() + 2);
+    let mut rest = args.iter();
+    while let Some(arg) = rest.next() {
+        if arg == "--view" {
+            rest.next();
+        } else if !arg.to_string_lossy().starts_with("--view=") {
+            out.push(arg.clone());
+        }
+    }
+    out.push("--view".into());
+    out.push(view.into());
+    out
+}
+
+/// Starts this program again in place of this process (Unix `exec`), looking through the
+/// scene's camera `view`: the window closes and a new one opens, the scene from its start
+/// (one process's windowing event loop cannot be made twice). Returns only on failure.
+pub fn restart_with_view(view: &str) -> AppError {
+    let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+    let args = args_with_view(&args, view);
+    let exe = match std::env::current_exe() {
+        Ok(exe) => exe,
+        Err(e) => {
+            return AppError::flag(
+                "C (switch camera)",
+                format!("cannot find this program: {e}"),
+            );
+        }
+    };
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::CommandExt;
+        let e = std::process::Command::new(&exe).args(&args[1..]).exec();
+        AppError::flag(
+            "C (switch camera)",
+            format!("cannot start {} again: {e}", exe.display()),
+        )
+    }
+    #[cfg(not(unix))]
+    {
+        AppError::flag(
+            "C (switch camera)",
+            format!("start it again with --view {view}: {}", exe.display()),
+        )
+    }
+}
+
 /// Quits [`QUIT_DRAIN`] updates after being asked to, asking for no new read-backs meanwhile.
 fn quit_when_drained(
     mut state: ResMut<PreviewState>,
@@ -603,5 +702,54 @@ fn quit_when_drained(
         exit.write(AppExit::Success);
     } else {
         state.quit_in = Some(left - 1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// C goes through the scene's cameras in turn; a scene with one camera has none to go to.
+    #[test]
+    fn c_goes_through_the_scenes_cameras() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/scenes");
+        let view = |file: &str, v: Option<&str>| {
+            avatarm_scene::Scene::load_view(&root.join(file), &Default::default(), v)
+                .expect("scene")
+        };
+        let two = "pouring_two_views.toml";
+        assert_eq!(next_camera(&view(two, None)), Some("alice"));
+        assert_eq!(next_camera(&view(two, Some("alice"))), Some("blair"));
+        assert_eq!(next_camera(&view("pouring.toml", None)), None);
+    }
+
+    /// Switching camera starts the same command again with `--view` set, in either spelling,
+    /// and the other arguments as they were.
+    #[test]
+    fn the_restart_keeps_the_arguments_and_sets_the_view() {
+        let args = |a: &[&str]| a.iter().map(std::ffi::OsString::from).collect::<Vec<_>>();
+        assert_eq!(
+            args_with_view(
+                &args(&["avatarm", "run", "s.toml", "--frames", "9"]),
+                "alice"
+            ),
+            args(&[
+                "avatarm", "run", "s.toml", "--frames", "9", "--view", "alice"
+            ])
+        );
+        assert_eq!(
+            args_with_view(
+                &args(&["avatarm", "run", "--view", "alice", "s.toml"]),
+                "blair"
+            ),
+            args(&["avatarm", "run", "s.toml", "--view", "blair"])
+        );
+        assert_eq!(
+            args_with_view(
+                &args(&["avatarm", "run", "--view=alice", "s.toml"]),
+                "blair"
+            ),
+            args(&["avatarm", "run", "s.toml", "--view", "blair"])
+        );
     }
 }

@@ -16,6 +16,7 @@
 //!   asked for every few seconds, so XR comes back when the headset does.
 
 use avatarm_core::teleop::hand::{Handedness, SKELETON};
+use avatarm_core::vision::head::{HeadMotion, LiveHead};
 use avatarm_erase::InteractionTargets;
 use avatarm_hand::openxr::{HandInbox, XrJoint, XrMount, xr_frame};
 use avatarm_twin::layers;
@@ -61,6 +62,8 @@ struct XrReport {
     fallback_told: bool,
     retry_at_s: f64,
     sessions: u32,
+    /// Updates with a session running (one frame submitted to the runtime each).
+    frames_running: u64,
 }
 
 #[derive(Component)]
@@ -87,12 +90,99 @@ impl Plugin for XrViewPlugin {
                 (
                     report_session,
                     eye_cameras_see_the_panel,
-                    (place_panel, read_hands).run_if(session_running),
+                    (place_panel, read_hands, read_head)
+                        .chain()
+                        .run_if(session_running),
                 )
                     .chain()
                     .in_set(AvatarmSystems::Xr),
-            );
+            )
+            // After the replay's and the preview's own exits are asked for.
+            .add_systems(Last, report_at_exit.after(AvatarmSystems::Score));
     }
+}
+
+/// The scene's head when a headset drives it (`avatarm run --xr` with a camera on a head).
+fn live_head(scene: &SceneResource) -> Option<&LiveHead> {
+    match scene.0.head.as_ref().map(|h| &h.motion) {
+        Some(HeadMotion::Live(live)) => Some(live),
+        _ => None,
+    }
+}
+
+/// The headset's head (the middle of its eye views, the first's orientation; tracking space)
+/// drives the scene's head: the simulated room's camera rides on it and its tracker reports
+/// it, so the mask follows the wearer. Stamped on the app clock, as the hands are.
+fn read_head(
+    scene: Res<SceneResource>,
+    eyes: Query<&Transform, With<XrCamera>>,
+    time: Res<Time<Fixed>>,
+    mut report: ResMut<XrReport>,
+) {
+    report.frames_running += 1;
+    let Some(live) = live_head(&scene) else {
+        return;
+    };
+    let n = eyes.iter().count();
+    let Some(first) = eyes.iter().next() else {
+        return;
+    };
+    let centre = eyes.iter().map(|t| t.translation).sum::<Vec3>() / n as f32;
+    if centre == Vec3::ZERO && first.rotation == Quat::IDENTITY {
+        return; // not located yet
+    }
+    let c = centre.as_dvec3();
+    let q = first.rotation.as_dquat();
+    let tracking_from_view = nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::new(c.x, c.y, c.z),
+        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z)),
+    );
+    live.push_openxr_view(time.elapsed_secs_f64(), &tracking_from_view);
+}
+
+/// One line when the app exits: the sessions, the frames submitted, the hand frames taken and,
+/// for a camera on a head, how the headset drove it (the tests against a runtime read it).
+#[allow(clippy::too_many_arguments)]
+fn report_at_exit(
+    mut exits: MessageReader<AppExit>,
+    report: Res<XrReport>,
+    hand: Res<XrHand>,
+    scene: Res<SceneResource>,
+    erase: Option<Res<avatarm_erase::EraseState>>,
+) {
+    if exits.read().next().is_none() {
+        return;
+    }
+    let head = match (live_head(&scene), &scene.0.head) {
+        (Some(live), Some(rig)) => {
+            // The last erased frame's mask camera against the headset's head at that frame's
+            // capture, times the mount.
+            let mask = match erase.as_ref().map(|e| (e.camera_pose, e.frame_capture_s)) {
+                Some((Some(camera), Some(capture_s))) => {
+                    let (angle, offset) = avatarm_core::vision::head::pose_error(
+                        &camera,
+                        &(live.pose_at(capture_s) * rig.believed_mount),
+                    );
+                    format!(
+                        ", the last frame's mask camera {:.3} deg and {:.1} mm off the headset's head at its capture",
+                        angle.to_degrees(),
+                        offset * 1e3
+                    )
+                }
+                _ => String::new(),
+            };
+            format!(
+                "; head: {} poses from the headset, turned {:.1} deg since the first{mask}",
+                live.poses(),
+                live.turned_rad().to_degrees()
+            )
+        }
+        _ => String::new(),
+    };
+    info!(
+        "XR summary: {} sessions, {} frames submitted while running, {} hand frames from OpenXR hand tracking{head}",
+        report.sessions, report.frames_running, hand.frames
+    );
 }
 
 fn configure_gizmos(mut store: ResMut<GizmoConfigStore>) {

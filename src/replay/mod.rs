@@ -915,6 +915,7 @@ fn finish(
         "wall_time_s": wall,
         "sim_s_per_wall_s": if wall > 0.0 { sim / wall } else { 0.0 },
         "camera": {
+            "name": s.camera_name(),
             "width": k.width, "height": k.height,
             "fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
             "fps": s.file.camera.fps,
@@ -1095,28 +1096,105 @@ pub fn run(
     scene: &avatarm_scene::Scene,
     options: ReplayOptions,
 ) -> Result<serde_json::Value, AppError> {
+    let out = options.out.clone();
+    let mut report = run_video(scene, options)?;
+    if let Some(object) = object_report(scene)? {
+        report["object"] = object;
+        write_report(&out, &report)?;
+    }
+    Ok(report)
+}
+
+/// Replays a scene through each of its cameras in turn: `scenes` holds the scene looked
+/// through each (`Scene::load_view`, in the file's order). The simulated room is the same in
+/// each replay (the scene's seed), so each camera sees the same run of the robot. Camera
+/// NAME's frames and its own report go to `options.out/NAME/`; `options.out/report.json`
+/// gives each camera's report under `cameras` (with its `name` and `out`) and the task's
+/// `object` once. Recording (`options.record`) holds one camera: refused here.
+pub fn run_views(
+    scenes: &[avatarm_scene::Scene],
+    options: ReplayOptions,
+) -> Result<serde_json::Value, AppError> {
+    let Some(first) = scenes.first() else {
+        return Err(AppError::replay("no camera to replay".to_owned()));
+    };
+    if options.record.is_some() {
+        return Err(AppError::flag(
+            "--record",
+            format!(
+                "a recording holds one camera, and the scene '{}' has {}: choose one with --view",
+                first.file.name,
+                scenes.len()
+            ),
+        ));
+    }
+    let mut cameras = Vec::new();
+    for scene in scenes {
+        let name = scene.camera_name();
+        if options.progress {
+            eprintln!(
+                "camera '{name}' ({} of {}):",
+                scene.camera_index + 1,
+                scenes.len()
+            );
+        }
+        let mut own = options.clone();
+        own.out = options.out.join(name);
+        own.result = Arc::default();
+        let mut report = run_video(scene, own)?;
+        report["name"] = json!(name);
+        report["out"] = json!(name);
+        cameras.push(report);
+    }
+    let mut report = json!({
+        "scene": first.file.name,
+        "scene_file": first.path.display().to_string(),
+        "seed": first.file.seed,
+        "cameras": cameras,
+        "note": "each camera replayed in turn over the same simulated run (the scene's seed); \
+                 cameras[i] is the report in cameras[i].out/report.json",
+    });
+    if let Some(object) = object_report(first)? {
+        report["object"] = object;
+    }
+    write_report(&options.out, &report)?;
+    Ok(report)
+}
+
+/// The task's trials, run headless (physics and mapping, no video) after the replay: the
+/// report's `object` section, `None` for a scene without a `[task]`.
+fn object_report(scene: &avatarm_scene::Scene) -> Result<Option<serde_json::Value>, AppError> {
+    match (&scene.file.task, &scene.trial) {
+        (Some(task), Some(setup)) => Ok(Some(task::object_report(task, setup)?)),
+        _ => Ok(None),
+    }
+}
+
+/// Writes `report` to `out/report.json`.
+fn write_report(out: &Path, report: &serde_json::Value) -> Result<(), AppError> {
+    std::fs::create_dir_all(out).map_err(|e| AppError::write(out.to_owned(), e))?;
+    let path = out.join("report.json");
+    let text = serde_json::to_string_pretty(report)?;
+    std::fs::write(&path, text + "\n").map_err(|e| AppError::write(path, e))
+}
+
+/// One camera's replay, without the task: its report (also in `options.out/report.json`).
+fn run_video(
+    scene: &avatarm_scene::Scene,
+    options: ReplayOptions,
+) -> Result<serde_json::Value, AppError> {
     if options.record.is_some() {
         refuse_moving_camera_recording(scene)?;
     }
     let slot = options.result.clone();
-    let out = options.out.clone();
     let mut app = crate::build_app(scene, &crate::Mode::Headless(options))?;
     let exit = app.run();
-    let mut report = slot
-        .lock()
+    slot.lock()
         .ok()
         .and_then(|mut s| s.take())
         .unwrap_or_else(|| {
             Err(AppError::replay(format!(
                 "stopped before finishing ({exit:?})"
             )))
-        })?;
-    if let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) {
-        // The task's trials run headless (physics and mapping, no video) after the replay.
-        report["object"] = task::object_report(task, setup)?;
-        let path = out.join("report.json");
-        let text = serde_json::to_string_pretty(&report)?;
-        std::fs::write(&path, text + "\n").map_err(|e| AppError::write(path, e))?;
-    }
-    Ok(report)
+        })
 }

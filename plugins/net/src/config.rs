@@ -3,11 +3,17 @@
 //!
 //! - No multicast scouting and no gossip: sites find each other only through the endpoints
 //!   given (two sessions on one network never join by accident).
-//! - The robot site (and a router) listens; it refuses to listen without a credentials
-//!   dictionary unless [`NetConfig::insecure_lan`] is set.
+//! - The robot site listens, or connects to a router (then nothing listens at the robot
+//!   site). Whatever listens refuses to do so without a credentials dictionary unless
+//!   [`NetConfig::insecure_lan`] is set.
 //! - With credentials, Zenoh's access control lets only the dictionary's operators
 //!   ([`NetConfig::operators`]) put on the operator's keys and declare its liveliness token:
 //!   an observer's or a stranger's target never reaches the robot's loop.
+//! - A router with a dictionary also lets only its robot sites ([`NetConfig::robot_sites`],
+//!   users that connect to it) publish on the robot's keys: none of its other users can feed
+//!   viewers false joint states or video. Zenoh's `usrpwd` authenticates the side that
+//!   connects, so the robot site connects to the router and logs in; a router that connects
+//!   out cannot tell who is at the other end, and is refused with a dictionary.
 
 use std::path::PathBuf;
 
@@ -86,6 +92,9 @@ pub struct NetConfig {
     pub dictionary: Option<PathBuf>,
     /// User names (in the dictionary) allowed to command the robot.
     pub operators: Vec<String>,
+    /// A router's robot sites: user names (in its dictionary) of the robot sites that connect
+    /// to it, the only ones allowed to publish on the robot's keys through it.
+    pub robot_sites: Vec<String>,
     /// TLS files.
     pub tls: Option<TlsFiles>,
     /// Listen without authentication (a trusted LAN or a test).
@@ -110,15 +119,29 @@ impl NetConfig {
                 message,
             })
         };
-        let listens = matches!(self.role, Role::RobotSite | Role::Router);
-        if listens && self.listen.is_empty() {
-            return bad(
-                "--listen",
-                "a robot site or router needs an endpoint to listen on".into(),
-            );
-        }
-        if !listens && self.connect.is_empty() {
-            return bad("ENDPOINT", "an endpoint to connect to is needed".into());
+        let listens = !self.listen.is_empty();
+        match self.role {
+            Role::Router if !listens => {
+                return bad("--listen", "a router needs an endpoint to listen on".into());
+            }
+            Role::RobotSite if !listens && self.connect.is_empty() => {
+                return bad(
+                    "--listen",
+                    "a robot site listens (--listen) or connects to a router (--connect)".into(),
+                );
+            }
+            Role::RobotSite if listens && !self.connect.is_empty() && !self.insecure_lan => {
+                return bad(
+                    "--connect",
+                    "a robot site that listens cannot also connect to a router (who sends \
+                     through that link is not authenticated): choose one, or --insecure-lan"
+                        .into(),
+                );
+            }
+            Role::Operator | Role::Observer if self.connect.is_empty() => {
+                return bad("ENDPOINT", "an endpoint to connect to is needed".into());
+            }
+            _ => {}
         }
         for e in self.listen.iter().chain(&self.connect) {
             if e.parse::<zenoh::config::EndPoint>().is_err()
@@ -138,10 +161,47 @@ impl NetConfig {
                     .into(),
             );
         }
-        if let Some(d) = &self.dictionary
-            && !d.is_file()
-        {
-            return bad("--credentials", format!("{} is not a file", d.display()));
+        if let Some(d) = &self.dictionary {
+            let text = match std::fs::read_to_string(d) {
+                Ok(text) => text,
+                Err(e) => return bad("--credentials", format!("{}: {e}", d.display())),
+            };
+            let users: Vec<&str> = text
+                .lines()
+                .filter_map(|l| l.split_once(':').map(|(u, _)| u.trim()))
+                .collect();
+            for (flag, names) in [
+                ("--operator", &self.operators),
+                ("--robot-site", &self.robot_sites),
+            ] {
+                if let Some(name) = names.iter().find(|n| !users.contains(&n.as_str())) {
+                    return bad(flag, format!("'{name}' is not a user of {}", d.display()));
+                }
+            }
+            if self.role == Role::Router {
+                if self.robot_sites.is_empty() {
+                    return bad(
+                        "--robot-site",
+                        "a router with a dictionary needs the user its robot site logs in as \
+                         (the robot site connects to it: serve --connect)"
+                            .into(),
+                    );
+                }
+                if !self.connect.is_empty() {
+                    return bad(
+                        "--connect",
+                        "a router with a dictionary does not connect out: what comes back on a \
+                         link it opened is not authenticated; let the robot site connect to it \
+                         (serve --connect) and log in as a --robot-site user"
+                            .into(),
+                    );
+                }
+            }
+        } else if !self.robot_sites.is_empty() {
+            return bad(
+                "--robot-site",
+                "names a user of the router's dictionary: give --credentials".into(),
+            );
         }
         if let Some(tls) = &self.tls {
             for (name, p) in [
@@ -200,12 +260,11 @@ impl NetConfig {
                 }
             }
         }
-        let acl =
-            if self.dictionary.is_some() && matches!(self.role, Role::RobotSite | Role::Router) {
-                self.access_control()
-            } else {
-                String::new()
-            };
+        let acl = if self.dictionary.is_some() {
+            self.access_control()
+        } else {
+            String::new()
+        };
         let text = format!(
             "{{ mode: {mode}, \
                listen: {{ endpoints: {listen} }}, \
@@ -226,8 +285,9 @@ impl NetConfig {
     }
 
     /// Access control: denied unless allowed; everyone authenticated may read the session;
-    /// the robot site's keys only leave the robot site (a router also forwards them in); only
-    /// [`NetConfig::operators`] may put on the operator's keys or declare its token.
+    /// only [`NetConfig::operators`] may put on the operator's keys or declare its token. At
+    /// the robot site its own keys only go out; at a router they come in only from
+    /// [`NetConfig::robot_sites`] and go out to anyone.
     fn access_control(&self) -> String {
         let k = &self.keys;
         let all = r#"["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable", "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"]"#;
@@ -235,35 +295,32 @@ impl NetConfig {
         let robot = list(&[k.robot_space(), k.camera_space()]);
         let session = list(&[k.session_space()]);
         let operator = list(&[k.operator_space()]);
-        let operators = list(&self.operators);
-        // At the robot site its own keys only go out: nobody else may publish joint states,
-        // status or video under its name, or answer its info and clock queries. A router
-        // forwards them in from the robot site.
-        let robot_flows = if self.role == Role::RobotSite {
-            r#"["egress"]"#
-        } else {
-            r#"["egress", "ingress"]"#
+        // Nobody: a subject no user name matches.
+        let subject = |id: &str, users: &[String]| {
+            if users.is_empty() {
+                format!(r#"{{ id: "{id}", usernames: ["-"] }}"#)
+            } else {
+                format!(r#"{{ id: "{id}", usernames: {} }}"#, list(users))
+            }
         };
-        let operator_subject = if self.operators.is_empty() {
-            // Nobody may command: a subject no user name matches.
-            r#"{ id: "operators", usernames: ["-"] }"#.to_string()
-        } else {
-            format!(r#"{{ id: "operators", usernames: {operators} }}"#)
-        };
+        let operators = subject("operators", &self.operators);
+        let robot_sites = subject("robot_sites", &self.robot_sites);
         format!(
             r#"access_control: {{
                 enabled: true,
                 default_permission: "deny",
                 rules: [
-                  {{ id: "robot_site", messages: {all}, flows: {robot_flows}, permission: "allow", key_exprs: {robot} }},
+                  {{ id: "robot_out", messages: {all}, flows: ["egress"], permission: "allow", key_exprs: {robot} }},
+                  {{ id: "robot_in", messages: {all}, flows: ["ingress"], permission: "allow", key_exprs: {robot} }},
                   {{ id: "read", messages: {read}, flows: ["egress", "ingress"], permission: "allow", key_exprs: {session} }},
                   {{ id: "forward_operator", messages: ["put", "delete", "liveliness_token"], flows: ["egress"], permission: "allow", key_exprs: {operator} }},
                   {{ id: "command", messages: ["put", "delete", "liveliness_token"], flows: ["ingress"], permission: "allow", key_exprs: {operator} }},
                 ],
-                subjects: [ {{ id: "anyone" }}, {operator_subject} ],
+                subjects: [ {{ id: "anyone" }}, {operators}, {robot_sites} ],
                 policies: [
-                  {{ rules: ["robot_site", "read", "forward_operator"], subjects: ["anyone"] }},
+                  {{ rules: ["robot_out", "read", "forward_operator"], subjects: ["anyone"] }},
                   {{ rules: ["command"], subjects: ["operators"] }},
+                  {{ rules: ["robot_in"], subjects: ["robot_sites"] }},
                 ],
               }},"#
         )

@@ -48,6 +48,7 @@ fn config(role: Role, endpoint: &str, site: &str) -> NetConfig {
         credentials: None,
         dictionary: None,
         operators: vec![],
+        robot_sites: vec![],
         tls: None,
         insecure_lan: true,
     }
@@ -104,6 +105,20 @@ fn until_delivered(operator: &OperatorSite, robot: &mut RobotSite) {
             "no target reached the robot site"
         );
     }
+}
+
+/// The operator's targets arrive, all 20 of a burst, and its liveliness token with them.
+fn commands_arrive(operator: &OperatorSite, robot: &mut RobotSite) {
+    until_delivered(operator, robot);
+    let now = operator.robot_now_s();
+    for seq in 0..20 {
+        operator
+            .publish_target(&TargetMsg::new(seq, &target(now), now, true))
+            .expect("sent");
+    }
+    let inbox = collect(robot, |i| i.targets.len() >= 20 && i.operator_present);
+    assert_eq!(inbox.targets.len(), 20);
+    assert!(inbox.operator_present);
 }
 
 #[test]
@@ -294,14 +309,135 @@ fn only_the_dictionary_s_operator_can_command_the_robot() {
         Duration::from_secs(5),
     )
     .expect("the operator joins");
-    until_delivered(&blair, &mut robot);
-    let now = blair.robot_now_s();
-    for seq in 0..20 {
-        blair
+    commands_arrive(&blair, &mut robot);
+}
+
+/// Through a router with a dictionary (the robot site connects to it and logs in): only the
+/// router's operator commands the robot, only the robot site's user publishes the robot's
+/// joint states to viewers (another user's forged ones, which that user also watches for, are
+/// dropped at the router), and a
+/// router that would connect out, or has no robot-site user, is refused.
+#[test]
+fn through_a_router_only_its_operator_commands_and_only_the_robot_site_publishes() {
+    use avatarm_net::Router;
+    use avatarm_net::msg::JointStatesMsg;
+    use zenoh::Wait;
+
+    let dir = std::env::temp_dir().join(format!("avatarm-net-router-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("a folder");
+    let dictionary = dir.join("router-users.txt");
+    std::fs::write(
+        &dictionary,
+        "desk:robot-site-key\nblair:pour-carefully\nwatcher:just-looking\n",
+    )
+    .expect("written");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let login = |user: &str, password: &str| {
+        Some(Credentials {
+            user: user.into(),
+            password: password.into(),
+        })
+    };
+    let mut router_config = config(Role::Router, &endpoint, "t6");
+    router_config.listen = vec![endpoint.clone()];
+    router_config.connect = vec![];
+    router_config.insecure_lan = false;
+    router_config.dictionary = Some(dictionary.clone());
+    router_config.operators = vec!["blair".into()];
+    // Refused: no robot-site user; a user not in the dictionary; connecting out.
+    let e = router_config.validate().expect_err("no robot site");
+    assert!(e.to_string().contains("--robot-site"), "{e}");
+    router_config.robot_sites = vec!["alice".into()];
+    let e = router_config.validate().expect_err("not a user");
+    assert!(e.to_string().contains("'alice'"), "{e}");
+    router_config.robot_sites = vec!["desk".into()];
+    let mut out = router_config.clone();
+    out.connect = vec![endpoint.clone()];
+    let e = out
+        .validate()
+        .expect_err("a router with a dictionary connecting out");
+    assert!(e.to_string().contains("--connect"), "{e}");
+    let _router = Router::open(&router_config).expect("the router opens");
+
+    // The robot site connects to the router and logs in; nothing listens at it.
+    let mut robot_config = config(Role::RobotSite, &endpoint, "t6");
+    robot_config.listen = vec![];
+    robot_config.connect = vec![endpoint.clone()];
+    robot_config.insecure_lan = false;
+    robot_config.credentials = login("desk", "robot-site-key");
+    let mut robot =
+        RobotSite::open(&robot_config, &info(PROTOCOL_VERSION), SiteClock::start()).expect("opens");
+    let as_user = |user: &str, password: &str| {
+        let mut c = config(Role::Operator, &endpoint, "t6");
+        c.insecure_lan = false;
+        c.credentials = login(user, password);
+        c
+    };
+    let joint = |position: f64| JointStatesMsg {
+        v: PROTOCOL_VERSION,
+        stamp_s: 1.0,
+        positions: vec![position],
+        velocities: vec![0.0],
+        object: None,
+    };
+
+    // The watcher: it sees the session through the router, but cannot command, and its
+    // forged joint states never reach another viewer.
+    let mut watcher =
+        OperatorSite::join(&as_user("watcher", "just-looking"), Duration::from_secs(10))
+            .expect("an observer joins through the router");
+    let forger = zenoh::open(
+        as_user("watcher", "just-looking")
+            .zenoh()
+            .expect("a configuration"),
+    )
+    .wait()
+    .expect("the watcher's own session");
+    let keys = Keys::new("t6").expect("a site name");
+    let forged = avatarm_net::msg::encode("joint_states", &joint(9.0)).expect("encoded");
+    let mut seen = Vec::new();
+    let mut inbox = RobotInbox::default();
+    for seq in 0..200 {
+        let now = watcher.robot_now_s();
+        watcher
             .publish_target(&TargetMsg::new(seq, &target(now), now, true))
-            .expect("sent");
+            .expect("handed to zenoh");
+        forger
+            .put(keys.joint_states(), forged.clone())
+            .wait()
+            .expect("handed to zenoh");
+        robot.publish_joint_states(&joint(1.0)).expect("published");
+        std::thread::sleep(Duration::from_millis(10));
+        let polled = robot.poll();
+        inbox.operator_present |= polled.operator_present;
+        inbox.targets.extend(polled.targets);
+        seen.extend(
+            watcher
+                .poll()
+                .joint_states
+                .into_iter()
+                .filter_map(Result::ok)
+                .map(|m| m.positions[0]),
+        );
     }
-    let inbox = collect(&mut robot, |i| i.targets.len() >= 20 && i.operator_present);
-    assert_eq!(inbox.targets.len(), 20);
-    assert!(inbox.operator_present);
+    assert!(
+        inbox.targets.is_empty() && !inbox.operator_present,
+        "the watcher commanded through the router"
+    );
+    assert!(
+        seen.iter().filter(|p| **p == 1.0).count() > 50,
+        "the robot site's joint states reach viewers through the router: {} seen",
+        seen.len()
+    );
+    assert!(
+        !seen.contains(&9.0),
+        "a forged joint state reached a viewer through the router"
+    );
+    let _ = forger.close().wait();
+    watcher.close();
+
+    // The operator commands through the router.
+    let blair = OperatorSite::join(&as_user("blair", "pour-carefully"), Duration::from_secs(10))
+        .expect("the operator joins through the router");
+    commands_arrive(&blair, &mut robot);
 }

@@ -90,6 +90,21 @@ impl SceneError {
         }
     }
 
+    /// This error with its field renamed from under `from` to under `to` (`camera.fps` to
+    /// `cameras[1] (alice).fps`); errors about other fields are returned as they are.
+    pub fn with_field_prefix(mut self, from: &str, to: &str) -> Self {
+        if let Self::Invalid { field, .. }
+        | Self::Value { field, .. }
+        | Self::Field { field, .. }
+        | Self::FieldValue { field, .. } = &mut self
+            && let Some(rest) = field.strip_prefix(from)
+            && (rest.is_empty() || rest.starts_with('.') || rest.starts_with('['))
+        {
+            *field = format!("{to}{rest}");
+        }
+        self
+    }
+
     /// A [`SceneError::Field`].
     pub fn field(field: impl Into<String>, message: impl Into<String>) -> Self {
         Self::Field {

@@ -25,7 +25,7 @@ pub mod spec;
 pub mod task;
 
 pub use error::SceneError;
-pub use load::{HeadRig, Scene};
+pub use load::{HeadRig, SINGLE_CAMERA, Scene};
 pub use spec::TwinSpec;
 
 /// The types most users of scenes need.

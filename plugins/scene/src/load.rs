@@ -16,7 +16,7 @@ use crate::error::SceneError;
 use crate::finite::first_non_finite;
 use crate::hand::HandChoice;
 use crate::prop::Prop;
-use crate::spec::{BackgroundSpec, CalibrationError, HeadSpec, JointValues, SceneFile};
+use crate::spec::{BackgroundSpec, CalibrationError, CameraSpec, HeadSpec, JointValues, SceneFile};
 use crate::task::TrialSetup;
 
 /// A loaded, validated scene.
@@ -44,6 +44,11 @@ pub struct Scene {
     /// The head a camera rides on (`[camera.head]`), `None` for a fixed camera; then
     /// `true_camera` and `believed_camera` are the camera at t = 0.
     pub head: Option<HeadRig>,
+    /// The names of the scene file's cameras, in the file's order: its `[[cameras]]`, or
+    /// [`SINGLE_CAMERA`] for its one `[camera]`.
+    pub cameras: Vec<String>,
+    /// Which of `cameras` this scene looks through (`file.camera`, `true_camera`, ...).
+    pub camera_index: usize,
     /// Props in the room.
     pub props: Vec<Prop>,
     /// The background image file, resolved (`[background] source = "file"`).
@@ -66,11 +71,40 @@ impl Scene {
         Self::parse(&text, path, extra_packages)
     }
 
-    /// Parses scene text as if read from `path`.
+    /// Reads and validates a scene file looking through its camera named `view` (one of
+    /// `[[cameras]]`; `None`: the first). Every camera of the file is checked, not only that
+    /// one.
+    pub fn load_view(
+        path: &Path,
+        extra_packages: &PackagePath,
+        view: Option<&str>,
+    ) -> Result<Self, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::parse_view(&text, path, extra_packages, view)
+    }
+
+    /// Parses scene text as if read from `path`, looking through its first camera.
     pub fn parse(
         text: &str,
         path: &Path,
         extra_packages: &PackagePath,
+    ) -> Result<Self, SceneError> {
+        Self::parse_view(text, path, extra_packages, None)
+    }
+
+    /// Parses scene text as if read from `path`, looking through the camera named `view`
+    /// (`None`: the first). A scene's cameras are its one `[camera]` (named `camera`) or its
+    /// `[[cameras]]`: the chosen one becomes `file.camera` (its `erase` keys over the scene's
+    /// `[erase]`, its `background` instead of the scene's), and the others are checked as
+    /// they would be chosen.
+    pub fn parse_view(
+        text: &str,
+        path: &Path,
+        extra_packages: &PackagePath,
+        view: Option<&str>,
     ) -> Result<Self, SceneError> {
         let parse_error = |source| SceneError::Parse {
             path: path.to_owned(),
@@ -82,11 +116,46 @@ impl Scene {
             message,
         };
         // Syntax first, then every float finite (TOML allows nan and inf), then the types.
-        let table: toml::Table = toml::from_str(text).map_err(parse_error)?;
+        let mut table: toml::Table = toml::from_str(text).map_err(parse_error)?;
         if let Some((field, value)) = first_non_finite(&table) {
             return Err(invalid(&field, format!("{value} is not a finite number")));
         }
-        let file: SceneFile = toml::from_str(text).map_err(parse_error)?;
+        let (file, cameras, camera_index, camera_field) = match CameraEntries::take(
+            &mut table, path,
+        )? {
+            // One `[camera]`: the parser's own errors, with line and column.
+            None => {
+                if let Some(v) = view.filter(|v| *v != SINGLE_CAMERA) {
+                    return Err(invalid(
+                        "camera",
+                        format!(
+                            "no camera named '{v}': the scene has one camera ([camera], named '{SINGLE_CAMERA}'); name several with [[cameras]]"
+                        ),
+                    ));
+                }
+                let file: SceneFile = toml::from_str(text).map_err(parse_error)?;
+                (file, vec![SINGLE_CAMERA.to_owned()], 0, "camera".to_owned())
+            }
+            Some(entries) => {
+                let index = entries.index(view, path)?;
+                let file = entries.file_for(&table, index, path)?;
+                // The others, checked as if chosen.
+                for other in (0..entries.0.len()).filter(|j| *j != index) {
+                    let f = entries.file_for(&table, other, path)?;
+                    let field = entries.field(other);
+                    resolve_camera(&f.camera, path)
+                        .map_err(|e| e.with_field_prefix("camera", &field))?;
+                    f.erase.validate("erase").map_err(|e| {
+                        SceneError::value(format!("{field}.erase"), e).in_file(path)
+                    })?;
+                    background_path(&f, path).map_err(|e| {
+                        e.with_field_prefix("background", &format!("{field}.background"))
+                    })?;
+                }
+                let names = entries.0.iter().map(|(name, _)| name.clone()).collect();
+                (file, names, index, entries.field(index))
+            }
+        };
         let dir = path.parent().unwrap_or(Path::new("."));
         if !(file.duration_s.is_finite() && file.duration_s > 0.0) {
             return Err(invalid(
@@ -100,53 +169,13 @@ impl Scene {
                 format!("{} must be within 1..=10000", file.control_rate_hz),
             ));
         }
-        let c = &file.camera;
-        if !(c.fps.is_finite() && (1.0..=1000.0).contains(&c.fps)) {
-            return Err(invalid(
-                "camera.fps",
-                format!("{} must be within 1..=1000", c.fps),
-            ));
-        }
-        if !(c.frame_latency_s.is_finite() && (0.0..=10.0).contains(&c.frame_latency_s)) {
-            return Err(invalid(
-                "camera.frame_latency_s",
-                format!("{} must be within 0..=10 s", c.frame_latency_s),
-            ));
-        }
-        if !(0.0..=255.0).contains(&c.sensor.noise_sigma) {
-            return Err(invalid(
-                "camera.sensor.noise_sigma",
-                format!("{} must be within 0..=255 levels", c.sensor.noise_sigma),
-            ));
-        }
-        for (i, [t_s, gain]) in c.sensor.exposure.iter().copied().enumerate() {
-            let field = format!("camera.sensor.exposure[{i}]");
-            if !(t_s >= 0.0 && gain > 0.0 && gain <= 100.0) {
-                return Err(invalid(
-                    &field,
-                    format!("[{t_s}, {gain}]: need t_s >= 0 and 0 < gain <= 100"),
-                ));
-            }
-            if i > 0 && t_s <= c.sensor.exposure[i - 1][0] {
-                return Err(invalid(
-                    &field,
-                    format!("t_s {t_s} is not after the previous keyframe's"),
-                ));
-            }
-        }
-        let ce = &c.calibration_error;
-        if ce.rotation_deg.abs() > 180.0 {
-            return Err(invalid(
-                "camera.calibration_error.rotation_deg",
-                format!("{} must be within -180..=180", ce.rotation_deg),
-            ));
-        }
-        if ce.rotation_deg != 0.0 && Vector3::from(ce.axis).norm() < 1e-9 {
-            return Err(invalid(
-                "camera.calibration_error.axis",
-                "a rotation error needs a non-zero axis".into(),
-            ));
-        }
+        let CameraParts {
+            true_camera,
+            believed_camera,
+            lens,
+            head,
+        } = resolve_camera(&file.camera, path)
+            .map_err(|e| e.with_field_prefix("camera", &camera_field))?;
         let s = &file.robot.sim;
         for (name, v) in [
             ("command_latency_s", s.command_latency_s),
@@ -217,22 +246,7 @@ impl Scene {
                 ),
             ));
         }
-        let background_path = match &file.background {
-            BackgroundSpec::File { path: p } => {
-                let full = dir.join(p);
-                if !full.is_file() {
-                    return Err(invalid(
-                        "background.path",
-                        format!("{} does not exist", full.display()),
-                    ));
-                }
-                Some(full)
-            }
-            BackgroundSpec::Capture { at_s } if !(at_s.is_finite() && *at_s >= 0.0) => {
-                return Err(invalid("background.at_s", format!("{at_s} must be >= 0")));
-            }
-            _ => None,
-        };
+        let background_path = background_path(&file, path)?;
 
         let mut packages = extra_packages.clone();
         packages
@@ -343,85 +357,6 @@ impl Scene {
             keyframes.push(Keyframe { t_s: k.t_s, q });
         }
 
-        let intrinsics = match c.intrinsics {
-            Some(k) => k,
-            None => {
-                if !(c.fov_y_deg.is_finite() && c.fov_y_deg > 1.0 && c.fov_y_deg < 179.0) {
-                    return Err(invalid("camera.fov_y_deg", "must be within 1..179".into()));
-                }
-                Intrinsics::from_fov_y(c.fov_y_deg.to_radians(), c.width, c.height)
-            }
-        };
-        intrinsics
-            .validate()
-            .map_err(|e| SceneError::value("camera.intrinsics", e).in_file(path))?;
-        let head = match (&c.pose, &c.head) {
-            (Some(_), Some(_)) => {
-                return Err(invalid(
-                    "camera.pose",
-                    "a camera on a head ([camera.head]) takes its pose from the head and the mount; remove camera.pose".into(),
-                ));
-            }
-            (None, None) => {
-                return Err(invalid(
-                    "camera.pose",
-                    "missing: a fixed camera needs { eye, target, up } (or [camera.head] for one on a head)".into(),
-                ));
-            }
-            (None, Some(h)) => {
-                Some(HeadRig::resolve(h, ce).map_err(|(field, message)| {
-                    invalid(&format!("camera.head.{field}"), message)
-                })?)
-            }
-            (Some(_), None) => None,
-        };
-        let pose = match (&c.pose, &head) {
-            (Some(p), _) => p
-                .to_isometry()
-                .map_err(|e| SceneError::value("camera.pose", e).in_file(path))?,
-            (None, Some(h)) => h.camera_at(0.0),
-            (None, None) => unreachable!("checked above"),
-        };
-        let true_camera = PinholeCamera {
-            intrinsics,
-            world_from_camera: pose,
-        };
-        let lens = match &c.distortion {
-            Some(l) => {
-                let lens = Distortion::from_ros(&l.model, &l.coefficients)
-                    .map_err(|e| SceneError::value("camera.distortion", e).in_file(path))?;
-                // The lens must invert over the image (a render can be drawn through it).
-                if !lens.is_none() {
-                    let map = DistortionMap::new(&intrinsics, &lens, 1.0)
-                        .map_err(|e| SceneError::value("camera.distortion", e).in_file(path))?;
-                    if map.unmapped > 0 {
-                        let e = avatarm_core::Error::BadSetting {
-                            what: "lens distortion".into(),
-                            message: format!(
-                                "does not invert at {} of the image's pixels (past a barrel's fold): not a lens over this image",
-                                map.unmapped
-                            ),
-                        };
-                        return Err(SceneError::value("camera.distortion", e).in_file(path));
-                    }
-                }
-                lens
-            }
-            None => Distortion::None,
-        };
-        // A head camera's error is its mount's (in the head's frame), already in `believed_mount`.
-        let believed_camera = match &head {
-            Some(h) => PinholeCamera {
-                intrinsics,
-                world_from_camera: h.believed_camera_at(0.0),
-            },
-            None => true_camera.perturbed(
-                &Vector3::from(ce.axis),
-                ce.rotation_deg.to_radians(),
-                &(Vector3::from(ce.translation_mm) * 1e-3),
-            ),
-        };
-
         let mut props: Vec<Prop> = Vec::new();
         for (i, p) in file.props.iter().enumerate() {
             let field = format!("props[{i}] ({})", p.name);
@@ -478,6 +413,8 @@ impl Scene {
             believed_camera,
             lens,
             head,
+            cameras,
+            camera_index,
             props,
             file,
         })
@@ -487,6 +424,335 @@ impl Scene {
     pub fn robot_base(&self) -> Isometry3<f64> {
         self.file.robot.base.to_isometry()
     }
+
+    /// The name of the camera this scene looks through.
+    pub fn camera_name(&self) -> &str {
+        &self.cameras[self.camera_index]
+    }
+}
+
+/// The name of a scene's one `[camera]`.
+pub const SINGLE_CAMERA: &str = "camera";
+
+/// A scene file's `[[cameras]]`: each one's name and its table (the `[camera]` fields, with
+/// `erase` and `background` of its own when it has them).
+struct CameraEntries(Vec<(String, toml::Table)>);
+
+impl CameraEntries {
+    /// Takes `cameras` out of the file's `table`: `None` when the file has none (then it
+    /// must have a `[camera]`). Checks that there are some, not beside a `[camera]`, each
+    /// with a unique name of letters, digits, `_` and `-` (it names the replay's folders).
+    fn take(table: &mut toml::Table, path: &Path) -> Result<Option<Self>, SceneError> {
+        let invalid = |field: &str, message: String| SceneError::Invalid {
+            path: path.to_owned(),
+            field: field.to_owned(),
+            message,
+        };
+        let Some(value) = table.remove("cameras") else {
+            return Ok(None);
+        };
+        if table.contains_key("camera") {
+            return Err(invalid(
+                "camera",
+                "give one [camera] or several [[cameras]], not both".into(),
+            ));
+        }
+        let toml::Value::Array(items) = value else {
+            return Err(invalid(
+                "cameras",
+                "must be an array of tables ([[cameras]])".into(),
+            ));
+        };
+        if items.is_empty() {
+            return Err(invalid("cameras", "is empty: give at least one".into()));
+        }
+        let mut entries: Vec<(String, toml::Table)> = Vec::new();
+        for (i, item) in items.into_iter().enumerate() {
+            let toml::Value::Table(mut t) = item else {
+                return Err(invalid(&format!("cameras[{i}]"), "must be a table".into()));
+            };
+            let name = match t.remove("name") {
+                Some(toml::Value::String(n)) => n,
+                Some(other) => {
+                    return Err(invalid(
+                        &format!("cameras[{i}].name"),
+                        format!("{other}: must be a string"),
+                    ));
+                }
+                None => {
+                    return Err(invalid(
+                        &format!("cameras[{i}].name"),
+                        "missing: each of [[cameras]] needs a name (e.g. \"blair\", \"alice\")"
+                            .into(),
+                    ));
+                }
+            };
+            if name.is_empty()
+                || !name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+            {
+                return Err(invalid(
+                    &format!("cameras[{i}].name"),
+                    format!("'{name}': use letters, digits, '_' and '-' (it names folders)"),
+                ));
+            }
+            if entries.iter().any(|(n, _)| *n == name) {
+                return Err(invalid(
+                    &format!("cameras[{i}].name"),
+                    format!("another camera is already named '{name}'"),
+                ));
+            }
+            entries.push((name, t));
+        }
+        Ok(Some(Self(entries)))
+    }
+
+    /// The index of the camera named `view` (`None`: the first).
+    fn index(&self, view: Option<&str>, path: &Path) -> Result<usize, SceneError> {
+        let Some(view) = view else { return Ok(0) };
+        self.0
+            .iter()
+            .position(|(name, _)| name == view)
+            .ok_or_else(|| SceneError::Invalid {
+                path: path.to_owned(),
+                field: "cameras".into(),
+                message: format!(
+                    "no camera named '{view}'; the scene's cameras: {}",
+                    self.0
+                        .iter()
+                        .map(|(n, _)| n.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            })
+    }
+
+    /// How errors name camera `i`: `cameras[i] (name)`.
+    fn field(&self, i: usize) -> String {
+        format!("cameras[{i}] ({})", self.0[i].0)
+    }
+
+    /// The scene file as seen through camera `i`: `table` (without `cameras`) with the
+    /// camera as its `[camera]`, the camera's `erase` keys over the scene's `[erase]` and its
+    /// `background` instead of the scene's.
+    fn file_for(
+        &self,
+        table: &toml::Table,
+        i: usize,
+        path: &Path,
+    ) -> Result<SceneFile, SceneError> {
+        let field = self.field(i);
+        let invalid = |message: String| SceneError::Invalid {
+            path: path.to_owned(),
+            field: field.clone(),
+            message,
+        };
+        let mut camera = self.0[i].1.clone();
+        let mut table = table.clone();
+        match camera.remove("erase") {
+            None => {}
+            Some(toml::Value::Table(own)) => {
+                let erase = table
+                    .entry("erase")
+                    .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+                let Some(erase) = erase.as_table_mut() else {
+                    return Err(invalid("the scene's erase is not a table".into()));
+                };
+                erase.extend(own);
+            }
+            Some(_) => return Err(invalid("erase: must be a table".into())),
+        }
+        if let Some(background) = camera.remove("background") {
+            table.insert("background".into(), background);
+        }
+        // The camera's own fields first, so that an error names the camera.
+        toml::Value::Table(camera.clone())
+            .try_into::<CameraSpec>()
+            .map_err(|e| invalid(e.to_string().trim_end().to_owned()))?;
+        table.insert("camera".into(), toml::Value::Table(camera));
+        toml::Value::Table(table)
+            .try_into()
+            .map_err(|source| SceneError::Parse {
+                path: path.to_owned(),
+                source,
+            })
+    }
+}
+
+/// The `[background]` image file of `file` (a scene file at `path`), resolved and checked:
+/// `None` unless it comes from a file.
+fn background_path(file: &SceneFile, path: &Path) -> Result<Option<PathBuf>, SceneError> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let invalid = |field: &str, message: String| SceneError::Invalid {
+        path: path.to_owned(),
+        field: field.to_owned(),
+        message,
+    };
+    match &file.background {
+        BackgroundSpec::File { path: p } => {
+            let full = dir.join(p);
+            if !full.is_file() {
+                return Err(invalid(
+                    "background.path",
+                    format!("{} does not exist", full.display()),
+                ));
+            }
+            Ok(Some(full))
+        }
+        BackgroundSpec::Capture { at_s } if !(at_s.is_finite() && *at_s >= 0.0) => {
+            Err(invalid("background.at_s", format!("{at_s} must be >= 0")))
+        }
+        _ => Ok(None),
+    }
+}
+
+/// A scene's camera, resolved from its spec.
+struct CameraParts {
+    true_camera: PinholeCamera,
+    believed_camera: PinholeCamera,
+    lens: Distortion,
+    head: Option<HeadRig>,
+}
+
+/// Checks and resolves one camera (`[camera]`, or one of `[[cameras]]`) of the scene file
+/// `path`; errors name the field under `camera`.
+fn resolve_camera(c: &CameraSpec, path: &Path) -> Result<CameraParts, SceneError> {
+    let invalid = |field: &str, message: String| SceneError::Invalid {
+        path: path.to_owned(),
+        field: field.to_owned(),
+        message,
+    };
+    if !(c.fps.is_finite() && (1.0..=1000.0).contains(&c.fps)) {
+        return Err(invalid(
+            "camera.fps",
+            format!("{} must be within 1..=1000", c.fps),
+        ));
+    }
+    if !(c.frame_latency_s.is_finite() && (0.0..=10.0).contains(&c.frame_latency_s)) {
+        return Err(invalid(
+            "camera.frame_latency_s",
+            format!("{} must be within 0..=10 s", c.frame_latency_s),
+        ));
+    }
+    if !(0.0..=255.0).contains(&c.sensor.noise_sigma) {
+        return Err(invalid(
+            "camera.sensor.noise_sigma",
+            format!("{} must be within 0..=255 levels", c.sensor.noise_sigma),
+        ));
+    }
+    for (i, [t_s, gain]) in c.sensor.exposure.iter().copied().enumerate() {
+        let field = format!("camera.sensor.exposure[{i}]");
+        if !(t_s >= 0.0 && gain > 0.0 && gain <= 100.0) {
+            return Err(invalid(
+                &field,
+                format!("[{t_s}, {gain}]: need t_s >= 0 and 0 < gain <= 100"),
+            ));
+        }
+        if i > 0 && t_s <= c.sensor.exposure[i - 1][0] {
+            return Err(invalid(
+                &field,
+                format!("t_s {t_s} is not after the previous keyframe's"),
+            ));
+        }
+    }
+    let ce = &c.calibration_error;
+    if ce.rotation_deg.abs() > 180.0 {
+        return Err(invalid(
+            "camera.calibration_error.rotation_deg",
+            format!("{} must be within -180..=180", ce.rotation_deg),
+        ));
+    }
+    if ce.rotation_deg != 0.0 && Vector3::from(ce.axis).norm() < 1e-9 {
+        return Err(invalid(
+            "camera.calibration_error.axis",
+            "a rotation error needs a non-zero axis".into(),
+        ));
+    }
+    let intrinsics = match c.intrinsics {
+        Some(k) => k,
+        None => {
+            if !(c.fov_y_deg.is_finite() && c.fov_y_deg > 1.0 && c.fov_y_deg < 179.0) {
+                return Err(invalid("camera.fov_y_deg", "must be within 1..179".into()));
+            }
+            Intrinsics::from_fov_y(c.fov_y_deg.to_radians(), c.width, c.height)
+        }
+    };
+    intrinsics
+        .validate()
+        .map_err(|e| SceneError::value("camera.intrinsics", e).in_file(path))?;
+    let head = match (&c.pose, &c.head) {
+        (Some(_), Some(_)) => {
+            return Err(invalid(
+                "camera.pose",
+                "a camera on a head ([camera.head]) takes its pose from the head and the mount; remove camera.pose".into(),
+            ));
+        }
+        (None, None) => {
+            return Err(invalid(
+                "camera.pose",
+                "missing: a fixed camera needs { eye, target, up } (or [camera.head] for one on a head)".into(),
+            ));
+        }
+        (None, Some(h)) => Some(
+            HeadRig::resolve(h, ce)
+                .map_err(|(field, message)| invalid(&format!("camera.head.{field}"), message))?,
+        ),
+        (Some(_), None) => None,
+    };
+    let pose = match (&c.pose, &head) {
+        (Some(p), _) => p
+            .to_isometry()
+            .map_err(|e| SceneError::value("camera.pose", e).in_file(path))?,
+        (None, Some(h)) => h.camera_at(0.0),
+        (None, None) => unreachable!("checked above"),
+    };
+    let true_camera = PinholeCamera {
+        intrinsics,
+        world_from_camera: pose,
+    };
+    let lens = match &c.distortion {
+        Some(l) => {
+            let lens = Distortion::from_ros(&l.model, &l.coefficients)
+                .map_err(|e| SceneError::value("camera.distortion", e).in_file(path))?;
+            // The lens must invert over the image (a render can be drawn through it).
+            if !lens.is_none() {
+                let map = DistortionMap::new(&intrinsics, &lens, 1.0)
+                    .map_err(|e| SceneError::value("camera.distortion", e).in_file(path))?;
+                if map.unmapped > 0 {
+                    let e = avatarm_core::Error::BadSetting {
+                        what: "lens distortion".into(),
+                        message: format!(
+                            "does not invert at {} of the image's pixels (past a barrel's fold): not a lens over this image",
+                            map.unmapped
+                        ),
+                    };
+                    return Err(SceneError::value("camera.distortion", e).in_file(path));
+                }
+            }
+            lens
+        }
+        None => Distortion::None,
+    };
+    // A head camera's error is its mount's (in the head's frame), already in `believed_mount`.
+    let believed_camera = match &head {
+        Some(h) => PinholeCamera {
+            intrinsics,
+            world_from_camera: h.believed_camera_at(0.0),
+        },
+        None => true_camera.perturbed(
+            &Vector3::from(ce.axis),
+            ce.rotation_deg.to_radians(),
+            &(Vector3::from(ce.translation_mm) * 1e-3),
+        ),
+    };
+
+    Ok(CameraParts {
+        true_camera,
+        believed_camera,
+        lens,
+        head,
+    })
 }
 
 /// A camera on a head (`[camera.head]`), resolved: the head's motion, the mount and how the
@@ -651,7 +917,7 @@ impl HeadRig {
                 *peak_speed_rad_s = deg_s.to_radians();
                 true
             }
-            HeadMotion::Keyframes(_) => false,
+            HeadMotion::Keyframes(_) | HeadMotion::Live(_) => false,
         }
     }
 }

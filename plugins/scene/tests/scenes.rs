@@ -421,3 +421,86 @@ fn a_camera_on_a_head_is_resolved_and_checked() {
         "camera.head.keyframes[1].t_s",
     );
 }
+
+/// `[[cameras]]`: a scene with Blair's fixed camera and Alice's head camera loads through
+/// either, each camera with its own settings, and every camera is checked whichever is chosen.
+#[test]
+fn several_cameras_load_by_name_and_each_is_checked() {
+    let (path, text) = scene_text("pouring_two_views.toml");
+    let view = |t: &str, v: Option<&str>| Scene::parse_view(t, &path, &PackagePath::default(), v);
+
+    let blair = view(&text, None).expect("the first camera");
+    assert_eq!(blair.cameras, ["blair", "alice"]);
+    assert_eq!((blair.camera_index, blair.camera_name()), (0, "blair"));
+    assert!(blair.head.is_none(), "Blair's camera is fixed");
+    let alice = view(&text, Some("alice")).expect("Alice's camera");
+    assert_eq!((alice.camera_index, alice.camera_name()), (1, "alice"));
+    let head = alice
+        .head
+        .as_ref()
+        .expect("Alice's camera rides on her head");
+    assert_eq!(alice.true_camera.world_from_camera, head.camera_at(0.0));
+    assert_ne!(
+        alice.true_camera.world_from_camera,
+        blair.true_camera.world_from_camera
+    );
+    // The rest of the scene is the same through either camera.
+    assert_eq!(alice.props.len(), blair.props.len());
+    assert_eq!(alice.q0, blair.q0);
+    assert_eq!(alice.file.seed, blair.file.seed);
+
+    let e = view(&text, Some("carol")).unwrap_err().to_string();
+    assert!(e.contains("carol") && e.contains("blair, alice"), "{e}");
+
+    // A camera's own erase keys go over the scene's [erase], for it alone.
+    let own = text.replace(
+        "name = \"blair\"",
+        "name = \"blair\"\nerase = { latency_compensation = false }",
+    );
+    assert!(!view(&own, None).unwrap().file.erase.latency_compensation);
+    assert!(
+        view(&own, Some("alice"))
+            .unwrap()
+            .file
+            .erase
+            .latency_compensation
+    );
+
+    // A bad value in the camera not chosen is still refused, naming that camera.
+    let bad = text.replace(
+        "name = \"alice\"\nintrinsics = { fx = 461.0",
+        "name = \"alice\"\nintrinsics = { fx = -461.0",
+    );
+    assert_ne!(bad, text);
+    let e = view(&bad, None).unwrap_err().to_string();
+    assert!(e.contains("cameras[1] (alice).intrinsics"), "{e}");
+    let typo = text.replace("name = \"alice\"", "name = \"alice\"\nfsp = 30");
+    let e = view(&typo, None).unwrap_err().to_string();
+    assert!(e.contains("cameras[1] (alice)") && e.contains("fsp"), "{e}");
+
+    for (change, expected) in [
+        (
+            text.replacen("name = \"alice\"", "name = \"blair\"", 1),
+            "already named 'blair'",
+        ),
+        (text.replacen("name = \"alice\"", "", 1), "cameras[1].name"),
+        (
+            text.replacen("name = \"alice\"", "name = \"al ice\"", 1),
+            "letters, digits",
+        ),
+        (format!("{text}\n[camera]\nfps = 30.0\n"), "not both"),
+    ] {
+        let e = view(&change, None).unwrap_err().to_string();
+        assert!(e.contains(expected), "{expected}: {e}");
+    }
+
+    // A scene with one [camera] has one camera, named "camera".
+    let (path1, one) = scene_text("pouring.toml");
+    let single = Scene::parse_view(&one, &path1, &PackagePath::default(), Some("camera"))
+        .expect("the one camera by its name");
+    assert_eq!(single.cameras, ["camera"]);
+    let e = Scene::parse_view(&one, &path1, &PackagePath::default(), Some("alice"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("one camera"), "{e}");
+}

@@ -53,6 +53,8 @@ pub enum HeadMotion {
         /// eye).
         pivot_back_m: f64,
     },
+    /// A real head, as a headset reports it ([`LiveHead`]): the wearer's own motion.
+    Live(LiveHead),
 }
 
 impl HeadMotion {
@@ -91,6 +93,7 @@ impl HeadMotion {
                 let eye = pivot + turn * (centre.translation.vector - pivot);
                 Isometry3::from_parts(Translation3::from(eye), turn * centre.rotation)
             }
+            Self::Live(live) => live.pose_at(t_s),
         }
     }
 
@@ -152,6 +155,124 @@ pub fn interpolate(a: &Isometry3<f64>, b: &Isometry3<f64>, s: f64) -> Isometry3<
 /// about x: `world_from_head = world_from_view * openxr_view_from_head()`.
 pub fn openxr_view_from_head() -> UnitQuaternion<f64> {
     UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+}
+
+/// `world_from_tracking` for a headset's tracking space (OpenXR's stage or local space: y up)
+/// that puts the head pose `tracking_from_head` (the head's optical frame) on
+/// `world_from_head` (the world: z up) as nearly as turning about the vertical allows: the
+/// same heading and position, gravity kept (the tracking space's y becomes the world's z).
+/// This registers a headset to a scene at one moment; it is not a calibration.
+pub fn register_tracking(
+    world_from_head: &Isometry3<f64>,
+    tracking_from_head: &Isometry3<f64>,
+) -> Isometry3<f64> {
+    // y up -> z up: +90 degrees about x.
+    let z_up = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_2);
+    let heading = |r: &UnitQuaternion<f64>| {
+        let forward = r * Vector3::z();
+        forward.y.atan2(forward.x)
+    };
+    let upright = z_up * tracking_from_head.rotation;
+    let yaw = heading(&world_from_head.rotation) - heading(&upright);
+    let rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw) * z_up;
+    let translation =
+        world_from_head.translation.vector - rotation * tracking_from_head.translation.vector;
+    Isometry3::from_parts(Translation3::from(translation), rotation)
+}
+
+/// A head moved by a headset (OpenXR, Alice's): the poses it reports, registered to the scene
+/// at the first one ([`register_tracking`] onto the scripted motion's pose then), kept in a
+/// [`PoseHistory`]; before the first, the scripted motion. Clones share one head, so that the
+/// headset's system and the simulated room read and write the same poses.
+#[derive(Debug, Clone)]
+pub struct LiveHead(std::sync::Arc<std::sync::Mutex<LiveHeadState>>);
+
+#[derive(Debug)]
+struct LiveHeadState {
+    scripted: Box<HeadMotion>,
+    history: PoseHistory,
+    world_from_tracking: Option<Isometry3<f64>>,
+    first: Option<Isometry3<f64>>,
+    poses: u64,
+}
+
+impl PartialEq for LiveHead {
+    fn eq(&self, other: &Self) -> bool {
+        std::sync::Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+impl LiveHead {
+    /// A live head that follows `scripted` until the headset reports.
+    pub fn new(scripted: HeadMotion) -> Self {
+        Self(std::sync::Arc::new(std::sync::Mutex::new(LiveHeadState {
+            scripted: Box::new(scripted),
+            history: PoseHistory::default(),
+            world_from_tracking: None,
+            first: None,
+            poses: 0,
+        })))
+    }
+
+    fn state(&self) -> std::sync::MutexGuard<'_, LiveHeadState> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Takes the headset's head at `t_s` (s, the app's clock): `tracking_from_view`, an
+    /// OpenXR view pose in its tracking space (y up). Returns `world_from_head`, or `None` for
+    /// a pose or time that is not finite or not newer than the last.
+    pub fn push_openxr_view(
+        &self,
+        t_s: f64,
+        tracking_from_view: &Isometry3<f64>,
+    ) -> Option<Isometry3<f64>> {
+        let tracking_from_head = Isometry3::from_parts(
+            tracking_from_view.translation,
+            tracking_from_view.rotation * openxr_view_from_head(),
+        );
+        let mut s = self.state();
+        let registration = match s.world_from_tracking {
+            Some(r) => r,
+            None => {
+                let r = register_tracking(&s.scripted.pose_at(t_s), &tracking_from_head);
+                if !(r.translation.vector.iter().all(|v| v.is_finite())
+                    && r.rotation.coords.iter().all(|v| v.is_finite()))
+                {
+                    return None;
+                }
+                s.world_from_tracking = Some(r);
+                r
+            }
+        };
+        let world_from_head = registration * tracking_from_head;
+        if !s.history.push(t_s, world_from_head) {
+            return None;
+        }
+        s.first.get_or_insert(world_from_head);
+        s.poses += 1;
+        Some(world_from_head)
+    }
+
+    /// `world_from_head` at `t_s`: the headset's (interpolated, or extrapolated at most 0.1 s)
+    /// once it has reported, the scripted motion's before.
+    pub fn pose_at(&self, t_s: f64) -> Isometry3<f64> {
+        let s = self.state();
+        s.history.at(t_s).unwrap_or_else(|| s.scripted.pose_at(t_s))
+    }
+
+    /// Poses taken from the headset so far.
+    pub fn poses(&self) -> u64 {
+        self.state().poses
+    }
+
+    /// How far the head has turned (rad) from the headset's first pose to its newest.
+    pub fn turned_rad(&self) -> f64 {
+        let s = self.state();
+        match (s.first, s.history.latest()) {
+            (Some(a), Some((_, b))) => a.rotation.angle_to(&b.rotation),
+            _ => 0.0,
+        }
+    }
 }
 
 /// How a headset reports its head pose.
@@ -398,6 +519,58 @@ pub fn perturbed_mount(
 
 #[cfg(test)]
 mod tests {
+
+    /// A headset's pose is registered onto the scene's head at its first sample; its later
+    /// turn about its tracking space's vertical turns the scene's head as much about the
+    /// world's vertical.
+    #[test]
+    fn a_live_head_follows_the_headset_from_where_the_scene_put_it() {
+        let scripted = HeadMotion::look_at(&[(
+            0.0,
+            CameraPose {
+                eye: [0.85, -1.1, 1.25],
+                target: [0.55, 0.0, 0.9],
+                up: [0.0, 0.0, 1.0],
+            },
+        )])
+        .unwrap();
+        let start = scripted.pose_at(0.0);
+        let live = LiveHead::new(scripted);
+        assert_eq!(
+            live.pose_at(0.5),
+            start,
+            "the script until the headset reports"
+        );
+        // The headset at 1.6 m in its stage space, looking down -z, then turned 20 degrees
+        // left (about +y) and 10 cm to the right.
+        let view = |yaw_deg: f64, x: f64| {
+            Isometry3::from_parts(
+                Translation3::new(x, 1.6, 0.0),
+                UnitQuaternion::from_axis_angle(&Vector3::y_axis(), yaw_deg.to_radians()),
+            )
+        };
+        let first = live.push_openxr_view(1.0, &view(0.0, 0.0)).unwrap();
+        assert!((first.translation.vector - start.translation.vector).norm() < 1e-9);
+        // Registered by heading: the start pose's pitch is not the headset's.
+        let heading = |p: &Isometry3<f64>| {
+            let f = p.rotation * Vector3::z();
+            f.y.atan2(f.x)
+        };
+        assert!((heading(&first) - heading(&start)).abs() < 1e-9);
+        let later = live.push_openxr_view(2.0, &view(20.0, 0.1)).unwrap();
+        assert!(((heading(&later) - heading(&first)).to_degrees() - 20.0).abs() < 1e-6);
+        assert!(((later.translation.vector - first.translation.vector).norm() - 0.1).abs() < 1e-9);
+        assert!((live.turned_rad().to_degrees() - 20.0).abs() < 1e-6);
+        assert_eq!(live.poses(), 2);
+        // Between them, interpolated; an old or broken sample is refused.
+        let mid = live.pose_at(1.5);
+        assert!(((heading(&mid) - heading(&first)).to_degrees() - 10.0).abs() < 1e-6);
+        assert!(live.push_openxr_view(1.5, &view(5.0, 0.0)).is_none());
+        assert!(live.push_openxr_view(f64::NAN, &view(5.0, 0.0)).is_none());
+        // Clones share the head.
+        assert_eq!(live.clone().poses(), 2);
+        assert_eq!(HeadMotion::Live(live.clone()), HeadMotion::Live(live));
+    }
     use super::*;
 
     fn look(eye: [f64; 3], target: [f64; 3]) -> Isometry3<f64> {
