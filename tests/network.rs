@@ -198,6 +198,19 @@ fn a_cut_link_stops_the_arm_and_the_session_resumes() {
     assert!(f(&s, "targets_used") >= 850.0, "nothing lost: {s}");
     assert!(f(&j, "targets_sent") >= 900.0, "{j}");
     assert_eq!(f(&s, "nan_commands"), 0.0);
+    // The relay held the cut's bytes without filling its queue: nothing pushed back.
+    let held = relay
+        .stats()
+        .held_max
+        .load(std::sync::atomic::Ordering::Relaxed);
+    eprintln!("cut: the relay held at most {held} bytes in one direction");
+    assert_eq!(
+        relay
+            .stats()
+            .backpressure
+            .load(std::sync::atomic::Ordering::Relaxed),
+        0
+    );
 }
 
 #[test]
@@ -330,7 +343,8 @@ fn over_tls_only_the_authenticated_operator_moves_the_robot() {
     );
     assert!(
         out.status.success(),
-        "{}",
+        "{:?}: {}",
+        out.status,
         String::from_utf8_lossy(&out.stderr)
     );
     // The operator.
@@ -349,7 +363,8 @@ fn over_tls_only_the_authenticated_operator_moves_the_robot() {
     );
     assert!(
         out.status.success(),
-        "{}",
+        "{:?}: {}",
+        out.status,
         String::from_utf8_lossy(&out.stderr)
     );
     let s = finish(robot, &dir, "serve");

@@ -1065,7 +1065,6 @@ fn each_camera_of_a_scene_is_erased_and_scored() {
     // The same run of the robot, seen from two places.
     assert_eq!(blair["sim_time_s"], alice["sim_time_s"]);
     assert_eq!(blair["frames"], alice["frames"]);
-    assert_ne!(blair["mask"]["iou_mean"], alice["mask"]["iou_mean"]);
     // Blair's fixed camera: as the pouring scene's. Alice's head camera: pose-compensated,
     // under the 1 % leak goal, with a background that follows her view.
     assert!(blair["head"].is_null(), "{}", blair["head"]);

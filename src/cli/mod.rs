@@ -437,6 +437,10 @@ enum Command {
         /// Seed of the loss and jitter.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// TCP: what each direction holds at most (KiB, at least 64): delayed, queued behind
+        /// the cap or held through a cut; when full the sender is pushed back.
+        #[arg(long = "queue-kib", default_value_t = 4096)]
+        queue_kib: usize,
         /// Stop after this many seconds (default: until killed).
         #[arg(long, value_name = "S")]
         duration: Option<f64>,
@@ -897,15 +901,20 @@ fn run(cli: Cli) -> Result<(), AppError> {
             loss_pct,
             mbit_s,
             seed,
+            queue_kib,
             duration,
         } => {
             use avatarm_net::impair::{Impairment, Relay};
+            let queue_bytes = queue_kib.checked_mul(1024).ok_or_else(|| {
+                AppError::flag("--queue-kib", format!("{queue_kib} KiB is too large"))
+            })?;
             let impairment = Impairment {
                 delay_s: delay_ms / 1e3,
                 jitter_s: jitter_ms / 1e3,
                 loss: loss_pct / 100.0,
                 bandwidth_bps: mbit_s.map(|m| m * 1e6),
                 seed,
+                queue_bytes,
             };
             impairment
                 .validate()

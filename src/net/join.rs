@@ -630,6 +630,19 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
             ),
         ));
     }
+    // Several cameras: the robot site serves one; the twins are drawn through that one.
+    let view = super::serve::camera_key(&options.scene);
+    if options.scene.cameras.len() > 1 && !info.cameras.is_empty() && !info.cameras.contains(&view)
+    {
+        return Err(AppError::flag(
+            "--view",
+            format!(
+                "the robot site serves the camera(s) {:?}, this site looks through '{view}': \
+                 give join the robot site's --view",
+                info.cameras
+            ),
+        ));
+    }
     let offset = site.offset();
     info!(
         "joined '{}' ({} at the robot site, protocol {}): clock offset {:+.3} ms (round trip {:.2} ms)",

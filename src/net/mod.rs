@@ -66,7 +66,8 @@ impl NetArgs {
         let (credentials, dictionary, operators) = match (&self.credentials, listens) {
             (Some(path), true) => {
                 let first = Credentials::from_file(path)?;
-                let operators = if self.operators.is_empty() {
+                // A router's operators are named (its first user may be a robot site).
+                let operators = if self.operators.is_empty() && role != Role::Router {
                     vec![first.user]
                 } else {
                     self.operators.clone()

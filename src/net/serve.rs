@@ -600,8 +600,18 @@ impl Drop for StopOnDrop {
     }
 }
 
-/// The camera's name on the network (one camera per scene today).
+/// The camera's name on the network for a scene with one `[camera]`.
 pub const CAMERA: &str = "desk";
+
+/// The name the robot site publishes `scene`'s camera under: [`CAMERA`] for a scene's one
+/// `[camera]`, the camera's own name (`--view`) for one of its `[[cameras]]`.
+pub fn camera_key(scene: &avatarm_scene::Scene) -> String {
+    if scene.cameras.len() > 1 {
+        scene.camera_name().to_owned()
+    } else {
+        CAMERA.to_owned()
+    }
+}
 
 /// What the robot site says about itself: the scene and its fingerprint, the cameras, the
 /// control rate, the watchdog's timeout and the robot.
@@ -660,7 +670,7 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
         .as_ref()
         .map_or(0.0, |s| s.bottle_centre().translation.z);
     let cameras = if options.video {
-        vec![CAMERA.to_owned()]
+        vec![camera_key(scene)]
     } else {
         Vec::new()
     };
@@ -690,7 +700,7 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
         let video = super::video::ServeVideoOptions {
             updates: Arc::new(Mutex::new(rx)),
             sender: site.frame_sender(),
-            camera: CAMERA.to_owned(),
+            camera: camera_key(scene),
             clock,
             stop: stop.clone(),
             encoder: options.encoder,

@@ -62,7 +62,7 @@ struct XrReport {
     fallback_told: bool,
     retry_at_s: f64,
     sessions: u32,
-    /// Updates with a session running (one frame submitted to the runtime each).
+    /// Updates with a session running (bevy_mod_openxr submits a frame in each).
     frames_running: u64,
 }
 
@@ -180,7 +180,7 @@ fn report_at_exit(
         _ => String::new(),
     };
     info!(
-        "XR summary: {} sessions, {} frames submitted while running, {} hand frames from OpenXR hand tracking{head}",
+        "XR summary: {} sessions, {} updates while the session ran (a frame each), {} hand frames from OpenXR hand tracking{head}",
         report.sessions, report.frames_running, hand.frames
     );
 }

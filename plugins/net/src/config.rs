@@ -143,6 +143,25 @@ impl NetConfig {
             }
             _ => {}
         }
+        // A robot site that only connects takes whatever its router sends as its operators':
+        // it must know that router (TLS, checked against the authority's certificate).
+        if self.role == Role::RobotSite && !listens && !self.insecure_lan {
+            let checked = self.tls.as_ref().is_some_and(|t| t.root_ca.is_some());
+            if !self.connect.iter().all(|e| e.starts_with("tls/")) || !checked {
+                return bad(
+                    "--connect",
+                    "a robot site that connects to a router obeys it: connect over tls/ with \
+                     --tls-ca (the router's authority), or --insecure-lan on a network you trust"
+                        .into(),
+                );
+            }
+        }
+        if self.role != Role::Router && !self.robot_sites.is_empty() {
+            return bad(
+                "--robot-site",
+                "only a router takes robot-site users (a robot site publishes its own keys)".into(),
+            );
+        }
         for e in self.listen.iter().chain(&self.connect) {
             if e.parse::<zenoh::config::EndPoint>().is_err()
                 || !["tcp/", "udp/", "tls/"].iter().any(|p| e.starts_with(p))
@@ -178,7 +197,21 @@ impl NetConfig {
                     return bad(flag, format!("'{name}' is not a user of {}", d.display()));
                 }
             }
+            if let Some(name) = users.iter().find(|u| u.is_empty() || **u == "-") {
+                return bad(
+                    "--credentials",
+                    format!("'{name}' is not a usable user name in {}", d.display()),
+                );
+            }
             if self.role == Role::Router {
+                if self.operators.is_empty() {
+                    return bad(
+                        "--operator",
+                        "a router with a dictionary needs the user(s) who may command \
+                         (--operator USER)"
+                            .into(),
+                    );
+                }
                 if self.robot_sites.is_empty() {
                     return bad(
                         "--robot-site",
@@ -295,16 +328,22 @@ impl NetConfig {
         let robot = list(&[k.robot_space(), k.camera_space()]);
         let session = list(&[k.session_space()]);
         let operator = list(&[k.operator_space()]);
-        // Nobody: a subject no user name matches.
-        let subject = |id: &str, users: &[String]| {
-            if users.is_empty() {
-                format!(r#"{{ id: "{id}", usernames: ["-"] }}"#)
-            } else {
-                format!(r#"{{ id: "{id}", usernames: {} }}"#, list(users))
+        // A subject and its policy only for users named: nobody else gets those rules.
+        let mut subjects = vec![r#"{ id: "anyone" }"#.to_owned()];
+        let mut policies = vec![
+            r#"{ rules: ["robot_out", "read", "forward_operator"], subjects: ["anyone"] }"#
+                .to_owned(),
+        ];
+        for (id, rule, users) in [
+            ("operators", "command", &self.operators),
+            ("robot_sites", "robot_in", &self.robot_sites),
+        ] {
+            if !users.is_empty() {
+                subjects.push(format!(r#"{{ id: "{id}", usernames: {} }}"#, list(users)));
+                policies.push(format!(r#"{{ rules: ["{rule}"], subjects: ["{id}"] }}"#));
             }
-        };
-        let operators = subject("operators", &self.operators);
-        let robot_sites = subject("robot_sites", &self.robot_sites);
+        }
+        let (subjects, policies) = (subjects.join(", "), policies.join(", "));
         format!(
             r#"access_control: {{
                 enabled: true,
@@ -316,12 +355,8 @@ impl NetConfig {
                   {{ id: "forward_operator", messages: ["put", "delete", "liveliness_token"], flows: ["egress"], permission: "allow", key_exprs: {operator} }},
                   {{ id: "command", messages: ["put", "delete", "liveliness_token"], flows: ["ingress"], permission: "allow", key_exprs: {operator} }},
                 ],
-                subjects: [ {{ id: "anyone" }}, {operators}, {robot_sites} ],
-                policies: [
-                  {{ rules: ["robot_out", "read", "forward_operator"], subjects: ["anyone"] }},
-                  {{ rules: ["command"], subjects: ["operators"] }},
-                  {{ rules: ["robot_in"], subjects: ["robot_sites"] }},
-                ],
+                subjects: [ {subjects} ],
+                policies: [ {policies} ],
               }},"#
         )
     }

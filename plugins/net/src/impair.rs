@@ -3,10 +3,10 @@
 //!
 //! - [`Relay::tcp`]: a TCP proxy. Each direction's bytes are held for the one-way delay plus a
 //!   jitter drawn per chunk (order kept, as TCP keeps it), paced by a bandwidth cap, and held
-//!   back entirely during a cut, then delivered. No loss: a TCP stream cannot lose bytes. The
-//!   relay reads the sender's bytes into memory as they come, so the sender never feels
-//!   backpressure from a cut or a cap (a real dead link fills the sender's socket buffer and
-//!   then blocks it).
+//!   back entirely during a cut, then delivered. No loss: a TCP stream cannot lose bytes. Each
+//!   direction holds at most [`Impairment::queue_bytes`] (delayed, queued behind the cap or held
+//!   through a cut); when that is full the relay stops reading, so the sender's socket buffer
+//!   fills and then its writes block, as behind a real slow or dead link.
 //! - [`Relay::udp`]: a UDP forwarder. Each datagram is dropped with the loss probability or
 //!   delayed by the delay plus jitter (datagrams may reorder, as on a real path); a cut drops
 //!   everything.
@@ -35,7 +35,14 @@ pub struct Impairment {
     pub bandwidth_bps: Option<f64>,
     /// Seed of the drops and jitter.
     pub seed: u64,
+    /// What one TCP direction holds at most (bytes, ≥ 64 KiB): in flight through the delay,
+    /// queued behind the cap, held through a cut. Default 4 MiB (Linux's largest autotuned
+    /// socket buffer).
+    pub queue_bytes: usize,
 }
+
+/// The smallest [`Impairment::queue_bytes`]: one read of the relay's.
+pub const MIN_QUEUE_BYTES: usize = 64 * 1024;
 
 impl Default for Impairment {
     fn default() -> Self {
@@ -45,6 +52,7 @@ impl Default for Impairment {
             loss: 0.0,
             bandwidth_bps: None,
             seed: 1,
+            queue_bytes: 4 << 20,
         }
     }
 }
@@ -65,6 +73,12 @@ impl Impairment {
             && !(b.is_finite() && b > 0.0)
         {
             return Err(format!("bandwidth_bps {b} must be > 0"));
+        }
+        if self.queue_bytes < MIN_QUEUE_BYTES {
+            return Err(format!(
+                "queue_bytes {} must be at least {MIN_QUEUE_BYTES}",
+                self.queue_bytes
+            ));
         }
         Ok(())
     }
@@ -94,6 +108,10 @@ pub struct RelayStats {
     pub packets: AtomicU64,
     /// Datagrams dropped (loss or cut).
     pub dropped: AtomicU64,
+    /// The most bytes one TCP direction held at once.
+    pub held_max: AtomicU64,
+    /// Times a TCP direction stopped reading because it held [`Impairment::queue_bytes`].
+    pub backpressure: AtomicU64,
 }
 
 struct Shared {
@@ -200,7 +218,14 @@ impl Relay {
         self.addr
     }
 
-    /// Changes the impairment from now on.
+    /// Changes the impairment from now on, after checking it ([`Impairment::validate`]).
+    pub fn set_checked(&self, impairment: Impairment) -> Result<(), String> {
+        impairment.validate()?;
+        self.set(impairment);
+        Ok(())
+    }
+
+    /// Changes the impairment from now on (not checked: a test's or a bench's own settings).
     pub fn set(&self, impairment: Impairment) {
         *self
             .shared
@@ -234,14 +259,40 @@ impl Drop for Relay {
 fn pump_tcp(mut from: TcpStream, mut to: TcpStream, shared: Arc<Shared>, seed: u64) {
     let (tx, rx) = channel::<(Instant, Vec<u8>)>();
     let reader_shared = shared.clone();
+    // Bytes read and not yet written on; whether the writer has stopped.
+    let held = Arc::new(AtomicU64::new(0));
+    let reader_held = held.clone();
+    let writer_done = Arc::new(AtomicBool::new(false));
+    let reader_writer_done = writer_done.clone();
     let _ = std::thread::Builder::new()
         .name("relay read".into())
         .spawn(move || {
-            let mut buf = vec![0u8; 64 * 1024];
-            while !reader_shared.stopped() {
+            let mut buf = vec![0u8; MIN_QUEUE_BYTES];
+            let mut waiting = false;
+            while !reader_shared.stopped() && !reader_writer_done.load(Ordering::Relaxed) {
+                // Full: stop reading (the sender's socket buffer fills, then it blocks).
+                let limit = reader_shared.impairment().queue_bytes.max(MIN_QUEUE_BYTES) as u64;
+                if reader_held.load(Ordering::Relaxed) + buf.len() as u64 > limit {
+                    if !waiting {
+                        waiting = true;
+                        reader_shared
+                            .stats
+                            .backpressure
+                            .fetch_add(1, Ordering::Relaxed);
+                    }
+                    std::thread::sleep(Duration::from_millis(1));
+                    continue;
+                }
+                waiting = false;
                 match from.read(&mut buf) {
                     Ok(0) | Err(_) => break,
                     Ok(n) => {
+                        let now_held =
+                            reader_held.fetch_add(n as u64, Ordering::Relaxed) + n as u64;
+                        reader_shared
+                            .stats
+                            .held_max
+                            .fetch_max(now_held, Ordering::Relaxed);
                         if tx.send((Instant::now(), buf[..n].to_vec())).is_err() {
                             break;
                         }
@@ -271,12 +322,14 @@ fn pump_tcp(mut from: TcpStream, mut to: TcpStream, shared: Arc<Shared>, seed: u
                     let _ = to.shutdown(std::net::Shutdown::Both);
                     break;
                 }
+                held.fetch_sub(chunk.len() as u64, Ordering::Relaxed);
                 shared
                     .stats
                     .bytes
                     .fetch_add(chunk.len() as u64, Ordering::Relaxed);
                 shared.stats.packets.fetch_add(1, Ordering::Relaxed);
             }
+            writer_done.store(true, Ordering::Relaxed);
             let _ = to.shutdown(std::net::Shutdown::Both);
         });
 }
@@ -500,6 +553,70 @@ mod tests {
             std::thread::sleep(Duration::from_millis(5));
         }
         assert!(relay.stats().bytes.load(Ordering::Relaxed) >= 16);
+    }
+
+    /// Behind a slow cap the relay holds at most its queue, and then the sender's writes stop
+    /// being taken: with a 64 KiB queue at 200 kbit/s a sender that writes as fast as it can
+    /// gets only its own and the relay's socket buffers ahead, not the gigabytes loopback
+    /// would take in the same time.
+    #[test]
+    fn a_full_tcp_queue_pushes_back_on_the_sender() {
+        let sink = TcpListener::bind("127.0.0.1:0").expect("binds");
+        let upstream = sink.local_addr().expect("addr");
+        std::thread::spawn(move || {
+            for s in sink.incoming().flatten() {
+                std::thread::spawn(move || {
+                    let mut s = s;
+                    let mut buf = [0u8; 4096];
+                    while let Ok(n) = s.read(&mut buf) {
+                        if n == 0 {
+                            break;
+                        }
+                    }
+                });
+            }
+        });
+        let relay = Relay::tcp(
+            upstream,
+            Impairment {
+                bandwidth_bps: Some(200e3),
+                queue_bytes: MIN_QUEUE_BYTES,
+                ..Impairment::default()
+            },
+        )
+        .expect("relay");
+        let mut c = TcpStream::connect(relay.local_addr()).expect("connects");
+        c.set_nonblocking(true).expect("nonblocking");
+        let chunk = vec![7u8; 64 * 1024];
+        let mut written = 0u64;
+        let start = Instant::now();
+        while start.elapsed() < Duration::from_millis(1500) {
+            match c.write(&chunk) {
+                Ok(n) => written += n as u64,
+                Err(_) => std::thread::sleep(Duration::from_millis(1)),
+            }
+        }
+        let held_max = relay.stats().held_max.load(Ordering::Relaxed);
+        let pushed_back = relay.stats().backpressure.load(Ordering::Relaxed);
+        eprintln!(
+            "taken from the sender {written} B, held at most {held_max} B, pushed back {pushed_back} times"
+        );
+        assert!(held_max <= MIN_QUEUE_BYTES as u64, "held {held_max}");
+        assert!(pushed_back >= 1, "the queue never filled");
+        // The sender's send buffer and the relay's receive buffer (Linux autotunes each to a
+        // few MiB at most) and the queue; without the limit, loopback takes gigabytes.
+        assert!(written < 32 << 20, "{written} bytes taken from the sender");
+        // Only what the cap lets through has left the relay (1.5 s at 25 kB/s, and the queue).
+        let forwarded = relay.stats().bytes.load(Ordering::Relaxed);
+        assert!(forwarded < 200_000, "{forwarded} bytes forwarded");
+        assert!(
+            relay
+                .set_checked(Impairment {
+                    queue_bytes: 10,
+                    ..Impairment::default()
+                })
+                .is_err()
+        );
     }
 
     #[test]

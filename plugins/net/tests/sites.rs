@@ -343,8 +343,11 @@ fn through_a_router_only_its_operator_commands_and_only_the_robot_site_publishes
     router_config.connect = vec![];
     router_config.insecure_lan = false;
     router_config.dictionary = Some(dictionary.clone());
+    // Refused: no operator named; no robot-site user; a user not in the dictionary;
+    // connecting out.
+    let e = router_config.validate().expect_err("no operator");
+    assert!(e.to_string().contains("--operator"), "{e}");
     router_config.operators = vec!["blair".into()];
-    // Refused: no robot-site user; a user not in the dictionary; connecting out.
     let e = router_config.validate().expect_err("no robot site");
     assert!(e.to_string().contains("--robot-site"), "{e}");
     router_config.robot_sites = vec!["alice".into()];
@@ -365,6 +368,17 @@ fn through_a_router_only_its_operator_commands_and_only_the_robot_site_publishes
     robot_config.connect = vec![endpoint.clone()];
     robot_config.insecure_lan = false;
     robot_config.credentials = login("desk", "robot-site-key");
+    // It obeys the router it connects to: over plain TCP only on a trusted network (TLS with
+    // the router's authority otherwise; tests/network.rs's TLS test covers TLS).
+    let e = robot_config
+        .validate()
+        .expect_err("a robot site connecting without TLS");
+    assert!(e.to_string().contains("--tls-ca"), "{e}");
+    robot_config.insecure_lan = true;
+    let mut stray = robot_config.clone();
+    stray.robot_sites = vec!["desk".into()];
+    let e = stray.validate().expect_err("--robot-site at a robot site");
+    assert!(e.to_string().contains("only a router"), "{e}");
     let mut robot =
         RobotSite::open(&robot_config, &info(PROTOCOL_VERSION), SiteClock::start()).expect("opens");
     let as_user = |user: &str, password: &str| {

@@ -145,12 +145,18 @@ impl Scene {
                     let field = entries.field(other);
                     resolve_camera(&f.camera, path)
                         .map_err(|e| e.with_field_prefix("camera", &field))?;
-                    f.erase.validate("erase").map_err(|e| {
-                        SceneError::value(format!("{field}.erase"), e).in_file(path)
-                    })?;
-                    background_path(&f, path).map_err(|e| {
-                        e.with_field_prefix("background", &format!("{field}.background"))
-                    })?;
+                    // Its own erase and background, named as its; the scene's are checked below.
+                    let own = |key: &str| entries.0[other].1.contains_key(key);
+                    if own("erase") {
+                        f.erase.validate("erase").map_err(|e| {
+                            SceneError::value(format!("{field}.erase"), e).in_file(path)
+                        })?;
+                    }
+                    if own("background") {
+                        background_path(&f, path).map_err(|e| {
+                            e.with_field_prefix("background", &format!("{field}.background"))
+                        })?;
+                    }
                 }
                 let names = entries.0.iter().map(|(name, _)| name.clone()).collect();
                 (file, names, index, entries.field(index))

@@ -466,6 +466,18 @@ fn several_cameras_load_by_name_and_each_is_checked() {
             .latency_compensation
     );
 
+    // A bad value in the scene's own [erase] is the scene's, not a camera's.
+    let shared = text.replace(
+        "latency_compensation = true",
+        "latency_compensation = true\nranges = [[240, 255], [250, 240], [240, 255], [240, 255]]",
+    );
+    assert_ne!(shared, text);
+    let e = view(&shared, None).unwrap_err().to_string();
+    assert!(
+        e.contains("erase") && e.contains("G range") && !e.contains("cameras["),
+        "{e}"
+    );
+
     // A bad value in the camera not chosen is still refused, naming that camera.
     let bad = text.replace(
         "name = \"alice\"\nintrinsics = { fx = 461.0",
