@@ -142,6 +142,21 @@ impl RemoteDriver {
     }
 }
 
+impl RemoteDriver {
+    /// Whether the runtime opened Monado's remote driver; if not, says that `test`'s `part`
+    /// (what the driver moves) was skipped.
+    fn drove(&self, test: &str, part: &str) -> bool {
+        let connected = self.connected.load(Ordering::Relaxed);
+        if !connected {
+            eprintln!(
+                "{test}: SKIPPED {part}: the runtime did not open Monado's remote driver, which \
+                 this test moves it with"
+            );
+        }
+        connected
+    }
+}
+
 impl Drop for RemoteDriver {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
@@ -253,11 +268,7 @@ fn tracked_hands_drive_the_hand_source() {
             "90",
         ],
     );
-    if !driver.connected.load(Ordering::Relaxed) {
-        eprintln!(
-            "tracked_hands_drive_the_hand_source: SKIPPED: the runtime did not open Monado's \
-             remote driver, which this test moves the hands with"
-        );
+    if !driver.drove("tracked_hands_drive_the_hand_source", "the hands") {
         return;
     }
     assert!(driver.sent.load(Ordering::Relaxed) > 0);
@@ -293,11 +304,7 @@ fn the_headsets_head_pose_drives_the_head_camera() {
             "150",
         ],
     );
-    if !driver.connected.load(Ordering::Relaxed) {
-        eprintln!(
-            "the_headsets_head_pose_drives_the_head_camera: SKIPPED: the runtime did not open \
-             Monado's remote driver, which this test turns the head with"
-        );
+    if !driver.drove("the_headsets_head_pose_drives_the_head_camera", "the head") {
         return;
     }
     // "...; head: P poses from the headset, turned A deg since the first, the last frame's
@@ -372,11 +379,11 @@ fn the_operators_site_runs_in_xr_and_its_tracked_hand_sends_targets() {
     assert!(log.contains("entered XR state FOCUSED"), "{log}");
     let (line, n) = summary(&log);
     assert_eq!(n[0], 1.0, "{line}");
-    if !driver.connected.load(Ordering::Relaxed) {
-        eprintln!(
-            "the_operators_site_runs_in_xr_and_its_tracked_hand_sends_targets: the session part \
-             passed; SKIPPED the hand: the runtime did not open Monado's remote driver"
-        );
+    // The session part has passed.
+    if !driver.drove(
+        "the_operators_site_runs_in_xr_and_its_tracked_hand_sends_targets",
+        "the hand",
+    ) {
         return;
     }
     assert!(n[2] >= 30.0, "{line}");

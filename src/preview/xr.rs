@@ -117,9 +117,7 @@ fn read_head(
     scene: Res<SceneResource>,
     eyes: Query<&Transform, With<XrCamera>>,
     time: Res<Time<Fixed>>,
-    mut report: ResMut<XrReport>,
 ) {
-    report.frames_running += 1;
     let Some(live) = live_head(&scene) else {
         return;
     };
@@ -245,6 +243,9 @@ fn report_session(
                 report.retry_at_s = now + RETRY_S;
             }
         }
+    }
+    if state == Some(XrState::Running) {
+        report.frames_running += 1;
     }
     report.last = state;
 }
