@@ -13,6 +13,14 @@
 //! --pose` read), `camera_info.yaml` with `--intrinsics`, `overlay_before_NNNNN.png` and
 //! `overlay_after_NNNNN.png` (the model's silhouette tinted red, the reference's outline in
 //! green), and `report.json`.
+//!
+//! A recording of a camera on a head (Alice's headset camera: the head's tracked poses and the
+//! mount, `avatarm_record::HEAD_FRAME`) gets its *mount* fitted instead: each frame's robot is
+//! put in the head's frame at the frame's capture (the tracked poses interpolated to it), where
+//! one `camera_from_head` must explain every frame, and the same fit runs on it from the rough
+//! mount (`--mount FILE`, or the recording's). The views from several head poses constrain it
+//! better than one fixed view does. Written: `camera_mount.yaml` (`head_from_camera`: what
+//! `--mount` and `avatarm replay --believed-mount` read) instead of `camera_pose.yaml`.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -30,7 +38,9 @@ use nalgebra::{Isometry3, UnitQuaternion};
 use serde_json::json;
 
 use crate::AppError;
-use crate::replay::recording::{decode, interpolate, joint_vectors, overlay, recording_camera};
+use crate::replay::recording::{
+    decode, interpolate, joint_vectors, overlay, recording_camera, recording_mount,
+};
 
 /// The pairing check draws every frame's joints against every frame's mask: up to this many.
 const MAX_PAIRING_FRAMES: usize = 60;
@@ -40,6 +50,9 @@ const MAX_FIT_FRAMES: usize = 100;
 
 /// Frames one run decodes, draws and scores at most (fit and held out).
 const MAX_USED_FRAMES: usize = 300;
+
+/// A frame captured further than this outside the tracked head poses has no head pose (ns).
+const HEAD_POSE_SLACK_NS: u64 = 50_000_000;
 
 /// What `avatarm calibrate` is given.
 #[derive(Debug, Clone)]
@@ -56,6 +69,9 @@ pub struct CalibrateOptions {
     pub pose: Option<PathBuf>,
     /// The rough pose as the camera's eye and a point it looks at, in the base frame (m).
     pub look_at: Option<([f64; 3], [f64; 3])>,
+    /// A camera on a head: the rough mount from a file (`head_from_camera`), else the
+    /// recording's.
+    pub mount: Option<PathBuf>,
     /// Frames the fit uses (inclusive ranges of indices); every frame with a silhouette when
     /// empty (a reference mask, or with `background` every frame).
     pub fit: Vec<(usize, usize)>,
@@ -87,7 +103,26 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     let recording = Recording::open(&o.recording)?;
     let (calibration, k) = recording_camera(&recording, o.camera.as_deref(), &name)?;
     let size = (k.width, k.height);
+    // A camera on a head: the fit is of the mount. Each frame's robot is put in the head's
+    // frame at the frame's capture, so that one camera_from_head explains every frame.
+    let pose_flag = match (&o.pose, &o.look_at) {
+        (Some(_), _) => Some("--pose"),
+        (None, Some(_)) => Some("--look-at"),
+        (None, None) => None,
+    };
+    let head_from_camera =
+        recording_mount(&recording, o.mount.as_deref(), pose_flag, "--mount", &name)?;
+    let on_head = head_from_camera.is_some();
+    if on_head && o.background.is_some() {
+        return Err(AppError::flag(
+            "--background",
+            format!(
+                "{name}: the camera rides on a head, so one photograph is not its empty room: fit to the recording's reference masks"
+            ),
+        ));
+    }
     let base_from_camera = match (&o.pose, &o.look_at) {
+        _ if head_from_camera.is_some() => head_from_camera.unwrap_or_default(),
         (Some(path), _) => read_pose(path)?,
         (None, Some((eye, target))) => CameraPose {
             eye: *eye,
@@ -211,6 +246,26 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         let mut triangles = silhouette.at(&model, &Isometry3::identity(), q.as_slice());
         if let Some(z) = o.hidden_below {
             triangles = clip_below(&triangles, z);
+        }
+        if on_head {
+            // The robot as the head saw it at the frame's capture.
+            let (first, last) = (
+                recording.head_poses[0].stamp_ns,
+                recording.head_poses[recording.head_poses.len() - 1].stamp_ns,
+            );
+            if f.stamp_ns + HEAD_POSE_SLACK_NS < first || f.stamp_ns > last + HEAD_POSE_SLACK_NS {
+                notes.push(format!(
+                    "frame {i}: captured more than {} ms outside the tracked head poses: left out",
+                    HEAD_POSE_SLACK_NS / 1_000_000
+                ));
+                continue;
+            }
+            let head_from_base = recording.head_at(f.stamp_ns).unwrap_or_default().inverse();
+            for t in &mut triangles {
+                for v in t.iter_mut() {
+                    *v = head_from_base * *v;
+                }
+            }
         }
         frames.push((
             i,
@@ -352,9 +407,23 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             .collect();
         (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
     };
+    // For a camera on a head, "base" below is the head: the pose is the mount.
     let base_from_camera = result.camera_from_base.inverse();
     let change = result.camera_from_base * rough.inverse();
-    let pose_path = o.out.join("camera_pose.yaml");
+    let (pose_file, key, frame_name) = if on_head {
+        (
+            "camera_mount.yaml",
+            "head_from_camera",
+            "the head's optical frame (x right, y down, z forward)",
+        )
+    } else {
+        (
+            "camera_pose.yaml",
+            "base_from_camera",
+            "the robot's base frame",
+        )
+    };
+    let pose_path = o.out.join(pose_file);
     let m = base_from_camera.to_homogeneous();
     let rows: String = (0..4)
         .map(|r| {
@@ -368,7 +437,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         })
         .collect();
     let text = format!(
-        "# The camera's pose in the robot's base frame (OpenCV optical axes: x right, y down, z\n# forward), fitted by `avatarm calibrate` to {} frames of {}.\nbase_from_camera:\n{rows}",
+        "# The camera's pose in {frame_name} (OpenCV optical axes: x right, y down,\n# z forward), fitted by `avatarm calibrate` to {} frames of {}.\n{key}:\n{rows}",
         fit.len(),
         name
     );
@@ -407,6 +476,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         .collect();
     let q: UnitQuaternion<f64> = base_from_camera.rotation;
     let t = base_from_camera.translation.vector;
+    let rpy = q.euler_angles();
     let report = json!({
         "recording": name,
         "robot": model.name,
@@ -433,9 +503,12 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             "held_out_after": mean(false, "iou_after"),
             "per_frame": per_frame,
         },
-        "base_from_camera": {
+        "camera": if on_head { "on a head: the fit is the mount (head_from_camera)" } else { "fixed" },
+        "head_poses": recording.head_poses.len(),
+        key: {
             "translation": [t.x, t.y, t.z],
             "quaternion_xyzw": [q.i, q.j, q.k, q.w],
+            "rpy": [rpy.0, rpy.1, rpy.2],
         },
         "change_from_rough": {
             "rotation_deg": change.rotation.angle().to_degrees(),

@@ -3,7 +3,8 @@
 //!
 //! What is recorded, each stamped with its capture or sample time on the app's clock (offset to
 //! the Unix epoch at start): the camera's frames (JPEG) as the pipeline received them, its
-//! calibration (K, the lens) and believed pose, the robot's base in the world, the robot's
+//! calibration (K, the lens) and believed pose (for a camera on a head: the believed mount and
+//! every tracked head pose received, in the base frame), the robot's base in the world, the robot's
 //! every joint state sent to the app's twin, Avatarm's erased frame (JPEG) and mask (PNG)
 //! of every frame (read back after the frame's render: the one read-back the live path gets
 //! with `--record`), the operator's hand frames, every control tick's command to the robot,
@@ -26,8 +27,8 @@ use avatarm_erase::{EraseState, EraseTargets};
 use avatarm_hand::ActiveHand;
 use avatarm_mapping::{Teleop, TeleopSample, TeleopStatus};
 use avatarm_record::{
-    CompressedFrame, HandPoses, ImageFormat, JointStates, LogLevel, RecordError, RecordingWriter,
-    RobotCommand, SafetyEvent,
+    CompressedFrame, HandPoses, HeadPose, ImageFormat, JointStates, LogLevel, RecordError,
+    RecordingWriter, RobotCommand, SafetyEvent,
 };
 use avatarm_scene::Scene;
 use avatarm_twin::JointStateMessage;
@@ -43,7 +44,6 @@ const JPEG_QUALITY: u8 = 90;
 /// Adds the session recorder to `app`: creates `path` now (an error names it), records until
 /// the app ends.
 pub fn add_session_recorder(app: &mut App, path: &Path, scene: &Scene) -> Result<(), AppError> {
-    crate::replay::refuse_moving_camera_recording(scene)?;
     let mut writer = RecordingWriter::create(path)?;
     let epoch_ns = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -51,10 +51,14 @@ pub fn add_session_recorder(app: &mut App, path: &Path, scene: &Scene) -> Result
     let calibration = crate::replay::scene_calibration(scene);
     let base = scene.robot_base();
     writer.calibration(epoch_ns, &calibration)?;
-    writer.camera_pose(
-        epoch_ns,
-        &(base.inverse() * scene.believed_camera.world_from_camera),
-    )?;
+    match &scene.head {
+        // A camera on a head: the mount as the app believes it; the head's tracked poses follow.
+        Some(head) => writer.camera_mount(epoch_ns, &head.believed_mount)?,
+        None => writer.camera_pose(
+            epoch_ns,
+            &(base.inverse() * scene.believed_camera.world_from_camera),
+        )?,
+    }
     writer.base_pose(epoch_ns, &base)?;
     let (tx, rx) = channel();
     let thread = std::thread::Builder::new()
@@ -81,8 +85,12 @@ pub fn add_session_recorder(app: &mut App, path: &Path, scene: &Scene) -> Result
         last_hand: None,
         writer_gone: Default::default(),
         watch: SafetyWatch::default(),
+        base_from_world: base.inverse(),
     })
     .add_systems(Last, record_session);
+    if scene.head.is_some() {
+        app.add_systems(Last, record_head_poses);
+    }
     // Every control tick from the first (the live task's loop is in the app already).
     if let Some(mut teleop) = app.world_mut().get_resource_mut::<Teleop>() {
         teleop.record = true;
@@ -101,6 +109,7 @@ enum Item {
         data: Arc<Vec<u8>>,
     },
     Joints(JointStates),
+    Head(HeadPose),
     Hand(HandPoses),
     Command(RobotCommand),
     Safety(SafetyEvent),
@@ -188,6 +197,7 @@ fn write_session(mut writer: RecordingWriter, rx: Receiver<Item>) -> Result<Writ
                 }
             },
             Item::Joints(s) => writer.joint_states(&s),
+            Item::Head(p) => writer.head_pose(&p),
             Item::Hand(h) => writer.hand(&h),
             Item::Command(c) => writer.robot_command(&c),
             Item::Safety(e) => writer.safety_event(&e),
@@ -233,6 +243,8 @@ struct SessionRecorder {
     /// The writer thread ended early (said once).
     writer_gone: std::sync::atomic::AtomicBool,
     watch: SafetyWatch,
+    /// The world into the robot's base frame (head poses are recorded in the base frame).
+    base_from_world: nalgebra::Isometry3<f64>,
 }
 
 impl SessionRecorder {
@@ -318,6 +330,20 @@ fn severity(kind: &str) -> LogLevel {
         LogLevel::Error
     } else {
         LogLevel::Warning
+    }
+}
+
+/// A camera on a head: every tracked head pose the app receives, in the base frame.
+fn record_head_poses(
+    recorder: Res<SessionRecorder>,
+    mut poses: MessageReader<avatarm_video::HeadPoseMessage>,
+) {
+    for p in poses.read() {
+        let item = Item::Head(HeadPose {
+            stamp_ns: recorder.ns(p.stamp_s),
+            base_from_head: recorder.base_from_world * p.world_from_head,
+        });
+        recorder.send(item);
     }
 }
 

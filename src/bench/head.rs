@@ -125,8 +125,9 @@ pub fn run_head(scene: &Scene, sweep: &HeadSweep, out: &Path) -> Result<HeadOutp
         return Err(AppError::flag(
             "SCENE",
             format!(
-                "the scene '{}' has no [camera.head] sweep to vary (assets/scenes/head_camera.toml has one)",
-                scene.file.name
+                "the scene '{}' (camera '{}') has no [camera.head] sweep to vary (assets/scenes/head_camera.toml has one)",
+                scene.file.name,
+                scene.camera_name()
             ),
         ));
     };

@@ -236,6 +236,10 @@ enum Command {
         /// The rough pose (under camera_from_base or base_from_camera), else the recording's.
         #[arg(long, value_name = "FILE", conflicts_with = "look_at")]
         pose: Option<PathBuf>,
+        /// A recording of a camera on a head: the rough mount (under head_from_camera or
+        /// camera_from_head), else the recording's; the fit is then of the mount.
+        #[arg(long, value_name = "FILE", conflicts_with_all = ["pose", "look_at"])]
+        mount: Option<PathBuf>,
         /// The rough pose as the camera's eye and a point it looks at, in the base frame (m):
         /// EX,EY,EZ,TX,TY,TZ.
         #[arg(
@@ -459,6 +463,10 @@ enum BenchCommand {
     Head {
         /// The scene file (needs [camera.head] with a sweep).
         scene: Option<PathBuf>,
+        /// The scene's camera NAME (one of its [[cameras]]; default: its first camera on a
+        /// head).
+        #[arg(long, value_name = "NAME")]
+        view: Option<String>,
         /// Output folder.
         #[arg(long, value_name = "DIR", default_value = "out/bench_head")]
         out: PathBuf,
@@ -1215,6 +1223,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     packages: packages(package_path),
                     camera,
                     pose,
+                    mount: overrides.believed_mount.clone(),
                     settings,
                     background: overrides.background.clone(),
                     background_margin_px: background_margin,
@@ -1316,6 +1325,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             camera,
             pose,
             look_at,
+            mount,
             fit,
             every,
             intrinsics,
@@ -1357,6 +1367,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 camera,
                 pose,
                 look_at,
+                mount,
                 fit,
                 every,
                 fit_focal: intrinsics,
@@ -1395,14 +1406,36 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     .unwrap_or(f64::NAN),
             );
             println!(
-                "pose: {}; report: {}",
-                out.join("camera_pose.yaml").display(),
+                "{}: {}; report: {}",
+                if report["head_from_camera"].is_object() {
+                    "mount"
+                } else {
+                    "pose"
+                },
+                report["outputs"]["pose"].as_str().unwrap_or_default(),
                 out.join("report.json").display()
             );
+            if let Some(mount) = report["head_from_camera"].as_object() {
+                let v = |key: &str| {
+                    mount[key]
+                        .as_array()
+                        .into_iter()
+                        .flatten()
+                        .map(|x| format!("{:.6}", x.as_f64().unwrap_or(f64::NAN)))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
+                println!(
+                    "in the scene: [camera.head] mount = {{ xyz = [{}], rpy = [{}] }}",
+                    v("translation"),
+                    v("rpy")
+                );
+            }
             Ok(())
         }
         Command::Bench(BenchCommand::Head {
             scene,
+            view,
             out,
             speeds,
             latencies,
@@ -1416,7 +1449,18 @@ fn run(cli: Cli) -> Result<(), AppError> {
             package_path,
         }) => {
             let path = scene.unwrap_or_else(|| bundled_scene("head_camera.toml"));
-            let mut scene = Scene::load(&path, &packages(package_path))?;
+            let packages = packages(package_path);
+            let mut scene = Scene::load_view(&path, &packages, view.as_deref())?;
+            if view.is_none() && scene.head.is_none() {
+                // The first camera on a head, where the first is fixed.
+                for name in scene.cameras.clone().iter().skip(1) {
+                    let other = Scene::load_view(&path, &packages, Some(name))?;
+                    if other.head.is_some() {
+                        scene = other;
+                        break;
+                    }
+                }
+            }
             EraseOverrides {
                 camera_size,
                 ..Default::default()

@@ -59,6 +59,12 @@ pub struct EraseOverrides {
     /// scene puts it.
     #[arg(long = "believed-pose", value_name = "FILE")]
     pub believed_pose: Option<PathBuf>,
+    /// A camera on a head: the mount the app believes, from a file (under head_from_camera or
+    /// camera_from_head; what `avatarm calibrate` writes for a recording of a camera on a head)
+    /// instead of the scene's mount and calibration error. The simulated room's camera stays
+    /// where the scene's mount puts it. With --recording: instead of the recording's mount.
+    #[arg(long = "believed-mount", value_name = "FILE")]
+    pub believed_mount: Option<PathBuf>,
     /// Run the scene's camera at WIDTHxHEIGHT pixels, its pose and vertical field of view kept
     /// (the principal point at the centre): the same scene at 1080p.
     #[arg(long = "camera-size", value_name = "WxH", value_parser = super::frame_size)]
@@ -201,6 +207,15 @@ impl EraseOverrides {
             }
             let base_from_camera = avatarm_record::camera::read_pose(path)?;
             scene.believed_camera.world_from_camera = scene.robot_base() * base_from_camera;
+        }
+        if let Some(path) = &self.believed_mount {
+            let Some(head) = scene.head.as_mut() else {
+                return Err(AppError::flag(
+                    "--believed-mount",
+                    "the scene's camera is fixed, not on a head: give its pose with --believed-pose",
+                ));
+            };
+            head.believed_mount = avatarm_record::camera::read_mount(path)?;
         }
         if let Some(path) = &self.background {
             if !path.is_file() {

@@ -209,6 +209,9 @@ struct Replay {
     /// against the camera's true pose at capture (degrees, mm), the head's angular speed then
     /// (degrees/s) and how old the newest tracked pose was (ms).
     head_errors: Vec<HeadFrameError>,
+    /// A camera on a head, recorded (`--record`): the tracked head poses the app received,
+    /// `(stamp_s, world_from_head)`.
+    head_poses: Vec<(f64, nalgebra::Isometry3<f64>)>,
 }
 
 /// A camera on a head: how far one frame's mask camera was from the truth.
@@ -249,6 +252,7 @@ impl FrameStore for Replay {
 impl Plugin for ReplayPlugin {
     fn build(&self, app: &mut App) {
         let scene = &app.world().resource::<SceneResource>().0;
+        let head = scene.head.is_some();
         let total_frames = (scene.file.duration_s * scene.file.camera.fps)
             .round()
             .max(1.0) as u64;
@@ -280,6 +284,7 @@ impl Plugin for ReplayPlugin {
             recorded: Vec::new(),
             lens: None,
             head_errors: Vec::new(),
+            head_poses: Vec::new(),
         })
         .add_systems(Startup, pause_for_warmup)
         .add_systems(
@@ -288,7 +293,20 @@ impl Plugin for ReplayPlugin {
                 .chain()
                 .in_set(AvatarmSystems::Score),
         );
+        if self.0.record.is_some() && head {
+            app.add_systems(Last, keep_head_poses);
+        }
     }
+}
+
+/// A camera on a head, recorded: keeps every tracked head pose the app receives.
+fn keep_head_poses(
+    mut replay: ResMut<Replay>,
+    mut poses: MessageReader<avatarm_video::HeadPoseMessage>,
+) {
+    replay
+        .head_poses
+        .extend(poses.read().map(|p| (p.stamp_s, p.world_from_head)));
 }
 
 /// Updates the replay's warm-up goes on after the empty room is photographed: the GPU times of
@@ -780,7 +798,8 @@ fn stage_timings(replay: &Replay, gpu: &SpanTimes) -> serde_json::Value {
     })
 }
 
-/// Writes `--record`'s MCAP: the believed camera (its pose in the robot's base frame), and per
+/// Writes `--record`'s MCAP: the believed camera (its pose in the robot's base frame; for a
+/// camera on a head, the believed mount and every tracked head pose received), and per
 /// scored frame the frame, the simulated robot's joints at capture, the true silhouette as the
 /// reference mask, Avatarm's erased frame and mask; stamped with the capture time.
 /// The scene's believed camera as a recording's calibration: K, the size and the lens, as its
@@ -811,8 +830,22 @@ fn write_recording(path: &Path, replay: &Replay, scene: &SceneResource) -> Resul
         .fold(f64::INFINITY, f64::min);
     let t0 = ns(if first.is_finite() { first } else { 0.0 });
     w.calibration(t0, &scene_calibration(s))?;
-    let base_from_camera = s.robot_base().inverse() * s.believed_camera.world_from_camera;
-    w.camera_pose(t0, &base_from_camera)?;
+    let base_from_world = s.robot_base().inverse();
+    match &s.head {
+        // A camera on a head: the mount as the app believes it and each tracked head pose.
+        Some(head) => {
+            w.camera_mount(t0, &head.believed_mount)?;
+            for (stamp_s, world_from_head) in &replay.head_poses {
+                w.head_pose(&avatarm_record::HeadPose {
+                    stamp_ns: ns(*stamp_s),
+                    base_from_head: base_from_world * world_from_head,
+                })?;
+            }
+        }
+        None => {
+            w.camera_pose(t0, &(base_from_world * s.believed_camera.world_from_camera))?;
+        }
+    }
     let names: Vec<String> = s.model.dof_names().iter().map(|n| n.to_string()).collect();
     let mut frames: Vec<&RecordedFrame> = replay.recorded.iter().collect();
     frames.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
@@ -1075,22 +1108,6 @@ fn head_report(
     })
 }
 
-/// A recording holds one camera pose; a camera on a head moves, so recording one is refused
-/// (`--record`) rather than written with a wrong pose.
-pub(crate) fn refuse_moving_camera_recording(scene: &avatarm_scene::Scene) -> Result<(), AppError> {
-    if scene.head.is_some() {
-        return Err(AppError::flag(
-            "--record",
-            format!(
-                "the scene '{}' has a camera on a head; recordings hold one fixed camera pose, \
-                 so a moving camera is not recorded yet",
-                scene.file.name
-            ),
-        ));
-    }
-    Ok(())
-}
-
 /// Runs a replay to the end and returns its report.
 pub fn run(
     scene: &avatarm_scene::Scene,
@@ -1183,9 +1200,6 @@ fn run_video(
     scene: &avatarm_scene::Scene,
     options: ReplayOptions,
 ) -> Result<serde_json::Value, AppError> {
-    if options.record.is_some() {
-        refuse_moving_camera_recording(scene)?;
-    }
     let slot = options.result.clone();
     let mut app = crate::build_app(scene, &crate::Mode::Headless(options))?;
     let exit = app.run();

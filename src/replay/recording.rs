@@ -25,15 +25,16 @@ use avatarm_core::dr::{self, BackgroundEstimate, EraseSettings, FootageBackgroun
 use avatarm_core::robot::{JointMap, PackagePath, RobotModel};
 use avatarm_core::vision::camera::{Intrinsics, PinholeCamera};
 use avatarm_core::vision::distortion::Distortion;
+use avatarm_core::vision::head::PoseHistory;
 use avatarm_erase::{
     EraseConfig, EraseLens, ErasePlugin, EraseState, EraseSystems, EraseTargets, GpuTimes,
     PASS_NAMES, SetBackground, UPLOAD_SPAN,
 };
-use avatarm_record::camera::{CameraCalibration, read_calibration, read_pose};
-use avatarm_record::{CompressedFrame, ImageFormat, Recording, RecordingWriter};
+use avatarm_record::camera::{CameraCalibration, read_calibration, read_mount, read_pose};
+use avatarm_record::{CompressedFrame, HeadPose, ImageFormat, Recording, RecordingWriter};
 use avatarm_twin::readback::{ImageRead, ImageReadbackPlugin, read_image_once};
 use avatarm_twin::{RobotTwin, RobotTwinPlugin, TwinDetail};
-use avatarm_video::{LiveVideo, VideoFrame, VideoInbox, VideoPlugin, VideoSystems};
+use avatarm_video::{HeadTracking, LiveVideo, VideoFrame, VideoInbox, VideoPlugin, VideoSystems};
 use bevy::app::ScheduleRunnerPlugin;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
@@ -55,6 +56,9 @@ pub struct RecordingOptions {
     pub camera: Option<PathBuf>,
     /// A pose file instead of the recording's camera pose.
     pub pose: Option<PathBuf>,
+    /// A recording of a camera on a head: a mount file (`head_from_camera`) instead of the
+    /// recording's mount.
+    pub mount: Option<PathBuf>,
     /// The erase's settings.
     pub settings: EraseSettings,
     /// H from an image file instead of from the footage.
@@ -119,6 +123,8 @@ pub fn run_recording(o: &RecordingOptions) -> Result<serde_json::Value, AppError
     // Each frame's joints are interpolated to its capture time here, so the mask twin takes the
     // newest state as it is.
     settings.latency_compensation = false;
+    // A camera on a head: the head's pose at each frame's capture (handed over with it).
+    settings.pose_compensation = true;
     let (w, h) = input.size;
     app.insert_resource(LiveVideo::new("recording", 1e9))
         .insert_resource(EraseConfig {
@@ -131,11 +137,15 @@ pub fn run_recording(o: &RecordingOptions) -> Result<serde_json::Value, AppError
             base: Isometry3::identity(),
             source_twin: Some(source),
             occluders: Vec::new(),
-            head_mount: None,
+            head_mount: input.head_mount,
             view_background: None,
         })
         .add_plugins(ErasePlugin)
         .insert_resource(Driver {
+            head: input
+                .head_mount
+                .map(|_| input.recording.head_poses.clone())
+                .unwrap_or_default(),
             frames: input.frames.clone(),
             q: input.q.clone(),
             source,
@@ -199,6 +209,9 @@ struct Input {
     references: Vec<Option<Vec<u8>>>,
     /// What the replay could not honour.
     notes: Vec<String>,
+    /// A camera on a head: the mount (`head_from_camera`); the head's poses are the
+    /// recording's.
+    head_mount: Option<Isometry3<f64>>,
 }
 
 impl Input {
@@ -208,13 +221,32 @@ impl Input {
         let bad = |message: String| AppError::replay(format!("{name}: {message}"));
         let (calibration, intrinsics) = recording_camera(&recording, o.camera.as_deref(), &name)?;
         let size = (intrinsics.width, intrinsics.height);
-        let base_from_camera = match &o.pose {
-            Some(path) => read_pose(path)?,
-            None => recording.base_from_camera.ok_or_else(|| {
+        let mut notes = Vec::new();
+        // A camera on a head: each frame's camera is the head's pose at its capture times the
+        // mount.
+        let pose_flag = o.pose.as_ref().map(|_| "--pose");
+        let head = recording_mount(
+            &recording,
+            o.mount.as_deref(),
+            pose_flag,
+            "--believed-mount",
+            &name,
+        )?;
+        let base_from_camera = match (&o.pose, head) {
+            (_, Some(mount)) => {
+                let first = recording.frames.first().map_or(0, |f| f.stamp_ns);
+                recording.head_at(first).unwrap_or_default() * mount
+            }
+            (Some(path), None) => read_pose(path)?,
+            (None, None) => recording.base_from_camera.ok_or_else(|| {
                 bad("the recording has no camera pose: give one with --pose FILE".into())
             })?,
         };
-        let mut notes = Vec::new();
+        if head.is_some() {
+            notes.push(
+                "the camera rides on a head: each frame's mask is drawn at the tracked head's pose at its capture times the mount; the background built from the footage is one image for every view, so where the head turned the erased pixels show the wrong part of the room (the masks and their scores are not affected)".into(),
+            );
+        }
         let lens = Distortion::from_ros(calibration.distortion_model.ros_name(), &calibration.d)?;
         // The mask's lens map, checked before any frame is decoded.
         let lens_map = EraseLens::new(&intrinsics, &lens, &o.settings)?;
@@ -277,6 +309,7 @@ impl Input {
             q,
             references,
             notes,
+            head_mount: head,
         })
     }
 }
@@ -284,6 +317,53 @@ impl Input {
 /// The recording's joint states in the description's q order, by stamp. Errors name a joint
 /// the description does not have; joints the recording never names stay at 0 (said in the
 /// notes).
+/// A recording of a camera on a head: its mount (`head_from_camera`), from `mount_file` or
+/// else the recording's; `None` for a fixed camera. Errors: `pose_flag` (a fixed camera's pose
+/// given on the command line) for a camera on a head, `mount_flag` for a fixed camera, a
+/// camera on a head with no tracked head pose, or with no mount at all.
+pub(crate) fn recording_mount(
+    recording: &Recording,
+    mount_file: Option<&Path>,
+    pose_flag: Option<&str>,
+    mount_flag: &str,
+    name: &str,
+) -> Result<Option<Isometry3<f64>>, AppError> {
+    let bad = |message: String| AppError::replay(format!("{name}: {message}"));
+    if !recording.camera_on_head() {
+        return match mount_file {
+            Some(_) => Err(AppError::flag(
+                mount_flag,
+                format!(
+                    "{name}: the recording's camera is fixed, not on a head: give its pose with --pose"
+                ),
+            )),
+            None => Ok(None),
+        };
+    }
+    if let Some(flag) = pose_flag {
+        return Err(AppError::flag(
+            flag,
+            format!(
+                "{name}: the camera rides on a head ({} tracked head poses): its pose is the head's times the mount; give the mount with {mount_flag} FILE (head_from_camera), or none for the recording's",
+                recording.head_poses.len()
+            ),
+        ));
+    }
+    if recording.head_poses.is_empty() {
+        return Err(bad(
+            "the camera rides on a head (the recording has its mount) but there is no tracked head pose".into(),
+        ));
+    }
+    match mount_file {
+        Some(path) => Ok(Some(read_mount(path)?)),
+        None => recording.head_from_camera.map(Some).ok_or_else(|| {
+            bad(format!(
+                "the recording has head poses but no mount: give one with {mount_flag} FILE"
+            ))
+        }),
+    }
+}
+
 /// A recording's camera: its calibration (or `camera`, a camera file, instead) checked against
 /// the frames' size, and the pinhole intrinsics from its K. Errors: no frames, no calibration,
 /// a calibration for another image size.
@@ -473,6 +553,8 @@ struct Finished {
 
 #[derive(Resource)]
 struct Driver {
+    /// A camera on a head: the recording's head poses, by stamp.
+    head: Vec<HeadPose>,
     frames: Vec<CompressedFrame>,
     q: Vec<DVector<f64>>,
     source: Entity,
@@ -503,7 +585,7 @@ fn feed(
     time: Res<Time<Fixed>>,
     times: Res<GpuTimes>,
     mut exit: MessageWriter<AppExit>,
-    targets: Option<Res<EraseTargets>>,
+    (targets, mut head): (Option<Res<EraseTargets>>, ResMut<HeadTracking>),
 ) {
     let d = &mut *d;
     d.shown = None;
@@ -526,10 +608,10 @@ fn feed(
                 return;
             }
             d.phase = Phase::Run(pass, 0);
-            hand_over(d, &mut inbox, &mut twins, now);
+            hand_over(d, &mut inbox, &mut twins, &mut head, now);
         }
         Phase::Settle(k, pass) => d.phase = Phase::Settle(k - 1, pass),
-        Phase::Run(..) => hand_over(d, &mut inbox, &mut twins, now),
+        Phase::Run(..) => hand_over(d, &mut inbox, &mut twins, &mut head, now),
         Phase::Drain(pass) => {
             d.waited += 1;
             if d.pending > 0 && d.waited < MAX_WAIT_UPDATES {
@@ -575,6 +657,7 @@ fn feed(
         d: &mut Driver,
         inbox: &mut VideoInbox,
         twins: &mut Query<&mut RobotTwin>,
+        head: &mut HeadTracking,
         now: f64,
     ) {
         let Phase::Run(pass, i) = d.phase else {
@@ -608,6 +691,20 @@ fn feed(
             d.errors.push(format!("frame {i}: {e}"));
             d.phase = Phase::Done;
             return;
+        }
+        if !d.head.is_empty() {
+            // The head's poses around the frame's capture, on the app's clock (the frame is
+            // captured `now`): the mask's camera is the head's pose then times the mount.
+            head.history = PoseHistory::default();
+            let window_ns = (0.5e9 * head.history.window_s) as u64;
+            for p in d
+                .head
+                .iter()
+                .filter(|p| p.stamp_ns.abs_diff(frame.stamp_ns) <= window_ns)
+            {
+                let dt = (p.stamp_ns as f64 - frame.stamp_ns as f64) * 1e-9;
+                head.history.push(now + dt, p.base_from_head);
+            }
         }
         if let Ok(mut twin) = twins.get_mut(d.source) {
             twin.positions.clone_from(&d.q[i]);
@@ -798,7 +895,15 @@ fn write_outputs(
     let mut mcap = RecordingWriter::create(&mcap_path)?;
     let first_stamp = input.frames.first().map_or(0, |f| f.stamp_ns);
     mcap.calibration(first_stamp, &input.calibration)?;
-    mcap.camera_pose(first_stamp, &input.camera.world_from_camera)?;
+    match input.head_mount {
+        Some(mount) => {
+            mcap.camera_mount(first_stamp, &mount)?;
+            for p in &input.recording.head_poses {
+                mcap.head_pose(p)?;
+            }
+        }
+        None => mcap.camera_pose(first_stamp, &input.camera.world_from_camera)?,
+    }
     for s in &input.recording.joint_states {
         mcap.joint_states(s)?;
     }
@@ -925,7 +1030,13 @@ fn write_outputs(
         "size": [w, h],
         "camera": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
                    "distortion_model": input.calibration.distortion_model.ros_name(),
-                   "lens": super::lens_report(&input.lens, lens.0.as_deref())},
+                   "lens": super::lens_report(&input.lens, lens.0.as_deref()),
+                   "head": input.head_mount.map(|m| {
+                       let q = m.rotation;
+                       json!({"head_poses": input.recording.head_poses.len(),
+                              "head_from_camera": {"translation": [m.translation.x, m.translation.y, m.translation.z],
+                                                   "quaternion_xyzw": [q.i, q.j, q.k, q.w]}})
+                   })},
         "erase": {"dilate_px": settings.dilate_px, "feather_px": settings.feather_px,
                   "resolution_scale": settings.resolution_scale, "photometric": settings.photometric},
         "background": background_report,

@@ -397,26 +397,58 @@ pub fn read_calibration(
 /// error, never a guess; so is a matrix whose rotation is not one (orthonormality within
 /// 1e-4, determinant +1) or a quaternion whose norm is off 1 by more than 1e-3.
 pub fn read_pose(path: &Path) -> Result<Isometry3<f64>, CameraFileError> {
+    read_transform(
+        path,
+        ("base_from_camera", "the camera's pose in the base frame"),
+        (
+            "camera_from_base",
+            "base points into the camera frame, OpenCV's [R|t]",
+        ),
+    )
+}
+
+/// Reads the mount of a camera on a head: a YAML or JSON file whose one top-level key is
+/// `head_from_camera` (the camera's pose in the head's optical frame: x right, y down,
+/// z forward) or `camera_from_head`, holding a pose as [`read_pose`] reads it. Returns
+/// head_from_camera. Errors as [`read_pose`]'s.
+pub fn read_mount(path: &Path) -> Result<Isometry3<f64>, CameraFileError> {
+    read_transform(
+        path,
+        ("head_from_camera", "the camera's pose in the head's frame"),
+        ("camera_from_head", "head points into the camera frame"),
+    )
+}
+
+/// A pose file under one of two keys: `direct` (`a_from_b`, returned as it is) or `inverse`
+/// (`b_from_a`, inverted), each with what it means for the error naming neither.
+fn read_transform(
+    path: &Path,
+    direct: (&str, &str),
+    inverse: (&str, &str),
+) -> Result<Isometry3<f64>, CameraFileError> {
     let text = read_text(path)?;
     let y = parse_yaml(path, &text)?;
-    let (direction, pose) = match (&y["camera_from_base"], &y["base_from_camera"]) {
+    let (direction, pose) = match (&y[inverse.0], &y[direct.0]) {
         (Yaml::BadValue, Yaml::BadValue) => {
             return Err(content(
                 path,
-                "the pose's direction is not stated: put it under camera_from_base (base points into the camera frame, OpenCV's [R|t]) or base_from_camera (the camera's pose in the base frame)",
+                format!(
+                    "the pose's direction is not stated: put it under {} ({}) or {} ({})",
+                    inverse.0, inverse.1, direct.0, direct.1
+                ),
             ));
         }
-        (p, Yaml::BadValue) => ("camera_from_base", p),
-        (Yaml::BadValue, p) => ("base_from_camera", p),
+        (p, Yaml::BadValue) => (inverse.0, p),
+        (Yaml::BadValue, p) => (direct.0, p),
         _ => {
             return Err(content(
                 path,
-                "both camera_from_base and base_from_camera: give one",
+                format!("both {} and {}: give one", inverse.0, direct.0),
             ));
         }
     };
     let iso = pose_of(path, direction, pose)?;
-    Ok(if direction == "camera_from_base" {
+    Ok(if direction == inverse.0 {
         iso.inverse()
     } else {
         iso
@@ -673,5 +705,19 @@ mod tests {
             let e = read_pose(&file("bad_pose.yaml", &text)).expect_err(&text);
             assert!(e.to_string().contains(want), "{text}: {e}");
         }
+        // A head camera's mount, under its own keys, either way round.
+        let mount = read_mount(&file(
+            "mount.yaml",
+            &format!("camera_from_head: [{}]\n", rows.join(", ")),
+        ))
+        .expect("mount");
+        let d = mount.inverse() * base_from_camera;
+        assert!(d.translation.vector.norm() < 1e-9 && d.rotation.angle() < 1e-9);
+        let e = read_mount(&file("pose_as_mount.yaml", &files[0])).expect_err("a camera pose");
+        assert!(
+            e.to_string().contains("camera_from_head")
+                && e.to_string().contains("head_from_camera"),
+            "{e}"
+        );
     }
 }

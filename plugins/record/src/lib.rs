@@ -9,7 +9,7 @@
 //! |---|---|---|
 //! | [`topics::IMAGE`] | `foxglove.CompressedImage` | camera frames (PNG or JPEG), stamped at capture |
 //! | [`topics::CALIBRATION`] | `foxglove.CameraCalibration` | K, D and its model, the image size |
-//! | [`topics::TRANSFORM`] | `foxglove.FrameTransform` | the camera's pose: [`BASE_FRAME`] → [`CAMERA_FRAME`] (OpenCV optical axes) |
+//! | [`topics::TRANSFORM`] | `foxglove.FrameTransform` | the camera's pose: [`BASE_FRAME`] → [`CAMERA_FRAME`] (OpenCV optical axes); or, for a camera on a head, the head's tracked poses [`BASE_FRAME`] → [`HEAD_FRAME`] (each stamped with the moment it describes) and the mount [`HEAD_FRAME`] → [`CAMERA_FRAME`] |
 //! | [`topics::JOINT_STATES`] | `avatarm.JointState` | names, positions (rad or m), velocities, stamp |
 //! | [`topics::REFERENCE_MASK`] | `foxglove.CompressedImage` | a reference silhouette (PNG, 255 = robot), where the source has one |
 //! | [`topics::ERASED`] | `foxglove.CompressedImage` | Avatarm's output Ĩ(t): the frame with the robot erased (PNG) |
@@ -50,6 +50,9 @@ pub const BASE_FRAME: &str = "base";
 pub const CAMERA_FRAME: &str = "camera_optical";
 /// The world frame of a live session (z up): the hand's, and the parent of [`BASE_FRAME`].
 pub const WORLD_FRAME: &str = "world";
+/// The head a moving camera rides on (Alice's headset): an optical frame (x right, y down,
+/// z forward, the way the face points), as `avatarm_core::vision::head` has it.
+pub const HEAD_FRAME: &str = "head";
 
 /// The topics of a recording.
 pub mod topics {
@@ -204,13 +207,28 @@ pub struct JointStates {
     pub velocities: Vec<f64>,
 }
 
+/// One tracked pose of the head a moving camera rides on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeadPose {
+    /// The moment it describes (ns).
+    pub stamp_ns: u64,
+    /// `base_from_head`: the head's optical frame in the robot's base frame (m).
+    pub base_from_head: Isometry3<f64>,
+}
+
 /// A recording read back.
 #[derive(Debug, Clone, Default)]
 pub struct Recording {
     /// The camera's calibration (the last one recorded).
     pub calibration: Option<CameraCalibration>,
-    /// The camera's pose in the base frame (the last one recorded), OpenCV optical axes.
+    /// The camera's pose in the base frame (the last one recorded), OpenCV optical axes. `None`
+    /// for a camera on a head (see [`Recording::camera_at`]).
     pub base_from_camera: Option<Isometry3<f64>>,
+    /// A camera on a head: the head's tracked poses in the base frame, by the moment each
+    /// describes.
+    pub head_poses: Vec<HeadPose>,
+    /// A camera on a head: the mount, `head_from_camera` (the last one recorded).
+    pub head_from_camera: Option<Isometry3<f64>>,
     /// Camera frames, by capture time.
     pub frames: Vec<CompressedFrame>,
     /// Reference silhouettes, by capture time.
@@ -669,26 +687,51 @@ impl RecordingWriter {
         stamp_ns: u64,
         base_from_camera: &Isometry3<f64>,
     ) -> Result<(), RecordError> {
-        let t = base_from_camera.translation.vector;
-        let q = base_from_camera.rotation;
-        if !(t.iter().all(|v| v.is_finite()) && q.coords.iter().all(|v| v.is_finite())) {
+        if !finite_pose(base_from_camera) {
             return Err(self.refuse(format!("camera pose {base_from_camera:?} is not finite")));
         }
+        self.transform(stamp_ns, BASE_FRAME, CAMERA_FRAME, base_from_camera)
+    }
+
+    /// A tracked pose of the head a moving camera rides on: `base_from_head` at the moment
+    /// `stamp_ns` describes. Refused when not finite.
+    pub fn head_pose(&mut self, p: &HeadPose) -> Result<(), RecordError> {
+        if !finite_pose(&p.base_from_head) {
+            return Err(self.refuse(format!(
+                "head pose at {} ns {:?} is not finite",
+                p.stamp_ns, p.base_from_head
+            )));
+        }
+        self.transform(p.stamp_ns, BASE_FRAME, HEAD_FRAME, &p.base_from_head)
+    }
+
+    /// The mount of a camera on a head (`head_from_camera`, OpenCV optical axes), recorded at
+    /// `stamp_ns`. Refused when not finite.
+    pub fn camera_mount(
+        &mut self,
+        stamp_ns: u64,
+        head_from_camera: &Isometry3<f64>,
+    ) -> Result<(), RecordError> {
+        if !finite_pose(head_from_camera) {
+            return Err(self.refuse(format!("camera mount {head_from_camera:?} is not finite")));
+        }
+        self.transform(stamp_ns, HEAD_FRAME, CAMERA_FRAME, head_from_camera)
+    }
+
+    fn transform(
+        &mut self,
+        stamp_ns: u64,
+        parent: &str,
+        child: &str,
+        parent_from_child: &Isometry3<f64>,
+    ) -> Result<(), RecordError> {
+        let p = wire_pose(parent_from_child);
         let message = WireTransform {
             timestamp: Time::of(stamp_ns),
-            parent_frame_id: BASE_FRAME.into(),
-            child_frame_id: CAMERA_FRAME.into(),
-            translation: WireVector3 {
-                x: t.x,
-                y: t.y,
-                z: t.z,
-            },
-            rotation: WireQuaternion {
-                x: q.i,
-                y: q.j,
-                z: q.k,
-                w: q.w,
-            },
+            parent_frame_id: parent.into(),
+            child_frame_id: child.into(),
+            translation: p.position,
+            rotation: p.orientation,
         };
         self.write(topics::TRANSFORM, stamp_ns, &message)
     }
@@ -776,15 +819,7 @@ impl RecordingWriter {
         if !finite_pose(world_from_base) {
             return Err(self.refuse(format!("base pose {world_from_base:?} is not finite")));
         }
-        let p = wire_pose(world_from_base);
-        let message = WireTransform {
-            timestamp: Time::of(stamp_ns),
-            parent_frame_id: WORLD_FRAME.into(),
-            child_frame_id: BASE_FRAME.into(),
-            translation: p.position,
-            rotation: p.orientation,
-        };
-        self.write(topics::TRANSFORM, stamp_ns, &message)
+        self.transform(stamp_ns, WORLD_FRAME, BASE_FRAME, world_from_base)
     }
 
     /// The operator's hand. Refused (nothing written) when a pose or radius is not finite, the
@@ -999,6 +1034,22 @@ impl Recording {
                             Some(pose_of(&m.translation, &m.rotation).map_err(bad)?);
                         continue;
                     }
+                    match (m.parent_frame_id.as_str(), m.child_frame_id.as_str()) {
+                        (BASE_FRAME, HEAD_FRAME) => {
+                            out.head_poses.push(HeadPose {
+                                stamp_ns: m.timestamp.ns(),
+                                base_from_head: pose_of(&m.translation, &m.rotation)
+                                    .map_err(bad)?,
+                            });
+                            continue;
+                        }
+                        (HEAD_FRAME, CAMERA_FRAME) => {
+                            out.head_from_camera =
+                                Some(pose_of(&m.translation, &m.rotation).map_err(bad)?);
+                            continue;
+                        }
+                        _ => {}
+                    }
                     if (m.parent_frame_id.as_str(), m.child_frame_id.as_str())
                         != (BASE_FRAME, CAMERA_FRAME)
                     {
@@ -1107,10 +1158,52 @@ impl Recording {
         out.erased.sort_by_key(|f| f.stamp_ns);
         out.masks.sort_by_key(|f| f.stamp_ns);
         out.joint_states.sort_by_key(|s| s.stamp_ns);
+        out.head_poses.sort_by_key(|p| p.stamp_ns);
         out.hands.sort_by_key(|h| h.stamp_ns);
         out.commands.sort_by_key(|c| c.stamp_ns);
         out.safety.sort_by_key(|e| e.stamp_ns);
         Ok(out)
+    }
+
+    /// Whether the camera rides on a head: the recording has the head's poses or a mount.
+    pub fn camera_on_head(&self) -> bool {
+        !self.head_poses.is_empty() || self.head_from_camera.is_some()
+    }
+
+    /// The head's pose (`base_from_head`) at `stamp_ns`: interpolated between the tracked poses
+    /// around it (translation linearly, rotation by slerp), the first or last one outside
+    /// them; `None` without head poses.
+    pub fn head_at(&self, stamp_ns: u64) -> Option<Isometry3<f64>> {
+        let i = self.head_poses.partition_point(|p| p.stamp_ns <= stamp_ns);
+        let before = i.checked_sub(1).map(|i| &self.head_poses[i]);
+        match (before, self.head_poses.get(i)) {
+            (Some(a), Some(b)) => {
+                let s = (stamp_ns - a.stamp_ns) as f64 / (b.stamp_ns - a.stamp_ns) as f64;
+                let t = a
+                    .base_from_head
+                    .translation
+                    .vector
+                    .lerp(&b.base_from_head.translation.vector, s);
+                let r = a
+                    .base_from_head
+                    .rotation
+                    .try_slerp(&b.base_from_head.rotation, s, 1e-9)
+                    .unwrap_or(b.base_from_head.rotation);
+                Some(Isometry3::from_parts(Translation3::from(t), r))
+            }
+            (Some(p), None) | (None, Some(p)) => Some(p.base_from_head),
+            (None, None) => None,
+        }
+    }
+
+    /// The camera's pose in the base frame at `stamp_ns`: the fixed one, or for a camera on a
+    /// head the head's pose then ([`Recording::head_at`]) times the mount. `None` when the
+    /// recording has neither.
+    pub fn camera_at(&self, stamp_ns: u64) -> Option<Isometry3<f64>> {
+        match self.head_from_camera {
+            Some(mount) => Some(self.head_at(stamp_ns)? * mount),
+            None => self.base_from_camera,
+        }
     }
 
     /// The joint states at or just before `stamp_ns` (sample-and-hold), `None` before the first.
@@ -1247,6 +1340,50 @@ mod tests {
         assert_eq!(r.hands[1], lost);
         assert_eq!(r.commands, vec![command]);
         assert_eq!(r.safety, vec![event]);
+    }
+
+    #[test]
+    fn a_camera_on_a_head_reads_back_as_its_head_poses_and_mount() {
+        let path = temp("head.mcap");
+        let head = |i: u64| HeadPose {
+            stamp_ns: 1_000_000_000 + i * 10_000_000,
+            base_from_head: Isometry3::from_parts(
+                Translation3::new(0.1 * i as f64, -1.0, 0.5),
+                UnitQuaternion::from_euler_angles(0.0, 0.0, 0.1 * i as f64),
+            ),
+        };
+        let mount = Isometry3::translation(0.0, -0.03, 0.08);
+        let mut w = RecordingWriter::create(&path).expect("create");
+        w.camera_mount(1_000_000_000, &mount).expect("mount");
+        for i in [1u64, 0, 2] {
+            w.head_pose(&head(i)).expect("head");
+        }
+        let nan = HeadPose {
+            stamp_ns: 5,
+            base_from_head: Isometry3::translation(f64::NAN, 0.0, 0.0),
+        };
+        let e = w.head_pose(&nan).expect_err("NaN");
+        assert!(e.to_string().contains("head pose at 5 ns"), "{e}");
+        w.finish().expect("finish");
+        let r = Recording::open(&path).expect("open");
+        assert!(r.camera_on_head());
+        assert_eq!(r.base_from_camera, None);
+        assert_eq!(r.head_poses.len(), 3);
+        assert!(
+            r.head_poses
+                .windows(2)
+                .all(|w| w[0].stamp_ns < w[1].stamp_ns)
+        );
+        assert!(r.other_topics.is_empty(), "{:?}", r.other_topics);
+        // Halfway between the first two: 5 cm and 0.05 rad along; outside, the nearest.
+        let mid = r.head_at(1_005_000_000).expect("head");
+        assert!((mid.translation.x - 0.05).abs() < 1e-12);
+        assert!((mid.rotation.euler_angles().2 - 0.05).abs() < 1e-12);
+        assert_eq!(r.head_at(0), Some(head(0).base_from_head));
+        let camera = r.camera_at(1_020_000_000).expect("camera");
+        let expected = head(2).base_from_head * mount;
+        assert!((camera.translation.vector - expected.translation.vector).norm() < 1e-12);
+        assert!(camera.rotation.angle_to(&expected.rotation) < 1e-12);
     }
 
     #[test]
