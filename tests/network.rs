@@ -32,11 +32,19 @@ fn free_port() -> u16 {
         .expect("the test's set-up")
 }
 
+/// The scene both sites run unless a test says otherwise.
+const POURING: &str = "assets/scenes/pouring.toml";
+
 /// `avatarm serve` of the pouring scene on 127.0.0.1:`port`, logging into `dir`.
 fn serve(dir: &Path, port: u16, duration_s: f64, extra: &[&str]) -> Child {
+    serve_scene(dir, POURING, port, duration_s, extra)
+}
+
+/// `avatarm serve SCENE` on 127.0.0.1:`port`, logging into `dir`.
+fn serve_scene(dir: &Path, scene: &str, port: u16, duration_s: f64, extra: &[&str]) -> Child {
     let log = std::fs::File::create(dir.join("serve.log")).expect("the test's set-up");
     Command::new(env!("CARGO_BIN_EXE_avatarm"))
-        .args(["serve", "assets/scenes/pouring.toml", "--listen"])
+        .args(["serve", scene, "--listen"])
         .arg(format!("tcp/127.0.0.1:{port}"))
         .args(["--duration", &duration_s.to_string(), "--report"])
         .arg(dir.join("serve.json"))
@@ -49,11 +57,16 @@ fn serve(dir: &Path, port: u16, duration_s: f64, extra: &[&str]) -> Child {
 
 /// `avatarm join` to 127.0.0.1:`port`.
 fn join(dir: &Path, name: &str, port: u16, extra: &[&str]) -> Child {
+    join_scene(dir, name, POURING, port, extra)
+}
+
+/// `avatarm join --scene SCENE` to 127.0.0.1:`port`.
+fn join_scene(dir: &Path, name: &str, scene: &str, port: u16, extra: &[&str]) -> Child {
     let log = std::fs::File::create(dir.join(format!("{name}.log"))).expect("the test's set-up");
     Command::new(env!("CARGO_BIN_EXE_avatarm"))
         .arg("join")
         .arg(format!("tcp/127.0.0.1:{port}"))
-        .args(["--scene", "assets/scenes/pouring.toml", "--report"])
+        .args(["--scene", scene, "--report"])
         .arg(dir.join(format!("{name}.json")))
         .args(extra)
         .stdout(Stdio::null())
@@ -603,4 +616,45 @@ fn the_operator_window_shows_the_received_video_with_the_hand_in_front() {
         .filter(|p| near(&p.0, [242, 217, 178]) || near(&p.0, [255, 140, 51]))
         .count();
     assert!(hand >= 100, "{hand} hand-coloured pixels");
+}
+
+/// Alice's head camera through the network: the robot site erases it (`serve --view alice`)
+/// and each frame carries the camera pose its mask was drawn from, so that a viewer places the
+/// hand and the twins in front of it. Alice leans in and back: the frames' cameras move; the
+/// fixed camera's do not.
+#[test]
+fn a_head_camera_s_frames_carry_the_pose_they_were_erased_from() {
+    let _serial = serial();
+    let scene = "assets/scenes/pouring_two_views.toml";
+    let run = |view: &str| {
+        let dir = out_dir(&format!("view_{view}"));
+        let port = free_port();
+        let robot = serve_scene(
+            &dir,
+            scene,
+            port,
+            600.0,
+            &["--insecure-lan", "--view", view],
+        );
+        let viewer = join_scene(
+            &dir,
+            "join",
+            scene,
+            port,
+            &["--watch", "--view", view, "--wait", "30", "--duration", "6"],
+        );
+        let j = finish(viewer, &dir, "join");
+        let mut robot = robot;
+        let _ = robot.kill();
+        let _ = robot.wait();
+        j
+    };
+    let alice = run("alice");
+    assert!(f(&alice, "video.shown") >= 5.0, "{alice}");
+    assert!(f(&alice, "video.camera_moved_mm") >= 20.0, "{alice}");
+    assert!(f(&alice, "video.camera_turned_deg") >= 0.5, "{alice}");
+    let blair = run("blair");
+    assert!(f(&blair, "video.shown") >= 5.0, "{blair}");
+    assert!(f(&blair, "video.camera_moved_mm") < 1e-6, "{blair}");
+    assert!(f(&blair, "video.camera_turned_deg") < 1e-6, "{blair}");
 }

@@ -99,6 +99,11 @@ pub struct VideoLatency {
     pub decode_ms: Spread,
     /// Capture → decoded here (glass to glass but the display).
     pub total_ms: Spread,
+    /// How far the frames' cameras moved from the first frame's (a camera on a head): the
+    /// largest rotation (degrees) and translation (mm).
+    pub camera_turned_deg: f64,
+    /// The largest translation (mm).
+    pub camera_moved_mm: f64,
 }
 
 /// The operator's (or observer's) report (`--report`).
@@ -313,6 +318,8 @@ const KEYFRAME_REQUEST_INTERVAL_S: f64 = 0.5;
 #[derive(Default)]
 struct CameraView {
     decoder: avatarm_net::codec::VideoDecoder,
+    /// The first frame's camera pose.
+    first_pose: Option<nalgebra::Isometry3<f64>>,
     stream: Option<u64>,
     last_seq: Option<u64>,
     last_request: Option<Instant>,
@@ -401,6 +408,11 @@ impl Collect {
             r.video.keyframes += u64::from(h.keyframe);
             r.video.codec.clone_from(&h.codec);
             let view = self.cameras.entry(h.camera.clone()).or_default();
+            let pose = h.world_from_camera();
+            let first = *view.first_pose.get_or_insert(pose);
+            let (angle, offset) = avatarm_core::vision::head::pose_error(&first, &pose);
+            r.video.camera_turned_deg = r.video.camera_turned_deg.max(angle.to_degrees());
+            r.video.camera_moved_mm = r.video.camera_moved_mm.max(1e3 * offset);
             // `seq` is at most MAX_SEQ (the header's check): no overflow. Another stream (the
             // robot site restarted) starts the count again.
             if view.stream != Some(h.stream) {
@@ -428,7 +440,7 @@ impl Collect {
                     // The window shows one camera: the first one received.
                     let first = self.window_camera.get_or_insert_with(|| h.camera.clone());
                     if let Some(view) = self.view.as_ref().filter(|_| *first == h.camera) {
-                        view.put_frame(width, height, rgba);
+                        view.put_frame(width, height, rgba, h.world_from_camera());
                     }
                     r.video.shown += 1;
                     self.erase.push((h.erased_s - h.capture_s) * 1e3);

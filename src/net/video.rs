@@ -82,6 +82,8 @@ struct ServeVideo {
     encoder: Sender<Coded>,
     last_index: Option<u64>,
     carried: Option<(usize, Isometry3<f64>)>,
+    /// The camera's believed pose (the frames' until the erase has drawn one).
+    world_from_camera: Isometry3<f64>,
 }
 
 /// A frame read back, to be coded.
@@ -106,6 +108,12 @@ impl Plugin for ServeVideoPlugin {
             .world()
             .get_resource::<crate::SceneResource>()
             .and_then(|s| carried_object(&s.0));
+        let world_from_camera = app
+            .world()
+            .get_resource::<crate::SceneResource>()
+            .map_or_else(Isometry3::identity, |s| {
+                s.0.believed_camera.world_from_camera
+            });
         if let Some(mut room) = app.world_mut().get_resource_mut::<SimRoomConfig>() {
             room.external_drive = true;
         }
@@ -114,6 +122,7 @@ impl Plugin for ServeVideoPlugin {
             encoder: tx,
             last_index: None,
             carried,
+            world_from_camera,
         })
         .add_systems(Update, (mirror_loop, publish_erased, stop_when_done));
     }
@@ -187,6 +196,8 @@ fn publish_erased(
     video.last_index = Some(index);
     let clock = video.options.clock;
     let capture_s = clock.now_s() - (time.elapsed_secs_f64() - t_s);
+    // The camera this frame's mask was drawn from (a camera on a head moves).
+    let camera_pose = FrameHeader::pose_of(&state.camera_pose.unwrap_or(video.world_from_camera));
     let camera = video.options.camera.clone();
     let codec = video.options.encoder.codec.name();
     let tx = video.encoder.clone();
@@ -205,6 +216,7 @@ fn publish_erased(
                 capture_s,
                 erased_s: clock.now_s(),
                 sent_s: f64::NAN,
+                camera_pose,
             };
             let _ = tx.send(Coded {
                 header,

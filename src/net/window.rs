@@ -73,6 +73,9 @@ pub struct ViewFrame {
     pub height: u32,
     /// The pixels.
     pub rgba: Vec<u8>,
+    /// The camera the robot site drew the frame's mask from (`world_from_camera`): where the
+    /// hand and the twins are placed in front of it (a camera on a head moves).
+    pub world_from_camera: Isometry3<f64>,
 }
 
 /// What the session hands the window, newest only.
@@ -124,8 +127,15 @@ impl ViewShared {
         }
     }
 
-    /// Puts a decoded frame up for the window (replacing one it has not drawn yet).
-    pub fn put_frame(&self, width: u32, height: u32, rgba: Vec<u8>) {
+    /// Puts a decoded frame up for the window (replacing one it has not drawn yet), seen from
+    /// `world_from_camera`.
+    pub fn put_frame(
+        &self,
+        width: u32,
+        height: u32,
+        rgba: Vec<u8>,
+        world_from_camera: Isometry3<f64>,
+    ) {
         let number = self.frames_in.fetch_add(1, Ordering::Relaxed) + 1;
         if let Ok(mut s) = self.state.lock() {
             s.frame = Some(ViewFrame {
@@ -134,6 +144,7 @@ impl ViewShared {
                 width,
                 height,
                 rgba,
+                world_from_camera,
             });
         }
     }
@@ -412,6 +423,10 @@ fn show_session(
             }
             image.data = Some(frame.rgba);
             state.report.video_frames += 1;
+            // The hand and the twins in front of the frame, from where it was taken.
+            if config.real_camera.world_from_camera != frame.world_from_camera {
+                config.real_camera.world_from_camera = frame.world_from_camera;
+            }
             if let Ok(mut record) = outcome.0.lock() {
                 WindowRecord::push(&mut record.panel_wait_ms, wait_ms);
             }
@@ -519,11 +534,13 @@ mod tests {
     #[test]
     fn the_view_holds_the_newest_frame_numbered() {
         let shared = ViewShared::new();
-        shared.put_frame(2, 1, vec![1; 8]);
-        shared.put_frame(2, 1, vec![2; 8]);
+        let at = |x: f64| Isometry3::translation(x, 0.0, 1.0);
+        shared.put_frame(2, 1, vec![1; 8], at(1.0));
+        shared.put_frame(2, 1, vec![2; 8], at(2.0));
         let frame = shared.state.lock().unwrap().frame.take().unwrap();
         assert_eq!((frame.number, frame.rgba[0]), (2, 2));
-        shared.put_frame(2, 1, vec![3; 8]);
+        assert_eq!(frame.world_from_camera, at(2.0));
+        shared.put_frame(2, 1, vec![3; 8], at(3.0));
         let frame = shared.state.lock().unwrap().frame.take().unwrap();
         assert_eq!(frame.number, 3);
     }

@@ -18,7 +18,7 @@ use crate::NetError;
 
 /// The protocol's version: a peer with another is refused with both versions named. Raised
 /// on every change of a message's fields or meaning.
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 
 /// Largest operator target accepted (bytes): one is ~400.
 pub const MAX_TARGET_BYTES: usize = 4096;
@@ -244,9 +244,31 @@ pub struct FrameHeader {
     pub erased_s: f64,
     /// Coded and handed to the network.
     pub sent_s: f64,
+    /// The camera's pose the frame's mask was drawn from (`world_from_camera`, the scene's
+    /// world, OpenCV optical axes): position (m) then unit quaternion `[x, y, z, w]`. A camera
+    /// on a head moves, and a viewer places the hand and the twins in front of the frame from
+    /// it.
+    pub camera_pose: [f64; 7],
 }
 
 impl FrameHeader {
+    /// [`FrameHeader::camera_pose`] for `world_from_camera`.
+    pub fn pose_of(world_from_camera: &Isometry3<f64>) -> [f64; 7] {
+        let t = world_from_camera.translation.vector;
+        let q = world_from_camera.rotation.quaternion().coords;
+        [t.x, t.y, t.z, q.x, q.y, q.z, q.w]
+    }
+
+    /// The camera's pose ([`FrameHeader::camera_pose`]), normalised (the check has already
+    /// refused one that is not finite or far from unit length).
+    pub fn world_from_camera(&self) -> Isometry3<f64> {
+        let [x, y, z, qx, qy, qz, qw] = self.camera_pose;
+        Isometry3::from_parts(
+            Translation3::new(x, y, z),
+            UnitQuaternion::from_quaternion(Quaternion::new(qw, qx, qy, qz)),
+        )
+    }
+
     fn check(&self) -> Result<(), NetError> {
         let ok = crate::codec::Codec::from_name(&self.codec).is_some()
             && self.seq <= MAX_SEQ
@@ -257,14 +279,15 @@ impl FrameHeader {
             && [self.capture_s, self.erased_s, self.sent_s]
                 .iter()
                 .all(|v| v.is_finite())
-            && self.camera.len() <= 64;
+            && self.camera.len() <= 64
+            && pose_ok(&self.camera_pose);
         if ok {
             Ok(())
         } else {
             Err(NetError::Invalid {
                 what: "frame header".into(),
                 message: format!(
-                    "codec '{}' (jpeg or h264), index {} and seq {} (..={MAX_SEQ}), {}x{} (1..=8192), stamps {} {} {} (finite)",
+                    "codec '{}' (jpeg or h264), index {} and seq {} (..={MAX_SEQ}), {}x{} (1..=8192), stamps {} {} {} (finite), camera pose {:?} (finite, within 100 m, a unit quaternion)",
                     self.codec,
                     self.index,
                     self.seq,
@@ -272,11 +295,20 @@ impl FrameHeader {
                     self.height,
                     self.capture_s,
                     self.erased_s,
-                    self.sent_s
+                    self.sent_s,
+                    self.camera_pose
                 ),
             })
         }
     }
+}
+
+/// A pose on the wire (position, m, then quaternion `[x, y, z, w]`): finite, within 100 m of
+/// the origin, the quaternion within 1e-3 of unit length.
+fn pose_ok(p: &[f64; 7]) -> bool {
+    let position = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+    let norm = (p[3] * p[3] + p[4] * p[4] + p[5] * p[5] + p[6] * p[6]).sqrt();
+    p.iter().all(|v| v.is_finite()) && position <= 100.0 && (norm - 1.0).abs() <= 1e-3
 }
 
 /// The operator's hand for observers: joint positions (m, real world), tracked or not.
@@ -519,8 +551,27 @@ mod tests {
             capture_s: 1.0,
             erased_s: 1.01,
             sent_s: 1.02,
+            camera_pose: FrameHeader::pose_of(&Isometry3::from_parts(
+                Translation3::new(1.85, 0.1, 1.3),
+                UnitQuaternion::from_euler_angles(-2.0, 0.1, 1.6),
+            )),
         };
         let bytes = encode("frame header", &h).expect("encodes");
+        let back = decode_frame_header(&bytes, 1000).expect("decodes");
+        let d = back.world_from_camera().inverse() * h.world_from_camera();
+        assert!(d.translation.vector.norm() < 1e-12 && d.rotation.angle() < 1e-12);
+        // (A NaN is JSON's null: refused as not a number.)
+        for (i, v, why) in [
+            (2, f64::NAN, "null"),
+            (0, 1e3, "camera pose"),
+            (6, 2.0, "camera pose"),
+        ] {
+            let mut bad = h.clone();
+            bad.camera_pose[i] = v;
+            let e = decode_frame_header(&encode("h", &bad).expect("encodes"), 10)
+                .expect_err("a bad camera pose");
+            assert!(e.to_string().contains(why), "{e}");
+        }
         assert_eq!(decode_frame_header(&bytes, 1000).expect("decodes"), h);
         assert!(decode_frame_header(&bytes, 0).is_err());
         let mut bad = h.clone();
