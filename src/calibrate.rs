@@ -32,8 +32,8 @@ use avatarm_core::vision::calibrate::{
 };
 use avatarm_core::vision::camera::CameraPose;
 use avatarm_core::vision::distortion::Distortion;
-use avatarm_record::Recording;
 use avatarm_record::camera::read_pose;
+use avatarm_record::{HEAD_POSE_SLACK_NS, Recording};
 use nalgebra::{Isometry3, UnitQuaternion};
 use serde_json::json;
 
@@ -50,9 +50,6 @@ const MAX_FIT_FRAMES: usize = 100;
 
 /// Frames one run decodes, draws and scores at most (fit and held out).
 const MAX_USED_FRAMES: usize = 300;
-
-/// A frame captured further than this outside the tracked head poses has no head pose (ns).
-const HEAD_POSE_SLACK_NS: u64 = 50_000_000;
 
 /// What `avatarm calibrate` is given.
 #[derive(Debug, Clone)]
@@ -189,6 +186,8 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     // The frames with a silhouette: the robot's at its joints, and the observed one.
     let mut frames = Vec::new();
     let mut with_silhouette = 0usize;
+    // A camera on a head: frames left out for want of a head pose.
+    let mut outside_head = 0usize;
     for (i, f) in recording.frames.iter().enumerate() {
         let reference = recording
             .reference_masks
@@ -249,11 +248,8 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         }
         if on_head {
             // The robot as the head saw it at the frame's capture.
-            let (first, last) = (
-                recording.head_poses[0].stamp_ns,
-                recording.head_poses[recording.head_poses.len() - 1].stamp_ns,
-            );
-            if f.stamp_ns + HEAD_POSE_SLACK_NS < first || f.stamp_ns > last + HEAD_POSE_SLACK_NS {
+            if !recording.head_covers(f.stamp_ns, HEAD_POSE_SLACK_NS) {
+                outside_head += 1;
                 notes.push(format!(
                     "frame {i}: captured more than {} ms outside the tracked head poses: left out",
                     HEAD_POSE_SLACK_NS / 1_000_000
@@ -275,6 +271,12 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             },
             scored,
         ));
+    }
+    if frames.is_empty() && outside_head > 0 {
+        return Err(bad(format!(
+            "every frame with a silhouette ({outside_head}) was captured more than {} ms outside the tracked head poses",
+            HEAD_POSE_SLACK_NS / 1_000_000
+        )));
     }
     if frames.is_empty() {
         return Err(bad(

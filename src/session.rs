@@ -51,14 +51,7 @@ pub fn add_session_recorder(app: &mut App, path: &Path, scene: &Scene) -> Result
     let calibration = crate::replay::scene_calibration(scene);
     let base = scene.robot_base();
     writer.calibration(epoch_ns, &calibration)?;
-    match &scene.head {
-        // A camera on a head: the mount as the app believes it; the head's tracked poses follow.
-        Some(head) => writer.camera_mount(epoch_ns, &head.believed_mount)?,
-        None => writer.camera_pose(
-            epoch_ns,
-            &(base.inverse() * scene.believed_camera.world_from_camera),
-        )?,
-    }
+    crate::replay::write_scene_camera(&mut writer, epoch_ns, scene)?;
     writer.base_pose(epoch_ns, &base)?;
     let (tx, rx) = channel();
     let thread = std::thread::Builder::new()

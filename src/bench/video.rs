@@ -201,7 +201,7 @@ fn code(
             capture_s: now,
             erased_s: now,
             sent_s: now,
-            camera_pose: [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            camera_pose: FrameHeader::pose_of(&nalgebra::Isometry3::identity()),
         };
         let started = Instant::now();
         let decoded = decoder.decode(&header, &coded.bytes)?;

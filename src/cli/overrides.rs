@@ -216,6 +216,9 @@ impl EraseOverrides {
                 ));
             };
             head.believed_mount = avatarm_record::camera::read_mount(path)?;
+            // The camera as believed at t = 0 (before the first tracked pose; where a
+            // background photograph was taken from).
+            scene.believed_camera.world_from_camera = head.believed_camera_at(0.0);
         }
         if let Some(path) = &self.background {
             if !path.is_file() {

@@ -124,7 +124,15 @@ impl Plugin for ServeVideoPlugin {
             carried,
             world_from_camera,
         })
-        .add_systems(Update, (mirror_loop, publish_erased, stop_when_done));
+        .add_systems(
+            Update,
+            (
+                mirror_loop,
+                // The frame erased in this update, with the camera it was drawn from.
+                publish_erased.after(avatarm_erase::EraseSystems::Prepare),
+                stop_when_done,
+            ),
+        );
     }
 }
 

@@ -798,10 +798,6 @@ fn stage_timings(replay: &Replay, gpu: &SpanTimes) -> serde_json::Value {
     })
 }
 
-/// Writes `--record`'s MCAP: the believed camera (its pose in the robot's base frame; for a
-/// camera on a head, the believed mount and every tracked head pose received), and per
-/// scored frame the frame, the simulated robot's joints at capture, the true silhouette as the
-/// reference mask, Avatarm's erased frame and mask; stamped with the capture time.
 /// The scene's believed camera as a recording's calibration: K, the size and the lens, as its
 /// `camera_info` would give them.
 pub(crate) fn scene_calibration(s: &avatarm_scene::Scene) -> avatarm_record::CameraCalibration {
@@ -818,6 +814,27 @@ pub(crate) fn scene_calibration(s: &avatarm_scene::Scene) -> avatarm_record::Cam
     calibration
 }
 
+/// Writes the scene's believed camera's place at `stamp_ns`: its pose in the robot's base
+/// frame, or for a camera on a head the believed mount (the head's poses follow as they are
+/// tracked).
+pub(crate) fn write_scene_camera(
+    w: &mut avatarm_record::RecordingWriter,
+    stamp_ns: u64,
+    s: &avatarm_scene::Scene,
+) -> Result<(), avatarm_record::RecordError> {
+    match &s.head {
+        Some(head) => w.camera_mount(stamp_ns, &head.believed_mount),
+        None => w.camera_pose(
+            stamp_ns,
+            &(s.robot_base().inverse() * s.believed_camera.world_from_camera),
+        ),
+    }
+}
+
+/// Writes `--record`'s MCAP: the believed camera ([`write_scene_camera`]; for a camera on a
+/// head, every tracked head pose received), and per scored frame the frame, the simulated
+/// robot's joints at capture, the true silhouette as the reference mask, Avatarm's erased
+/// frame and mask; stamped with the capture time.
 fn write_recording(path: &Path, replay: &Replay, scene: &SceneResource) -> Result<(), AppError> {
     use avatarm_record::{CompressedFrame, ImageFormat, JointStates, RecordingWriter};
     let s = &scene.0;
@@ -830,21 +847,13 @@ fn write_recording(path: &Path, replay: &Replay, scene: &SceneResource) -> Resul
         .fold(f64::INFINITY, f64::min);
     let t0 = ns(if first.is_finite() { first } else { 0.0 });
     w.calibration(t0, &scene_calibration(s))?;
+    write_scene_camera(&mut w, t0, s)?;
     let base_from_world = s.robot_base().inverse();
-    match &s.head {
-        // A camera on a head: the mount as the app believes it and each tracked head pose.
-        Some(head) => {
-            w.camera_mount(t0, &head.believed_mount)?;
-            for (stamp_s, world_from_head) in &replay.head_poses {
-                w.head_pose(&avatarm_record::HeadPose {
-                    stamp_ns: ns(*stamp_s),
-                    base_from_head: base_from_world * world_from_head,
-                })?;
-            }
-        }
-        None => {
-            w.camera_pose(t0, &(base_from_world * s.believed_camera.world_from_camera))?;
-        }
+    for (stamp_s, world_from_head) in &replay.head_poses {
+        w.head_pose(&avatarm_record::HeadPose {
+            stamp_ns: ns(*stamp_s),
+            base_from_head: base_from_world * world_from_head,
+        })?;
     }
     let names: Vec<String> = s.model.dof_names().iter().map(|n| n.to_string()).collect();
     let mut frames: Vec<&RecordedFrame> = replay.recorded.iter().collect();

@@ -243,6 +243,22 @@ impl Input {
             })?,
         };
         if head.is_some() {
+            let outside = recording
+                .frames
+                .iter()
+                .filter(|f| !recording.head_covers(f.stamp_ns, avatarm_record::HEAD_POSE_SLACK_NS))
+                .count();
+            if outside > 0 {
+                notes.push(format!(
+                    "{outside} frames were captured more than {} ms outside the tracked head poses: their masks are drawn at the nearest pose",
+                    avatarm_record::HEAD_POSE_SLACK_NS / 1_000_000
+                ));
+            }
+            if !o.settings.pose_compensation {
+                notes.push(
+                    "pose compensation cannot be switched off for a recording: each frame is handed over with the head's pose at its capture".into(),
+                );
+            }
             notes.push(
                 "the camera rides on a head: each frame's mask is drawn at the tracked head's pose at its capture times the mount; the background built from the footage is one image for every view, so where the head turned the erased pixels show the wrong part of the room (the masks and their scores are not affected)".into(),
             );
@@ -314,9 +330,6 @@ impl Input {
     }
 }
 
-/// The recording's joint states in the description's q order, by stamp. Errors name a joint
-/// the description does not have; joints the recording never names stay at 0 (said in the
-/// notes).
 /// A recording of a camera on a head: its mount (`head_from_camera`), from `mount_file` or
 /// else the recording's; `None` for a fixed camera. Errors: `pose_flag` (a fixed camera's pose
 /// given on the command line) for a camera on a head, `mount_flag` for a fixed camera, a
@@ -402,6 +415,9 @@ pub(crate) fn recording_camera(
     Ok((calibration, intrinsics))
 }
 
+/// The recording's joint states in the description's q order, by stamp. Errors name a joint
+/// the description does not have; joints the recording never names stay at 0 (said in the
+/// notes).
 pub(crate) fn joint_vectors(
     recording: &Recording,
     model: &RobotModel,
@@ -693,17 +709,12 @@ fn feed(
             return;
         }
         if !d.head.is_empty() {
-            // The head's poses around the frame's capture, on the app's clock (the frame is
-            // captured `now`): the mask's camera is the head's pose then times the mount.
+            // The head's pose at the frame's capture (interpolated between the tracked poses
+            // around it, as `avatarm calibrate` takes it), at the app's clock's `now`, the
+            // frame's capture here: the mask's camera is that pose times the mount.
             head.history = PoseHistory::default();
-            let window_ns = (0.5e9 * head.history.window_s) as u64;
-            for p in d
-                .head
-                .iter()
-                .filter(|p| p.stamp_ns.abs_diff(frame.stamp_ns) <= window_ns)
-            {
-                let dt = (p.stamp_ns as f64 - frame.stamp_ns as f64) * 1e-9;
-                head.history.push(now + dt, p.base_from_head);
+            if let Some(pose) = avatarm_record::head_at(&d.head, frame.stamp_ns) {
+                head.history.push(now, pose);
             }
         }
         if let Ok(mut twin) = twins.get_mut(d.source) {

@@ -494,7 +494,7 @@ mod tests {
             capture_s: 0.0,
             erased_s: 0.0,
             sent_s: 0.0,
-            camera_pose: [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            camera_pose: FrameHeader::pose_of(&nalgebra::Isometry3::identity()),
         }
     }
 

@@ -279,15 +279,23 @@ impl FrameHeader {
             && [self.capture_s, self.erased_s, self.sent_s]
                 .iter()
                 .all(|v| v.is_finite())
-            && self.camera.len() <= 64
-            && pose_ok(&self.camera_pose);
+            && self.camera.len() <= 64;
+        if ok && !pose_ok(&self.camera_pose) {
+            return Err(NetError::Invalid {
+                what: "frame header".into(),
+                message: format!(
+                    "camera pose {:?}: not finite, beyond 100 m or not a unit quaternion",
+                    self.camera_pose
+                ),
+            });
+        }
         if ok {
             Ok(())
         } else {
             Err(NetError::Invalid {
                 what: "frame header".into(),
                 message: format!(
-                    "codec '{}' (jpeg or h264), index {} and seq {} (..={MAX_SEQ}), {}x{} (1..=8192), stamps {} {} {} (finite), camera pose {:?} (finite, within 100 m, a unit quaternion)",
+                    "codec '{}' (jpeg or h264), index {} and seq {} (..={MAX_SEQ}), {}x{} (1..=8192), stamps {} {} {} (finite)",
                     self.codec,
                     self.index,
                     self.seq,
@@ -295,8 +303,7 @@ impl FrameHeader {
                     self.height,
                     self.capture_s,
                     self.erased_s,
-                    self.sent_s,
-                    self.camera_pose
+                    self.sent_s
                 ),
             })
         }
@@ -580,7 +587,10 @@ mod tests {
         let mut bad = h.clone();
         bad.seq = u64::MAX;
         let e = decode_frame_header(&encode("h", &bad).expect("encodes"), 10).expect_err("refused");
-        assert!(e.to_string().contains("seq"), "{e}");
+        assert!(
+            e.to_string().contains("seq") && !e.to_string().contains("camera pose"),
+            "{e}"
+        );
         let j = JointStatesMsg {
             v: PROTOCOL_VERSION,
             stamp_s: 0.5,

@@ -216,6 +216,33 @@ pub struct HeadPose {
     pub base_from_head: Isometry3<f64>,
 }
 
+/// A frame captured further than this outside a recording's tracked head poses has no head
+/// pose of its own (ns): [`Recording::head_covers`].
+pub const HEAD_POSE_SLACK_NS: u64 = 50_000_000;
+
+/// The head's pose (`base_from_head`) at `stamp_ns` from tracked poses sorted by stamp:
+/// interpolated between the two around it (translation linearly, rotation by slerp), the
+/// first or the last outside them; `None` without poses.
+pub fn head_at(poses: &[HeadPose], stamp_ns: u64) -> Option<Isometry3<f64>> {
+    let i = poses.partition_point(|p| p.stamp_ns <= stamp_ns);
+    let before = i.checked_sub(1).map(|i| &poses[i]);
+    match (before, poses.get(i)) {
+        (Some(a), Some(b)) => {
+            let s = (stamp_ns - a.stamp_ns) as f64 / (b.stamp_ns - a.stamp_ns) as f64;
+            let (pa, pb) = (&a.base_from_head, &b.base_from_head);
+            let t = pa.translation.vector.lerp(&pb.translation.vector, s);
+            // Two opposite rotations have no one path between them: the nearer one is kept.
+            let r = pa
+                .rotation
+                .try_slerp(&pb.rotation, s, 1e-9)
+                .unwrap_or(if s < 0.5 { pa.rotation } else { pb.rotation });
+            Some(Isometry3::from_parts(Translation3::from(t), r))
+        }
+        (Some(p), None) | (None, Some(p)) => Some(p.base_from_head),
+        (None, None) => None,
+    }
+}
+
 /// A recording read back.
 #[derive(Debug, Clone, Default)]
 pub struct Recording {
@@ -1170,29 +1197,20 @@ impl Recording {
         !self.head_poses.is_empty() || self.head_from_camera.is_some()
     }
 
-    /// The head's pose (`base_from_head`) at `stamp_ns`: interpolated between the tracked poses
-    /// around it (translation linearly, rotation by slerp), the first or last one outside
-    /// them; `None` without head poses.
+    /// The head's pose (`base_from_head`) at `stamp_ns` ([`head_at`] of its tracked poses).
     pub fn head_at(&self, stamp_ns: u64) -> Option<Isometry3<f64>> {
-        let i = self.head_poses.partition_point(|p| p.stamp_ns <= stamp_ns);
-        let before = i.checked_sub(1).map(|i| &self.head_poses[i]);
-        match (before, self.head_poses.get(i)) {
-            (Some(a), Some(b)) => {
-                let s = (stamp_ns - a.stamp_ns) as f64 / (b.stamp_ns - a.stamp_ns) as f64;
-                let t = a
-                    .base_from_head
-                    .translation
-                    .vector
-                    .lerp(&b.base_from_head.translation.vector, s);
-                let r = a
-                    .base_from_head
-                    .rotation
-                    .try_slerp(&b.base_from_head.rotation, s, 1e-9)
-                    .unwrap_or(b.base_from_head.rotation);
-                Some(Isometry3::from_parts(Translation3::from(t), r))
+        head_at(&self.head_poses, stamp_ns)
+    }
+
+    /// Whether the tracked head poses cover `stamp_ns`: it lies within `slack_ns` of their
+    /// span (`false` without head poses).
+    pub fn head_covers(&self, stamp_ns: u64, slack_ns: u64) -> bool {
+        match (self.head_poses.first(), self.head_poses.last()) {
+            (Some(first), Some(last)) => {
+                stamp_ns.saturating_add(slack_ns) >= first.stamp_ns
+                    && stamp_ns <= last.stamp_ns.saturating_add(slack_ns)
             }
-            (Some(p), None) | (None, Some(p)) => Some(p.base_from_head),
-            (None, None) => None,
+            _ => false,
         }
     }
 
@@ -1380,6 +1398,10 @@ mod tests {
         assert!((mid.translation.x - 0.05).abs() < 1e-12);
         assert!((mid.rotation.euler_angles().2 - 0.05).abs() < 1e-12);
         assert_eq!(r.head_at(0), Some(head(0).base_from_head));
+        // The poses span 1.00-1.02 s: 50 ms either side is covered, not more.
+        assert!(r.head_covers(1_010_000_000, 0) && r.head_covers(955_000_000, HEAD_POSE_SLACK_NS));
+        assert!(!r.head_covers(945_000_000, HEAD_POSE_SLACK_NS));
+        assert!(!r.head_covers(1_071_000_000, HEAD_POSE_SLACK_NS));
         let camera = r.camera_at(1_020_000_000).expect("camera");
         let expected = head(2).base_from_head * mount;
         assert!((camera.translation.vector - expected.translation.vector).norm() < 1e-12);
