@@ -18,7 +18,7 @@ use avatarm_core::teleop::grasp::Contact;
 use avatarm_core::teleop::mapping::{Mapper, MappingMode, OperatorInputs};
 use avatarm_hand::{ActiveHand, GraspTarget, HeldObject, ScriptedHand};
 use avatarm_mapping::pouring::{TrialParts, read_hand_world};
-use avatarm_net::msg::{HandMsg, PROTOCOL_VERSION, TargetMsg};
+use avatarm_net::msg::{FrameHeader, HandMsg, PROTOCOL_VERSION, TargetMsg};
 use avatarm_net::{NetConfig, OperatorInbox, OperatorSite};
 use avatarm_record::RecordingWriter;
 use avatarm_scene::Scene;
@@ -344,6 +344,25 @@ struct Collect {
     total: Vec<f64>,
     joint_age: Vec<f64>,
     recorder: Option<JoinRecorder>,
+    /// The real object's poses the robot site reported, `(stamp_s, pose)`, oldest first.
+    objects: std::collections::VecDeque<(f64, nalgebra::Isometry3<f64>)>,
+}
+
+/// How long the real object's reported poses are kept (s): longer than the video's latency.
+const OBJECT_HISTORY_S: f64 = 2.0;
+
+/// The real object's reported pose at `t_s`: the newest reported at or before it (the oldest
+/// kept when all are later); `None` when none was reported.
+fn object_at(
+    objects: &std::collections::VecDeque<(f64, nalgebra::Isometry3<f64>)>,
+    t_s: f64,
+) -> Option<nalgebra::Isometry3<f64>> {
+    objects
+        .iter()
+        .rev()
+        .find(|(t, _)| *t <= t_s)
+        .or(objects.front())
+        .map(|(_, p)| *p)
 }
 
 impl Collect {
@@ -354,6 +373,18 @@ impl Collect {
                 Ok(j) => {
                     r.joint_states += 1;
                     self.joint_age.push((robot_now - j.stamp_s) * 1e3);
+                    if let Some(o) = &j.object {
+                        // About the last 2 s, for the frames' capture times.
+                        self.objects
+                            .push_back((j.stamp_s, avatarm_net::msg::pose_from_wire(o)));
+                        while self
+                            .objects
+                            .front()
+                            .is_some_and(|(t, _)| j.stamp_s - t > OBJECT_HISTORY_S)
+                        {
+                            self.objects.pop_front();
+                        }
+                    }
                     if let Some(rec) = &mut self.recorder {
                         rec.joint_states(&j);
                     }
@@ -384,9 +415,12 @@ impl Collect {
                     if let Some(view) = self.view.as_ref().filter(|_| self.observer) {
                         let joints = (h.tracked && h.joints.len() == 26)
                             .then(|| h.joints.iter().map(|p| Vector3::from(*p)).collect());
+                        let held = h.held_object.as_ref().map(avatarm_net::msg::pose_from_wire);
                         view.update(|s| {
                             s.hand = joints;
                             s.hand_at = Some(Instant::now());
+                            s.holding = held.is_some();
+                            s.held_object = held;
                         });
                     }
                 }
@@ -441,6 +475,9 @@ impl Collect {
                     let first = self.window_camera.get_or_insert_with(|| h.camera.clone());
                     if let Some(view) = self.view.as_ref().filter(|_| *first == h.camera) {
                         view.put_frame(width, height, rgba, h.world_from_camera());
+                        // The real object as this frame shows it.
+                        let object = object_at(&self.objects, h.capture_s);
+                        view.update(|s| s.real_object = object);
                     }
                     r.video.shown += 1;
                     self.erase.push((h.erased_s - h.capture_s) * 1e3);
@@ -917,6 +954,7 @@ fn operate_with(
                         [p.x, p.y, p.z]
                     })
                     .collect(),
+                held_object: held.then(|| FrameHeader::pose_of(&v2r.pose(&twin))),
             };
             if let Err(e) = site.publish_hand(&m) {
                 warn!("operator: {e}");

@@ -49,6 +49,15 @@ pub struct WindowReport {
     pub video_frames: u64,
     /// Rendered frames in which the hand was drawn.
     pub hand_frames: u64,
+    /// A camera on a head (Alice's view), watching: rendered frames in which the operator's
+    /// hand was drawn carried with the real object she holds.
+    pub anchored_hand_frames: u64,
+    /// In those frames, the distance from the hand's palm to the real object's centre as
+    /// drawn (mm), and from the palm as tracked (mm): the robot's lag behind the twin is the
+    /// difference.
+    pub anchored_palm_to_object_mm: Spread,
+    /// The tracked palm's distance (mm) in the same frames.
+    pub tracked_palm_to_object_mm: Spread,
     /// Rendered frames per second.
     pub fps: f64,
     /// Each rendered frame's time (ms, the window's clock).
@@ -78,6 +87,9 @@ pub struct ViewFrame {
     pub world_from_camera: Isometry3<f64>,
 }
 
+/// The palm among OpenXR's 26 hand joints (`XR_HAND_JOINT_PALM_EXT`).
+const PALM: usize = 0;
+
 /// What the session hands the window, newest only.
 #[derive(Debug, Clone, Default)]
 pub struct ViewState {
@@ -95,6 +107,12 @@ pub struct ViewState {
     /// The object's twin in the real world (its base pose, robot frame), for the operator;
     /// `None` for an observer (which has no twin: it sees the real object in the video).
     pub object: Option<Isometry3<f64>>,
+    /// An observer: while the operator's hand holds the object, her twin of it in the real
+    /// world (its centre), as her hand frame came with it.
+    pub held_object: Option<Isometry3<f64>>,
+    /// The real object (its centre) as the frame on the panel shows it, where the robot site
+    /// reports it.
+    pub real_object: Option<Isometry3<f64>>,
     /// A line of figures for the status text.
     pub line: String,
 }
@@ -172,6 +190,9 @@ struct Session(Arc<ViewShared>);
 struct WindowState {
     options: WindowOptions,
     observer: bool,
+    /// Watching through a camera on a head (Alice's view): the held hand is drawn carried
+    /// with the real object.
+    anchor: bool,
     /// The carried object's index among the object twins.
     object: Option<usize>,
     video: Handle<Image>,
@@ -188,6 +209,8 @@ struct WindowRecord {
     report: WindowReport,
     frame_ms: Vec<f64>,
     panel_wait_ms: Vec<f64>,
+    anchored_mm: Vec<f64>,
+    tracked_mm: Vec<f64>,
 }
 
 /// The most samples each of the window's series keeps (an hour at 120 frames a second), so a
@@ -264,6 +287,7 @@ pub fn build(
         .insert_resource(WindowState {
             options: options.clone(),
             observer,
+            anchor: observer && scene.head.is_some(),
             object: crate::teleop::carried_object(scene).and_then(|(i, _)| i),
             video,
             shown: 0,
@@ -310,6 +334,8 @@ impl WindowHandle {
         (record.report.frames > 0).then(|| WindowReport {
             frame_ms: Spread::of(&record.frame_ms),
             panel_wait_ms: Spread::of(&record.panel_wait_ms),
+            anchored_palm_to_object_mm: Spread::of(&record.anchored_mm),
+            tracked_palm_to_object_mm: Spread::of(&record.tracked_mm),
             ..record.report.clone()
         })
     }
@@ -395,7 +421,7 @@ fn show_session(
     mut gizmos: Gizmos<HandInteractionGizmos>,
     mut text: Query<&mut Text, With<StatusText>>,
 ) {
-    let (frame, hand, holding, object_pose, line) = {
+    let (frame, hand, holding, object_pose, carried, line) = {
         let mut shared = session.0.state.lock().unwrap_or_else(|e| e.into_inner());
         let shown = state.shown;
         let fresh = shared
@@ -406,6 +432,7 @@ fn show_session(
             shared.hand.clone().filter(|_| fresh),
             shared.holding,
             shared.object,
+            shared.held_object.zip(shared.real_object),
             shared.line.clone(),
         )
     };
@@ -448,6 +475,21 @@ fn show_session(
     }
     if let (Some(hand), Some(i)) = (hand, object) {
         let colour = crate::teleop::hand_colour(holding);
+        // Alice's view: the hand that holds the object is drawn on the real object as this
+        // frame shows it (as `avatarm run` draws it in one process).
+        let hand = match carried.filter(|_| state.anchor && holding) {
+            Some((twin, real)) => {
+                let drawn = avatarm_core::teleop::hand::carried_with(&hand, &twin, &real);
+                state.report.anchored_hand_frames += 1;
+                if let Ok(mut record) = outcome.0.lock() {
+                    let to = real.translation.vector;
+                    WindowRecord::push(&mut record.anchored_mm, 1e3 * (drawn[PALM] - to).norm());
+                    WindowRecord::push(&mut record.tracked_mm, 1e3 * (hand[PALM] - to).norm());
+                }
+                drawn
+            }
+            None => hand,
+        };
         let lines = crate::teleop::hand_in_interaction_view(&hand, &config, i);
         state.report.hand_frames += u64::from(!lines.is_empty());
         for (a, b) in lines {

@@ -166,6 +166,11 @@ impl JointStatesMsg {
         if !finite {
             return bad("a value is not finite".into());
         }
+        if let Some(o) = self.object.filter(|o| !pose_ok(o)) {
+            return bad(format!(
+                "the object's pose {o:?} is beyond 100 m or not a unit quaternion"
+            ));
+        }
         Ok(())
     }
 }
@@ -259,14 +264,9 @@ impl FrameHeader {
         [t.x, t.y, t.z, q.x, q.y, q.z, q.w]
     }
 
-    /// The camera's pose ([`FrameHeader::camera_pose`]), normalised (the check has already
-    /// refused one that is not finite or far from unit length).
+    /// The camera's pose ([`FrameHeader::camera_pose`]; [`pose_from_wire`]).
     pub fn world_from_camera(&self) -> Isometry3<f64> {
-        let [x, y, z, qx, qy, qz, qw] = self.camera_pose;
-        Isometry3::from_parts(
-            Translation3::new(x, y, z),
-            UnitQuaternion::from_quaternion(Quaternion::new(qw, qx, qy, qz)),
-        )
+        pose_from_wire(&self.camera_pose)
     }
 
     fn check(&self) -> Result<(), NetError> {
@@ -310,6 +310,15 @@ impl FrameHeader {
     }
 }
 
+/// A pose from the wire (position, m, then quaternion `[x, y, z, w]`), the quaternion
+/// normalised: for a pose the message's check has passed ([`pose_ok`]).
+pub fn pose_from_wire(p: &[f64; 7]) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(p[0], p[1], p[2]),
+        UnitQuaternion::from_quaternion(Quaternion::new(p[6], p[3], p[4], p[5])),
+    )
+}
+
 /// A pose on the wire (position, m, then quaternion `[x, y, z, w]`): finite, within 100 m of
 /// the origin, the quaternion within 1e-3 of unit length.
 fn pose_ok(p: &[f64; 7]) -> bool {
@@ -332,6 +341,11 @@ pub struct HandMsg {
     pub tracked: bool,
     /// Joint positions (m, real world), in OpenXR's joint order.
     pub joints: Vec<[f64; 3]>,
+    /// While the hand holds the object: the object's twin in the real world (its centre,
+    /// position then quaternion `[x, y, z, w]`) at the hand frame's capture. A viewer whose
+    /// camera rides on a head (Alice's view) draws the hand carried with the real object from
+    /// it, so that it holds the bottle she sees.
+    pub held_object: Option<[f64; 7]>,
 }
 
 impl HandMsg {
@@ -339,13 +353,14 @@ impl HandMsg {
         let ok = self.stamp_s.is_finite()
             && (self.hand == "left" || self.hand == "right")
             && self.joints.len() <= 32
-            && self.joints.iter().flatten().all(|v| v.is_finite());
+            && self.joints.iter().flatten().all(|v| v.is_finite())
+            && self.held_object.is_none_or(|o| pose_ok(&o));
         if ok {
             Ok(())
         } else {
             Err(NetError::Invalid {
                 what: "hand".into(),
-                message: "a side of left or right, at most 32 finite joints".into(),
+                message: "a side of left or right, at most 32 finite joints, a held object's pose finite, within 100 m and with a unit quaternion".into(),
             })
         }
     }
@@ -603,5 +618,27 @@ mod tests {
             e.to_string().contains("9 positions and 8 velocities"),
             "{e}"
         );
+        // The real object's pose and the held twin's: unit quaternions, or refused.
+        let j = JointStatesMsg {
+            velocities: vec![0.0; 9],
+            object: Some([0.5, 0.0, 0.8, 0.0, 0.0, 0.0, 0.0]),
+            ..j
+        };
+        let e = decode_joint_states(&encode("j", &j).expect("encodes")).expect_err("refused");
+        assert!(e.to_string().contains("object's pose"), "{e}");
+        let twin = [0.5, 0.0, 0.8, 0.0, 0.0, 0.0, 1.0];
+        let mut hand = HandMsg {
+            v: PROTOCOL_VERSION,
+            stamp_s: 0.5,
+            hand: "right".into(),
+            tracked: true,
+            joints: vec![[0.1, 0.2, 0.3]; 26],
+            held_object: Some(twin),
+        };
+        let back = decode_hand(&encode("hand", &hand).expect("encodes")).expect("decodes");
+        assert_eq!(back.held_object, Some(twin));
+        hand.held_object = Some([0.5, 0.0, 0.8, 0.0, 0.0, 2.0, 0.0]);
+        let e = decode_hand(&encode("hand", &hand).expect("encodes")).expect_err("refused");
+        assert!(e.to_string().contains("held object"), "{e}");
     }
 }
