@@ -662,7 +662,7 @@ fn a_head_camera_s_frames_carry_the_pose_they_were_erased_from() {
 /// Alice watches through her head camera while Blair pours (`join --watch --view alice
 /// --window`): the hand that holds the bottle is drawn carried with the real bottle as each
 /// frame shows it (the robot site reports it), so it keeps its grip on the bottle Alice sees
-/// while the arm lags Blair's twin; Blair's tracked palm wanders further from the real bottle.
+/// while the video is older than Blair's hand and the arm lags her twin.
 #[test]
 fn alice_watching_sees_the_operator_s_hand_on_the_bottle_the_arm_carries() {
     let _serial = serial();
@@ -713,11 +713,10 @@ fn alice_watching_sees_the_operator_s_hand_on_the_bottle_the_arm_carries() {
     assert!(f(&j, "targets_sent") >= 100.0, "{j}");
     let report = &w["window"];
     assert!(f(&w, "window.anchored_hand_frames") >= 20.0, "{report}");
-    // Drawn on the real bottle, the palm keeps its place on it: a rigid grip, to a few mm.
-    let anchored = |k: &str| f(&w, &format!("window.anchored_palm_to_object_mm.{k}"));
-    let tracked = |k: &str| f(&w, &format!("window.tracked_palm_to_object_mm.{k}"));
-    assert!(anchored("max") <= 100.0, "{report}");
-    assert!(anchored("max") - anchored("median") <= 10.0, "{report}");
-    // Where Blair's hand is, the arm's bottle is not yet: further, at times.
-    assert!(tracked("max") > anchored("max") + 10.0, "{report}");
+    // The hand was moved from Blair's twin to the real bottle the frame shows: by centimetres
+    // while the bottle moves (the video's age, the arm's lag), never by more than the desk
+    // (one object, one frame of reference).
+    let moved = |k: &str| f(&w, &format!("window.anchor_correction_mm.{k}"));
+    assert!(moved("max") >= 10.0, "{report}");
+    assert!(moved("max") <= 500.0, "{report}");
 }

@@ -348,11 +348,17 @@ struct Collect {
     objects: std::collections::VecDeque<(f64, nalgebra::Isometry3<f64>)>,
 }
 
-/// How long the real object's reported poses are kept (s): longer than the video's latency.
-const OBJECT_HISTORY_S: f64 = 2.0;
+/// How long the real object's reported poses are kept (s): longer than the video's latency
+/// (up to 2 s on a software renderer).
+const OBJECT_HISTORY_S: f64 = 10.0;
 
-/// The real object's reported pose at `t_s`: the newest reported at or before it (the oldest
-/// kept when all are later); `None` when none was reported.
+/// A reported object pose describes the object this long after its stamp at most (s): the
+/// joint states come at the control rate.
+const OBJECT_GAP_S: f64 = 0.2;
+
+/// The real object's reported pose at `t_s`: the newest reported at or before it, if at most
+/// [`OBJECT_GAP_S`] before it; `None` when none is (before the history, or the reports
+/// stopped).
 fn object_at(
     objects: &std::collections::VecDeque<(f64, nalgebra::Isometry3<f64>)>,
     t_s: f64,
@@ -361,7 +367,7 @@ fn object_at(
         .iter()
         .rev()
         .find(|(t, _)| *t <= t_s)
-        .or(objects.front())
+        .filter(|(t, _)| t_s - t <= OBJECT_GAP_S)
         .map(|(_, p)| *p)
 }
 
@@ -374,7 +380,11 @@ impl Collect {
                     r.joint_states += 1;
                     self.joint_age.push((robot_now - j.stamp_s) * 1e3);
                     if let Some(o) = &j.object {
-                        // About the last 2 s, for the frames' capture times.
+                        // The last seconds, for the frames' capture times (a robot site that
+                        // started again starts its clock again).
+                        if self.objects.back().is_some_and(|(t, _)| *t > j.stamp_s) {
+                            self.objects.clear();
+                        }
                         self.objects
                             .push_back((j.stamp_s, avatarm_net::msg::pose_from_wire(o)));
                         while self
@@ -474,10 +484,9 @@ impl Collect {
                     // The window shows one camera: the first one received.
                     let first = self.window_camera.get_or_insert_with(|| h.camera.clone());
                     if let Some(view) = self.view.as_ref().filter(|_| *first == h.camera) {
-                        view.put_frame(width, height, rgba, h.world_from_camera());
-                        // The real object as this frame shows it.
+                        // With the real object as this frame shows it.
                         let object = object_at(&self.objects, h.capture_s);
-                        view.update(|s| s.real_object = object);
+                        view.put_frame(width, height, rgba, h.world_from_camera(), object);
                     }
                     r.video.shown += 1;
                     self.erase.push((h.erased_s - h.capture_s) * 1e3);
@@ -1025,4 +1034,24 @@ pub fn summary(r: &JoinReport) -> String {
         r.clock_offset_s * 1e3,
         r.clock_rtt_ms
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A frame's real object is the newest reported at or before its capture, and none when
+    /// the reports do not reach it.
+    #[test]
+    fn a_frame_s_object_is_the_one_reported_before_its_capture() {
+        let at = |x: f64| nalgebra::Isometry3::translation(x, 0.0, 0.8);
+        let objects: std::collections::VecDeque<_> =
+            [(1.0, at(0.1)), (1.01, at(0.2)), (1.02, at(0.3))].into();
+        assert_eq!(object_at(&objects, 1.015), Some(at(0.2)));
+        assert_eq!(object_at(&objects, 1.1), Some(at(0.3)));
+        // Before the history, or long after the last report: none.
+        assert_eq!(object_at(&objects, 0.9), None);
+        assert_eq!(object_at(&objects, 1.5), None);
+        assert_eq!(object_at(&Default::default(), 1.0), None);
+    }
 }

@@ -52,12 +52,10 @@ pub struct WindowReport {
     /// A camera on a head (Alice's view), watching: rendered frames in which the operator's
     /// hand was drawn carried with the real object she holds.
     pub anchored_hand_frames: u64,
-    /// In those frames, the distance from the hand's palm to the real object's centre as
-    /// drawn (mm), and from the palm as tracked (mm): the robot's lag behind the twin is the
-    /// difference.
-    pub anchored_palm_to_object_mm: Spread,
-    /// The tracked palm's distance (mm) in the same frames.
-    pub tracked_palm_to_object_mm: Spread,
+    /// In those frames, how far the hand was moved (mm): the distance between the operator's
+    /// twin of the object and the real object as the frame on the panel shows it (the video's
+    /// age and the arm's lag behind the twin).
+    pub anchor_correction_mm: Spread,
     /// Rendered frames per second.
     pub fps: f64,
     /// Each rendered frame's time (ms, the window's clock).
@@ -82,13 +80,12 @@ pub struct ViewFrame {
     pub height: u32,
     /// The pixels.
     pub rgba: Vec<u8>,
+    /// The real object (its centre) as the frame shows it, where the robot site reports it.
+    pub real_object: Option<Isometry3<f64>>,
     /// The camera the robot site drew the frame's mask from (`world_from_camera`): where the
     /// hand and the twins are placed in front of it (a camera on a head moves).
     pub world_from_camera: Isometry3<f64>,
 }
-
-/// The palm among OpenXR's 26 hand joints (`XR_HAND_JOINT_PALM_EXT`).
-const PALM: usize = 0;
 
 /// What the session hands the window, newest only.
 #[derive(Debug, Clone, Default)]
@@ -110,9 +107,7 @@ pub struct ViewState {
     /// An observer: while the operator's hand holds the object, her twin of it in the real
     /// world (its centre), as her hand frame came with it.
     pub held_object: Option<Isometry3<f64>>,
-    /// The real object (its centre) as the frame on the panel shows it, where the robot site
-    /// reports it.
-    pub real_object: Option<Isometry3<f64>>,
+
     /// A line of figures for the status text.
     pub line: String,
 }
@@ -153,6 +148,7 @@ impl ViewShared {
         height: u32,
         rgba: Vec<u8>,
         world_from_camera: Isometry3<f64>,
+        real_object: Option<Isometry3<f64>>,
     ) {
         let number = self.frames_in.fetch_add(1, Ordering::Relaxed) + 1;
         if let Ok(mut s) = self.state.lock() {
@@ -163,6 +159,7 @@ impl ViewShared {
                 height,
                 rgba,
                 world_from_camera,
+                real_object,
             });
         }
     }
@@ -193,6 +190,8 @@ struct WindowState {
     /// Watching through a camera on a head (Alice's view): the held hand is drawn carried
     /// with the real object.
     anchor: bool,
+    /// The real object as the frame on the panel shows it.
+    panel_object: Option<Isometry3<f64>>,
     /// The carried object's index among the object twins.
     object: Option<usize>,
     video: Handle<Image>,
@@ -209,8 +208,7 @@ struct WindowRecord {
     report: WindowReport,
     frame_ms: Vec<f64>,
     panel_wait_ms: Vec<f64>,
-    anchored_mm: Vec<f64>,
-    tracked_mm: Vec<f64>,
+    correction_mm: Vec<f64>,
 }
 
 /// The most samples each of the window's series keeps (an hour at 120 frames a second), so a
@@ -288,6 +286,7 @@ pub fn build(
             options: options.clone(),
             observer,
             anchor: observer && scene.head.is_some(),
+            panel_object: None,
             object: crate::teleop::carried_object(scene).and_then(|(i, _)| i),
             video,
             shown: 0,
@@ -334,8 +333,7 @@ impl WindowHandle {
         (record.report.frames > 0).then(|| WindowReport {
             frame_ms: Spread::of(&record.frame_ms),
             panel_wait_ms: Spread::of(&record.panel_wait_ms),
-            anchored_palm_to_object_mm: Spread::of(&record.anchored_mm),
-            tracked_palm_to_object_mm: Spread::of(&record.tracked_mm),
+            anchor_correction_mm: Spread::of(&record.correction_mm),
             ..record.report.clone()
         })
     }
@@ -432,7 +430,7 @@ fn show_session(
             shared.hand.clone().filter(|_| fresh),
             shared.holding,
             shared.object,
-            shared.held_object.zip(shared.real_object),
+            shared.held_object,
             shared.line.clone(),
         )
     };
@@ -450,6 +448,7 @@ fn show_session(
             }
             image.data = Some(frame.rgba);
             state.report.video_frames += 1;
+            state.panel_object = frame.real_object;
             // The hand and the twins in front of the frame, from where it was taken.
             if config.real_camera.world_from_camera != frame.world_from_camera {
                 config.real_camera.world_from_camera = frame.world_from_camera;
@@ -477,21 +476,22 @@ fn show_session(
         let colour = crate::teleop::hand_colour(holding);
         // Alice's view: the hand that holds the object is drawn on the real object as this
         // frame shows it (as `avatarm run` draws it in one process).
-        let hand = match carried.filter(|_| state.anchor && holding) {
-            Some((twin, real)) => {
-                let drawn = avatarm_core::teleop::hand::carried_with(&hand, &twin, &real);
-                state.report.anchored_hand_frames += 1;
-                if let Ok(mut record) = outcome.0.lock() {
-                    let to = real.translation.vector;
-                    WindowRecord::push(&mut record.anchored_mm, 1e3 * (drawn[PALM] - to).norm());
-                    WindowRecord::push(&mut record.tracked_mm, 1e3 * (hand[PALM] - to).norm());
-                }
-                drawn
-            }
+        let anchor = carried
+            .zip(state.panel_object)
+            .filter(|_| state.anchor && holding);
+        let hand = match anchor {
+            Some((twin, real)) => avatarm_core::teleop::hand::carried_with(&hand, &twin, &real),
             None => hand,
         };
         let lines = crate::teleop::hand_in_interaction_view(&hand, &config, i);
         state.report.hand_frames += u64::from(!lines.is_empty());
+        if let Some((twin, real)) = anchor.filter(|_| !lines.is_empty()) {
+            state.report.anchored_hand_frames += 1;
+            if let Ok(mut record) = outcome.0.lock() {
+                let d = twin.translation.vector - real.translation.vector;
+                WindowRecord::push(&mut record.correction_mm, 1e3 * d.norm());
+            }
+        }
         for (a, b) in lines {
             gizmos.line(a, b, colour);
         }
@@ -577,12 +577,13 @@ mod tests {
     fn the_view_holds_the_newest_frame_numbered() {
         let shared = ViewShared::new();
         let at = |x: f64| Isometry3::translation(x, 0.0, 1.0);
-        shared.put_frame(2, 1, vec![1; 8], at(1.0));
-        shared.put_frame(2, 1, vec![2; 8], at(2.0));
+        shared.put_frame(2, 1, vec![1; 8], at(1.0), None);
+        shared.put_frame(2, 1, vec![2; 8], at(2.0), Some(at(0.5)));
         let frame = shared.state.lock().unwrap().frame.take().unwrap();
         assert_eq!((frame.number, frame.rgba[0]), (2, 2));
         assert_eq!(frame.world_from_camera, at(2.0));
-        shared.put_frame(2, 1, vec![3; 8], at(3.0));
+        assert_eq!(frame.real_object, Some(at(0.5)));
+        shared.put_frame(2, 1, vec![3; 8], at(3.0), None);
         let frame = shared.state.lock().unwrap().frame.take().unwrap();
         assert_eq!(frame.number, 3);
     }

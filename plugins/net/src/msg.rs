@@ -136,8 +136,8 @@ pub struct JointStatesMsg {
     pub positions: Vec<f64>,
     /// Joint velocities (rad/s or m/s).
     pub velocities: Vec<f64>,
-    /// The real object's pose where the robot site knows it (simulation): position (m) then
-    /// quaternion `[x, y, z, w]`.
+    /// The real object's pose (its centre) where the robot site knows it (simulation):
+    /// position (m) then quaternion `[x, y, z, w]`.
     pub object: Option<[f64; 7]>,
 }
 
@@ -342,7 +342,7 @@ pub struct HandMsg {
     /// Joint positions (m, real world), in OpenXR's joint order.
     pub joints: Vec<[f64; 3]>,
     /// While the hand holds the object: the object's twin in the real world (its centre,
-    /// position then quaternion `[x, y, z, w]`) at the hand frame's capture. A viewer whose
+    /// position then quaternion `[x, y, z, w]`) at the control tick the message is sent. A viewer whose
     /// camera rides on a head (Alice's view) draws the hand carried with the real object from
     /// it, so that it holds the bottle she sees.
     pub held_object: Option<[f64; 7]>,
