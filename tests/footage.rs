@@ -7,6 +7,8 @@ use std::process::Command;
 
 use avatarm_record::{ImageFormat, Recording};
 
+#[path = "support/output.rs"]
+mod output;
 #[path = "support/python_mcap.rs"]
 mod python_mcap;
 use nalgebra::{Isometry3, Matrix4, Rotation3, Translation3, UnitQuaternion};
@@ -36,12 +38,7 @@ fn avatarm(command: &str, args: &[&str]) -> (bool, String) {
         .current_dir(root())
         .output()
         .expect("avatarm runs");
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out.status.success(), text)
+    (out.status.success(), output::printed(&out))
 }
 
 fn png(path: &Path, width: u32, height: u32, shade: u8) {

@@ -77,12 +77,17 @@ fn join_scene(dir: &Path, name: &str, scene: &str, port: u16, extra: &[&str]) ->
 
 /// Waits until the operator's log says it joined (at most 30 s).
 fn wait_joined(dir: &Path) {
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while !std::fs::read_to_string(dir.join("join.log"))
+    wait_for_join(dir, "join", 30);
+}
+
+/// Waits until `dir/NAME.log` says it joined (at most `seconds`).
+fn wait_for_join(dir: &Path, name: &str, seconds: u64) {
+    let deadline = Instant::now() + Duration::from_secs(seconds);
+    while !std::fs::read_to_string(dir.join(format!("{name}.log")))
         .unwrap_or_default()
         .contains("joined")
     {
-        assert!(Instant::now() < deadline, "the operator never joined");
+        assert!(Instant::now() < deadline, "{name} never joined");
         std::thread::sleep(Duration::from_millis(50));
     }
 }
@@ -690,14 +695,7 @@ fn alice_watching_sees_the_operator_s_hand_on_the_bottle_the_arm_carries() {
         .stderr(std::fs::File::create(dir.join("watch.log")).expect("the test's set-up"))
         .spawn()
         .expect("xvfb-run starts (scripts/setup.sh installs it)");
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while !std::fs::read_to_string(dir.join("watch.log"))
-        .unwrap_or_default()
-        .contains("joined")
-    {
-        assert!(Instant::now() < deadline, "the watcher never joined");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    wait_for_join(&dir, "watch", 60);
     let operator = join_scene(
         &dir,
         "join",

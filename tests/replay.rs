@@ -8,6 +8,8 @@ use std::process::Command;
 #[path = "../plugins/ros/tests/support/mod.rs"]
 mod ros_support;
 
+#[path = "support/output.rs"]
+mod output;
 #[path = "support/python_mcap.rs"]
 mod python_mcap;
 
@@ -254,11 +256,7 @@ fn run_preview_with(args: &[&str], out: &Path, env: &[(&str, &str)]) -> String {
         .current_dir(root())
         .output()
         .expect("xvfb-run starts (scripts/setup.sh installs it)");
-    let log = format!(
-        "{}{}",
-        String::from_utf8_lossy(&run.stdout),
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let log = output::printed(&run);
     assert!(run.status.success(), "avatarm run {args:?} failed:\n{log}");
     assert!(!log.contains("panicked"), "{log}");
     log

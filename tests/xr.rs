@@ -15,6 +15,9 @@
 //! without that driver ignores these variables; then the head and hand tests say they were
 //! skipped.
 
+#[path = "support/output.rs"]
+mod output;
+
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
@@ -196,11 +199,7 @@ fn avatarm_xr(runtime: &Path, port: u16, name: &str, args: &[&str]) -> String {
         .current_dir(root())
         .output()
         .expect("xvfb-run starts (scripts/setup.sh installs it)");
-    let log = format!(
-        "{}{}",
-        String::from_utf8_lossy(&run.stdout),
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let log = output::printed(&run);
     assert!(
         run.status.success(),
         "avatarm run {args:?} --xr failed:\n{log}"
