@@ -590,6 +590,8 @@ fn the_operator_window_shows_the_received_video_with_the_hand_in_front() {
     );
     assert_eq!(rec.joint_states.len() as f64, f(&j, "joint_states"), "{j}");
     assert!(rec.calibration.is_some());
+    // The fixed camera's pose, once.
+    assert!(!rec.camera_on_head() && rec.camera_at(0).is_some());
     assert!(rec.erased.windows(2).all(|w| w[0].stamp_ns < w[1].stamp_ns));
     let first = image::load_from_memory(&rec.erased[0].data).expect("a JPEG");
     assert_eq!((first.width(), first.height()), (640, 480));
@@ -623,45 +625,82 @@ fn the_operator_window_shows_the_received_video_with_the_hand_in_front() {
     assert!(hand >= 100, "{hand} hand-coloured pixels");
 }
 
-/// Alice's head camera through the network: the robot site erases it (`serve --view alice`)
-/// and each frame carries the camera pose its mask was drawn from, so that a viewer places the
-/// hand and the twins in front of it. Alice leans in and back: the frames' cameras move; the
-/// fixed camera's do not.
+/// Both cameras through the network at once: the robot site erases Blair's fixed camera and
+/// Alice's head camera, each in an app of its own fed the same joint states, and publishes
+/// each under its name; each viewer receives the one it looks through. Each frame carries the
+/// camera pose its mask was drawn from, so that a viewer places the hand and the twins in
+/// front of it: Alice leans in and back, and her frames' cameras move; Blair's do not.
 #[test]
-fn a_head_camera_s_frames_carry_the_pose_they_were_erased_from() {
+fn the_robot_site_serves_both_cameras_each_frame_with_its_pose() {
     let _serial = serial();
     let scene = "assets/scenes/pouring_two_views.toml";
-    let run = |view: &str| {
-        let dir = out_dir(&format!("view_{view}"));
-        let port = free_port();
-        let robot = serve_scene(
-            &dir,
-            scene,
-            port,
-            600.0,
-            &["--insecure-lan", "--view", view],
-        );
-        let viewer = join_scene(
-            &dir,
-            "join",
-            scene,
-            port,
-            &["--watch", "--view", view, "--wait", "30", "--duration", "6"],
-        );
-        let j = finish(viewer, &dir, "join");
-        let mut robot = robot;
-        let _ = robot.kill();
-        let _ = robot.wait();
-        j
+    let dir = out_dir("both_views");
+    let port = free_port();
+    // No --view: every camera of the scene. It stops by itself after the viewers.
+    let robot = serve_scene(&dir, scene, port, 30.0, &["--insecure-lan"]);
+    let record = dir.join("alice.mcap");
+    let watch = |view: &str| {
+        let mut args = vec!["--watch", "--view", view, "--wait", "30", "--duration", "8"];
+        if view == "alice" {
+            args.extend(["--record", record.to_str().expect("a UTF-8 path")]);
+        }
+        join_scene(&dir, view, scene, port, &args)
     };
-    let alice = run("alice");
+    let (alice, blair) = (watch("alice"), watch("blair"));
+    let alice = finish(alice, &dir, "alice");
+    let blair = finish(blair, &dir, "blair");
+    let site = finish(robot, &dir, "serve");
+    let cameras = &site["video_cameras"];
+    assert_eq!(cameras[0]["camera"], "blair", "{cameras}");
+    assert_eq!(cameras[1]["camera"], "alice", "{cameras}");
+    assert!(
+        f(&cameras[0], "frames") >= 10.0 && f(&cameras[1], "frames") >= 10.0,
+        "{cameras}"
+    );
     assert!(f(&alice, "video.shown") >= 5.0, "{alice}");
     assert!(f(&alice, "video.camera_moved_mm") >= 20.0, "{alice}");
     assert!(f(&alice, "video.camera_turned_deg") >= 0.5, "{alice}");
-    let blair = run("blair");
+    // Alice's recording keeps each frame's camera: a camera on a head, a pose at each
+    // frame's capture.
+    let rec = avatarm_record::Recording::open(&record).expect("the recording");
+    assert_eq!(f(&alice, "recording.refused"), 0.0, "{alice}");
+    assert!(rec.camera_on_head() && rec.erased.len() >= 5);
+    let centres: Vec<_> = rec
+        .erased
+        .iter()
+        .map(|e| {
+            rec.camera_at(e.stamp_ns)
+                .expect("a pose at each frame")
+                .translation
+                .vector
+        })
+        .collect();
+    let moved = centres
+        .iter()
+        .map(|c| (c - centres[0]).norm())
+        .fold(0.0, f64::max);
+    let received = f(&alice, "video.camera_moved_mm");
+    assert!(
+        moved * 1e3 >= 20.0 && moved * 1e3 <= received + 1.0,
+        "{moved} m, {alice}"
+    );
     assert!(f(&blair, "video.shown") >= 5.0, "{blair}");
     assert!(f(&blair, "video.camera_moved_mm") < 1e-6, "{blair}");
     assert!(f(&blair, "video.camera_turned_deg") < 1e-6, "{blair}");
+    // The site said it serves both.
+    let log = std::fs::read_to_string(dir.join("serve.log")).expect("the robot site's log");
+    assert!(log.contains("video of blair, alice"), "{log}");
+    // Naming a camera twice is refused by flag, before anything runs.
+    let twice = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["serve", scene, "--insecure-lan", "--view", "alice,alice"])
+        .args(["--listen", "tcp/127.0.0.1:1"])
+        .output()
+        .expect("the test's set-up");
+    let err = String::from_utf8_lossy(&twice.stderr);
+    assert!(
+        !twice.status.success() && err.contains("--view") && err.contains("'alice'"),
+        "{err}"
+    );
 }
 
 /// Alice watches through her head camera while Blair pours (`join --watch --view alice

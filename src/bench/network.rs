@@ -194,7 +194,7 @@ fn run_cell(
     let robot = std::thread::Builder::new()
         .name("bench robot site".into())
         .spawn(move || {
-            let report = control.run(&mut site, None, &loop_stop, None);
+            let report = control.run(&mut site, None, &loop_stop, Vec::new());
             site.close();
             report
         })

@@ -291,9 +291,10 @@ enum Command {
     Serve {
         /// The scene file.
         scene: Option<PathBuf>,
-        /// Look through the scene's camera NAME (one of its [[cameras]]; default: the first; the robot site serves one camera).
-        #[arg(long, value_name = "NAME")]
-        view: Option<String>,
+        /// Serve the scene's cameras NAME,... (of its [[cameras]]; repeatable; default: every
+        /// one), each erased by an app of its own and published under its name.
+        #[arg(long, value_name = "NAME", value_delimiter = ',')]
+        view: Vec<String>,
         /// The robot: sim (the simulated arm) or ros (the scene's [robot.link], ROS 1).
         #[arg(long, value_name = "ROBOT", value_parser = ["sim", "ros"], default_value = "sim")]
         robot: String,
@@ -363,9 +364,9 @@ enum Command {
         /// Write the report (JSON) here when it stops.
         #[arg(long, value_name = "FILE")]
         report: Option<PathBuf>,
-        /// Record what this site received (MCAP, docs/recording.md): the first camera's erased
-        /// frames as they arrived, the robot's joint states and its stops, on the robot site's
-        /// clock
+        /// Record what this site received (MCAP, docs/network.md): its camera's erased frames
+        /// as they arrived with the camera pose of each, the robot's joint states and its
+        /// stops, on the robot site's clock
         #[arg(long, value_name = "FILE.mcap")]
         record: Option<PathBuf>,
         /// How long to wait for the robot site (s).
@@ -793,7 +794,18 @@ fn run(cli: Cli) -> Result<(), AppError> {
         } => {
             crate::net::init_log();
             let path = scene.unwrap_or_else(pouring_scene);
-            let scene = Scene::load_view(&path, &packages(package_path), view.as_deref())?;
+            let packages = packages(package_path);
+            let scene = Scene::load_view(&path, &packages, view.first().map(String::as_str))?;
+            // Every camera of the scene unless named.
+            let more: Vec<String> = if view.is_empty() {
+                scene.cameras.iter().skip(1).cloned().collect()
+            } else {
+                view[1..].to_vec()
+            };
+            let more_views = more
+                .iter()
+                .map(|name| Scene::load_view(&path, &packages, Some(name)))
+                .collect::<Result<Vec<_>, _>>()?;
             let encoder = crate::net::encoder_settings(
                 &codec,
                 jpeg_quality,
@@ -809,6 +821,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     net.config(avatarm_net::Role::RobotSite, listen, connect)?
                 },
                 scene,
+                more_views,
                 robot: if robot == "ros" {
                     crate::teleop::RobotChoice::Ros
                 } else {

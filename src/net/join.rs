@@ -154,7 +154,7 @@ pub struct JoinReport {
 pub struct JoinRecording {
     /// The file.
     pub path: PathBuf,
-    /// The camera whose erased frames were recorded (the first one received).
+    /// The camera whose erased frames were recorded (the one this site views).
     pub camera: Option<String>,
     /// Erased frames written.
     pub erased_frames: u64,
@@ -170,13 +170,24 @@ pub struct JoinRecording {
 
 /// `join --record`: what the operator's (or observer's) site receives, written as it arrives:
 /// the first camera's erased frames (JPEG as received; an H.264 frame coded to JPEG as
-/// `run --record` codes its frames), the robot's joint states and its stops, stamped on the
-/// robot site's clock moved to the Unix epoch at the join (so that MCAP tools show wall time).
+/// `run --record` codes its frames) with the camera pose each was erased from, the robot's
+/// joint states and its stops, stamped on the robot site's clock moved to the Unix epoch at
+/// the join (so that MCAP tools show wall time).
+///
+/// The camera's poses: a fixed camera's, once (the first frame's); a camera on a head's, each
+/// frame's as the head's pose at its capture with an identity mount (the head's frame is then
+/// the camera's own), so that [`avatarm_record::Recording::camera_at`] gives each frame's.
 struct JoinRecorder {
     writer: RecordingWriter,
     /// Unix time (ns) of the robot site's clock's 0 s.
     epoch_ns: i128,
     names: Vec<String>,
+    /// The scene's world in the robot's base frame (the recording's frame).
+    base_from_world: nalgebra::Isometry3<f64>,
+    /// The recorded camera rides on a head: each frame's pose is written.
+    on_head: bool,
+    /// The camera's pose (or, on a head, the identity mount) is written.
+    camera_written: bool,
     report: JoinRecording,
 }
 
@@ -197,6 +208,9 @@ impl JoinRecorder {
                 .iter()
                 .map(|n| n.to_string())
                 .collect(),
+            base_from_world: scene.robot_base().inverse(),
+            on_head: scene.head.is_some(),
+            camera_written: false,
             report: JoinRecording {
                 path: path.to_owned(),
                 ..JoinRecording::default()
@@ -280,6 +294,30 @@ impl JoinRecorder {
         let Some(stamp_ns) = self.stamp_ns(h.capture_s) else {
             return self.refused(format!("a frame captured at {} s", h.capture_s));
         };
+        // The camera the frame's mask was drawn from (checked finite and unit on receipt).
+        let base_from_camera = self.base_from_world * h.world_from_camera();
+        let pose = match (self.on_head, self.camera_written) {
+            (true, written) => {
+                let mount = if written {
+                    Ok(())
+                } else {
+                    self.writer
+                        .camera_mount(stamp_ns, &nalgebra::Isometry3::identity())
+                };
+                mount.and_then(|()| {
+                    self.writer.head_pose(&avatarm_record::HeadPose {
+                        stamp_ns,
+                        base_from_head: base_from_camera,
+                    })
+                })
+            }
+            (false, false) => self.writer.camera_pose(stamp_ns, &base_from_camera),
+            (false, true) => Ok(()),
+        };
+        match pose {
+            Ok(()) => self.camera_written = true,
+            Err(e) => return self.refused(format!("frame {}: {e}", h.index)),
+        }
         let data = if h.codec == avatarm_net::codec::Codec::Jpeg.name() {
             payload.to_vec()
         } else {
@@ -688,7 +726,8 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
             ),
         ));
     }
-    // Several cameras: the robot site serves one; the twins are drawn through that one.
+    // Several cameras: the robot site serves one or more; this site shows one, and the
+    // twins are drawn through it.
     let view = super::serve::camera_key(&options.scene);
     if options.scene.cameras.len() > 1 && !info.cameras.is_empty() && !info.cameras.contains(&view)
     {
@@ -700,6 +739,10 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
                 info.cameras
             ),
         ));
+    }
+    if info.cameras.len() > 1 && info.cameras.contains(&view) {
+        // Only the frames this site shows cross the network to it.
+        site.view_camera(&view)?;
     }
     let offset = site.offset();
     info!(

@@ -162,6 +162,39 @@ pub struct ServeReport {
     pub video_encode_errors: u64,
     /// Frames H.264's rate control skipped to hold the bit rate.
     pub video_skipped: u64,
+    /// Each camera's video (the totals above are their sums).
+    pub video_cameras: Vec<CameraVideo>,
+}
+
+/// One camera's video at the robot site (`ServeReport::video_cameras`).
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct CameraVideo {
+    /// The camera's name on the network.
+    pub camera: String,
+    /// Erased frames published.
+    pub frames: u64,
+    /// Of them, keyframes.
+    pub keyframes: u64,
+    /// H.264 IDR frames forced by viewers' requests.
+    pub forced_keyframes: u64,
+    /// Frames the encoder refused.
+    pub encode_errors: u64,
+    /// Frames H.264's rate control skipped.
+    pub skipped: u64,
+}
+
+impl CameraVideo {
+    /// Reads `camera`'s counters.
+    fn of(camera: String, counters: &super::video::VideoCounters) -> Self {
+        Self {
+            camera,
+            frames: counters.published.load(Ordering::Relaxed),
+            keyframes: counters.keyframes.load(Ordering::Relaxed),
+            forced_keyframes: counters.forced_keyframes.load(Ordering::Relaxed),
+            encode_errors: counters.encode_errors.load(Ordering::Relaxed),
+            skipped: counters.skipped.load(Ordering::Relaxed),
+        }
+    }
 }
 
 /// The robot site's control loop, built before it runs.
@@ -207,14 +240,14 @@ fn stop_reason(
 }
 
 impl ControlLoop {
-    /// Runs until `stop` is set or `duration` passes, publishing on `site` and feeding
-    /// `video` (when any). Returns the report.
+    /// Runs until `stop` is set or `duration` passes, publishing on `site` and feeding each
+    /// camera's video app in `video` (none: the loop alone). Returns the report.
     pub fn run(
         mut self,
         site: &mut RobotSite,
         duration: Option<Duration>,
         stop: &AtomicBool,
-        video: Option<Sender<ArmUpdate>>,
+        video: Vec<Sender<ArmUpdate>>,
     ) -> ServeReport {
         let clock = site.clock();
         let dt = self.period.as_secs_f64();
@@ -345,7 +378,7 @@ impl ControlLoop {
                 if let Err(e) = site.publish_joint_states(&m) {
                     warn!("robot site: {e}");
                 }
-                if let Some(v) = &video {
+                for v in &video {
                     let _ = v.send(ArmUpdate {
                         state: s.clone(),
                         object,
@@ -571,8 +604,11 @@ mod tests {
 /// How `avatarm serve` runs.
 #[derive(Debug, Clone)]
 pub struct ServeOptions {
-    /// The scene (with a `[task]`).
+    /// The scene (with a `[task]`), looking through the first camera served.
     pub scene: avatarm_scene::Scene,
+    /// The same scene through each further camera served at once (`--view alice,blair`; each
+    /// is erased by an app of its own, fed the same joint states).
+    pub more_views: Vec<avatarm_scene::Scene>,
     /// The robot.
     pub robot: crate::teleop::RobotChoice,
     /// The mapping mode (default: the task's closed loop).
@@ -669,12 +705,24 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
         .trial
         .as_ref()
         .map_or(0.0, |s| s.bottle_centre().translation.z);
-    let cameras = if options.video {
-        vec![camera_key(scene)]
+    let views: Vec<&avatarm_scene::Scene> =
+        std::iter::once(scene).chain(&options.more_views).collect();
+    let cameras: Vec<String> = if options.video {
+        views.iter().map(|v| camera_key(v)).collect()
     } else {
         Vec::new()
     };
-    let info = robot_info(scene, &parts, options.target_timeout_s, cameras)?;
+    if let Some(twice) = cameras
+        .iter()
+        .enumerate()
+        .find_map(|(i, c)| cameras[..i].contains(c).then_some(c))
+    {
+        return Err(crate::AppError::flag(
+            "--view",
+            format!("the camera '{twice}' is named twice"),
+        ));
+    }
+    let info = robot_info(scene, &parts, options.target_timeout_s, cameras.clone())?;
     let clock = avatarm_net::SiteClock::start();
     let mut site = RobotSite::open(&options.net, &info, clock)?;
     info!(
@@ -684,7 +732,11 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
         info.scene,
         info.robot,
         mode.name(),
-        if options.video { "on" } else { "off" }
+        if options.video {
+            format!("of {}", cameras.join(", "))
+        } else {
+            "off".to_owned()
+        }
     );
     let control = ControlLoop {
         teleop: parts.teleop,
@@ -696,43 +748,98 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
     let stop: StopFlag = Arc::new(AtomicBool::new(false));
     let duration = options.duration_s.map(Duration::from_secs_f64);
     let (report, site) = if options.video {
-        let (tx, rx) = std::sync::mpsc::channel();
-        let video = super::video::ServeVideoOptions {
-            updates: Arc::new(Mutex::new(rx)),
-            sender: site.frame_sender(),
-            camera: camera_key(scene),
-            clock,
-            stop: stop.clone(),
-            encoder: options.encoder,
-            counters: Arc::default(),
-        };
-        let counters = video.counters.clone();
+        // One app per camera, each fed the loop's joint states: the first on this thread
+        // (where the process's apps have always run), the others on threads of their own.
+        let mut feeds = Vec::new();
+        let mut apps = Vec::new();
+        for (view, camera) in views.iter().zip(&cameras) {
+            let (tx, rx) = std::sync::mpsc::channel();
+            feeds.push(tx);
+            let video = super::video::ServeVideoOptions {
+                updates: Arc::new(Mutex::new(rx)),
+                sender: site.frame_sender(),
+                camera: camera.clone(),
+                clock,
+                stop: stop.clone(),
+                encoder: avatarm_net::codec::EncoderSettings {
+                    fps: view.file.camera.fps.clamp(1.0, 240.0) as f32,
+                    ..options.encoder
+                },
+                counters: Arc::default(),
+            };
+            apps.push(((*view).clone(), video));
+        }
+        let counters: Vec<_> = apps
+            .iter()
+            .map(|(_, v)| (v.camera.clone(), v.counters.clone()))
+            .collect();
         let loop_stop = stop.clone();
         let handle = std::thread::Builder::new()
             .name("control loop".into())
             .spawn(move || {
-                // However the loop ends (a panic included), the video app ends with it.
+                // However the loop ends (a panic included), the video apps end with it.
                 let _stop = StopOnDrop(loop_stop.clone());
-                let report = control.run(&mut site, duration, &loop_stop, Some(tx));
+                let report = control.run(&mut site, duration, &loop_stop, feeds);
                 (report, site)
             })
             .map_err(|e| crate::AppError::replay(format!("cannot start the control loop: {e}")))?;
-        let app = crate::build_app(scene, &crate::Mode::Serve(video));
-        let ran = app.map(|mut app| app.run());
+        let mut apps = apps.into_iter();
+        let (first, first_video) = apps.next().expect("one camera at least");
+        let others: Vec<_> = apps
+            .map(|(view, video)| {
+                let camera = video.camera.clone();
+                let stop = stop.clone();
+                let thread = std::thread::Builder::new()
+                    .name(format!("camera {camera}"))
+                    .spawn(move || {
+                        // However this camera's app ends, the site ends with it.
+                        let _stop = StopOnDrop(stop);
+                        crate::build_app(&view, &crate::Mode::Serve(video))
+                            .map(|mut app| {
+                                app.run();
+                            })
+                            .map_err(|e| e.to_string())
+                    });
+                (camera, thread)
+            })
+            .collect();
+        let ran = crate::build_app(&first, &crate::Mode::Serve(first_video)).map(|mut app| {
+            app.run();
+        });
         stop.store(true, Ordering::Relaxed);
         let (mut report, site) = handle
             .join()
             .map_err(|_| crate::AppError::replay("the control loop panicked"))?;
+        // Every app has ended (the stop flag) before an error is returned.
+        let others: Vec<_> = others
+            .into_iter()
+            .map(|(camera, thread)| {
+                thread
+                    .map_err(|e| format!("cannot start its app: {e}"))
+                    .and_then(|t| {
+                        t.join()
+                            .map_err(|_| "its app panicked".to_owned())
+                            .and_then(|r| r)
+                    })
+                    .map_err(|e| crate::AppError::replay(format!("camera '{camera}': {e}")))
+            })
+            .collect();
         ran?;
-        report.video_frames = counters.published.load(Ordering::Relaxed);
+        others.into_iter().collect::<Result<Vec<()>, _>>()?;
+        report.video_cameras = counters
+            .iter()
+            .map(|(camera, c)| CameraVideo::of(camera.clone(), c))
+            .collect();
+        let sum = |f: fn(&CameraVideo) -> u64| report.video_cameras.iter().map(f).sum::<u64>();
+        report.video_frames = sum(|c| c.frames);
+        report.video_keyframes = sum(|c| c.keyframes);
+        report.video_forced_keyframes = sum(|c| c.forced_keyframes);
+        report.video_encode_errors = sum(|c| c.encode_errors);
+        report.video_skipped = sum(|c| c.skipped);
         report.video_codec = options.encoder.codec.name().into();
-        report.video_keyframes = counters.keyframes.load(Ordering::Relaxed);
-        report.video_forced_keyframes = counters.forced_keyframes.load(Ordering::Relaxed);
-        report.video_encode_errors = counters.encode_errors.load(Ordering::Relaxed);
-        report.video_skipped = counters.skipped.load(Ordering::Relaxed);
         (report, site)
     } else {
-        let report = control.run(&mut site, duration, &stop, None);
+        let report = control.run(&mut site, duration, &stop, Vec::new());
         (report, site)
     };
     site.close();

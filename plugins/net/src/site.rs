@@ -512,6 +512,15 @@ impl OperatorSite {
             .map_err(|e| zerr(&self.keys.hand(), e))
     }
 
+    /// Receives the erased video of `camera` alone from now on (at first every camera's):
+    /// a robot site serving several cameras then sends this site only the one it shows.
+    /// Errors when Zenoh refuses the subscription, with the key named.
+    pub fn view_camera(&mut self, camera: &str) -> Result<(), NetError> {
+        // The new subscriber first: no frame of `camera` is missed between the two.
+        self.frames = subscriber(&self.session, self.keys.erased(camera))?;
+        Ok(())
+    }
+
     /// Asks the robot site for an H.264 IDR frame of `camera` (after a loss, or on joining
     /// mid-stream); returns at once, the reply is not awaited.
     pub fn request_keyframe(&self, camera: &str) -> Result<(), NetError> {
