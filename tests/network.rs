@@ -625,16 +625,52 @@ fn the_operator_window_shows_the_received_video_with_the_hand_in_front() {
     assert!(hand >= 100, "{hand} hand-coloured pixels");
 }
 
+/// A recording of Alice's head turning `degrees` to her left over `seconds` about her eye,
+/// from where `scene`'s head starts (90 poses a second), as `run --record` writes head poses.
+fn head_turning(path: &Path, scene: &str, degrees: f64, seconds: f64) {
+    let scene = avatarm_scene::Scene::load_view(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join(scene),
+        &avatarm_core::robot::PackagePath::default(),
+        Some("alice"),
+    )
+    .expect("the scene");
+    let rig = scene.head.as_ref().expect("a camera on a head");
+    let start = rig.motion.pose_at(0.0);
+    let base_from_world = scene.robot_base().inverse();
+    let mut w = avatarm_record::RecordingWriter::create(path).expect("the test's set-up");
+    let n = (seconds * 90.0) as u64;
+    for i in 0..=n {
+        let s = i as f64 / n as f64;
+        let turn = nalgebra::UnitQuaternion::from_axis_angle(
+            &nalgebra::Vector3::z_axis(),
+            (degrees * s).to_radians(),
+        );
+        let world_from_head =
+            nalgebra::Isometry3::from_parts(start.translation, turn * start.rotation);
+        w.head_pose(&avatarm_record::HeadPose {
+            stamp_ns: 1_000_000_000 + i * 1_000_000_000 / 90,
+            base_from_head: base_from_world * world_from_head,
+        })
+        .expect("the test's set-up");
+    }
+    w.finish().expect("the test's set-up");
+}
+
 /// Both cameras through the network at once: the robot site erases Blair's fixed camera and
 /// Alice's head camera, each in an app of its own fed the same joint states, and publishes
-/// each under its name; each viewer receives the one it looks through. Each frame carries the
-/// camera pose its mask was drawn from, so that a viewer places the hand and the twins in
-/// front of it: Alice leans in and back, and her frames' cameras move; Blair's do not.
+/// each under its name; each viewer receives the one it looks through. Alice's viewer sends
+/// her head (here a recorded head turning 25 degrees; in XR the headset's), and the robot site
+/// erases her camera at it. Each frame carries the camera pose its mask was drawn from, so
+/// that a viewer places the hand and the twins in front of it: Alice's frames' cameras turn
+/// with her head; Blair's do not move.
 #[test]
-fn the_robot_site_serves_both_cameras_each_frame_with_its_pose() {
+fn the_robot_site_serves_both_cameras_at_alice_s_head_each_frame_with_its_pose() {
     let _serial = serial();
     let scene = "assets/scenes/pouring_two_views.toml";
     let dir = out_dir("both_views");
+    let head = dir.join("head.mcap");
+    // The scene's own head turns by 4 degrees at most: 25 is hers, sent.
+    head_turning(&head, scene, 25.0, 4.0);
     let port = free_port();
     // No --view: every camera of the scene. It stops by itself after the viewers.
     let robot = serve_scene(&dir, scene, port, 30.0, &["--insecure-lan"]);
@@ -643,6 +679,7 @@ fn the_robot_site_serves_both_cameras_each_frame_with_its_pose() {
         let mut args = vec!["--watch", "--view", view, "--wait", "30", "--duration", "8"];
         if view == "alice" {
             args.extend(["--record", record.to_str().expect("a UTF-8 path")]);
+            args.extend(["--head", head.to_str().expect("a UTF-8 path")]);
         }
         join_scene(&dir, view, scene, port, &args)
     };
@@ -657,32 +694,39 @@ fn the_robot_site_serves_both_cameras_each_frame_with_its_pose() {
         f(&cameras[0], "frames") >= 10.0 && f(&cameras[1], "frames") >= 10.0,
         "{cameras}"
     );
+    // Alice's head went to the robot site, which drew her frames' masks from it.
+    assert!(f(&alice, "head.sent") >= 100.0, "{alice}");
+    assert!((f(&alice, "head.turned_deg") - 25.0).abs() < 0.5, "{alice}");
+    assert!(f(&cameras[1], "head_poses") >= 100.0, "{cameras}");
+    assert_eq!(f(&cameras[1], "head_refused"), 0.0, "{cameras}");
+    assert_eq!(f(&cameras[0], "head_poses"), 0.0, "{cameras}");
     assert!(f(&alice, "video.shown") >= 5.0, "{alice}");
-    assert!(f(&alice, "video.camera_moved_mm") >= 20.0, "{alice}");
-    assert!(f(&alice, "video.camera_turned_deg") >= 0.5, "{alice}");
+    assert!(f(&alice, "video.camera_turned_deg") >= 10.0, "{alice}");
+    // At most the head's turn and the scripted head's before the first pose arrived.
+    assert!(f(&alice, "video.camera_turned_deg") <= 30.0, "{alice}");
     // Alice's recording keeps each frame's camera: a camera on a head, a pose at each
     // frame's capture.
     let rec = avatarm_record::Recording::open(&record).expect("the recording");
     assert_eq!(f(&alice, "recording.refused"), 0.0, "{alice}");
     assert!(rec.camera_on_head() && rec.erased.len() >= 5);
-    let centres: Vec<_> = rec
+    let axes: Vec<_> = rec
         .erased
         .iter()
         .map(|e| {
             rec.camera_at(e.stamp_ns)
                 .expect("a pose at each frame")
-                .translation
-                .vector
+                .rotation
         })
         .collect();
-    let moved = centres
+    let turned = axes
         .iter()
-        .map(|c| (c - centres[0]).norm())
+        .map(|r| r.angle_to(&axes[0]))
         .fold(0.0, f64::max);
-    let received = f(&alice, "video.camera_moved_mm");
+    let received = f(&alice, "video.camera_turned_deg");
+    assert!(turned.to_degrees() >= 10.0, "{turned} rad, {alice}");
     assert!(
-        moved * 1e3 >= 20.0 && moved * 1e3 <= received + 1.0,
-        "{moved} m, {alice}"
+        turned.to_degrees() <= received + 0.01,
+        "{turned} rad, {alice}"
     );
     assert!(f(&blair, "video.shown") >= 5.0, "{blair}");
     assert!(f(&blair, "video.camera_moved_mm") < 1e-6, "{blair}");
@@ -699,6 +743,24 @@ fn the_robot_site_serves_both_cameras_each_frame_with_its_pose() {
     let err = String::from_utf8_lossy(&twice.stderr);
     assert!(
         !twice.status.success() && err.contains("--view") && err.contains("'alice'"),
+        "{err}"
+    );
+    // A head for a fixed camera is refused by flag.
+    let fixed = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args([
+            "join",
+            "tcp/127.0.0.1:1",
+            "--scene",
+            scene,
+            "--view",
+            "blair",
+        ])
+        .args(["--watch", "--head", head.to_str().expect("a UTF-8 path")])
+        .output()
+        .expect("the test's set-up");
+    let err = String::from_utf8_lossy(&fixed.stderr);
+    assert!(
+        !fixed.status.success() && err.contains("--head") && err.contains("'blair'"),
         "{err}"
     );
 }

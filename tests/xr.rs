@@ -393,3 +393,80 @@ fn the_operators_site_runs_in_xr_and_its_tracked_hand_sends_targets() {
     eprintln!("join report: targets_sent {}", report["targets_sent"]);
     assert!(report["targets_sent"].as_f64() > Some(10.0), "{report}");
 }
+
+/// Alice's headset at her own site (`join --watch --view alice --xr`, issue 22's two-site
+/// session): her head goes to the robot site, which erases her head camera at it, and the
+/// frames she receives come from where her head was (they turn with the headset).
+#[test]
+fn alice_s_headset_sends_her_head_to_the_robot_site_which_erases_her_camera_at_it() {
+    let test = "alice_s_headset_sends_her_head_to_the_robot_site_which_erases_her_camera_at_it";
+    let Some(runtime) = runtime(test) else {
+        return;
+    };
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("xr_alice");
+    std::fs::create_dir_all(&out).expect("the test's folder");
+    let net = format!("tcp/127.0.0.1:{}", free_port());
+    /// Kills the robot site however the test ends.
+    struct Killed(std::process::Child);
+    impl Drop for Killed {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+    let _serve = Killed(
+        Command::new(env!("CARGO_BIN_EXE_avatarm"))
+            .args([
+                "serve",
+                "assets/scenes/pouring_two_views.toml",
+                "--insecure-lan",
+            ])
+            .args(["--view", "alice", "--listen", &net, "--duration", "240"])
+            .current_dir(root())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::fs::File::create(out.join("serve.log")).expect("the test's folder"))
+            .spawn()
+            .expect("the robot site starts"),
+    );
+    let port = free_port();
+    let driver = RemoteDriver::start(port, Duration::from_secs(120), 20.0, Duration::from_secs(8));
+    let report = out.join("join.json");
+    let log = avatarm_xr(
+        &runtime,
+        port,
+        "alice",
+        &[
+            "join",
+            &net,
+            "--scene",
+            "assets/scenes/pouring_two_views.toml",
+            "--view",
+            "alice",
+            "--watch",
+            "--frames",
+            "150",
+            "--wait",
+            "60",
+            "--report",
+            report.to_str().expect("a path"),
+        ],
+    );
+    assert!(log.contains("entered XR state FOCUSED"), "{log}");
+    if !driver.drove(test, "the head") {
+        return;
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).expect("Alice's report"))
+            .expect("JSON");
+    eprintln!("head: {}, video: {}", report["head"], report["video"]);
+    assert_eq!(report["head"]["source"], "headset", "{report}");
+    assert!(report["head"]["sent"].as_f64() >= Some(30.0), "{report}");
+    // The headset turned up to 20 degrees (the first pose may come after the turn began),
+    // and the frames' cameras with it.
+    let turned = report["head"]["turned_deg"].as_f64().unwrap_or_default();
+    assert!((2.0..=20.5).contains(&turned), "{report}");
+    let frames = report["video"]["camera_turned_deg"]
+        .as_f64()
+        .unwrap_or_default();
+    assert!(frames >= 2.0, "{report}");
+}

@@ -369,6 +369,12 @@ enum Command {
         /// stops, on the robot site's clock
         #[arg(long, value_name = "FILE.mcap")]
         record: Option<PathBuf>,
+        /// The head the viewed camera rides on (a camera on a head, Alice's), sent to the robot
+        /// site, which erases that camera at it: a recording's tracked head poses
+        /// (`run --record` of a head camera), played from the join on. With --xr and no
+        /// --head, the headset's head is sent.
+        #[arg(long, value_name = "FILE.mcap")]
+        head: Option<PathBuf>,
         /// How long to wait for the robot site (s).
         #[arg(long, value_name = "S", default_value_t = 10.0)]
         wait: f64,
@@ -855,10 +861,29 @@ fn run(cli: Cli) -> Result<(), AppError> {
             package_path,
             net,
             view,
+            head,
         } => {
             crate::net::init_log();
             let path = scene.unwrap_or_else(pouring_scene);
-            let scene = Scene::load_view(&path, &packages(package_path), view.as_deref())?;
+            #[allow(unused_mut)] // changed with the feature `xr`
+            let mut scene = Scene::load_view(&path, &packages(package_path), view.as_deref())?;
+            let head = match head {
+                Some(file) => Some(crate::net::join::HeadSource::Recorded(recorded_head(
+                    &file,
+                )?)),
+                None => None,
+            };
+            // In XR a camera on a head rides on the wearer's head, which goes to the robot
+            // site (docs/alice-view.md).
+            #[cfg(feature = "xr")]
+            let head = match (head, scene.head.as_mut()) {
+                (None, Some(rig)) if xr => {
+                    let live = avatarm_core::vision::head::LiveHead::new(rig.motion.clone());
+                    rig.motion = avatarm_core::vision::head::HeadMotion::Live(live.clone());
+                    Some(crate::net::join::HeadSource::Headset(live))
+                }
+                (head, _) => head,
+            };
             let role = if watch {
                 avatarm_net::Role::Observer
             } else {
@@ -909,6 +934,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 record,
                 wait_s: wait,
                 trial,
+                head,
             };
             let r = crate::net::join::join(&options)?;
             println!("{}", crate::net::join::summary(&r));
@@ -1981,4 +2007,20 @@ fn step_ms(s: &str) -> Result<f64, AppError> {
             message: "expected more than 0 and at most 250 ms (a longer step is clamped)".into(),
         })
     }
+}
+
+/// A recording's tracked head poses (`join --head FILE.mcap`); errors name the file, and say
+/// so when it has none.
+fn recorded_head(path: &Path) -> Result<Vec<avatarm_record::HeadPose>, AppError> {
+    let recording = avatarm_record::Recording::open(path)?;
+    if recording.head_poses.is_empty() {
+        return Err(AppError::flag(
+            "--head",
+            format!(
+                "{} has no head poses: record a camera on a head (`avatarm run --record`)",
+                path.display()
+            ),
+        ));
+    }
+    Ok(recording.head_poses)
 }

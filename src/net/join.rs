@@ -58,6 +58,9 @@ pub struct JoinOptions {
     pub hand: HandChoice,
     /// The operator's or observer's window (`None`: headless).
     pub window: Option<WindowOptions>,
+    /// Where the head of the viewed camera comes from, for a camera on a head (sent to the
+    /// robot site, which erases that camera at it); `None`: the robot site's simulated head.
+    pub head: Option<HeadSource>,
 }
 
 /// Latency of the erased video by stage (ms, robot clock): capture → erased → sent →
@@ -147,6 +150,126 @@ pub struct JoinReport {
     pub window: Option<WindowReport>,
     /// What `--record` wrote, when it was given.
     pub recording: Option<JoinRecording>,
+    /// The head this site sent for its camera on a head (`--xr`, `--head FILE.mcap`).
+    pub head: Option<HeadReport>,
+}
+
+/// What this site sent of the head its viewed camera rides on.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct HeadReport {
+    /// The camera.
+    pub camera: String,
+    /// `headset` (`--xr`) or `recording` (`--head FILE.mcap`).
+    pub source: String,
+    /// Poses sent.
+    pub sent: u64,
+    /// Poses the network refused.
+    pub failed: u64,
+    /// How far the head turned from the first pose sent (degrees, largest).
+    pub turned_deg: f64,
+    /// How far it moved from the first pose sent (mm, largest).
+    pub moved_mm: f64,
+}
+
+/// Where the head of this site's camera on a head comes from.
+#[derive(Debug, Clone)]
+pub enum HeadSource {
+    /// The headset (`--xr`): the scene's live head, which the window's XR session feeds.
+    Headset(avatarm_core::vision::head::LiveHead),
+    /// A recording's tracked head poses (`--head FILE.mcap`, `base_from_head`), played from
+    /// the join on in real time; after the last, the head holds it.
+    Recorded(Vec<avatarm_record::HeadPose>),
+}
+
+/// The most head poses sent a second: a headset's tracking rate.
+const HEAD_RATE_HZ: f64 = 90.0;
+
+/// Sends the head of this site's camera on a head to the robot site, which draws that
+/// camera's mask from it ([`avatarm_net::msg::HeadPoseMsg`]). Each pose is stamped when this
+/// site takes it (the headset's newest, up to a window frame and a control tick late; a
+/// recording's at its moment in the playback).
+struct HeadSender {
+    source: HeadSource,
+    /// The scene's world in the robot's base frame (a recording's poses are in the base frame).
+    world_from_base: nalgebra::Isometry3<f64>,
+    started: Instant,
+    last_sent: Option<Instant>,
+    /// The headset's poses taken when the last was sent.
+    taken: u64,
+    first: Option<nalgebra::Isometry3<f64>>,
+    report: HeadReport,
+}
+
+impl HeadSender {
+    fn new(source: HeadSource, camera: String, scene: &Scene) -> Self {
+        let name = match source {
+            HeadSource::Headset(_) => "headset",
+            HeadSource::Recorded(_) => "recording",
+        };
+        Self {
+            source,
+            world_from_base: scene.robot_base(),
+            started: Instant::now(),
+            last_sent: None,
+            taken: 0,
+            first: None,
+            report: HeadReport {
+                camera,
+                source: name.into(),
+                ..HeadReport::default()
+            },
+        }
+    }
+
+    /// Sends the head's newest pose if one is due, stamped `robot_now` (the robot's clock).
+    fn send(&mut self, site: &OperatorSite, robot_now: f64) {
+        let now = Instant::now();
+        if self
+            .last_sent
+            .is_some_and(|t| (now - t).as_secs_f64() < 1.0 / HEAD_RATE_HZ)
+        {
+            return;
+        }
+        let pose = match &self.source {
+            HeadSource::Headset(live) => {
+                let taken = live.poses();
+                if taken == self.taken {
+                    return; // nothing new from the headset
+                }
+                self.taken = taken;
+                live.latest().map(|(_, p)| p)
+            }
+            HeadSource::Recorded(poses) => {
+                let first_ns = poses.first().map_or(0, |p| p.stamp_ns);
+                let at = first_ns.saturating_add(self.started.elapsed().as_nanos() as u64);
+                avatarm_record::head_at(poses, at).map(|p| self.world_from_base * p)
+            }
+        };
+        let Some(world_from_head) = pose else { return };
+        self.last_sent = Some(now);
+        let m = avatarm_net::msg::HeadPoseMsg {
+            v: PROTOCOL_VERSION,
+            stamp_s: robot_now,
+            camera: self.report.camera.clone(),
+            pose: avatarm_net::msg::FrameHeader::pose_of(&world_from_head),
+        };
+        match site.publish_head(&m) {
+            Ok(()) => {
+                self.report.sent += 1;
+                let first = *self.first.get_or_insert(world_from_head);
+                let (angle, offset) =
+                    avatarm_core::vision::head::pose_error(&world_from_head, &first);
+                self.report.turned_deg = self.report.turned_deg.max(angle.to_degrees());
+                self.report.moved_mm = self.report.moved_mm.max(offset * 1e3);
+            }
+            Err(e) => {
+                if self.report.failed == 0 {
+                    warn!("head: {e}");
+                }
+                self.report.failed += 1;
+            }
+        }
+    }
 }
 
 /// What `join --record` wrote.
@@ -382,6 +505,8 @@ struct Collect {
     total: Vec<f64>,
     joint_age: Vec<f64>,
     recorder: Option<JoinRecorder>,
+    /// Sends the head of this site's camera on a head.
+    head: Option<HeadSender>,
     /// The real object's poses the robot site reported, `(stamp_s, pose)`, oldest first.
     objects: std::collections::VecDeque<(f64, nalgebra::Isometry3<f64>)>,
 }
@@ -411,6 +536,9 @@ fn object_at(
 
 impl Collect {
     fn take(&mut self, site: &OperatorSite, inbox: OperatorInbox, robot_now: f64) {
+        if let Some(head) = &mut self.head {
+            head.send(site, robot_now);
+        }
         let r = &mut self.report;
         for j in inbox.joint_states {
             match j {
@@ -621,6 +749,7 @@ impl Collect {
         r.video.total_ms = Spread::of(&self.total);
         r.joint_state_age_ms = Spread::of(&self.joint_age);
         r.recording = self.recorder.take().map(JoinRecorder::finish);
+        r.head = self.head.take().map(|h| h.report);
         self.report
     }
 }
@@ -632,6 +761,15 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
         return Err(AppError::flag(
             "--wait",
             format!("{} s must be >= 0", options.wait_s),
+        ));
+    }
+    if options.head.is_some() && options.scene.head.is_none() {
+        return Err(AppError::flag(
+            "--head",
+            format!(
+                "the camera '{}' is fixed, not on a head: look through a camera on a head                  (--view)",
+                options.scene.camera_name()
+            ),
         ));
     }
     if let Some(d) = options.duration_s
@@ -839,6 +977,13 @@ fn run_session(
         view,
         observer: operator.is_none(),
         recorder,
+        head: options.head.clone().map(|source| {
+            HeadSender::new(
+                source,
+                super::serve::camera_key(&options.scene),
+                &options.scene,
+            )
+        }),
         ..Collect::default()
     };
     if let Some(rec) = &mut collect.recorder {

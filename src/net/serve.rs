@@ -181,6 +181,10 @@ pub struct CameraVideo {
     pub encode_errors: u64,
     /// Frames H.264's rate control skipped.
     pub skipped: u64,
+    /// A camera on a head: its wearer's head poses taken from the network.
+    pub head_poses: u64,
+    /// Head poses refused (each run of refusals logged once).
+    pub head_refused: u64,
 }
 
 impl CameraVideo {
@@ -193,6 +197,8 @@ impl CameraVideo {
             forced_keyframes: counters.forced_keyframes.load(Ordering::Relaxed),
             encode_errors: counters.encode_errors.load(Ordering::Relaxed),
             skipped: counters.skipped.load(Ordering::Relaxed),
+            head_poses: counters.head_poses.load(Ordering::Relaxed),
+            head_refused: counters.head_refused.load(Ordering::Relaxed),
         }
     }
 }
@@ -755,7 +761,7 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
         for (view, camera) in views.iter().zip(&cameras) {
             let (tx, rx) = std::sync::mpsc::channel();
             feeds.push(tx);
-            let video = super::video::ServeVideoOptions {
+            let mut video = super::video::ServeVideoOptions {
                 updates: Arc::new(Mutex::new(rx)),
                 sender: site.frame_sender(),
                 camera: camera.clone(),
@@ -766,8 +772,18 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
                     ..options.encoder
                 },
                 counters: Arc::default(),
+                head: None,
             };
-            apps.push(((*view).clone(), video));
+            let mut view = (*view).clone();
+            if let Some(head) = view.head.as_mut() {
+                // A camera on a head rides on its wearer's head where one reports over the
+                // network (the scene's simulated head until then).
+                head.motion = avatarm_core::vision::head::HeadMotion::Live(
+                    avatarm_core::vision::head::LiveHead::new(head.motion.clone()),
+                );
+                video.head = Some(Arc::new(site.head_receiver(camera)?));
+            }
+            apps.push((view, video));
         }
         let counters: Vec<_> = apps
             .iter()

@@ -43,6 +43,11 @@ pub struct VideoCounters {
     pub encode_errors: AtomicU64,
     /// Frames H.264's rate control skipped.
     pub skipped: AtomicU64,
+    /// A camera on a head: poses of the head taken from its wearer's headset (the network).
+    pub head_poses: AtomicU64,
+    /// Of those received, refused (malformed, not finite, another camera's) or not newer than
+    /// the last taken.
+    pub head_refused: AtomicU64,
 }
 
 /// What the video side needs: the loop's updates, the publisher, the site's clock, and the
@@ -63,6 +68,10 @@ pub struct ServeVideoOptions {
     pub encoder: avatarm_net::codec::EncoderSettings,
     /// The counters.
     pub counters: Arc<VideoCounters>,
+    /// A camera on a head: its wearer's head poses from the network (`join --xr` or `--head`),
+    /// which the scene's live head ([`avatarm_core::vision::head::LiveHead`]) takes; until the
+    /// first arrives, the scene's simulated head moves the camera.
+    pub head: Option<Arc<avatarm_net::HeadReceiver>>,
 }
 
 impl std::fmt::Debug for ServeVideoOptions {
@@ -84,6 +93,10 @@ struct ServeVideo {
     carried: Option<(usize, Isometry3<f64>)>,
     /// The camera's believed pose (the frames' until the erase has drawn one).
     world_from_camera: Isometry3<f64>,
+    /// A refused head pose has been logged (one line per run of refusals).
+    head_refusing: bool,
+    /// The site's clock minus the app's (s) the head's poses were last stamped with.
+    head_clock: Option<f64>,
 }
 
 /// A frame read back, to be coded.
@@ -123,11 +136,13 @@ impl Plugin for ServeVideoPlugin {
             last_index: None,
             carried,
             world_from_camera,
+            head_refusing: false,
+            head_clock: None,
         })
         .add_systems(
             Update,
             (
-                mirror_loop,
+                (take_remote_head, mirror_loop).chain(),
                 // The frame erased in this update, with the camera it was drawn from.
                 publish_erased.after(avatarm_erase::EraseSystems::Prepare),
                 stop_when_done,
@@ -177,6 +192,70 @@ fn mirror_loop(
     }
     if let (Some(centre), Some((prop, centre_to_base))) = (last.object, video.carried) {
         crate::teleop::place_prop(&mut parts, prop, &(centre * centre_to_base));
+    }
+}
+
+/// A camera on a head: the wearer's head poses from the network into the scene's live head,
+/// their stamps moved from the site's clock to the app's. A refused one is counted and logged
+/// (one line until a pose is taken again); the head then holds its last pose.
+fn take_remote_head(
+    mut video: ResMut<ServeVideo>,
+    time: Res<Time>,
+    real: Res<Time<Real>>,
+    scene: Res<crate::SceneResource>,
+) {
+    let Some(receiver) = video.options.head.clone() else {
+        return;
+    };
+    let Some(avatarm_core::vision::head::HeadMotion::Live(live)) =
+        scene.0.head.as_ref().map(|h| &h.motion)
+    else {
+        return;
+    };
+    // The site's clock at this update's start against the app's then. The app's clock falls
+    // behind the wall's when an update takes longer than Bevy's largest step: the poses
+    // taken before move with it, so that each keeps its moment on the site's clock.
+    let since_update = real
+        .last_update()
+        .map_or(0.0, |t| t.elapsed().as_secs_f64());
+    let site_minus_app = video.options.clock.now_s() - since_update - time.elapsed_secs_f64();
+    if let Some(before) = video.head_clock.replace(site_minus_app) {
+        live.shift(before - site_minus_app);
+    }
+    for m in receiver.poll() {
+        let taken = match m {
+            Ok(m) if live.push_world(m.stamp_s - site_minus_app, &m.world_from_head()) => Ok(()),
+            Ok(m) => Err(format!(
+                "a pose stamped {:.3} s, not newer than the last taken",
+                m.stamp_s
+            )),
+            Err(e) => Err(e.to_string()),
+        };
+        match taken {
+            Ok(()) => {
+                video
+                    .options
+                    .counters
+                    .head_poses
+                    .fetch_add(1, Ordering::Relaxed);
+                if std::mem::take(&mut video.head_refusing) {
+                    info!("camera '{}': head poses taken again", video.options.camera);
+                }
+            }
+            Err(why) => {
+                video
+                    .options
+                    .counters
+                    .head_refused
+                    .fetch_add(1, Ordering::Relaxed);
+                if !std::mem::replace(&mut video.head_refusing, true) {
+                    warn!(
+                        "camera '{}': head pose refused: {why}",
+                        video.options.camera
+                    );
+                }
+            }
+        }
     }
 }
 

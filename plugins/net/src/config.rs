@@ -327,7 +327,9 @@ impl NetConfig {
         let read = r#"["declare_subscriber", "query", "liveliness_query", "declare_liveliness_subscriber"]"#;
         let robot = list(&[k.robot_space(), k.camera_space()]);
         let session = list(&[k.session_space()]);
-        let operator = list(&[k.operator_space()]);
+        // The operators' keys, and the head a camera rides on: its wearer is trusted as an
+        // operator is (the pose only steers that camera's mask, never the arm).
+        let operator = list(&[k.operator_space(), k.all_heads()]);
         // A subject and its policy only for users named: nobody else gets those rules.
         let mut subjects = vec![r#"{ id: "anyone" }"#.to_owned()];
         let mut policies = vec![

@@ -8,6 +8,7 @@
 //! | `robot/status` | robot site | [`crate::msg::RobotStatusMsg`] |
 //! | `camera/<name>/erased` | robot site | the erased video ([`crate::msg::FrameHeader`] attached) |
 //! | `camera/<name>/keyframe` | robot site (queryable) | a viewer asks for an H.264 IDR frame |
+//! | `camera/<name>/head` | the head camera's wearer | [`crate::msg::HeadPoseMsg`]: the head it rides on |
 //! | `operator/target` | operator | [`crate::msg::TargetMsg`] each control tick |
 //! | `operator/hand` | operator | [`crate::msg::HandMsg`] for observers |
 //! | `operator/alive` | operator (liveliness token) | present while the operator is |
@@ -93,6 +94,14 @@ impl Keys {
     /// Every camera's keyframe requests.
     pub fn all_keyframes(&self) -> String {
         self.key("camera/*/keyframe")
+    }
+    /// Camera `name`'s head (the wearer's headset).
+    pub fn head(&self, camera: &str) -> String {
+        self.key(&format!("camera/{camera}/head"))
+    }
+    /// Every camera's head.
+    pub fn all_heads(&self) -> String {
+        self.key("camera/*/head")
     }
     /// The operator's targets.
     pub fn target(&self) -> String {

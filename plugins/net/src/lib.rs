@@ -24,8 +24,8 @@ pub mod site;
 pub use config::{Credentials, NetConfig, Role, TlsFiles};
 pub use keys::Keys;
 pub use site::{
-    ClockOffset, FrameSender, OperatorInbox, OperatorSite, ReceivedFrame, RobotInbox, RobotSite,
-    Router, SiteClock,
+    ClockOffset, FrameSender, HeadReceiver, OperatorInbox, OperatorSite, ReceivedFrame, RobotInbox,
+    RobotSite, Router, SiteClock,
 };
 
 /// What can go wrong on the network; each names the message, setting or key.

@@ -18,7 +18,7 @@ use crate::NetError;
 
 /// The protocol's version: a peer with another is refused with both versions named. Raised
 /// on every change of a message's fields or meaning.
-pub const PROTOCOL_VERSION: u32 = 3;
+pub const PROTOCOL_VERSION: u32 = 4;
 
 /// Largest operator target accepted (bytes): one is ~400.
 pub const MAX_TARGET_BYTES: usize = 4096;
@@ -366,6 +366,52 @@ impl HandMsg {
     }
 }
 
+/// The head a camera rides on, as the wearer's headset reports it (Alice's, at the site where
+/// she wears it): the robot site draws that camera's mask from it instead of its own
+/// simulated head. Sent on `camera/<name>/head` ([`crate::Keys::head`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeadPoseMsg {
+    /// Protocol version.
+    pub v: u32,
+    /// The moment the pose describes (s, robot clock).
+    pub stamp_s: f64,
+    /// The camera that rides on the head (its name in the scene).
+    pub camera: String,
+    /// `world_from_head` in the scene's world (z up; the head's frame optical: x right, y
+    /// down, z forward), position (m) then quaternion `[x, y, z, w]`.
+    pub pose: [f64; 7],
+}
+
+impl HeadPoseMsg {
+    /// The head's pose ([`pose_from_wire`]).
+    pub fn world_from_head(&self) -> Isometry3<f64> {
+        pose_from_wire(&self.pose)
+    }
+
+    fn check(&self) -> Result<(), NetError> {
+        if !(self.stamp_s.is_finite() && !self.camera.is_empty() && self.camera.len() <= 64) {
+            return Err(NetError::Invalid {
+                what: "head pose".into(),
+                message: format!(
+                    "stamp {} s (finite) and camera '{}' (1-64 characters)",
+                    self.stamp_s, self.camera
+                ),
+            });
+        }
+        if !pose_ok(&self.pose) {
+            return Err(NetError::Invalid {
+                what: "head pose".into(),
+                message: format!(
+                    "{:?}: not finite, beyond 100 m or not a unit quaternion",
+                    self.pose
+                ),
+            });
+        }
+        Ok(())
+    }
+}
+
 /// Encodes a message (JSON). Errors only for a non-finite number, which JSON cannot hold.
 pub fn encode<T: Serialize>(what: &str, message: &T) -> Result<Vec<u8>, NetError> {
     serde_json::to_vec(message).map_err(|e| NetError::Invalid {
@@ -453,6 +499,13 @@ pub fn decode_frame_header(bytes: &[u8], payload_len: usize) -> Result<FrameHead
 /// Decodes and checks a hand frame.
 pub fn decode_hand(bytes: &[u8]) -> Result<HandMsg, NetError> {
     let m: HandMsg = decode("hand", bytes, MAX_HAND_BYTES)?;
+    m.check()?;
+    Ok(m)
+}
+
+/// Decodes a head pose; errors name the field.
+pub fn decode_head(bytes: &[u8]) -> Result<HeadPoseMsg, NetError> {
+    let m: HeadPoseMsg = decode("head pose", bytes, MAX_TARGET_BYTES)?;
     m.check()?;
     Ok(m)
 }
@@ -640,5 +693,32 @@ mod tests {
         hand.held_object = Some([0.5, 0.0, 0.8, 0.0, 0.0, 2.0, 0.0]);
         let e = decode_hand(&encode("hand", &hand).expect("encodes")).expect_err("refused");
         assert!(e.to_string().contains("held object"), "{e}");
+    }
+
+    #[test]
+    fn a_head_pose_crosses_unchanged_and_a_bad_one_is_refused_by_field() {
+        let pose = Isometry3::from_parts(
+            Translation3::new(0.8, -1.0, 1.2),
+            UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3),
+        );
+        let m = HeadPoseMsg {
+            v: PROTOCOL_VERSION,
+            stamp_s: 3.5,
+            camera: "alice".into(),
+            pose: FrameHeader::pose_of(&pose),
+        };
+        let back = decode_head(&encode("head pose", &m).expect("encodes")).expect("decodes");
+        assert_eq!((back.stamp_s, back.camera.as_str()), (3.5, "alice"));
+        assert!(back.world_from_head().rotation.angle_to(&pose.rotation) < 1e-12);
+        let refused = |f: &dyn Fn(&mut HeadPoseMsg), says: &str| {
+            let mut bad = m.clone();
+            f(&mut bad);
+            let e = decode_head(&encode("head pose", &bad).expect("encodes")).expect_err(says);
+            assert!(e.to_string().contains(says), "{e}");
+        };
+        refused(&|b| b.pose[6] = 2.0, "unit quaternion");
+        refused(&|b| b.pose[0] = 1e3, "100 m");
+        refused(&|b| b.camera.clear(), "camera");
+        refused(&|b| b.v = PROTOCOL_VERSION - 1, "version");
     }
 }

@@ -11,6 +11,7 @@
 //! | status | data high | no | drop (10 Hz; each says everything) |
 //! | erased video | data | no | drop (a late frame is useless) |
 //! | hand | interactive low | yes | drop |
+//! | a head camera's head | interactive high | yes | drop |
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -30,8 +31,8 @@ use crate::NetError;
 use crate::config::NetConfig;
 use crate::keys::Keys;
 use crate::msg::{
-    self, FrameHeader, HandMsg, JointStatesMsg, PROTOCOL_VERSION, RobotInfo, RobotStatusMsg,
-    TargetMsg,
+    self, FrameHeader, HandMsg, HeadPoseMsg, JointStatesMsg, PROTOCOL_VERSION, RobotInfo,
+    RobotStatusMsg, TargetMsg,
 };
 
 /// How many messages of a stream wait to be polled; beyond, Zenoh's handler blocks its
@@ -128,6 +129,44 @@ pub struct RobotInbox {
     pub operator_present: bool,
     /// An operator's token appeared (`true`) or went (`false`) since the last poll.
     pub operator_changed: Option<bool>,
+}
+
+/// One camera's head poses as they arrive at the robot site ([`RobotSite::head_receiver`]).
+pub struct HeadReceiver {
+    subscriber: Subscriber<FifoChannelHandler<Sample>>,
+    camera: String,
+}
+
+impl std::fmt::Debug for HeadReceiver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("HeadReceiver")
+            .field("camera", &self.camera)
+            .finish_non_exhaustive()
+    }
+}
+
+impl HeadReceiver {
+    /// The poses received since the last call, decoded and checked, in arrival order; a
+    /// refused one (malformed, another version, not finite, another camera's) says why.
+    pub fn poll(&self) -> Vec<Result<HeadPoseMsg, NetError>> {
+        drain(&self.subscriber)
+            .iter()
+            .map(|s| {
+                let m = msg::decode_head(&s.payload().to_bytes())?;
+                if m.camera == self.camera {
+                    Ok(m)
+                } else {
+                    Err(NetError::Invalid {
+                        what: "head pose".into(),
+                        message: format!(
+                            "camera '{}' in the message, on camera '{}''s key",
+                            m.camera, self.camera
+                        ),
+                    })
+                }
+            })
+            .collect()
+    }
 }
 
 /// Alice's end: publishes the robot's state and the erased video, receives the operator's
@@ -257,6 +296,16 @@ impl RobotSite {
     /// The site's clock.
     pub fn clock(&self) -> SiteClock {
         self.clock
+    }
+
+    /// A receiver of camera `camera`'s head poses (its wearer's headset), to hand to the
+    /// thread that erases that camera. Errors name the key Zenoh refused.
+    pub fn head_receiver(&self, camera: &str) -> Result<HeadReceiver, NetError> {
+        let key = self.keys.head(camera);
+        Ok(HeadReceiver {
+            subscriber: subscriber(&self.session, key.clone())?,
+            camera: camera.to_owned(),
+        })
     }
 
     /// The session's keys.
@@ -510,6 +559,21 @@ impl OperatorSite {
             .put(bytes)
             .wait()
             .map_err(|e| zerr(&self.keys.hand(), e))
+    }
+
+    /// Publishes the head a camera rides on (the wearer's headset; [`HeadPoseMsg`]): express,
+    /// dropped rather than queued behind a stalled link (the next pose is a frame away).
+    /// Errors for a non-finite pose or a put Zenoh refuses, with the key named.
+    pub fn publish_head(&self, m: &HeadPoseMsg) -> Result<(), NetError> {
+        let bytes = msg::encode("head pose", m)?;
+        let key = self.keys.head(&m.camera);
+        self.session
+            .put(key.clone(), bytes)
+            .priority(Priority::InteractiveHigh)
+            .express(true)
+            .congestion_control(CongestionControl::Drop)
+            .wait()
+            .map_err(|e| zerr(&key, e))
     }
 
     /// Receives the erased video of `camera` alone from now on (at first every camera's):

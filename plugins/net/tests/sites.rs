@@ -259,6 +259,13 @@ fn only_the_dictionary_s_operator_can_command_the_robot() {
     robot_config.operators = vec!["blair".into()];
     let mut robot =
         RobotSite::open(&robot_config, &info(PROTOCOL_VERSION), SiteClock::start()).expect("opens");
+    let heads = robot.head_receiver("alice").expect("subscribes");
+    let head = |stamp_s: f64| avatarm_net::msg::HeadPoseMsg {
+        v: PROTOCOL_VERSION,
+        stamp_s,
+        camera: "alice".into(),
+        pose: [0.8, -1.0, 1.2, 0.0, 0.0, 0.0, 1.0],
+    };
     let as_user = |user: Option<(&str, &str)>| {
         let mut c = config(Role::Operator, &endpoint, "t4");
         c.credentials = user.map(|(u, p)| Credentials {
@@ -286,6 +293,7 @@ fn only_the_dictionary_s_operator_can_command_the_robot() {
         watcher
             .publish_target(&TargetMsg::new(seq, &target(now), now, true))
             .expect("handed to zenoh");
+        watcher.publish_head(&head(now)).expect("handed to zenoh");
         std::thread::sleep(Duration::from_millis(10));
         let polled = robot.poll();
         inbox.operator_present |= polled.operator_present;
@@ -302,6 +310,10 @@ fn only_the_dictionary_s_operator_can_command_the_robot() {
         !inbox.operator_present,
         "an observer's liveliness token was accepted"
     );
+    assert!(
+        heads.poll().is_empty(),
+        "an observer's head poses reached the robot site"
+    );
     watcher.close();
     // The operator's do arrive.
     let blair = OperatorSite::join(
@@ -310,6 +322,20 @@ fn only_the_dictionary_s_operator_can_command_the_robot() {
     )
     .expect("the operator joins");
     commands_arrive(&blair, &mut robot);
+    // Its user may send a camera's head (the wearer logs in as an operator).
+    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    let mut taken = Vec::new();
+    while taken.is_empty() && std::time::Instant::now() < deadline {
+        blair
+            .publish_head(&head(blair.robot_now_s()))
+            .expect("handed to zenoh");
+        std::thread::sleep(Duration::from_millis(20));
+        taken.extend(heads.poll());
+    }
+    assert!(
+        !taken.is_empty() && taken.iter().all(|h| h.is_ok()),
+        "{taken:?}"
+    );
 }
 
 /// Through a router with a dictionary (the robot site connects to it and logs in): only the

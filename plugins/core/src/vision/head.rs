@@ -253,6 +253,36 @@ impl LiveHead {
         Some(world_from_head)
     }
 
+    /// Takes a head pose already in the scene's world (`world_from_head`; registered where the
+    /// headset is, as a remote wearer's arrives) at `t_s` (s, the app's clock). Returns `false`
+    /// for a pose or time that is not finite or not newer than the last.
+    pub fn push_world(&self, t_s: f64, world_from_head: &Isometry3<f64>) -> bool {
+        let finite = world_from_head
+            .translation
+            .vector
+            .iter()
+            .chain(world_from_head.rotation.coords.iter())
+            .all(|v| v.is_finite());
+        let mut s = self.state();
+        if !finite || !s.history.push(t_s, *world_from_head) {
+            return false;
+        }
+        s.first.get_or_insert(*world_from_head);
+        s.poses += 1;
+        true
+    }
+
+    /// The newest pose taken (`(t_s, world_from_head)`), if any.
+    pub fn latest(&self) -> Option<(f64, Isometry3<f64>)> {
+        self.state().history.latest()
+    }
+
+    /// Moves the stamps of the poses taken by `dt_s` (s): the poses come stamped on another
+    /// clock ([`LiveHead::push_world`]), and the app's clock moved against it.
+    pub fn shift(&self, dt_s: f64) {
+        self.state().history.shift(dt_s);
+    }
+
     /// `world_from_head` at `t_s`: the headset's (interpolated, or extrapolated at most 0.1 s)
     /// once it has reported, the scripted motion's before.
     pub fn pose_at(&self, t_s: f64) -> Isometry3<f64> {
@@ -453,6 +483,16 @@ impl PoseHistory {
     /// The newest sample, `(stamp_s, world_from_head)`.
     pub fn latest(&self) -> Option<(f64, Isometry3<f64>)> {
         self.samples.back().copied()
+    }
+
+    /// Moves every sample's stamp by `dt_s` (s; the clock they were converted to moved
+    /// against theirs). A shift that is not finite is ignored.
+    pub fn shift(&mut self, dt_s: f64) {
+        if dt_s.is_finite() {
+            for s in &mut self.samples {
+                s.0 += dt_s;
+            }
+        }
     }
 
     /// The pose at `t_s`: interpolated between the samples around it (translation linearly,
@@ -675,6 +715,37 @@ mod tests {
         assert_eq!(h.at(-1.0), Some(pose(0.0)));
         assert!(h.at(f64::NAN).is_none());
         assert!(PoseHistory::default().at(0.0).is_none());
+        // Moved to another clock: the same poses at the moved stamps, still in order.
+        h.shift(-0.5);
+        let (angle, dist) = pose_error(&h.at(0.033 - 0.5).expect("pose"), &pose(0.033));
+        assert!(angle < 1e-9 && dist < 1e-12);
+        assert!(
+            !h.push(0.05 - 0.5, pose(0.05)),
+            "out of order after the shift"
+        );
+        assert!(h.push(0.1 - 0.5, pose(0.1)));
+    }
+
+    #[test]
+    fn a_live_head_takes_a_remote_wearers_poses_in_the_world() {
+        let scripted = HeadMotion::Keyframes(vec![]);
+        let live = LiveHead::new(scripted);
+        let at = |x: f64| Isometry3::translation(x, 0.0, 1.5);
+        // Before any pose, the scripted head (here the identity).
+        assert_eq!(live.pose_at(0.3), Isometry3::identity());
+        assert!(live.push_world(0.1, &at(0.0)));
+        assert!(live.push_world(0.2, &at(0.1)));
+        assert!(!live.push_world(0.15, &at(0.5)), "out of order");
+        let mut nan = at(0.0);
+        nan.rotation =
+            UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(f64::NAN, 0.0, 0.0, 0.0));
+        assert!(!live.push_world(0.3, &nan), "not finite");
+        assert_eq!(live.poses(), 2);
+        assert!((live.pose_at(0.15).translation.x - 0.05).abs() < 1e-12);
+        // The app's clock fell 0.05 s behind the wearer's: the poses move with it.
+        live.shift(-0.05);
+        assert!((live.pose_at(0.1).translation.x - 0.05).abs() < 1e-12);
+        assert_eq!(live.latest().map(|l| l.0), Some(0.2 - 0.05));
     }
 
     #[test]
