@@ -672,8 +672,9 @@ fn the_robot_site_serves_both_cameras_at_alice_s_head_each_frame_with_its_pose()
     // The scene's own head turns by 4 degrees at most: 25 is hers, sent.
     head_turning(&head, scene, 25.0, 4.0);
     let port = free_port();
-    // No --view: every camera of the scene. It stops by itself after the viewers.
-    let robot = serve_scene(&dir, scene, port, 30.0, &["--insecure-lan"]);
+    // No --view: every camera of the scene. It stops by itself after the viewers (each waits
+    // for it at most 30 s, then watches 8 s).
+    let robot = serve_scene(&dir, scene, port, 45.0, &["--insecure-lan"]);
     let record = dir.join("alice.mcap");
     let watch = |view: &str| {
         let mut args = vec!["--watch", "--view", view, "--wait", "30", "--duration", "8"];

@@ -58,6 +58,16 @@ fn free_port() -> u16 {
         .expect("a free port")
 }
 
+/// A robot site killed however the test ends.
+struct Killed(std::process::Child);
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// Monado's remote driver, from the test's side: the hub (in the runtime) listens on `port`,
 /// sends its reset and latest states (`struct r_remote_data`, 280 bytes each), then reads
 /// ours. Offsets of `r_remote_data` (src/xrt/drivers/remote/r_interface.h): the header (u64)
@@ -333,14 +343,6 @@ fn the_operators_site_runs_in_xr_and_its_tracked_hand_sends_targets() {
     std::fs::create_dir_all(&out).expect("the test's folder");
     let net = format!("tcp/127.0.0.1:{}", free_port());
     let serve_report = out.join("serve.json");
-    /// Kills the robot site however the test ends.
-    struct Killed(std::process::Child);
-    impl Drop for Killed {
-        fn drop(&mut self) {
-            let _ = self.0.kill();
-            let _ = self.0.wait();
-        }
-    }
     let _serve = Killed(
         Command::new(env!("CARGO_BIN_EXE_avatarm"))
             .args(["serve", "assets/scenes/pouring.toml", "--insecure-lan"])
@@ -406,14 +408,6 @@ fn alice_s_headset_sends_her_head_to_the_robot_site_which_erases_her_camera_at_i
     let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("xr_alice");
     std::fs::create_dir_all(&out).expect("the test's folder");
     let net = format!("tcp/127.0.0.1:{}", free_port());
-    /// Kills the robot site however the test ends.
-    struct Killed(std::process::Child);
-    impl Drop for Killed {
-        fn drop(&mut self) {
-            let _ = self.0.kill();
-            let _ = self.0.wait();
-        }
-    }
     let _serve = Killed(
         Command::new(env!("CARGO_BIN_EXE_avatarm"))
             .args([

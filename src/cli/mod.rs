@@ -869,7 +869,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             let mut scene = Scene::load_view(&path, &packages(package_path), view.as_deref())?;
             let head = match head {
                 Some(file) => Some(crate::net::join::HeadSource::Recorded(recorded_head(
-                    &file,
+                    &file, &scene,
                 )?)),
                 None => None,
             };
@@ -2009,9 +2009,12 @@ fn step_ms(s: &str) -> Result<f64, AppError> {
     }
 }
 
-/// A recording's tracked head poses (`join --head FILE.mcap`); errors name the file, and say
-/// so when it has none.
-fn recorded_head(path: &Path) -> Result<Vec<avatarm_record::HeadPose>, AppError> {
+/// A recording's tracked head poses (`join --head FILE.mcap`) as the head `scene`'s camera
+/// rides on: where the recording's mount is another (`join --record` writes the camera as its
+/// own head, an identity mount), each is moved so that the scene's mount gives the recorded
+/// camera (`base_from_head · recorded mount · scene mount⁻¹`). Errors name the file, and say
+/// so when it has no head poses.
+fn recorded_head(path: &Path, scene: &Scene) -> Result<Vec<avatarm_record::HeadPose>, AppError> {
     let recording = avatarm_record::Recording::open(path)?;
     if recording.head_poses.is_empty() {
         return Err(AppError::flag(
@@ -2022,5 +2025,69 @@ fn recorded_head(path: &Path) -> Result<Vec<avatarm_record::HeadPose>, AppError>
             ),
         ));
     }
-    Ok(recording.head_poses)
+    let to_scene = match (recording.head_from_camera, &scene.head) {
+        (Some(recorded), Some(rig)) => recorded * rig.believed_mount.inverse(),
+        _ => nalgebra::Isometry3::identity(),
+    };
+    Ok(recording
+        .head_poses
+        .into_iter()
+        .map(|p| avatarm_record::HeadPose {
+            base_from_head: p.base_from_head * to_scene,
+            ..p
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+    /// A recording whose head is the camera itself (`join --record`: an identity mount) plays
+    /// as the head of the scene's camera: the scene's mount then gives the recorded camera.
+    #[test]
+    fn a_recorded_head_is_moved_by_its_mount_against_the_scene_s() {
+        let path = std::env::temp_dir().join(format!("avatarm-head-{}.mcap", std::process::id()));
+        let base_from_camera = Isometry3::from_parts(
+            Translation3::new(0.4, -1.0, 0.3),
+            UnitQuaternion::from_euler_angles(-1.4, 0.1, 0.6),
+        );
+        let mut w = avatarm_record::RecordingWriter::create(&path).expect("created");
+        w.camera_mount(0, &Isometry3::identity()).expect("written");
+        w.head_pose(&avatarm_record::HeadPose {
+            stamp_ns: 5,
+            base_from_head: base_from_camera,
+        })
+        .expect("written");
+        w.finish().expect("closed");
+        let scene = Scene::load_view(
+            Path::new(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/assets/scenes/pouring_two_views.toml"
+            )),
+            &avatarm_core::robot::PackagePath::default(),
+            Some("alice"),
+        )
+        .expect("the scene");
+        let mount = scene.head.as_ref().expect("a head").believed_mount;
+        let poses = recorded_head(&path, &scene).expect("read");
+        let _ = std::fs::remove_file(&path);
+        let camera = poses[0].base_from_head * mount;
+        assert!((camera.translation.vector - base_from_camera.translation.vector).norm() < 1e-9);
+        assert!(camera.rotation.angle_to(&base_from_camera.rotation) < 1e-9);
+        // A recording without head poses is refused by flag, naming the file.
+        let empty =
+            std::env::temp_dir().join(format!("avatarm-nohead-{}.mcap", std::process::id()));
+        avatarm_record::RecordingWriter::create(&empty)
+            .expect("created")
+            .finish()
+            .expect("closed");
+        let e = recorded_head(&empty, &scene).expect_err("refused");
+        let _ = std::fs::remove_file(&empty);
+        assert!(
+            e.to_string().contains("--head") && e.to_string().contains("no head poses"),
+            "{e}"
+        );
+    }
 }

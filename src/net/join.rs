@@ -190,7 +190,8 @@ const HEAD_RATE_HZ: f64 = 90.0;
 /// recording's at its moment in the playback).
 struct HeadSender {
     source: HeadSource,
-    /// The scene's world in the robot's base frame (a recording's poses are in the base frame).
+    /// The robot's base in the scene's world (`world_from_base`: a recording's poses are in
+    /// the base frame).
     world_from_base: nalgebra::Isometry3<f64>,
     started: Instant,
     last_sent: Option<Instant>,
@@ -767,7 +768,8 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
         return Err(AppError::flag(
             "--head",
             format!(
-                "the camera '{}' is fixed, not on a head: look through a camera on a head                  (--view)",
+                "the camera '{}' is fixed, not on a head: look through a camera on a head \
+                 (--view)",
                 options.scene.camera_name()
             ),
         ));

@@ -642,6 +642,25 @@ impl Drop for StopOnDrop {
     }
 }
 
+/// `encoder` for `view`'s camera: its frame rate for H.264's rate control. Errors name the
+/// camera whose rate the encoder refuses.
+fn view_encoder(
+    encoder: &avatarm_net::codec::EncoderSettings,
+    view: &avatarm_scene::Scene,
+) -> Result<avatarm_net::codec::EncoderSettings, crate::AppError> {
+    let settings = avatarm_net::codec::EncoderSettings {
+        fps: view.file.camera.fps.clamp(1.0, 240.0) as f32,
+        ..*encoder
+    };
+    settings.validate().map_err(|e| {
+        crate::AppError::flag(
+            "the video encoder",
+            format!("camera '{}': {e}", view.camera_name()),
+        )
+    })?;
+    Ok(settings)
+}
+
 /// The camera's name on the network for a scene with one `[camera]`.
 pub const CAMERA: &str = "desk";
 
@@ -767,10 +786,7 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
                 camera: camera.clone(),
                 clock,
                 stop: stop.clone(),
-                encoder: avatarm_net::codec::EncoderSettings {
-                    fps: view.file.camera.fps.clamp(1.0, 240.0) as f32,
-                    ..options.encoder
-                },
+                encoder: view_encoder(&options.encoder, view)?,
                 counters: Arc::default(),
                 head: None,
             };

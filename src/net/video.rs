@@ -159,18 +159,32 @@ fn carried_object(scene: &Scene) -> Option<(usize, Isometry3<f64>)> {
     Some((prop, setup.bottle_centre().inverse() * setup.bottle_base))
 }
 
+/// The site's clock minus the app's (s), for this update: the site's clock at the update's
+/// start (now, less the time since it began) against the app's elapsed time then. One value
+/// for every stamp converted in an update, so that they keep their order. It changes between
+/// updates when the app's clock falls behind the wall's (an update longer than Bevy's largest
+/// step).
+fn site_minus_app(clock: &SiteClock, time: &Time, real: &Time<Real>) -> f64 {
+    let since_update = real
+        .last_update()
+        .map_or(0.0, |t| t.elapsed().as_secs_f64());
+    clock.now_s() - since_update - time.elapsed_secs_f64()
+}
+
 /// The loop's joint states into the room's arm and the app's twin (their stamps moved to the
 /// app's clock), the real object where the arm holds it.
+#[allow(clippy::too_many_arguments)] // a Bevy system: each argument is a parameter it reads
 fn mirror_loop(
     video: Res<ServeVideo>,
     time: Res<Time>,
+    real: Res<Time<Real>>,
     twin: Option<Res<AppTwin>>,
     room: Res<SimRoomConfig>,
     mut robot: ResMut<SimRobotState>,
     mut states: MessageWriter<JointStateMessage>,
     mut parts: Query<(&SimPropPart, &mut Transform)>,
 ) {
-    let site_minus_app = video.options.clock.now_s() - time.elapsed_secs_f64();
+    let site_minus_app = site_minus_app(&video.options.clock, &time, &real);
     let updates: Vec<ArmUpdate> = match video.options.updates.lock() {
         Ok(rx) => rx.try_iter().collect(),
         Err(_) => return,
@@ -196,8 +210,9 @@ fn mirror_loop(
 }
 
 /// A camera on a head: the wearer's head poses from the network into the scene's live head,
-/// their stamps moved from the site's clock to the app's. A refused one is counted and logged
-/// (one line until a pose is taken again); the head then holds its last pose.
+/// their stamps moved from the site's clock to the app's. A refused one (malformed, stamped
+/// more than [`super::serve::MAX_AHEAD_S`] ahead, not newer than the last) is counted and
+/// logged (one line until a pose is taken again); the head then holds its last pose.
 fn take_remote_head(
     mut video: ResMut<ServeVideo>,
     time: Res<Time>,
@@ -212,18 +227,21 @@ fn take_remote_head(
     else {
         return;
     };
-    // The site's clock at this update's start against the app's then. The app's clock falls
-    // behind the wall's when an update takes longer than Bevy's largest step: the poses
-    // taken before move with it, so that each keeps its moment on the site's clock.
-    let since_update = real
-        .last_update()
-        .map_or(0.0, |t| t.elapsed().as_secs_f64());
-    let site_minus_app = video.options.clock.now_s() - since_update - time.elapsed_secs_f64();
+    // The poses taken before move with the app's clock, so that each keeps its moment on the
+    // site's clock.
+    let site_minus_app = site_minus_app(&video.options.clock, &time, &real);
     if let Some(before) = video.head_clock.replace(site_minus_app) {
         live.shift(before - site_minus_app);
     }
+    let site_now = video.options.clock.now_s();
     for m in receiver.poll() {
         let taken = match m {
+            // A pose from the future would hold every later one off as older.
+            Ok(m) if m.stamp_s > site_now + super::serve::MAX_AHEAD_S => Err(format!(
+                "a pose stamped {:.3} s, more than {} s ahead of the site's clock ({site_now:.3} s)",
+                m.stamp_s,
+                super::serve::MAX_AHEAD_S
+            )),
             Ok(m) if live.push_world(m.stamp_s - site_minus_app, &m.world_from_head()) => Ok(()),
             Ok(m) => Err(format!(
                 "a pose stamped {:.3} s, not newer than the last taken",
@@ -264,6 +282,7 @@ fn publish_erased(
     mut commands: Commands,
     mut video: ResMut<ServeVideo>,
     time: Res<Time>,
+    real: Res<Time<Real>>,
     state: Res<EraseState>,
     targets: Option<Res<EraseTargets>>,
 ) {
@@ -282,7 +301,7 @@ fn publish_erased(
     }
     video.last_index = Some(index);
     let clock = video.options.clock;
-    let capture_s = clock.now_s() - (time.elapsed_secs_f64() - t_s);
+    let capture_s = t_s + site_minus_app(&clock, &time, &real);
     // The camera this frame's mask was drawn from (a camera on a head moves).
     let camera_pose = FrameHeader::pose_of(&state.camera_pose.unwrap_or(video.world_from_camera));
     let camera = video.options.camera.clone();

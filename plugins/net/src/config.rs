@@ -318,7 +318,8 @@ impl NetConfig {
     }
 
     /// Access control: denied unless allowed; everyone authenticated may read the session;
-    /// only [`NetConfig::operators`] may put on the operator's keys or declare its token. At
+    /// only [`NetConfig::operators`] may put on the operator's keys and the cameras' heads, or
+    /// declare the operator's token. At
     /// the robot site its own keys only go out; at a router they come in only from
     /// [`NetConfig::robot_sites`] and go out to anyone.
     fn access_control(&self) -> String {

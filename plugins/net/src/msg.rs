@@ -24,6 +24,8 @@ pub const PROTOCOL_VERSION: u32 = 4;
 pub const MAX_TARGET_BYTES: usize = 4096;
 /// Largest hand frame accepted (bytes): 26 joints are ~3 kB.
 pub const MAX_HAND_BYTES: usize = 32 * 1024;
+/// Largest head pose accepted (bytes): one is ~200.
+pub const MAX_HEAD_BYTES: usize = 4096;
 /// Largest joint-state, status or info message accepted (bytes).
 pub const MAX_SMALL_BYTES: usize = 64 * 1024;
 /// Largest coded video frame accepted (bytes): a 1080p JPEG at quality 95 is under 1 MB.
@@ -374,7 +376,10 @@ impl HandMsg {
 pub struct HeadPoseMsg {
     /// Protocol version.
     pub v: u32,
-    /// The moment the pose describes (s, robot clock).
+    /// When the wearer's site took the pose (s, robot clock): a headset's newest, up to a
+    /// window frame and a control tick after the moment it describes; a recording's, at its
+    /// moment in the playback. The robot site refuses one stamped more than 0.5 s ahead of
+    /// its clock.
     pub stamp_s: f64,
     /// The camera that rides on the head (its name in the scene).
     pub camera: String,
@@ -505,7 +510,7 @@ pub fn decode_hand(bytes: &[u8]) -> Result<HandMsg, NetError> {
 
 /// Decodes a head pose; errors name the field.
 pub fn decode_head(bytes: &[u8]) -> Result<HeadPoseMsg, NetError> {
-    let m: HeadPoseMsg = decode("head pose", bytes, MAX_TARGET_BYTES)?;
+    let m: HeadPoseMsg = decode("head pose", bytes, MAX_HEAD_BYTES)?;
     m.check()?;
     Ok(m)
 }

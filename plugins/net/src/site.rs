@@ -11,7 +11,7 @@
 //! | status | data high | no | drop (10 Hz; each says everything) |
 //! | erased video | data | no | drop (a late frame is useless) |
 //! | hand | interactive low | yes | drop |
-//! | a head camera's head | interactive high | yes | drop |
+//! | a head camera's head | interactive high | yes | drop (and the oldest dropped at the robot site while its camera's app is busy) |
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 use serde::{Deserialize, Serialize};
 use zenoh::Session;
 use zenoh::Wait;
-use zenoh::handlers::FifoChannelHandler;
+use zenoh::handlers::{FifoChannelHandler, RingChannelHandler};
 use zenoh::liveliness::LivelinessToken;
 use zenoh::pubsub::{Publisher, Subscriber};
 use zenoh::qos::{CongestionControl, Priority};
@@ -133,9 +133,14 @@ pub struct RobotInbox {
 
 /// One camera's head poses as they arrive at the robot site ([`RobotSite::head_receiver`]).
 pub struct HeadReceiver {
-    subscriber: Subscriber<FifoChannelHandler<Sample>>,
+    subscriber: Subscriber<RingChannelHandler<Sample>>,
     camera: String,
 }
+
+/// How many head poses wait for the camera's app (about 3 s at a headset's rate): beyond, the
+/// oldest are dropped, so that an app that stalls (or is still starting) never blocks the
+/// session's other streams, the operator's targets among them.
+const HEAD_QUEUE: usize = 256;
 
 impl std::fmt::Debug for HeadReceiver {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -149,7 +154,11 @@ impl HeadReceiver {
     /// The poses received since the last call, decoded and checked, in arrival order; a
     /// refused one (malformed, another version, not finite, another camera's) says why.
     pub fn poll(&self) -> Vec<Result<HeadPoseMsg, NetError>> {
-        drain(&self.subscriber)
+        let mut samples = Vec::new();
+        while let Ok(Some(s)) = self.subscriber.try_recv() {
+            samples.push(s);
+        }
+        samples
             .iter()
             .map(|s| {
                 let m = msg::decode_head(&s.payload().to_bytes())?;
@@ -302,8 +311,14 @@ impl RobotSite {
     /// thread that erases that camera. Errors name the key Zenoh refused.
     pub fn head_receiver(&self, camera: &str) -> Result<HeadReceiver, NetError> {
         let key = self.keys.head(camera);
+        let subscriber = self
+            .session
+            .declare_subscriber(key.clone())
+            .with(zenoh::handlers::RingChannel::new(HEAD_QUEUE))
+            .wait()
+            .map_err(|e| zerr(&key, e))?;
         Ok(HeadReceiver {
-            subscriber: subscriber(&self.session, key.clone())?,
+            subscriber,
             camera: camera.to_owned(),
         })
     }

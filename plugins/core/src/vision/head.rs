@@ -196,6 +196,18 @@ struct LiveHeadState {
     poses: u64,
 }
 
+impl LiveHeadState {
+    /// Keeps a pose in the scene's world (refused when not finite or not newer than the last).
+    fn take(&mut self, t_s: f64, world_from_head: Isometry3<f64>) -> bool {
+        if !self.history.push(t_s, world_from_head) {
+            return false;
+        }
+        self.first.get_or_insert(world_from_head);
+        self.poses += 1;
+        true
+    }
+}
+
 impl PartialEq for LiveHead {
     fn eq(&self, other: &Self) -> bool {
         std::sync::Arc::ptr_eq(&self.0, &other.0)
@@ -245,34 +257,17 @@ impl LiveHead {
             }
         };
         let world_from_head = registration * tracking_from_head;
-        if !s.history.push(t_s, world_from_head) {
-            return None;
-        }
-        s.first.get_or_insert(world_from_head);
-        s.poses += 1;
-        Some(world_from_head)
+        s.take(t_s, world_from_head).then_some(world_from_head)
     }
 
     /// Takes a head pose already in the scene's world (`world_from_head`; registered where the
     /// headset is, as a remote wearer's arrives) at `t_s` (s, the app's clock). Returns `false`
     /// for a pose or time that is not finite or not newer than the last.
     pub fn push_world(&self, t_s: f64, world_from_head: &Isometry3<f64>) -> bool {
-        let finite = world_from_head
-            .translation
-            .vector
-            .iter()
-            .chain(world_from_head.rotation.coords.iter())
-            .all(|v| v.is_finite());
-        let mut s = self.state();
-        if !finite || !s.history.push(t_s, *world_from_head) {
-            return false;
-        }
-        s.first.get_or_insert(*world_from_head);
-        s.poses += 1;
-        true
+        self.state().take(t_s, *world_from_head)
     }
 
-    /// The newest pose taken (`(t_s, world_from_head)`), if any.
+    /// The newest pose taken (`(t_s, world_from_head)`, `t_s` on the app's clock), if any.
     pub fn latest(&self) -> Option<(f64, Isometry3<f64>)> {
         self.state().history.latest()
     }
