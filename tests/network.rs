@@ -589,6 +589,11 @@ fn the_operator_window_shows_the_received_video_with_the_hand_in_front() {
         "{j}"
     );
     assert_eq!(rec.joint_states.len() as f64, f(&j, "joint_states"), "{j}");
+    // The operator's own hand, each frame once, tracked with its 26 joints.
+    assert!(rec.hands.len() >= 50, "{} hand frames", rec.hands.len());
+    assert_eq!(rec.hands.len() as f64, f(&j, "recording.hands"), "{j}");
+    assert!(rec.hands.windows(2).all(|w| w[0].stamp_ns < w[1].stamp_ns));
+    assert!(rec.hands.iter().any(|h| h.tracked && h.poses.len() == 26));
     assert!(rec.calibration.is_some());
     // The fixed camera's pose, once.
     assert!(!rec.camera_on_head() && rec.camera_at(0).is_some());

@@ -286,6 +286,8 @@ pub struct JoinRecording {
     pub joint_states: u64,
     /// The robot site's stops written (as safety events).
     pub stops: u64,
+    /// The operator's own hand frames written (an operator's site).
+    pub hands: u64,
     /// Messages the recording refused (bad values, a failed write), and the first reason.
     pub refused: u64,
     /// The first refusal.
@@ -293,9 +295,10 @@ pub struct JoinRecording {
 }
 
 /// `join --record`: what the operator's (or observer's) site receives, written as it arrives:
-/// the first camera's erased frames (JPEG as received; an H.264 frame coded to JPEG as
+/// its camera's erased frames (JPEG as received; an H.264 frame coded to JPEG as
 /// `run --record` codes its frames) with the camera pose each was erased from, the robot's
-/// joint states and its stops, stamped on the robot site's clock moved to the Unix epoch at
+/// joint states and its stops, and at an operator's site her own hand (in the hand's world,
+/// as `run --record` writes it), stamped on the robot site's clock moved to the Unix epoch at
 /// the join (so that MCAP tools show wall time).
 ///
 /// The camera's poses: a fixed camera's, once (the first frame's); a camera on a head's, each
@@ -312,6 +315,8 @@ struct JoinRecorder {
     on_head: bool,
     /// The camera's pose (or, on a head, the identity mount) is written.
     camera_written: bool,
+    /// The hand source's time of the last hand frame written.
+    last_hand: Option<f64>,
     report: JoinRecording,
 }
 
@@ -335,6 +340,7 @@ impl JoinRecorder {
             base_from_world: scene.robot_base().inverse(),
             on_head: scene.head.is_some(),
             camera_written: false,
+            last_hand: None,
             report: JoinRecording {
                 path: path.to_owned(),
                 ..JoinRecording::default()
@@ -387,6 +393,32 @@ impl JoinRecorder {
         };
         match self.writer.joint_states(&states) {
             Ok(()) => self.report.joint_states += 1,
+            Err(e) => self.refused(e.to_string()),
+        }
+    }
+
+    /// The operator's hand frame, taken at `stamp_s` (robot clock); a frame already written
+    /// (the hand source gave none newer) is not written again.
+    fn hand(&mut self, f: &avatarm_core::teleop::hand::HandFrame, stamp_s: f64) {
+        if self.last_hand == Some(f.t_s) {
+            return;
+        }
+        self.last_hand = Some(f.t_s);
+        let Some(stamp_ns) = self.stamp_ns(stamp_s) else {
+            return self.refused(format!("a hand frame taken at {stamp_s} s"));
+        };
+        let hand = avatarm_record::HandPoses {
+            stamp_ns,
+            hand: match f.hand {
+                avatarm_core::teleop::hand::Handedness::Left => "left".into(),
+                avatarm_core::teleop::hand::Handedness::Right => "right".into(),
+            },
+            tracked: f.tracked,
+            poses: f.joints.iter().map(|j| j.pose).collect(),
+            radii: f.joints.iter().map(|j| j.radius).collect(),
+        };
+        match self.writer.hand(&hand) {
+            Ok(()) => self.report.hands += 1,
             Err(e) => self.refused(e.to_string()),
         }
     }
@@ -1105,6 +1137,9 @@ fn operate_with(
             Some(t) => (robot_now - (state.now_s - t), state.hand_tracked),
             None => (f64::NEG_INFINITY, false),
         };
+        if let (Some(f), Some(rec)) = (&frame, &mut collect.recorder) {
+            rec.hand(f, robot_now - (state.now_s - f.t_s));
+        }
         let operator = Mapper::operator_side(
             &OperatorInputs {
                 contacts: &contacts,
