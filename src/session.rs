@@ -7,8 +7,9 @@
 //! every tracked head pose received, in the base frame), the robot's base in the world, the robot's
 //! every joint state sent to the app's twin, Avatarm's erased frame (JPEG) and mask (PNG)
 //! of every frame (read back after the frame's render: the one read-back the live path gets
-//! with `--record`), the operator's hand frames, every control tick's command to the robot,
-//! and safety events: the limiter starting or ending an intervention (a stop for a lost hand,
+//! with `--record`), the operator's hand frames, every control tick's command to the robot and
+//! the target it drove the real object to (the operator's side of the mapping), and safety
+//! events: the limiter starting or ending an intervention (a stop for a lost hand,
 //! stale or non-finite data; a slow-down at a limit), mapping errors, refused joint states.
 //!
 //! The encoding and the file are on a thread of their own fed through a channel, so the app's
@@ -27,8 +28,8 @@ use avatarm_erase::{EraseState, EraseTargets};
 use avatarm_hand::ActiveHand;
 use avatarm_mapping::{Teleop, TeleopSample, TeleopStatus};
 use avatarm_record::{
-    CompressedFrame, HandPoses, HeadPose, ImageFormat, JointStates, LogLevel, RecordError,
-    RecordingWriter, RobotCommand, SafetyEvent,
+    CompressedFrame, HandPoses, HeadPose, ImageFormat, JointStates, LogLevel, ObjectTarget,
+    RecordError, RecordingWriter, RobotCommand, SafetyEvent,
 };
 use avatarm_scene::Scene;
 use avatarm_twin::JointStateMessage;
@@ -91,6 +92,25 @@ pub fn add_session_recorder(app: &mut App, path: &Path, scene: &Scene) -> Result
     Ok(())
 }
 
+/// The recording's message for the operator's side of a control tick at `stamp_ns`: its target
+/// for the real object (real world), the twists, σ, the grasp's rank and contacts.
+pub(crate) fn object_target(
+    stamp_ns: u64,
+    t: &avatarm_core::teleop::mapping::OperatorTarget,
+) -> ObjectTarget {
+    let six = |v: &nalgebra::Vector6<f64>| std::array::from_fn(|i| v[i]);
+    ObjectTarget {
+        stamp_ns,
+        world_from_object: t.target,
+        object_twist: six(&t.object_twist),
+        twin_twist: six(&t.twin_twist),
+        squeeze_n: t.squeeze_n,
+        grasp_rank: u8::try_from(t.rank).unwrap_or(u8::MAX),
+        contacts: u32::try_from(t.contacts).unwrap_or(u32::MAX),
+        held: t.held,
+    }
+}
+
 /// One message for the writer thread.
 enum Item {
     /// An RGBA8 image to encode (`mask`: 0/255 in one byte per pixel, as PNG).
@@ -105,6 +125,7 @@ enum Item {
     Head(HeadPose),
     Hand(HandPoses),
     Command(RobotCommand),
+    Target(ObjectTarget),
     Safety(SafetyEvent),
     /// The session is over: finish the file.
     End,
@@ -193,6 +214,7 @@ fn write_session(mut writer: RecordingWriter, rx: Receiver<Item>) -> Result<Writ
             Item::Head(p) => writer.head_pose(&p),
             Item::Hand(h) => writer.hand(&h),
             Item::Command(c) => writer.robot_command(&c),
+            Item::Target(t) => writer.object_target(&t),
             Item::Safety(e) => writer.safety_event(&e),
         };
         match result {
@@ -437,6 +459,9 @@ fn record_session(
             stopping: s.stopping,
             tcp_speed: s.tcp_speed,
         }));
+        if let Some(target) = &s.operator {
+            recorder.send(Item::Target(object_target(recorder.ns(s.t_s), target)));
+        }
     }
     let events = recorder
         .watch
@@ -561,6 +586,7 @@ mod tests {
             twin_twist: Vector6::zeros(),
             q: DVector::zeros(2),
             qdot: DVector::zeros(2),
+            operator: None,
         }
     }
 

@@ -594,6 +594,15 @@ fn the_operator_window_shows_the_received_video_with_the_hand_in_front() {
     assert_eq!(rec.hands.len() as f64, f(&j, "recording.hands"), "{j}");
     assert!(rec.hands.windows(2).all(|w| w[0].stamp_ns < w[1].stamp_ns));
     assert!(rec.hands.iter().any(|h| h.tracked && h.poses.len() == 26));
+    // Every target she sent, in order, on the robot's clock with the rest.
+    assert_eq!(rec.targets.len() as f64, f(&j, "targets_sent"), "{j}");
+    assert_eq!(rec.targets.len() as f64, f(&j, "recording.targets"), "{j}");
+    assert!(
+        rec.targets
+            .windows(2)
+            .all(|w| w[0].stamp_ns < w[1].stamp_ns)
+    );
+    assert!(rec.targets.iter().any(|t| t.contacts > 0));
     assert!(rec.calibration.is_some());
     // The fixed camera's pose, once.
     assert!(!rec.camera_on_head() && rec.camera_at(0).is_some());

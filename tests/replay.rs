@@ -343,6 +343,27 @@ fn run_teleoperates_the_pouring_task_live() {
             .collect::<Vec<_>>()
     );
     assert!(r.commands.iter().any(|c| c.gripper_closed));
+    // The operator's side of each tick that had one (the hand drives the arm after its move
+    // to the start), at its tick's stamp; held with a full-rank grasp and a squeeze, and
+    // lifting the bottle's target as the real one is lifted.
+    assert!(r.targets.len() >= 100, "{} targets", r.targets.len());
+    let ticks_ns: std::collections::BTreeSet<u64> = r.commands.iter().map(|c| c.stamp_ns).collect();
+    assert!(r.targets.iter().all(|t| ticks_ns.contains(&t.stamp_ns)));
+    let held: Vec<_> = r.targets.iter().filter(|t| t.held).collect();
+    assert!(
+        !held.is_empty()
+            && held
+                .iter()
+                .all(|t| t.grasp_rank == 6 && t.squeeze_n > 0.0 && t.contacts >= 2),
+        "{:?}",
+        held.first()
+    );
+    let z = |t: &avatarm_record::ObjectTarget| t.world_from_object.translation.z;
+    let target_lift_mm = (held.iter().map(|t| z(t)).fold(f64::MIN, f64::max) - z(held[0])) * 1e3;
+    assert!(
+        target_lift_mm > 5.0,
+        "the target lifts: {target_lift_mm} mm"
+    );
     assert!(r.joint_states.len() >= 150, "{}", r.joint_states.len());
     assert!(r.hands.len() >= 100 && r.hands.iter().all(|h| h.poses.len() == 26 || !h.tracked));
     assert!(r.calibration.is_some() && r.base_from_camera.is_some() && r.world_from_base.is_some());
@@ -359,6 +380,7 @@ fn run_teleoperates_the_pouring_task_live() {
         ("/avatarm/erased/compressed", "foxglove.CompressedImage"),
         ("/avatarm/hand", "foxglove.PosesInFrame"),
         ("/avatarm/robot/command", "avatarm.JointCommand"),
+        ("/avatarm/operator/target", "avatarm.ObjectTarget"),
         ("/joint_states", "avatarm.JointState"),
         ("/tf", "foxglove.FrameTransform"),
     ] {

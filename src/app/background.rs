@@ -76,6 +76,7 @@ fn load_file(scene: Res<SceneResource>, mut out: MessageWriter<SetBackground>) {
                 height,
                 origin: path.display().to_string(),
                 camera_pose: None,
+                one_view: true,
             });
         }
         Err(e) => error!("background: {e}; the robot is not erased until one is set"),
@@ -178,6 +179,7 @@ fn send_empty_room(
         height,
         origin: "the simulated empty room".into(),
         camera_pose,
+        one_view: true,
     });
 }
 

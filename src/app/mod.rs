@@ -292,21 +292,34 @@ fn head_tracking(scene: &Scene) -> avatarm_video::HeadTracking {
 /// background, its proxy the scene's boxes that are not objects (desk, wall, floor).
 pub fn view_background(scene: &Scene) -> Option<avatarm_erase::ViewBackgroundConfig> {
     let head = scene.head.as_ref().filter(|h| h.background_views > 0)?;
+    Some(avatarm_erase::ViewBackgroundConfig {
+        proxy: room_proxy(scene, &nalgebra::Isometry3::identity()),
+        max_views: head.background_views,
+        min_separation_rad: head.background_separation_rad,
+    })
+}
+
+/// The scene's room as a view-following background's geometric proxy: its boxes that are not
+/// objects (desk, wall, floor; a prop of another shape is no plane of the room), each moved by
+/// `frame_from_world` into the frame the cameras are posed in (the robot's base frame for a
+/// recording: `base_from_world`).
+pub fn room_proxy(
+    scene: &Scene,
+    frame_from_world: &nalgebra::Isometry3<f64>,
+) -> avatarm_core::dr::view_background::GeometricProxy {
     let boxes: Vec<_> = scene
         .props
         .iter()
         .zip(&scene.file.props)
         .filter(|(_, spec)| !spec.object)
         .filter_map(|(prop, _)| match prop.shape {
-            avatarm_scene::prop::PropShape::Box { size } => Some((prop.pose, size)),
+            avatarm_scene::prop::PropShape::Box { size } => {
+                Some((frame_from_world * prop.pose, size))
+            }
             _ => None,
         })
         .collect();
-    Some(avatarm_erase::ViewBackgroundConfig {
-        proxy: avatarm_core::dr::view_background::GeometricProxy::from_boxes(&boxes),
-        max_views: head.background_views,
-        min_separation_rad: head.background_separation_rad,
-    })
+    avatarm_core::dr::view_background::GeometricProxy::from_boxes(&boxes)
 }
 
 /// Inserts the scene's resources (the room, the video, the erase pipeline, the interaction

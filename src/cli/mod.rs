@@ -193,6 +193,12 @@ enum Command {
         /// used for the background built from the footage (px).
         #[arg(long = "background-margin", value_name = "PX", default_value_t = 8)]
         background_margin: u32,
+        /// With --recording of a camera on a head (Alice's): the scene file of its room, whose
+        /// boxes that are not objects (desk, wall, floor) are the proxy that a view-following
+        /// background re-projects the frames' views through, so that H follows the head (the
+        /// footage's median is then only the fallback where no view saw a pixel).
+        #[arg(long, value_name = "SCENE", requires = "recording")]
+        room: Option<PathBuf>,
         /// With a scene: replay only its camera NAME (one of its [[cameras]]; default: each
         /// camera in turn, into DIR/NAME/).
         #[arg(long, value_name = "NAME", conflicts_with = "recording")]
@@ -1248,6 +1254,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             camera,
             pose,
             background_margin,
+            room,
             out,
             package_path,
             overrides,
@@ -1266,6 +1273,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     settings,
                     background: overrides.background.clone(),
                     background_margin_px: background_margin,
+                    room,
                     out: out.clone(),
                     progress: true,
                 },

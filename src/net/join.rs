@@ -288,6 +288,8 @@ pub struct JoinRecording {
     pub stops: u64,
     /// The operator's own hand frames written (an operator's site).
     pub hands: u64,
+    /// The operator's targets written, each one sent (an operator's site).
+    pub targets: u64,
     /// Messages the recording refused (bad values, a failed write), and the first reason.
     pub refused: u64,
     /// The first refusal.
@@ -298,8 +300,9 @@ pub struct JoinRecording {
 /// its camera's erased frames (JPEG as received; an H.264 frame coded to JPEG as
 /// `run --record` codes its frames) with the camera pose each was erased from, the robot's
 /// joint states and its stops, and at an operator's site her own hand (in the hand's world,
-/// as `run --record` writes it), stamped on the robot site's clock moved to the Unix epoch at
-/// the join (so that MCAP tools show wall time).
+/// as `run --record` writes it) and every target she sent (the real object's, in the world),
+/// stamped on the robot site's clock moved to the Unix epoch at the join (so that MCAP tools
+/// show wall time).
 ///
 /// The camera's poses: a fixed camera's, once (the first frame's); a camera on a head's, each
 /// frame's as the head's pose at its capture with an identity mount (the head's frame is then
@@ -419,6 +422,20 @@ impl JoinRecorder {
         };
         match self.writer.hand(&hand) {
             Ok(()) => self.report.hands += 1,
+            Err(e) => self.refused(e.to_string()),
+        }
+    }
+
+    /// A target the operator sent (its stamp on the robot site's clock).
+    fn target(&mut self, t: &avatarm_core::teleop::mapping::OperatorTarget) {
+        let Some(stamp_ns) = self.stamp_ns(t.stamp_s) else {
+            return self.refused(format!("a target stamped {} s", t.stamp_s));
+        };
+        match self
+            .writer
+            .object_target(&crate::session::object_target(stamp_ns, t))
+        {
+            Ok(()) => self.report.targets += 1,
             Err(e) => self.refused(e.to_string()),
         }
     }
@@ -1155,7 +1172,12 @@ fn operate_with(
                 let m = TargetMsg::new(seq, &target, hand_stamp, tracked);
                 seq += 1;
                 match site.publish_target(&m) {
-                    Ok(()) => collect.report.targets_sent += 1,
+                    Ok(()) => {
+                        collect.report.targets_sent += 1;
+                        if let Some(rec) = &mut collect.recorder {
+                            rec.target(&target);
+                        }
+                    }
                     Err(e) => {
                         collect.report.targets_failed += 1;
                         warn!("operator: {e}");

@@ -28,7 +28,7 @@ use avatarm_core::vision::distortion::Distortion;
 use avatarm_core::vision::head::PoseHistory;
 use avatarm_erase::{
     EraseConfig, EraseLens, ErasePlugin, EraseState, EraseSystems, EraseTargets, GpuTimes,
-    PASS_NAMES, SetBackground, UPLOAD_SPAN,
+    PASS_NAMES, SetBackground, UPLOAD_SPAN, ViewBackgroundConfig,
 };
 use avatarm_record::camera::{CameraCalibration, read_calibration, read_mount, read_pose};
 use avatarm_record::{CompressedFrame, HeadPose, ImageFormat, Recording, RecordingWriter};
@@ -65,11 +65,17 @@ pub struct RecordingOptions {
     pub background: Option<PathBuf>,
     /// How far beyond the mask a pixel counts as possibly the robot when H is built (px).
     pub background_margin_px: u32,
+    /// A recording of a camera on a head: the scene file of its room, whose boxes that are not
+    /// objects are the view-following background's proxy.
+    pub room: Option<PathBuf>,
     /// Output folder.
     pub out: PathBuf,
     /// Show a progress bar.
     pub progress: bool,
 }
+
+/// H built from the footage (its origin's name).
+const FOOTAGE: &str = "the footage";
 
 /// Updates for pipelines to exist before the first frame, and between the passes.
 const SETTLE_UPDATES: u32 = 4;
@@ -138,7 +144,7 @@ pub fn run_recording(o: &RecordingOptions) -> Result<serde_json::Value, AppError
             source_twin: Some(source),
             occluders: Vec::new(),
             head_mount: input.head_mount,
-            view_background: None,
+            view_background: input.view_background.clone(),
         })
         .add_plugins(ErasePlugin)
         .insert_resource(Driver {
@@ -157,6 +163,7 @@ pub fn run_recording(o: &RecordingOptions) -> Result<serde_json::Value, AppError
                 Phase::Settle(SETTLE_UPDATES, Pass::Mask)
             },
             pending_background: file_background.map(|rgba| (rgba, "file".to_owned())),
+            view_background: input.view_background.is_some(),
             background: None,
             shown: None,
             outputs: vec![FrameOutput::default(); input.frames.len()],
@@ -212,6 +219,8 @@ struct Input {
     /// A camera on a head: the mount (`head_from_camera`); the head's poses are the
     /// recording's.
     head_mount: Option<Isometry3<f64>>,
+    /// `--room`: the background follows the view, through the room's boxes in the base frame.
+    view_background: Option<ViewBackgroundConfig>,
 }
 
 impl Input {
@@ -259,10 +268,29 @@ impl Input {
                     "pose compensation cannot be switched off for a recording: each frame is handed over with the head's pose at its capture".into(),
                 );
             }
-            notes.push(
-                "the camera rides on a head: each frame's mask is drawn at the tracked head's pose at its capture times the mount; the background built from the footage is one image for every view, so where the head turned the erased pixels show the wrong part of the room (the masks and their scores are not affected)".into(),
-            );
+            notes.push(if o.room.is_some() {
+                "the camera rides on a head: each frame's mask is drawn at the tracked head's pose at its capture times the mount; the background follows the view: the frames' pixels the robot cannot cover are kept as views and re-projected into each frame through the room's boxes (--room), so what stands off those planes (the bottle, the glass) lands displaced by parallax; where no view saw a pixel, the footage's median fills it".into()
+            } else {
+                "the camera rides on a head: each frame's mask is drawn at the tracked head's pose at its capture times the mount; the background built from the footage is one image for every view, so where the head turned the erased pixels show the wrong part of the room (the masks and their scores are not affected; --room SCENE makes it follow the view)".into()
+            });
         }
+        let view_background = match (&o.room, head) {
+            (None, _) => None,
+            (Some(_), None) => {
+                return Err(AppError::flag(
+                    "--room",
+                    format!(
+                        "{name}: the recording's camera is fixed, not on a head: its one background H serves every frame"
+                    ),
+                ));
+            }
+            (Some(path), Some(_)) => Some(room_background(
+                path,
+                &o.packages,
+                recording.world_from_base,
+                &mut notes,
+            )?),
+        };
         let lens = Distortion::from_ros(calibration.distortion_model.ros_name(), &calibration.d)?;
         // The mask's lens map, checked before any frame is decoded.
         let lens_map = EraseLens::new(&intrinsics, &lens, &o.settings)?;
@@ -326,8 +354,57 @@ impl Input {
             references,
             notes,
             head_mount: head,
+            view_background,
         })
     }
+}
+
+/// The view-following background of `--room SCENE`: the scene's boxes that are not objects
+/// (desk, wall, floor), moved into the recording's base frame by the recording's
+/// `world_from_base` (else the scene's robot base, said in `notes`); the scene's
+/// `[camera.head.background]` views and separation where it has them, else their defaults.
+/// Errors: the scene does not load, or has no such box.
+fn room_background(
+    path: &Path,
+    packages: &PackagePath,
+    world_from_base: Option<Isometry3<f64>>,
+    notes: &mut Vec<String>,
+) -> Result<ViewBackgroundConfig, AppError> {
+    let scene = avatarm_scene::Scene::load(path, packages)?;
+    let world_from_base = world_from_base.unwrap_or_else(|| {
+        notes.push(format!(
+            "the recording has no robot base in the world: the room of {} is placed by its own robot base",
+            path.display()
+        ));
+        scene.robot_base()
+    });
+    let proxy = crate::app::room_proxy(&scene, &world_from_base.inverse());
+    if proxy.rects.is_empty() {
+        return Err(AppError::flag(
+            "--room",
+            format!(
+                "{}: no box that is not an object (a desk, a wall, a floor): no room to re-project the views through",
+                path.display()
+            ),
+        ));
+    }
+    let defaults = avatarm_scene::spec::HeadBackgroundSpec::default();
+    let (max_views, min_separation_rad) = scene
+        .head
+        .as_ref()
+        .filter(|h| h.background_views > 0)
+        .map_or(
+            (
+                defaults.views as usize,
+                defaults.min_separation_deg.to_radians(),
+            ),
+            |h| (h.background_views, h.background_separation_rad),
+        );
+    Ok(ViewBackgroundConfig {
+        proxy,
+        max_views,
+        min_separation_rad,
+    })
 }
 
 /// A recording of a camera on a head: its mount (`head_from_camera`), from `mount_file` or
@@ -554,6 +631,9 @@ struct FrameOutput {
     raw: Option<(u32, u32, Vec<u8>)>,
     /// The live frame and H the passes had (for the CPU reference).
     inputs: Option<ErasedInputs>,
+    /// A view-following background: the share of the robot's region some view saw, and how
+    /// far (rad) the nearest kept view looked from this frame's camera.
+    view: Option<(Option<f64>, Option<f64>)>,
 }
 
 /// The live frame, H (if any) and the photometric model a frame was erased with.
@@ -579,6 +659,9 @@ struct Driver {
     phase: Phase,
     /// H to hand to the pipeline at the next pass's start, and where it came from.
     pending_background: Option<(Arc<Vec<u8>>, String)>,
+    /// The background follows the view ([`RecordingOptions::room`]): the footage's median is
+    /// a blend of many views, only the fallback where no view saw a pixel.
+    view_background: bool,
     background: Option<(BackgroundEstimate, String)>,
     /// The frame handed over in this update: its index and pass.
     shown: Option<(usize, Pass)>,
@@ -612,12 +695,16 @@ fn feed(
     match d.phase {
         Phase::Settle(0, pass) => {
             if let Some((rgba, origin)) = d.pending_background.take() {
+                // A file is one picture (taken where the first frame's camera is); the
+                // footage's median of a moving camera is no one view's.
+                let one_view = !(d.view_background && origin == FOOTAGE);
                 set_background.write(SetBackground {
                     rgba,
                     width: d.size.0,
                     height: d.size.1,
                     origin: format!("{origin} (recording replay)"),
                     camera_pose: None,
+                    one_view,
                 });
                 // H reaches the pipeline in the next update.
                 d.phase = Phase::Settle(1, pass);
@@ -641,8 +728,8 @@ fn feed(
                 Pass::Mask if d.errors.is_empty() => match footage_background(d) {
                     Ok(estimate) => {
                         let rgba = Arc::new(estimate.rgba.clone());
-                        d.pending_background = Some((rgba, "the footage".into()));
-                        d.background = Some((estimate, "the footage".into()));
+                        d.pending_background = Some((rgba, FOOTAGE.into()));
+                        d.background = Some((estimate, FOOTAGE.into()));
                         d.phase = Phase::Settle(SETTLE_UPDATES, Pass::Erase);
                     }
                     Err(e) => {
@@ -784,6 +871,10 @@ fn request(
             current.background.clone(),
             current.photometric,
         ));
+        d.outputs[i].view = state
+            .view_background
+            .as_ref()
+            .map(|v| (v.seen_share, v.nearest_rad));
     }
     for &(part, handle) in parts {
         d.pending += 1;
@@ -1018,6 +1109,27 @@ fn write_outputs(
         }
         None => json!({"source": o.background.as_ref().map(|p| p.display().to_string())}),
     };
+    let mut background_report = background_report;
+    if let Some(vb) = &input.view_background {
+        let seen: Vec<f64> = outputs
+            .iter()
+            .filter_map(|f| f.view.and_then(|v| v.0))
+            .collect();
+        let nearest: Vec<f64> = outputs
+            .iter()
+            .filter_map(|f| f.view.and_then(|v| v.1))
+            .map(f64::to_degrees)
+            .collect();
+        background_report["view_following"] = json!({
+            "room": o.room.as_ref().map(|p| p.display().to_string()),
+            "proxy_rects": vb.proxy.rects.len(),
+            "max_views": vb.max_views,
+            "min_separation_deg": vb.min_separation_rad.to_degrees(),
+            "robot_region_seen_pct_mean": mean(&seen).map(|f| 100.0 * f),
+            "nearest_view_deg": spread(&nearest),
+            "note": "each frame's H: the kept views re-projected through the room's boxes where the robot may be, the frame itself elsewhere; robot_region_seen_pct_mean: of the robot's region, the share some view saw (the footage's median fills the rest)",
+        });
+    }
     let get = |key: &str| -> Vec<f64> { scored.iter().filter_map(|s| s[key].as_f64()).collect() };
     let (iou, leak, over) = (get("iou"), get("leak_pct"), get("overmask_pct"));
     let span = |name: &str| {

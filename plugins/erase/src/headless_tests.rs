@@ -225,6 +225,7 @@ fn a_new_background_is_uploaded_once_and_turns_the_composite_on() {
         height: H,
         origin: "a file".into(),
         camera_pose: None,
+        one_view: true,
     });
     app.update();
     assert_eq!(pipeline(&mut app), (true, true, false, true));
@@ -247,6 +248,7 @@ fn a_background_of_the_camera_size_is_taken_and_another_refused() {
         height: 1,
         origin: "too small".into(),
         camera_pose: None,
+        one_view: true,
     });
     app.update();
     assert!(app.world().resource::<EraseState>().background.is_none());
@@ -256,6 +258,7 @@ fn a_background_of_the_camera_size_is_taken_and_another_refused() {
         height: H,
         origin: "a file".into(),
         camera_pose: None,
+        one_view: true,
     });
     app.update();
     let state = app.world().resource::<EraseState>();

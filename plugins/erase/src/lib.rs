@@ -256,6 +256,10 @@ pub struct SetBackground {
     /// The camera pose it was taken from (`world_from_camera`), for a camera on a head whose
     /// view-following background takes it as a view; `None`: the camera's configured pose.
     pub camera_pose: Option<Isometry3<f64>>,
+    /// It is one camera's picture of the room (at `camera_pose`), which a view-following
+    /// background keeps as a view. `false`: a blend of many views (a moving camera's footage
+    /// median), only the fallback where no view saw a pixel.
+    pub one_view: bool,
 }
 
 /// Takes the frame now on the panel as the background H.
@@ -542,6 +546,7 @@ fn set_background(
                     camera_pose: config
                         .head_mount
                         .and_then(|mount| Some(head.history.at(f.capture_s)? * mount)),
+                    one_view: true,
                 });
             }
             Some(_) => error!("background capture: the live frame's size does not match"),
@@ -552,6 +557,7 @@ fn set_background(
         rgba,
         origin,
         camera_pose: pose,
+        one_view,
         ..
     }) = new
     {
@@ -563,6 +569,8 @@ fn set_background(
         };
         if let Some(vb) = state.view_background.as_mut() {
             vb.seed = Some(rgba.clone());
+        }
+        if let Some(vb) = state.view_background.as_mut().filter(|_| one_view) {
             let offered = RgbaView::new("background", k.width, k.height, &rgba)
                 .and_then(|view| vb.views.set_photograph(&camera, &view, -1.0));
             if let Err(e) = offered {

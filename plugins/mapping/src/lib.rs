@@ -94,6 +94,9 @@ pub struct TeleopSample {
     pub q: DVector<f64>,
     /// The joint velocities sent (zero when nothing was sent).
     pub qdot: DVector<f64>,
+    /// The tick's operator side, where it gave one (the hand's own here, or the operator's
+    /// target as received; `None` while moving to the start, or when refused).
+    pub operator: Option<OperatorTarget>,
 }
 
 impl TeleopSample {
@@ -671,6 +674,7 @@ impl Teleop {
                 twin_twist,
                 q: DVector::from_vec(q),
                 qdot: limited.command.clone().unwrap_or_else(|| DVector::zeros(n)),
+                operator: operator.as_ref().ok().copied(),
             };
             t.log.push(sample);
         }
@@ -741,6 +745,7 @@ fn approach_tick(t: &mut Teleop, now: f64, dt: f64) -> bool {
                 .clone()
                 .unwrap_or_else(|| DVector::zeros(q.len())),
             q: DVector::from_vec(q),
+            operator: None,
         };
         t.log.push(sample);
     }

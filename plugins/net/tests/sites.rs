@@ -481,3 +481,71 @@ fn through_a_router_only_its_operator_commands_and_only_the_robot_site_publishes
         .expect("the operator joins through the router");
     commands_arrive(&blair, &mut robot);
 }
+
+/// Routers in a chain on a trusted network (`--insecure-lan`): a router beside the robot site
+/// connects to it, a second router (the operator's building) connects to the first, and the
+/// operator joins the second. Two hops each way: `info` and the clock answer (the offset
+/// within the round trip), the targets and the liveliness token arrive, the robot's joint
+/// states reach the operator, and her leaving is seen at the robot site.
+#[test]
+fn through_two_routers_in_a_chain_the_session_works_end_to_end() {
+    use avatarm_net::Router;
+    use avatarm_net::msg::JointStatesMsg;
+
+    let robot_endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let near = format!("tcp/127.0.0.1:{}", free_port());
+    let far = format!("tcp/127.0.0.1:{}", free_port());
+    let clock = SiteClock::start();
+    std::thread::sleep(Duration::from_millis(200));
+    let mut robot = RobotSite::open(
+        &config(Role::RobotSite, &robot_endpoint, "t8"),
+        &info(PROTOCOL_VERSION),
+        clock,
+    )
+    .expect("the robot site opens");
+    let router = |listen: &str, upstream: &str| {
+        let mut c = config(Role::Router, upstream, "t8");
+        c.listen = vec![listen.into()];
+        Router::open(&c).expect("a router opens")
+    };
+    let _near = router(&near, &robot_endpoint);
+    let _far = router(&far, &near);
+    // The operator's clock starts as she joins: the robot's clock then reads between these.
+    let before = clock.now_s();
+    let mut operator =
+        OperatorSite::join(&config(Role::Operator, &far, "t8"), Duration::from_secs(10))
+            .expect("the operator joins two routers away");
+    let after = clock.now_s();
+    assert_eq!(operator.info().cameras, vec!["desk".to_string()]);
+    let offset = operator.offset();
+    assert!(
+        offset.offset_s >= before - 0.05 - offset.rtt_s
+            && offset.offset_s <= after + 0.05 + offset.rtt_s,
+        "{offset:?}: the robot's clock read {before} to {after} s as she joined"
+    );
+    commands_arrive(&operator, &mut robot);
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let mut seen = 0;
+    while seen < 10 && Instant::now() < deadline {
+        robot
+            .publish_joint_states(&JointStatesMsg {
+                v: PROTOCOL_VERSION,
+                stamp_s: clock.now_s(),
+                positions: vec![0.5],
+                velocities: vec![0.0],
+                object: None,
+            })
+            .expect("published");
+        std::thread::sleep(Duration::from_millis(10));
+        seen += operator
+            .poll()
+            .joint_states
+            .iter()
+            .filter(|m| m.as_ref().is_ok_and(|m| m.positions == [0.5]))
+            .count();
+    }
+    assert!(seen >= 10, "{seen} joint states reached the operator");
+    operator.close();
+    let inbox = collect(&mut robot, |i| i.operator_changed == Some(false));
+    assert_eq!(inbox.operator_changed, Some(false));
+}

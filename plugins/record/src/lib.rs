@@ -17,6 +17,7 @@
 //! | [`topics::HAND`] | `foxglove.PosesInFrame` (with `hand`, `tracked`, `radius`) | the operator's tracked hand: its 26 joints' poses in [`WORLD_FRAME`] (none while untracked), each joint's capsule radius (m) |
 //! | [`topics::ROBOT_COMMAND`] | `avatarm.JointCommand` | each control tick's command to the robot: joint names and velocities (rad/s or m/s), gripper closed, the limiter stopping, tool-point speed (m/s) |
 //! | [`topics::SAFETY`] | `foxglove.Log` | safety events: the limiter starting or ending a stop or an intervention, mapping and robot-link errors |
+//! | [`topics::OBJECT_TARGET`] | `avatarm.ObjectTarget` | the operator's side of the motion mapping, each control tick: the real object's target pose in [`WORLD_FRAME`], its twist and the twin's (m/s, rad/s), the squeezing force σ (N), the grasp matrix's rank, the contacts, whether the hand holds the twin |
 //!
 //! [`topics::TRANSFORM`] also carries the robot's base in the world ([`WORLD_FRAME`] →
 //! [`BASE_FRAME`]) where the session has one, so Foxglove's 3D panel puts the hand, the robot's
@@ -76,6 +77,8 @@ pub mod topics {
     pub const ROBOT_COMMAND: &str = "/avatarm/robot/command";
     /// Safety events.
     pub const SAFETY: &str = "/avatarm/safety";
+    /// The operator's targets for the real object ([`super::ObjectTarget`]).
+    pub const OBJECT_TARGET: &str = "/avatarm/operator/target";
 }
 
 /// One hand at one instant, as the hand source gave it.
@@ -108,6 +111,30 @@ pub struct RobotCommand {
     pub stopping: bool,
     /// Commanded tool-point speed (m/s).
     pub tcp_speed: f64,
+}
+
+/// The operator's side of the motion mapping at one control tick: what the hand makes of the
+/// twin (contacts -> grasp matrix -> squeeze and twist; Avatarm paper, Sec. III-C), mapped
+/// into the real world as the target the robot's side drives the real object to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectTarget {
+    /// When the twin was there (ns).
+    pub stamp_ns: u64,
+    /// The real object's target pose in [`WORLD_FRAME`] (m).
+    pub world_from_object: Isometry3<f64>,
+    /// The real object's twist from the contacts ([`WORLD_FRAME`] axes, at the object's
+    /// origin): m/s, then rad/s.
+    pub object_twist: [f64; 6],
+    /// The twin's twist (the virtual scene's axes, at the twin's origin): m/s, then rad/s.
+    pub twin_twist: [f64; 6],
+    /// Squeezing force σ (N).
+    pub squeeze_n: f64,
+    /// The grasp matrix's rank (0-6).
+    pub grasp_rank: u8,
+    /// Contacts on the twin.
+    pub contacts: u32,
+    /// The hand holds the twin.
+    pub held: bool,
 }
 
 /// A safety event's severity (`foxglove.Log`'s levels).
@@ -274,6 +301,8 @@ pub struct Recording {
     pub commands: Vec<RobotCommand>,
     /// Safety events, by time.
     pub safety: Vec<SafetyEvent>,
+    /// The operator's targets for the real object, by tick time.
+    pub targets: Vec<ObjectTarget>,
     /// Messages on topics Avatarm does not read, by topic.
     pub other_topics: BTreeMap<String, usize>,
 }
@@ -411,6 +440,19 @@ struct WireCommand {
 }
 
 #[derive(Debug, Serialize, Deserialize)]
+struct WireObjectTarget {
+    timestamp: Time,
+    frame_id: String,
+    pose: WirePose,
+    object_twist: [f64; 6],
+    twin_twist: [f64; 6],
+    squeeze: f64,
+    grasp_rank: u8,
+    contacts: u32,
+    held: bool,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
 struct WireLog {
     timestamp: Time,
     level: u8,
@@ -451,6 +493,32 @@ fn pose_of(t: &WireVector3, q: &WireQuaternion) -> Result<Isometry3<f64>, String
         Translation3::from(t),
         UnitQuaternion::from_quaternion(q),
     ))
+}
+
+/// What is wrong with an object target's values, if anything.
+fn object_target_fault(
+    pose: &Isometry3<f64>,
+    object_twist: &[f64; 6],
+    twin_twist: &[f64; 6],
+    squeeze_n: f64,
+    grasp_rank: u8,
+) -> Option<String> {
+    if !finite_pose(pose) {
+        return Some(format!("pose {pose:?} is not finite"));
+    }
+    if let Some(v) = object_twist.iter().find(|v| !v.is_finite()) {
+        return Some(format!("the object's twist has {v}"));
+    }
+    if let Some(v) = twin_twist.iter().find(|v| !v.is_finite()) {
+        return Some(format!("the twin's twist has {v}"));
+    }
+    if !squeeze_n.is_finite() {
+        return Some(format!("squeezing force {squeeze_n} N"));
+    }
+    if grasp_rank > 6 {
+        return Some(format!("grasp matrix rank {grasp_rank}, above 6"));
+    }
+    None
 }
 
 fn finite_pose(p: &Isometry3<f64>) -> bool {
@@ -554,6 +622,28 @@ fn schema(topic: &str) -> (&'static str, serde_json::Value) {
                     "gripper_closed": {"type": "boolean"},
                     "stopping": {"type": "boolean"},
                     "tcp_speed": {"type": "number"}
+                }
+            }),
+        ),
+        topics::OBJECT_TARGET => (
+            "avatarm.ObjectTarget",
+            json!({
+                "title": "avatarm.ObjectTarget",
+                "description": "The operator's target for the real object at one control tick: its pose in frame_id (m), its twist and the twin's (m/s then rad/s), the squeezing force (N), the grasp matrix's rank, the contacts on the twin, whether the hand holds it",
+                "type": "object",
+                "properties": {
+                    "timestamp": time,
+                    "frame_id": {"type": "string"},
+                    "pose": {"type": "object", "properties": {
+                        "position": xyz,
+                        "orientation": {"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}, "w": {"type": "number"}}}
+                    }},
+                    "object_twist": numbers,
+                    "twin_twist": numbers,
+                    "squeeze": {"type": "number"},
+                    "grasp_rank": {"type": "integer", "minimum": 0, "maximum": 6},
+                    "contacts": {"type": "integer", "minimum": 0},
+                    "held": {"type": "boolean"}
                 }
             }),
         ),
@@ -914,6 +1004,32 @@ impl RecordingWriter {
         self.write(topics::ROBOT_COMMAND, c.stamp_ns, &message)
     }
 
+    /// The operator's target for the real object. Refused (nothing written) when a value is not
+    /// finite or the rank is above 6.
+    pub fn object_target(&mut self, t: &ObjectTarget) -> Result<(), RecordError> {
+        if let Some(why) = object_target_fault(
+            &t.world_from_object,
+            &t.object_twist,
+            &t.twin_twist,
+            t.squeeze_n,
+            t.grasp_rank,
+        ) {
+            return Err(self.refuse(format!("object target at {} ns: {why}", t.stamp_ns)));
+        }
+        let message = WireObjectTarget {
+            timestamp: Time::of(t.stamp_ns),
+            frame_id: WORLD_FRAME.into(),
+            pose: wire_pose(&t.world_from_object),
+            object_twist: t.object_twist,
+            twin_twist: t.twin_twist,
+            squeeze: t.squeeze_n,
+            grasp_rank: t.grasp_rank,
+            contacts: t.contacts,
+            held: t.held,
+        };
+        self.write(topics::OBJECT_TARGET, t.stamp_ns, &message)
+    }
+
     /// A safety event.
     pub fn safety_event(&mut self, e: &SafetyEvent) -> Result<(), RecordError> {
         let message = WireLog {
@@ -983,6 +1099,7 @@ impl Recording {
                 topics::HAND,
                 topics::ROBOT_COMMAND,
                 topics::SAFETY,
+                topics::OBJECT_TARGET,
             ];
             if !known.contains(&topic.as_str()) {
                 *out.other_topics.entry(topic.clone()).or_default() += 1;
@@ -1143,6 +1260,36 @@ impl Recording {
                         tcp_speed: m.tcp_speed,
                     });
                 }
+                topics::OBJECT_TARGET => {
+                    let m: WireObjectTarget = serde_json::from_slice(&message.data)
+                        .map_err(|e| bad(format!("not an avatarm.ObjectTarget: {e}")))?;
+                    if m.frame_id != WORLD_FRAME {
+                        return Err(bad(format!(
+                            "frame_id '{}': Avatarm writes targets in '{WORLD_FRAME}'",
+                            m.frame_id
+                        )));
+                    }
+                    let pose = pose_of(&m.pose.position, &m.pose.orientation).map_err(bad)?;
+                    if let Some(why) = object_target_fault(
+                        &pose,
+                        &m.object_twist,
+                        &m.twin_twist,
+                        m.squeeze,
+                        m.grasp_rank,
+                    ) {
+                        return Err(bad(why));
+                    }
+                    out.targets.push(ObjectTarget {
+                        stamp_ns: m.timestamp.ns(),
+                        world_from_object: pose,
+                        object_twist: m.object_twist,
+                        twin_twist: m.twin_twist,
+                        squeeze_n: m.squeeze,
+                        grasp_rank: m.grasp_rank,
+                        contacts: m.contacts,
+                        held: m.held,
+                    });
+                }
                 topics::SAFETY => {
                     let m: WireLog = serde_json::from_slice(&message.data)
                         .map_err(|e| bad(format!("not a foxglove.Log: {e}")))?;
@@ -1189,6 +1336,7 @@ impl Recording {
         out.hands.sort_by_key(|h| h.stamp_ns);
         out.commands.sort_by_key(|c| c.stamp_ns);
         out.safety.sort_by_key(|e| e.stamp_ns);
+        out.targets.sort_by_key(|t| t.stamp_ns);
         Ok(out)
     }
 
@@ -1330,6 +1478,34 @@ mod tests {
             message: "stopping: the hand is not tracked".into(),
         };
         w.safety_event(&event).expect("event");
+        let target = ObjectTarget {
+            stamp_ns: 1_700_000_000_010_000_000,
+            world_from_object: Isometry3::from_parts(
+                Translation3::new(0.6, -0.1, 0.9),
+                UnitQuaternion::from_euler_angles(0.2, 0.0, 0.1),
+            ),
+            object_twist: [0.01, 0.0, 0.02, 0.0, 0.3, 0.0],
+            twin_twist: [0.01, 0.0, 0.02, 0.0, 0.3, 0.0],
+            squeeze_n: 4.5,
+            grasp_rank: 6,
+            contacts: 5,
+            held: true,
+        };
+        w.object_target(&target).expect("target");
+        // A NaN target, a rank above 6: refused by name, nothing written.
+        let nan = ObjectTarget {
+            squeeze_n: f64::NAN,
+            ..target
+        };
+        let e = w.object_target(&nan).expect_err("a NaN target");
+        assert!(e.to_string().contains("squeezing force NaN"), "{e}");
+        let e = w
+            .object_target(&ObjectTarget {
+                grasp_rank: 7,
+                ..target
+            })
+            .expect_err("rank 7");
+        assert!(e.to_string().contains("rank 7"), "{e}");
         w.finish().expect("finish");
 
         let r = Recording::open(&path).expect("open");
@@ -1358,6 +1534,27 @@ mod tests {
         assert_eq!(r.hands[1], lost);
         assert_eq!(r.commands, vec![command]);
         assert_eq!(r.safety, vec![event]);
+        assert_eq!(r.targets.len(), 1);
+        let t = r.targets[0];
+        assert_eq!(
+            (t.stamp_ns, t.grasp_rank, t.contacts, t.held),
+            (target.stamp_ns, 6, 5, true)
+        );
+        assert_eq!(
+            (t.object_twist, t.twin_twist),
+            (target.object_twist, target.twin_twist)
+        );
+        assert!(
+            t.world_from_object
+                .rotation
+                .angle_to(&target.world_from_object.rotation)
+                < 1e-12
+        );
+        assert!(
+            (t.world_from_object.translation.vector - target.world_from_object.translation.vector)
+                .norm()
+                < 1e-12
+        );
     }
 
     #[test]
