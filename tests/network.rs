@@ -396,10 +396,35 @@ fn over_tls_only_the_authenticated_operator_moves_the_robot() {
     .expect("the test's set-up");
     assert!(f(&watcher, "targets_sent") > 250.0, "{watcher}");
     assert!(f(&blair, "targets_sent") > 350.0, "{blair}");
-    // Only the operator's targets reached the robot, and it joined once.
+    // Only the operator's targets reached the robot.
     let used = f(&s, "targets_used");
     assert!(used > 0.0 && used <= f(&blair, "targets_sent"), "{s}");
-    assert_eq!(f(&s, "operator_joins"), 1.0, "{s}");
+    // An operator was present only inside Blair's window, never in the watcher's, which ended
+    // before hers began: every join the robot site saw (on its clock) lies between Blair's
+    // clock's zero, before which her token cannot exist, and her exit (her session's length,
+    // plus 2 s for her start-up queries and the close). Zenoh 1.10's TLS link can drop and
+    // reconnect under load (eclipse-zenoh/zenoh#2557; docs/network.md), each time a leave and
+    // a join of the same operator, so joins are not asserted to be one.
+    let start = f(&blair, "clock_offset_s");
+    let end = start + f(&blair, "duration_s") + 2.0;
+    assert!(
+        f(&watcher, "clock_offset_s") + f(&watcher, "duration_s") < start,
+        "the watcher's window overlaps Blair's: {watcher} {blair}"
+    );
+    let changes = s["operator_changes"]
+        .as_array()
+        .expect("the report's operator changes");
+    let joins = f(&s, "operator_joins");
+    assert!(joins >= 1.0, "{s}");
+    assert_eq!(f(&s, "operator_leaves"), joins, "she left at the end: {s}");
+    assert_eq!(changes.len() as f64, 2.0 * joins, "{s}");
+    for change in changes {
+        let t = f(change, "t_s");
+        assert!(
+            t >= start - 0.05 && t <= end,
+            "an operator came or went outside Blair's window [{start}, {end}]: {s}"
+        );
+    }
 }
 
 /// Waits (at most 120 s: the robot site's renderer starts first) until the robot site on

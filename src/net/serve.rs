@@ -50,6 +50,19 @@ pub struct StopEpisode {
     pub length_s: Option<f64>,
 }
 
+/// An operator's liveliness token appearing or the last one going, as the robot site saw it.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct OperatorChange {
+    /// When (s, site clock).
+    pub t_s: f64,
+    /// `true`: an operator joined; `false`: the last one left.
+    pub present: bool,
+}
+
+/// How many operator changes the report lists (the counts go on beyond): a link that flaps
+/// for hours must not grow the report without bound.
+pub const MAX_OPERATOR_CHANGES: usize = 1000;
+
 /// Median, 95th percentile and largest of a series (ms).
 #[derive(Debug, Clone, Copy, Serialize, Default, PartialEq)]
 pub struct Spread {
@@ -132,10 +145,12 @@ pub struct ServeReport {
     pub targets_refused: u64,
     /// The first refusals' reasons (at most 10).
     pub refusals: Vec<String>,
-    /// Times an operator joined and left.
+    /// Times an operator joined.
     pub operator_joins: u64,
     /// Times the operator left.
     pub operator_leaves: u64,
+    /// When operators joined and left, in order (the first [`MAX_OPERATOR_CHANGES`]).
+    pub operator_changes: Vec<OperatorChange>,
     /// The arm's stops.
     pub stops: Vec<StopEpisode>,
     /// Age of the target each tick used (ms, site clock minus the hand frame's stamp).
@@ -308,6 +323,13 @@ impl ControlLoop {
             last_tick_at = Some(at);
             let now = clock.now_s();
             let inbox = site.poll();
+            if let Some(present) = inbox.operator_changed
+                && report.operator_changes.len() < MAX_OPERATOR_CHANGES
+            {
+                report
+                    .operator_changes
+                    .push(OperatorChange { t_s: now, present });
+            }
             match inbox.operator_changed {
                 Some(true) => {
                     report.operator_joins += 1;

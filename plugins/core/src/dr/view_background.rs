@@ -11,11 +11,13 @@
 //!   `min_separation` from every kept one, the oldest going when `max_views` are kept.
 //! - [`BackgroundViews::render`]: for each pixel of the target camera, `X` is projected into
 //!   every kept view that sees it (the view's own ray through that pixel hits the same
-//!   rectangle first, and the pixel is usable), sampled bilinearly, and the samples blended with
-//!   weights `1 / (θ + θ₀)²`, θ the angle at `X` between the target's and the view's rays
-//!   (closest views dominate, as in unstructured lumigraph rendering: Buehler et al., SIGGRAPH
-//!   2001), θ₀ = 0.5°. A ray that meets no rectangle looks at infinity (the sky, a far room):
-//!   its direction is projected into the views that see nothing of the proxy there either.
+//!   rectangle first, and the pixel is usable), sampled bilinearly over the texels that show
+//!   it (weights renormalised, so edges between rectangles leave no holes), and the samples
+//!   blended with weights `1 / (θ + θ₀)²`, θ the angle at `X` between the target's and the
+//!   view's rays (closest views dominate, as in unstructured lumigraph rendering: Buehler et
+//!   al., SIGGRAPH 2001), θ₀ = 0.5°. A ray that meets no rectangle looks at infinity (the
+//!   sky, a far room): its direction is projected into the views that see nothing of the proxy
+//!   there either.
 //!   Pixels no view sees keep a fallback image's pixel, marked unseen.
 //!
 //! Pixel maps are row-major, top row first; images RGBA8; masks 0/1 per pixel.
@@ -475,10 +477,11 @@ impl BackgroundViews {
                     let Some((u, vv, _)) = projected else {
                         continue;
                     };
-                    let Some(sample) = v.sample(u, vv, rect) else {
+                    let Some((sample, support)) = v.sample(u, vv, rect) else {
                         continue;
                     };
-                    let weight = 1.0 / (theta + theta0).powi(2);
+                    // A view that sees the point through few of its texels counts for less.
+                    let weight = support / (theta + theta0).powi(2);
                     for c in 0..3 {
                         acc[c] += weight * sample[c];
                     }
@@ -510,40 +513,45 @@ fn project_direction(camera: &PinholeCamera, dir: &Vector3<f64>) -> Option<(f64,
 }
 
 impl CapturedView {
-    /// The view's colour at `(u, v)` (bilinear over its four texels), when all four are usable
-    /// and show rectangle `rect` (the point is not hidden from this view by another part of the
-    /// proxy); at the image's rim, the nearest texel on the same terms.
-    fn sample(&self, u: f64, v: f64, rect: u16) -> Option<[f64; 3]> {
+    /// The view's colour at `(u, v)`: bilinear over its four texels, of which only those
+    /// inside the image, usable and showing rectangle `rect` (the point is not hidden from this
+    /// view by another part of the proxy) count, their weights renormalised (normalised
+    /// convolution). A point beside a rectangle's edge, a covered region or the image's rim
+    /// thus takes its colour from the texels that do show it, instead of being unseen along a
+    /// line of dots. Returns the colour and the support (the qualifying texels' share of the
+    /// bilinear weight, 0–1]; `None` when that share is under a thousandth.
+    fn sample(&self, u: f64, v: f64, rect: u16) -> Option<([f64; 3], f64)> {
         let k = &self.camera.intrinsics;
         if !self.camera.in_image(u, v) {
             return None;
         }
         let (w, h) = (k.width as usize, k.height as usize);
-        let ok = |x: usize, y: usize| {
-            let i = y * w + x;
-            self.usable[i] > 0 && self.rects[i] == rect
-        };
-        let px = |x: usize, y: usize, c: usize| f64::from(self.rgba[(y * w + x) * 4 + c]);
         let (x0, y0) = (u.floor(), v.floor());
-        if x0 < 0.0 || y0 < 0.0 || x0 as usize + 1 >= w || y0 as usize + 1 >= h {
-            let (x, y) = (
-                (u.round().max(0.0) as usize).min(w - 1),
-                (v.round().max(0.0) as usize).min(h - 1),
-            );
-            return ok(x, y).then(|| [px(x, y, 0), px(x, y, 1), px(x, y, 2)]);
-        }
-        let (x, y) = (x0 as usize, y0 as usize);
-        if !(ok(x, y) && ok(x + 1, y) && ok(x, y + 1) && ok(x + 1, y + 1)) {
-            return None;
-        }
         let (fx, fy) = (u - x0, v - y0);
         let mut out = [0.0; 3];
-        for (c, o) in out.iter_mut().enumerate() {
-            let top = px(x, y, c) * (1.0 - fx) + px(x + 1, y, c) * fx;
-            let bottom = px(x, y + 1, c) * (1.0 - fx) + px(x + 1, y + 1, c) * fx;
-            *o = top * (1.0 - fy) + bottom * fy;
+        let mut total = 0.0;
+        for (dx, dy, weight) in [
+            (0.0, 0.0, (1.0 - fx) * (1.0 - fy)),
+            (1.0, 0.0, fx * (1.0 - fy)),
+            (0.0, 1.0, (1.0 - fx) * fy),
+            (1.0, 1.0, fx * fy),
+        ] {
+            let (x, y) = (x0 + dx, y0 + dy);
+            if weight <= 0.0 || x < 0.0 || y < 0.0 || x >= w as f64 || y >= h as f64 {
+                continue;
+            }
+            let i = y as usize * w + x as usize;
+            if self.usable[i] == 0 || self.rects[i] != rect {
+                continue;
+            }
+            for (c, o) in out.iter_mut().enumerate() {
+                *o += weight * f64::from(self.rgba[i * 4 + c]);
+            }
+            total += weight;
         }
-        Some(out)
+        // Below a thousandth of a texel's weight, the colour would come from a texel a pixel
+        // away that the point barely touches: unseen instead.
+        (total > 1e-3).then(|| (out.map(|c| c / total), total))
     }
 }
 
@@ -596,6 +604,25 @@ mod tests {
         out
     }
 
+    /// The room photographed from `a`, kept as the only view, and rendered from `b`: the
+    /// views, the rendering and `b`'s own photograph (the truth).
+    fn one_view_seen_from(
+        proxy: &GeometricProxy,
+        a: &PinholeCamera,
+        b: &PinholeCamera,
+    ) -> (BackgroundViews, RenderedBackground, Vec<u8>) {
+        let mut views = BackgroundViews::new(64, 48, proxy.clone(), 4, 0.0).expect("views");
+        let photo = photograph(proxy, a);
+        let frame = RgbaView::new("a", 64, 48, &photo).expect("view");
+        assert!(
+            views
+                .offer(a, &frame, &vec![0; 64 * 48], 0.0)
+                .expect("offer")
+        );
+        let out = views.render(b, None, None).expect("render");
+        (views, out, photograph(proxy, b))
+    }
+
     #[test]
     fn a_box_has_six_faces_and_the_nearest_is_hit() {
         let proxy = GeometricProxy::from_boxes(&[(Isometry3::identity(), [1.0, 2.0, 0.5])]);
@@ -618,16 +645,7 @@ mod tests {
         let proxy = wall();
         let a = camera([1.5, -0.3, 1.0], [0.0, 0.0, 1.0]);
         let b = camera([1.4, 0.25, 1.05], [0.0, 0.1, 1.0]);
-        let mut views = BackgroundViews::new(64, 48, proxy.clone(), 4, 0.0).expect("views");
-        let photo = photograph(&proxy, &a);
-        let frame = RgbaView::new("a", 64, 48, &photo).expect("view");
-        assert!(
-            views
-                .offer(&a, &frame, &vec![0; 64 * 48], 0.0)
-                .expect("offer")
-        );
-        let out = views.render(&b, None, None).expect("render");
-        let truth = photograph(&proxy, &b);
+        let (views, out, truth) = one_view_seen_from(&proxy, &a, &b);
         let mut diffs = Vec::new();
         for i in 0..64 * 48 {
             if out.seen[i] > 0 {
@@ -660,6 +678,68 @@ mod tests {
             .expect("render");
         assert_eq!(out3.seen.iter().filter(|&&s| s > 0).count(), 1);
         assert_eq!(out3.rgba[(24 * 64 + 32) * 4], out.rgba[(24 * 64 + 32) * 4]);
+    }
+
+    #[test]
+    fn where_two_rectangles_meet_the_seam_is_filled_from_the_texels_that_show_it() {
+        // A desk (a box) before the wall: its top and front faces meet at an edge that both
+        // cameras see, and the wall meets the desk's top behind it.
+        let proxy = GeometricProxy::from_boxes(&[
+            (Isometry3::translation(-0.01, 0.0, 0.0), [0.02, 4.0, 3.0]),
+            (Isometry3::translation(0.5, 0.0, 0.35), [0.6, 1.6, 0.7]),
+        ]);
+        let a = camera([1.8, -0.3, 1.2], [0.3, 0.0, 0.6]);
+        let b = camera([1.75, -0.22, 1.24], [0.3, 0.05, 0.6]);
+        let (_, out, truth) = one_view_seen_from(&proxy, &a, &b);
+        // Every pixel of b whose point a sees, a texel from its own rim, on the same rectangle,
+        // is seen: none left along the edges where rectangles meet.
+        let rects_a = proxy.rect_map(&a);
+        let origin = Point3::from(b.world_from_camera.translation.vector);
+        let (mut checked, mut holes, mut seam) = (0, Vec::new(), 0);
+        for y in 0..48u32 {
+            for x in 0..64u32 {
+                let Some((r, t)) = proxy.hit(&origin, &b.ray(f64::from(x), f64::from(y))) else {
+                    continue;
+                };
+                let p = origin + b.ray(f64::from(x), f64::from(y)) * t;
+                let Some((u, v, _)) = a.project(&p) else {
+                    continue;
+                };
+                if !(1.0..62.0).contains(&u) || !(1.0..46.0).contains(&v) {
+                    continue;
+                }
+                let near = (v.round() as usize) * 64 + u.round() as usize;
+                if rects_a[near] != r as u16 {
+                    continue;
+                }
+                checked += 1;
+                let (x0, y0) = (u.floor() as usize, v.floor() as usize);
+                let footprint = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                    .map(|(dx, dy)| rects_a[(y0 + dy) * 64 + x0 + dx]);
+                if footprint.iter().any(|&q| q != r as u16) {
+                    seam += 1;
+                }
+                let i = (y * 64 + x) as usize;
+                if out.seen[i] == 0 {
+                    holes.push((x, y));
+                }
+            }
+        }
+        assert!(checked > 64 * 48 / 2, "{checked}");
+        assert!(seam > 20, "the views straddle edges: {seam} pixels");
+        assert!(holes.is_empty(), "unseen on a seam: {holes:?}");
+        // And what fills the seam is the room's colour there, as elsewhere.
+        let mut diffs = Vec::new();
+        for i in 0..64 * 48 {
+            if out.seen[i] > 0 && truth[i * 4..i * 4 + 3] != [0, 0, 0] {
+                for c in 0..3 {
+                    diffs
+                        .push((i32::from(out.rgba[i * 4 + c]) - i32::from(truth[i * 4 + c])).abs());
+                }
+            }
+        }
+        let mean = diffs.iter().sum::<i32>() as f64 / diffs.len() as f64;
+        assert!(mean < 4.0, "{mean}");
     }
 
     #[test]
