@@ -418,7 +418,12 @@ fn over_tls_only_the_authenticated_operator_moves_the_robot() {
     assert!(joins >= 1.0, "{s}");
     assert_eq!(f(&s, "operator_leaves"), joins, "she left at the end: {s}");
     assert_eq!(changes.len() as f64, 2.0 * joins, "{s}");
-    for change in changes {
+    for (i, change) in changes.iter().enumerate() {
+        assert_eq!(
+            change["present"].as_bool(),
+            Some(i % 2 == 0),
+            "joins and leaves alternate, a join first: {s}"
+        );
         let t = f(change, "t_s");
         assert!(
             t >= start - 0.05 && t <= end,

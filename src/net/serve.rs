@@ -323,23 +323,19 @@ impl ControlLoop {
             last_tick_at = Some(at);
             let now = clock.now_s();
             let inbox = site.poll();
-            if let Some(present) = inbox.operator_changed
-                && report.operator_changes.len() < MAX_OPERATOR_CHANGES
-            {
-                report
-                    .operator_changes
-                    .push(OperatorChange { t_s: now, present });
-            }
-            match inbox.operator_changed {
-                Some(true) => {
+            if let Some(present) = inbox.operator_changed {
+                if present {
                     report.operator_joins += 1;
                     info!("robot site: an operator joined");
-                }
-                Some(false) => {
+                } else {
                     report.operator_leaves += 1;
                     warn!("robot site: the operator left; stopping the arm");
                 }
-                None => {}
+                if report.operator_changes.len() < MAX_OPERATOR_CHANGES {
+                    report
+                        .operator_changes
+                        .push(OperatorChange { t_s: now, present });
+                }
             }
             let present = inbox.operator_present;
             for received in inbox.targets {
