@@ -16,26 +16,8 @@ bin="${1:-target/release/avatarm}"
 out="${2:-out/gpu_check}"
 mkdir -p "$out"
 [ -x "$bin" ] || { echo "error: no avatarm binary at $bin (cargo build --release)" >&2; exit 1; }
-# Headless NVIDIA in a container: an ICD manifest naming libGLX_nvidia gives no Vulkan instance
-# without a display ("Could not get 'vkCreateInstance'"); the same driver's EGL library does.
-libs=$( (ldconfig -p || /sbin/ldconfig -p) 2>/dev/null || true)
-icd=""
-for f in /usr/share/vulkan/icd.d/nvidia_icd.json /etc/vulkan/icd.d/nvidia_icd.json; do
-  [ -f "$f" ] && { icd=$f; break; }
-done
-if [ -z "${VK_ICD_FILENAMES:-}" ] && [ -z "${DISPLAY:-}" ] && [ -n "$icd" ] \
-    && grep -qs libGLX_nvidia "$icd"; then
-  egl=$(printf '%s\n' "$libs" | awk '/libEGL_nvidia\.so\.0 /{p=$NF} END{print p}')
-  api=$(sed -n 's/.*"api_version" *: *"\([^"]*\)".*/\1/p' "$icd" | head -1)
-  if [ -n "$egl" ]; then
-    printf '{"file_format_version":"1.0.1","ICD":{"library_path":"%s","api_version":"%s"}}\n' \
-      "$egl" "${api:-1.3.0}" > "$out/nvidia_egl_icd.json"
-    export VK_ICD_FILENAMES="$(cd "$out" && pwd)/nvidia_egl_icd.json"
-    echo "headless NVIDIA: Vulkan through $egl"
-  fi
-fi
-printf '%s\n' "$libs" | grep -c 'libvulkan\.so\.1 ' >/dev/null || [ -n "${LD_LIBRARY_PATH:-}" ] \
-  || echo "warning: no Vulkan loader (libvulkan.so.1): install libvulkan1 or put it on LD_LIBRARY_PATH" >&2
+# Headless NVIDIA Vulkan and the loader check (sets VK_ICD_FILENAMES where it must).
+. scripts/gpu_env.sh "$out"
 command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.max.sm --format=csv | tee "$out/gpu.txt"
 short_scene() {  # the default scene cut to 1 s, its robot found from this checkout
   sed -e 's/duration_s = 10.0/duration_s = 1.0/' \
@@ -65,6 +47,8 @@ for size in 640x480 1920x1080; do
   "$bin" replay "$out/default_1s.toml" --headless --camera-size "$size" --frames-every 1000 \
     --out "$out/replay_$size" 2>&1 | grep "replayed" | tee -a "$out/replays.txt"
 done
+# Alice's head camera: its view-following background on one CPU thread and on all.
+scripts/head_threads.sh "$bin" "$out/head"
 # The live preview's frame at 1080p, where a display server is at hand (Xvfb): its budget line.
 if command -v Xvfb >/dev/null; then
   Xvfb :77 -screen 0 1920x1080x24 >/dev/null 2>&1 & xvfb=$!

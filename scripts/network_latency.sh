@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # The erased video's latency by stage at 0, 50 and 150 ms one-way (docs/network.md): the robot
 # site with video, an operator and an observer through `avatarm relay`; the observer's report
-# has each stage. Needs a built target/debug/avatarm. CODEC=h264 codes the video with H.264
-# (default jpeg). Output: out/network_latency_CODEC/.
+# has each stage. Needs a built target/debug/avatarm, or the binary AVATARM names (a release
+# build on a GPU machine, with scripts/gpu_env.sh sourced there). CODEC=h264 codes the video
+# with H.264 (default jpeg). Output: out/network_latency_CODEC/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-A=target/debug/avatarm
+A=${AVATARM:-target/debug/avatarm}
 S=assets/scenes/pouring.toml
 codec=${CODEC:-jpeg}
 O=out/network_latency_$codec; rm -rf "$O"; mkdir -p "$O"

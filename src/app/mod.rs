@@ -296,6 +296,7 @@ pub fn view_background(scene: &Scene) -> Option<avatarm_erase::ViewBackgroundCon
         proxy: room_proxy(scene, &nalgebra::Isometry3::identity()),
         max_views: head.background_views,
         min_separation_rad: head.background_separation_rad,
+        threads: head.background_threads,
     })
 }
 

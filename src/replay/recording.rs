@@ -389,7 +389,7 @@ fn room_background(
         ));
     }
     let defaults = avatarm_scene::spec::HeadBackgroundSpec::default();
-    let (max_views, min_separation_rad) = scene
+    let (max_views, min_separation_rad, threads) = scene
         .head
         .as_ref()
         .filter(|h| h.background_views > 0)
@@ -397,13 +397,21 @@ fn room_background(
             (
                 defaults.views as usize,
                 defaults.min_separation_deg.to_radians(),
+                defaults.threads as usize,
             ),
-            |h| (h.background_views, h.background_separation_rad),
+            |h| {
+                (
+                    h.background_views,
+                    h.background_separation_rad,
+                    h.background_threads,
+                )
+            },
         );
     Ok(ViewBackgroundConfig {
         proxy,
         max_views,
         min_separation_rad,
+        threads,
     })
 }
 

@@ -117,6 +117,8 @@ pub struct ViewBackgroundConfig {
     pub max_views: usize,
     /// A frame becomes a view this far (rad) from every kept one.
     pub min_separation_rad: f64,
+    /// CPU threads that re-project the views (0: one per core; the image is the same).
+    pub threads: usize,
 }
 
 /// The view-following background's state.
@@ -386,7 +388,10 @@ fn setup(
                 v.max_views,
                 v.min_separation_rad,
             ) {
-                Ok(views) => {
+                Ok(mut views) => {
+                    if v.threads > 0 {
+                        views.threads = v.threads;
+                    }
                     let s = &config.settings;
                     if s.photometric || s.background_refresh > 0.0 {
                         warn!(

@@ -777,6 +777,8 @@ pub struct HeadRig {
     pub background_views: usize,
     /// A frame becomes a background view this far (rad) from every kept one.
     pub background_separation_rad: f64,
+    /// CPU threads that re-project the background views (0: one per core).
+    pub background_threads: usize,
 }
 
 impl HeadRig {
@@ -886,6 +888,12 @@ impl HeadRig {
                 format!("{} must be within 0..=90", b.min_separation_deg),
             ));
         }
+        if b.threads > 256 {
+            return Err((
+                "background.threads".into(),
+                format!("{} must be within 0..=256 (0: one per core)", b.threads),
+            ));
+        }
         let believed_mount = perturbed_mount(
             &mount,
             &Vector3::from(error.axis),
@@ -899,6 +907,7 @@ impl HeadRig {
             tracking,
             background_views: b.views as usize,
             background_separation_rad: b.min_separation_deg.to_radians(),
+            background_threads: b.threads as usize,
         })
     }
 

@@ -309,6 +309,9 @@ pub struct HeadBackgroundSpec {
     pub views: u32,
     /// A frame becomes a view when it looks at least this far (degrees) from every kept one.
     pub min_separation_deg: f64,
+    /// CPU threads that re-project the views (0..=256; 0: one per core). Fewer leave cores
+    /// to the rest of the machine (a robot site's control loop); the image is the same.
+    pub threads: u32,
 }
 
 impl Default for HeadBackgroundSpec {
@@ -316,6 +319,7 @@ impl Default for HeadBackgroundSpec {
         Self {
             views: 8,
             min_separation_deg: 4.0,
+            threads: 0,
         }
     }
 }

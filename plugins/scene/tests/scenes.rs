@@ -405,6 +405,17 @@ fn a_camera_on_a_head_is_resolved_and_checked() {
         text.replace("rate_hz = 90.0", "rate_hz = nan"),
         "camera.head.tracking.rate_hz",
     );
+    // The background's threads: one per core unless set, at most 256.
+    assert_eq!(head.background_threads, 0);
+    let threads = |n: u32| {
+        text.replace(
+            "\n[erase]",
+            &format!("\n[camera.head.background]\nthreads = {n}\n\n[erase]"),
+        )
+    };
+    let s = parse(&threads(3)).expect("3 threads");
+    assert_eq!(s.head.as_ref().expect("head").background_threads, 3);
+    fails(threads(257), "camera.head.background.threads");
     // Keyframes instead of a sweep: strictly increasing times.
     let keyed = text.replace(
         "sweep = { eye = [0.75, -1.15, 1.2], target = [0.3, 0.0, 0.95], amplitude_deg = 15.0, peak_speed_deg_s = 30.0, pivot_back_m = 0.09 }",

@@ -107,19 +107,78 @@ impl GeometricProxy {
     }
 
     /// For each pixel of `camera`, the index of the rectangle its ray meets first
-    /// ([`NO_RECT`] where none).
-    pub fn rect_map(&self, camera: &PinholeCamera) -> Vec<u16> {
+    /// ([`NO_RECT`] where none), row-major (`width × height`).
+    ///
+    /// The rows are cast on `threads` threads (0 or 1: this one alone); the map is the same
+    /// whatever the count.
+    pub fn rect_map(&self, camera: &PinholeCamera, threads: usize) -> Vec<u16> {
         let k = &camera.intrinsics;
+        let (w, h) = (k.width as usize, k.height as usize);
         let origin = Point3::from(camera.world_from_camera.translation.vector);
-        let mut out = Vec::with_capacity(k.width as usize * k.height as usize);
-        for y in 0..k.height {
-            for x in 0..k.width {
-                let dir = camera.ray(f64::from(x), f64::from(y));
-                out.push(self.hit(&origin, &dir).map_or(NO_RECT, |(i, _)| i as u16));
+        let mut out = vec![NO_RECT; w * h];
+        let mut none = vec![(); w * h];
+        in_row_bands(threads, (&mut out, &mut none), (w, w), |y, row, _| {
+            for (x, r) in row.iter_mut().enumerate() {
+                let dir = camera.ray(x as f64, y as f64);
+                *r = self.hit(&origin, &dir).map_or(NO_RECT, |(i, _)| i as u16);
             }
-        }
+        });
         out
     }
+}
+
+/// Rows per band handed to a thread by [`in_row_bands`]: small enough that a region of a few
+/// dozen rows (the robot's) is shared among the threads, large enough that a band's rows are
+/// next to each other in memory.
+const BAND_ROWS: usize = 4;
+
+/// A band of rows of two images for [`in_row_bands`]: its first row and its elements of each.
+type Band<'a, A, B> = (usize, &'a mut [A], &'a mut [B]);
+
+/// Calls `f(y, row_a, row_b)` for each row `y` of two images of equal height, of `widths`
+/// elements per row (`a`'s, `b`'s), on `threads` threads (scoped; 0 and 1 both mean the calling
+/// thread alone). Rows go in bands of [`BAND_ROWS`], dealt round-robin, so a region of work in
+/// one part of the image is spread over all threads. Each row is written by one call only.
+fn in_row_bands<A: Send, B: Send>(
+    threads: usize,
+    (a, b): (&mut [A], &mut [B]),
+    (width_a, width_b): (usize, usize),
+    f: impl Fn(usize, &mut [A], &mut [B]) + Sync,
+) {
+    if width_a == 0 || width_b == 0 {
+        return;
+    }
+    let threads = threads.max(1);
+    let mut dealt: Vec<Vec<Band<'_, A, B>>> = (0..threads).map(|_| Vec::new()).collect();
+    let bands = a
+        .chunks_mut(width_a * BAND_ROWS)
+        .zip(b.chunks_mut(width_b * BAND_ROWS));
+    for (i, (band_a, band_b)) in bands.enumerate() {
+        dealt[i % threads].push((i * BAND_ROWS, band_a, band_b));
+    }
+    let run = |bands: Vec<Band<'_, A, B>>| {
+        for (y0, band_a, band_b) in bands {
+            let rows = band_a.chunks_mut(width_a).zip(band_b.chunks_mut(width_b));
+            for (dy, (row_a, row_b)) in rows.enumerate() {
+                f(y0 + dy, row_a, row_b);
+            }
+        }
+    };
+    let mut dealt = dealt.into_iter();
+    let Some(own) = dealt.next() else {
+        return;
+    };
+    std::thread::scope(|scope| {
+        for bands in dealt.filter(|b| !b.is_empty()) {
+            scope.spawn(move || run(bands));
+        }
+        run(own);
+    });
+}
+
+/// Threads a [`BackgroundViews`] renders on by default: the machine's cores.
+pub fn default_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
 }
 
 /// In a rectangle map: the pixel's ray meets no rectangle.
@@ -180,6 +239,10 @@ pub struct BackgroundViews {
     /// A view is kept only this far (rad, between optical axes) from every kept one, or when
     /// it shows a larger share of the room than the nearest kept one.
     pub min_separation_rad: f64,
+    /// Threads [`BackgroundViews::render`] and a new view's rectangle map run on (1: the
+    /// calling thread alone); [`default_threads`] at first. The result is the same whatever
+    /// the count.
+    pub threads: usize,
     views: Vec<CapturedView>,
     offered: u64,
     blank: u64,
@@ -226,6 +289,7 @@ impl BackgroundViews {
             proxy,
             max_views,
             min_separation_rad,
+            threads: default_threads(),
             views: Vec::new(),
             offered: 0,
             blank: 0,
@@ -342,7 +406,7 @@ impl BackgroundViews {
             camera: *camera,
             rgba: frame.data.to_vec(),
             usable: covered.iter().map(|&c| u8::from(c == 0)).collect(),
-            rects: self.proxy.rect_map(camera),
+            rects: self.proxy.rect_map(camera, self.threads),
             axis,
             at_s,
             pinned: false,
@@ -417,7 +481,7 @@ impl BackgroundViews {
             camera: *camera,
             rgba: frame.data.to_vec(),
             usable: vec![1; n],
-            rects: self.proxy.rect_map(camera),
+            rects: self.proxy.rect_map(camera, self.threads),
             axis: camera.world_from_camera.rotation * Vector3::z(),
             at_s,
             pinned: true,
@@ -451,53 +515,69 @@ impl BackgroundViews {
         let mut rgba = fallback.unwrap_or_else(|| [0, 0, 0, 255].repeat(w * h));
         let mut seen = vec![0u8; w * h];
         let origin = Point3::from(target.world_from_camera.translation.vector);
-        let theta0 = 0.5f64.to_radians();
-        for y in 0..h {
-            for x in 0..w {
-                if only.is_some_and(|o| o[y * w + x] == 0) {
-                    continue;
-                }
-                let dir = target.ray(x as f64, y as f64);
-                // Past the proxy: the point is at infinity (the view turns, it does not move).
-                let point = self
-                    .proxy
-                    .hit(&origin, &dir)
-                    .map(|(r, t)| (r, origin + dir * t));
-                let rect = point.map_or(NO_RECT, |(r, _)| r as u16);
-                let mut acc = [0.0f64; 3];
-                let mut total = 0.0;
-                for v in &self.views {
-                    let (projected, theta) = match point {
-                        Some((_, p)) => {
-                            let eye = Point3::from(v.camera.world_from_camera.translation.vector);
-                            (v.camera.project(&p), dir.angle(&(p - eye)))
-                        }
-                        None => (project_direction(&v.camera, &dir), 0.0),
-                    };
-                    let Some((u, vv, _)) = projected else {
+        in_row_bands(
+            self.threads,
+            (&mut seen, &mut rgba),
+            (w, w * 4),
+            |y, seen_row, rgba_row| {
+                for x in 0..w {
+                    if only.is_some_and(|o| o[y * w + x] == 0) {
                         continue;
-                    };
-                    let Some((sample, support)) = v.sample(u, vv, rect) else {
-                        continue;
-                    };
-                    // A view that sees the point through few of its texels counts for less.
-                    let weight = support / (theta + theta0).powi(2);
-                    for c in 0..3 {
-                        acc[c] += weight * sample[c];
                     }
-                    total += weight;
-                }
-                if total > 0.0 {
-                    let i = y * w + x;
-                    for c in 0..3 {
-                        rgba[i * 4 + c] = (acc[c] / total).round().clamp(0.0, 255.0) as u8;
+                    if let Some(colour) = self.blend(target, &origin, x, y) {
+                        rgba_row[x * 4..x * 4 + 3].copy_from_slice(&colour);
+                        rgba_row[x * 4 + 3] = 255;
+                        seen_row[x] = 1;
                     }
-                    rgba[i * 4 + 3] = 255;
-                    seen[i] = 1;
                 }
-            }
-        }
+            },
+        );
         Ok(RenderedBackground { rgba, seen })
+    }
+
+    /// The room's colour at pixel `(x, y)` of `target` (whose centre is `origin`), blended
+    /// from the views that see it; `None` where none does. The weights are
+    /// unstructured-lumigraph ones (Buehler et al., SIGGRAPH 2001), 1/(θ + 0.5°)², θ the angle
+    /// at the point between the target's ray and the view's, times the view's support there.
+    fn blend(
+        &self,
+        target: &PinholeCamera,
+        origin: &Point3<f64>,
+        x: usize,
+        y: usize,
+    ) -> Option<[u8; 3]> {
+        let theta0 = 0.5f64.to_radians();
+        let dir = target.ray(x as f64, y as f64);
+        // Past the proxy: the point is at infinity (the view turns, it does not move).
+        let point = self
+            .proxy
+            .hit(origin, &dir)
+            .map(|(r, t)| (r, origin + dir * t));
+        let rect = point.map_or(NO_RECT, |(r, _)| r as u16);
+        let mut acc = [0.0f64; 3];
+        let mut total = 0.0;
+        for v in &self.views {
+            let (projected, theta) = match point {
+                Some((_, p)) => {
+                    let eye = Point3::from(v.camera.world_from_camera.translation.vector);
+                    (v.camera.project(&p), dir.angle(&(p - eye)))
+                }
+                None => (project_direction(&v.camera, &dir), 0.0),
+            };
+            let Some((u, vv, _)) = projected else {
+                continue;
+            };
+            let Some((sample, support)) = v.sample(u, vv, rect) else {
+                continue;
+            };
+            // A view that sees the point through few of its texels counts for less.
+            let weight = support / (theta + theta0).powi(2);
+            for c in 0..3 {
+                acc[c] += weight * sample[c];
+            }
+            total += weight;
+        }
+        (total > 0.0).then(|| acc.map(|a| (a / total).round().clamp(0.0, 255.0) as u8))
     }
 }
 
@@ -571,6 +651,18 @@ mod tests {
             .to_isometry()
             .expect("pose"),
         }
+    }
+
+    /// A desk (a box) before a wall, and two cameras 2.2° apart that see the desk's top and front
+    /// and the wall behind: edges where rectangles meet, in both views.
+    fn desk_before_wall() -> (GeometricProxy, PinholeCamera, PinholeCamera) {
+        let proxy = GeometricProxy::from_boxes(&[
+            (Isometry3::translation(-0.01, 0.0, 0.0), [0.02, 4.0, 3.0]),
+            (Isometry3::translation(0.5, 0.0, 0.35), [0.6, 1.6, 0.7]),
+        ]);
+        let a = camera([1.8, -0.3, 1.2], [0.3, 0.0, 0.6]);
+        let b = camera([1.75, -0.22, 1.24], [0.3, 0.05, 0.6]);
+        (proxy, a, b)
     }
 
     /// A wall at x = 0 (a thin box) whose colour is a function of the point: what a view sees
@@ -684,16 +776,11 @@ mod tests {
     fn where_two_rectangles_meet_the_seam_is_filled_from_the_texels_that_show_it() {
         // A desk (a box) before the wall: its top and front faces meet at an edge that both
         // cameras see, and the wall meets the desk's top behind it.
-        let proxy = GeometricProxy::from_boxes(&[
-            (Isometry3::translation(-0.01, 0.0, 0.0), [0.02, 4.0, 3.0]),
-            (Isometry3::translation(0.5, 0.0, 0.35), [0.6, 1.6, 0.7]),
-        ]);
-        let a = camera([1.8, -0.3, 1.2], [0.3, 0.0, 0.6]);
-        let b = camera([1.75, -0.22, 1.24], [0.3, 0.05, 0.6]);
+        let (proxy, a, b) = desk_before_wall();
         let (_, out, truth) = one_view_seen_from(&proxy, &a, &b);
         // Every pixel of b whose point a sees, a texel from its own rim, on the same rectangle,
         // is seen: none left along the edges where rectangles meet.
-        let rects_a = proxy.rect_map(&a);
+        let rects_a = proxy.rect_map(&a, 1);
         let origin = Point3::from(b.world_from_camera.translation.vector);
         let (mut checked, mut holes, mut seam) = (0, Vec::new(), 0);
         for y in 0..48u32 {
@@ -740,6 +827,108 @@ mod tests {
         }
         let mean = diffs.iter().sum::<i32>() as f64 / diffs.len() as f64;
         assert!(mean < 4.0, "{mean}");
+    }
+
+    #[test]
+    fn a_view_that_sees_a_point_through_few_texels_counts_for_less_in_the_blend() {
+        let proxy = wall();
+        // a is 1.9 deg from the target, b 3.8 deg: a outweighs b where it sees fully.
+        let target = camera([1.5, 0.0, 1.0], [0.0, 0.0, 1.0]);
+        let a = camera([1.5, 0.05, 1.0], [0.0, 0.0, 1.0]);
+        let b = camera([1.5, -0.1, 1.0], [0.0, 0.0, 1.0]);
+        // a's picture is wrong in blue (45 where the room is 90), and only every other texel
+        // of every other row is usable, so its support runs from 0 to 1 across the wall.
+        let wrong: Vec<u8> = photograph(&proxy, &a)
+            .chunks_exact(4)
+            .flat_map(|p| [p[0], p[1], p[2] / 2, 255])
+            .collect();
+        let lattice: Vec<u8> = (0..64 * 48)
+            .map(|i| u8::from(!(i % 64 % 2 == 0 && i / 64 % 2 == 0)))
+            .collect();
+        let right = photograph(&proxy, &b);
+        let mut views = BackgroundViews::new(64, 48, proxy.clone(), 4, 0.0).expect("views");
+        let fa = RgbaView::new("a", 64, 48, &wrong).expect("a");
+        let fb = RgbaView::new("b", 64, 48, &right).expect("b");
+        assert!(views.offer(&a, &fa, &lattice, 0.0).expect("a"));
+        assert!(views.offer(&b, &fb, &vec![0; 64 * 48], 1.0).expect("b"));
+        let out = views.render(&target, None, None).expect("render");
+        // a's share of each pixel's colour, read from blue: 90 is b's alone, 45 a's alone.
+        let origin = Point3::from(target.world_from_camera.translation.vector);
+        let (mut thin, mut full) = (Vec::new(), Vec::new());
+        for y in 2..46u32 {
+            for x in 2..62u32 {
+                let dir = target.ray(f64::from(x), f64::from(y));
+                let Some((r, t)) = proxy.hit(&origin, &dir) else {
+                    continue;
+                };
+                let Some((u, v, _)) = a.project(&(origin + dir * t)) else {
+                    continue;
+                };
+                let Some((_, support)) = views.views[0].sample(u, v, r as u16) else {
+                    continue;
+                };
+                let i = (y * 64 + x) as usize;
+                let share = (90.0 - f64::from(out.rgba[i * 4 + 2])) / 45.0;
+                if support < 0.1 {
+                    thin.push(share);
+                } else if support > 0.9 {
+                    full.push(share);
+                }
+            }
+        }
+        let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
+        assert!(
+            thin.len() > 50 && full.len() > 50,
+            "{} {}",
+            thin.len(),
+            full.len()
+        );
+        // Unweighted, a would give three quarters of the colour everywhere it sees.
+        assert!(mean(&full) > 0.6, "a seen fully wins: {}", mean(&full));
+        assert!(
+            mean(&thin) < 0.3,
+            "a seen through a corner loses: {}",
+            mean(&thin)
+        );
+    }
+
+    #[test]
+    fn any_number_of_threads_renders_the_same_image() {
+        let (proxy, a, b) = desk_before_wall();
+        let mut views = BackgroundViews::new(64, 48, proxy.clone(), 4, 0.0).expect("views");
+        views.threads = 1;
+        let photo = photograph(&proxy, &a);
+        let frame = RgbaView::new("a", 64, 48, &photo).expect("view");
+        assert!(
+            views
+                .offer(&a, &frame, &vec![0; 64 * 48], 0.0)
+                .expect("offer")
+        );
+        // A region of a few rows, as the robot's is: fewer bands than threads in places.
+        let only: Vec<u8> = (0..64 * 48)
+            .map(|i| u8::from((9..19).contains(&(i / 64))))
+            .collect();
+        let alone = views.render(&b, None, Some(&only)).expect("render");
+        let everywhere = views.render(&b, None, None).expect("render");
+        assert!(alone.seen.iter().filter(|&&s| s > 0).count() > 300);
+        for threads in [0, 2, 3, 7, 64] {
+            views.threads = threads;
+            assert_eq!(
+                views.render(&b, None, Some(&only)).expect("render"),
+                alone,
+                "{threads}"
+            );
+            assert_eq!(
+                views.render(&b, None, None).expect("render"),
+                everywhere,
+                "{threads}"
+            );
+            assert_eq!(
+                proxy.rect_map(&b, threads),
+                proxy.rect_map(&b, 1),
+                "{threads}"
+            );
+        }
     }
 
     #[test]
