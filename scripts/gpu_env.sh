@@ -6,6 +6,10 @@
 # instance ("Could not get 'vkCreateInstance'"); the same driver's EGL library does. Where
 # that is the case (and VK_ICD_FILENAMES and DISPLAY are unset), this writes a manifest naming
 # libEGL_nvidia.so.0 into OUT_DIR and points VK_ICD_FILENAMES at it.
+if [ "${BASH_SOURCE[0]}" = "$0" ]; then
+  echo "error: source it (. scripts/gpu_env.sh OUT_DIR): run alone, its settings are lost" >&2
+  exit 2
+fi
 gpu_env_out="${1:?usage: . scripts/gpu_env.sh OUT_DIR}"
 mkdir -p "$gpu_env_out"
 libs=$( (ldconfig -p || /sbin/ldconfig -p) 2>/dev/null || true)
@@ -26,3 +30,4 @@ if [ -z "${VK_ICD_FILENAMES:-}" ] && [ -z "${DISPLAY:-}" ] && [ -n "$icd" ] \
 fi
 printf '%s\n' "$libs" | grep -c 'libvulkan\.so\.1 ' >/dev/null || [ -n "${LD_LIBRARY_PATH:-}" ] \
   || echo "warning: no Vulkan loader (libvulkan.so.1): install libvulkan1 or put it on LD_LIBRARY_PATH" >&2
+unset gpu_env_out libs icd egl api f

@@ -17,9 +17,11 @@ for threads in 1 0; do
   sed -e "s#\"../robots/#\"$PWD/assets/robots/#" \
       -e "s#^\[erase\]#[camera.head.background]\nthreads = $threads\n\n[erase]#" \
       assets/scenes/head_camera.toml > "$out/head_threads_$threads.toml"
+  grep -q "^threads = $threads\$" "$out/head_threads_$threads.toml" \
+    || { echo "error: no [erase] table in head_camera.toml to set the threads before" >&2; exit 1; }
   "$bin" replay "$out/head_threads_$threads.toml" --headless --frames-every 1000 \
     --out "$out/head_threads_$threads" 2>&1 | grep "replayed" | tee -a "$out/head.txt"
-  printf 'threads %s (0: one per core, %s here): ' "$threads" "$(nproc)" | tee -a "$out/head.txt"
+  printf 'threads %s (0: one per core; nproc says %s): ' "$threads" "$(nproc)" | tee -a "$out/head.txt"
   { grep -A2 '"cpu_ms"' "$out/head_threads_$threads/report.json" || echo "no cpu_ms"; } \
     | tr -d ' \n' | tee -a "$out/head.txt"
   echo | tee -a "$out/head.txt"

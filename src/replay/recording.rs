@@ -362,7 +362,8 @@ impl Input {
 /// The view-following background of `--room SCENE`: the scene's boxes that are not objects
 /// (desk, wall, floor), moved into the recording's base frame by the recording's
 /// `world_from_base` (else the scene's robot base, said in `notes`); the scene's
-/// `[camera.head.background]` views and separation where it has them, else their defaults.
+/// `[camera.head.background]` views and separation where it has them (more than 0 views), else
+/// their defaults, and its threads.
 /// Errors: the scene does not load, or has no such box.
 fn room_background(
     path: &Path,
@@ -389,7 +390,7 @@ fn room_background(
         ));
     }
     let defaults = avatarm_scene::spec::HeadBackgroundSpec::default();
-    let (max_views, min_separation_rad, threads) = scene
+    let (max_views, min_separation_rad) = scene
         .head
         .as_ref()
         .filter(|h| h.background_views > 0)
@@ -397,16 +398,14 @@ fn room_background(
             (
                 defaults.views as usize,
                 defaults.min_separation_deg.to_radians(),
-                defaults.threads as usize,
             ),
-            |h| {
-                (
-                    h.background_views,
-                    h.background_separation_rad,
-                    h.background_threads,
-                )
-            },
+            |h| (h.background_views, h.background_separation_rad),
         );
+    // The threads whatever the views: a scene may set them alone.
+    let threads = scene
+        .head
+        .as_ref()
+        .map_or(defaults.threads as usize, |h| h.background_threads);
     Ok(ViewBackgroundConfig {
         proxy,
         max_views,

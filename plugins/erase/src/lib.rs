@@ -389,9 +389,7 @@ fn setup(
                 v.min_separation_rad,
             ) {
                 Ok(mut views) => {
-                    if v.threads > 0 {
-                        views.threads = v.threads;
-                    }
+                    views.threads = v.threads;
                     let s = &config.settings;
                     if s.photometric || s.background_refresh > 0.0 {
                         warn!(

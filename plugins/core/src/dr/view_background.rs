@@ -109,8 +109,8 @@ impl GeometricProxy {
     /// For each pixel of `camera`, the index of the rectangle its ray meets first
     /// ([`NO_RECT`] where none), row-major (`width × height`).
     ///
-    /// The rows are cast on `threads` threads (0 or 1: this one alone); the map is the same
-    /// whatever the count.
+    /// The rows are cast on `threads` threads (0: one per core, [`default_threads`]; 1: the
+    /// calling thread alone); the map is the same whatever the count.
     pub fn rect_map(&self, camera: &PinholeCamera, threads: usize) -> Vec<u16> {
         let k = &camera.intrinsics;
         let (w, h) = (k.width as usize, k.height as usize);
@@ -136,9 +136,10 @@ const BAND_ROWS: usize = 4;
 type Band<'a, A, B> = (usize, &'a mut [A], &'a mut [B]);
 
 /// Calls `f(y, row_a, row_b)` for each row `y` of two images of equal height, of `widths`
-/// elements per row (`a`'s, `b`'s), on `threads` threads (scoped; 0 and 1 both mean the calling
-/// thread alone). Rows go in bands of [`BAND_ROWS`], dealt round-robin, so a region of work in
-/// one part of the image is spread over all threads. Each row is written by one call only.
+/// elements per row (`a`'s, `b`'s), on `threads` threads (scoped; 0: one per core, 1: the
+/// calling thread alone; never more than there are bands). Rows go in bands of [`BAND_ROWS`],
+/// dealt round-robin, so a region of work in one part of the image is spread over all
+/// threads. Each row is written by one call only.
 fn in_row_bands<A: Send, B: Send>(
     threads: usize,
     (a, b): (&mut [A], &mut [B]),
@@ -148,7 +149,17 @@ fn in_row_bands<A: Send, B: Send>(
     if width_a == 0 || width_b == 0 {
         return;
     }
-    let threads = threads.max(1);
+    debug_assert!(
+        a.len() % width_a == 0 && b.len() % width_b == 0 && a.len() / width_a == b.len() / width_b,
+        "two images of one height"
+    );
+    let band_count = a.len().div_ceil(width_a * BAND_ROWS);
+    let threads = if threads == 0 {
+        default_threads()
+    } else {
+        threads
+    }
+    .clamp(1, band_count.max(1));
     let mut dealt: Vec<Vec<Band<'_, A, B>>> = (0..threads).map(|_| Vec::new()).collect();
     let bands = a
         .chunks_mut(width_a * BAND_ROWS)
@@ -239,9 +250,9 @@ pub struct BackgroundViews {
     /// A view is kept only this far (rad, between optical axes) from every kept one, or when
     /// it shows a larger share of the room than the nearest kept one.
     pub min_separation_rad: f64,
-    /// Threads [`BackgroundViews::render`] and a new view's rectangle map run on (1: the
-    /// calling thread alone); [`default_threads`] at first. The result is the same whatever
-    /// the count.
+    /// Threads [`BackgroundViews::render`] and a new view's rectangle map run on (0: one per
+    /// core, [`default_threads`], as at first; 1: the calling thread alone; at most one per band
+    /// of rows). The result is the same whatever the count.
     pub threads: usize,
     views: Vec<CapturedView>,
     offered: u64,
@@ -289,7 +300,7 @@ impl BackgroundViews {
             proxy,
             max_views,
             min_separation_rad,
-            threads: default_threads(),
+            threads: 0,
             views: Vec::new(),
             offered: 0,
             blank: 0,
@@ -911,7 +922,8 @@ mod tests {
         let alone = views.render(&b, None, Some(&only)).expect("render");
         let everywhere = views.render(&b, None, None).expect("render");
         assert!(alone.seen.iter().filter(|&&s| s > 0).count() > 300);
-        for threads in [0, 2, 3, 7, 64] {
+        // More threads than bands of rows: one per band, not one per request.
+        for threads in [0, 2, 3, 7, 64, usize::MAX] {
             views.threads = threads;
             assert_eq!(
                 views.render(&b, None, Some(&only)).expect("render"),
