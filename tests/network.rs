@@ -717,11 +717,20 @@ fn the_robot_site_serves_both_cameras_at_alice_s_head_each_frame_with_its_pose()
     head_turning(&head, scene, 25.0, 4.0);
     let port = free_port();
     // No --view: every camera of the scene. It stops by itself after the viewers (each waits
-    // for it at most 30 s, then watches 8 s).
+    // for it at most 30 s, then watches 12 s: two apps share the software renderer's 2 cores,
+    // at well under a frame a second each while they start).
     let robot = serve_scene(&dir, scene, port, 45.0, &["--insecure-lan"]);
     let record = dir.join("alice.mcap");
     let watch = |view: &str| {
-        let mut args = vec!["--watch", "--view", view, "--wait", "30", "--duration", "8"];
+        let mut args = vec![
+            "--watch",
+            "--view",
+            view,
+            "--wait",
+            "30",
+            "--duration",
+            "12",
+        ];
         if view == "alice" {
             args.extend(["--record", record.to_str().expect("a UTF-8 path")]);
             args.extend(["--head", head.to_str().expect("a UTF-8 path")]);

@@ -810,6 +810,12 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
             };
             let mut view = (*view).clone();
             if let Some(head) = view.head.as_mut() {
+                // The cameras' apps share the cores: a view-following background left at one
+                // thread per core gets its share, so one camera's bursts do not starve another's.
+                if head.background_threads == 0 {
+                    head.background_threads =
+                        (avatarm_core::dr::view_background::default_threads() / views.len()).max(1);
+                }
                 // A camera on a head rides on its wearer's head where one reports over the
                 // network (the scene's simulated head until then).
                 head.motion = avatarm_core::vision::head::HeadMotion::Live(

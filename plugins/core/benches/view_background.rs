@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use avatarm_core::dr::RgbaView;
 use avatarm_core::dr::view_background::{BackgroundViews, GeometricProxy, default_threads};
-use avatarm_core::prelude::{CameraPose, Intrinsics, PinholeCamera};
+use avatarm_core::prelude::{Intrinsics, PinholeCamera};
 use common::median;
 use criterion::{BenchmarkId, Criterion};
 use nalgebra::Isometry3;
@@ -23,16 +23,12 @@ fn head(yaw_deg: f64) -> PinholeCamera {
     let yaw = yaw_deg.to_radians();
     let eye = [1.2, -0.4, 1.35];
     let target = [eye[0] - 1.2 * yaw.cos(), eye[1] + 1.2 * yaw.sin(), 0.85];
-    PinholeCamera {
-        intrinsics: Intrinsics::from_fov_y(55f64.to_radians(), W, H),
-        world_from_camera: CameraPose {
-            eye,
-            target,
-            up: [0.0, 0.0, 1.0],
-        }
-        .to_isometry()
-        .expect("pose"),
-    }
+    PinholeCamera::looking_at(
+        Intrinsics::from_fov_y(55f64.to_radians(), W, H),
+        eye,
+        target,
+    )
+    .expect("pose")
 }
 
 /// The room: a wall, a floor and a desk.

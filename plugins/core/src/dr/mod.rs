@@ -456,16 +456,12 @@ mod tests {
         let (spheres, notes) = link_spheres(&robot);
         assert!(notes.is_empty());
         assert!(spheres.len() >= 7);
-        let camera = PinholeCamera {
-            intrinsics: crate::vision::camera::Intrinsics::default(),
-            world_from_camera: crate::vision::camera::CameraPose {
-                eye: [2.0, 0.0, 0.6],
-                target: [0.3, 0.0, 0.3],
-                up: [0.0, 0.0, 1.0],
-            }
-            .to_isometry()
-            .expect("camera"),
-        };
+        let camera = PinholeCamera::looking_at(
+            crate::vision::camera::Intrinsics::default(),
+            [2.0, 0.0, 0.6],
+            [0.3, 0.0, 0.3],
+        )
+        .expect("camera");
         let q = vec![0.0; robot.dof()];
         let poses = robot.forward_kinematics(&Isometry3::identity(), &q);
         let mask = sphere_mask(&camera, &poses, &spheres, 2.0);

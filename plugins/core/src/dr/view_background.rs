@@ -649,19 +649,15 @@ impl CapturedView {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vision::camera::{CameraPose, Intrinsics};
+    use crate::vision::camera::Intrinsics;
 
     fn camera(eye: [f64; 3], target: [f64; 3]) -> PinholeCamera {
-        PinholeCamera {
-            intrinsics: Intrinsics::from_fov_y(50f64.to_radians(), 64, 48),
-            world_from_camera: CameraPose {
-                eye,
-                target,
-                up: [0.0, 0.0, 1.0],
-            }
-            .to_isometry()
-            .expect("pose"),
-        }
+        PinholeCamera::looking_at(
+            Intrinsics::from_fov_y(50f64.to_radians(), 64, 48),
+            eye,
+            target,
+        )
+        .expect("pose")
     }
 
     /// A desk (a box) before a wall, and two cameras 2.2° apart that see the desk's top and front

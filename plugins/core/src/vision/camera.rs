@@ -154,6 +154,21 @@ impl CameraPose {
 }
 
 impl PinholeCamera {
+    /// A camera of `intrinsics` at `eye` looking at `target` (world, m), the world's z up in
+    /// its image (the scenes' convention; [`CameraPose`] for another up). Errors as
+    /// [`CameraPose::to_isometry`]: eye = target, or a view straight up or down.
+    pub fn looking_at(intrinsics: Intrinsics, eye: [f64; 3], target: [f64; 3]) -> Result<Self> {
+        Ok(Self {
+            intrinsics,
+            world_from_camera: CameraPose {
+                eye,
+                target,
+                up: default_up(),
+            }
+            .to_isometry()?,
+        })
+    }
+
     /// Projects a world point to `(u, v, depth)`; `None` when it is behind the camera.
     pub fn project(&self, p_world: &Point3<f64>) -> Option<(f64, f64, f64)> {
         let p = self.world_from_camera.inverse_transform_point(p_world);
@@ -274,6 +289,19 @@ mod tests {
             assert!((ur - u).abs() < 1e-9 && (vr - v).abs() < 1e-9);
             assert!(nz > 0.0 && nz < 1.0);
         }
+    }
+
+    #[test]
+    fn looking_at_puts_the_target_at_the_principal_point_with_z_up() {
+        let k = Intrinsics::from_fov_y(1.0, 640, 480);
+        let c = PinholeCamera::looking_at(k, [2.0, 1.0, 1.5], [0.0, 0.0, 0.5]).expect("pose");
+        let (u, v, _) = c.project(&Point3::new(0.0, 0.0, 0.5)).expect("in front");
+        assert!((u - k.cx).abs() < 1e-9 && (v - k.cy).abs() < 1e-9);
+        // A point above the target is above it in the image.
+        let (_, above, _) = c.project(&Point3::new(0.0, 0.0, 0.6)).expect("in front");
+        assert!(above < v);
+        // Straight down, z cannot be up: refused.
+        assert!(PinholeCamera::looking_at(k, [0.0, 0.0, 2.0], [0.0, 0.0, 0.0]).is_err());
     }
 
     #[test]

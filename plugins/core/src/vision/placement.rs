@@ -155,20 +155,10 @@ pub fn panel_corners(k: &Intrinsics, distance: f64) -> [Point3<f64>; 4] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vision::camera::CameraPose;
     use nalgebra::{UnitQuaternion, Vector3};
 
     fn camera(eye: [f64; 3], target: [f64; 3], k: Intrinsics) -> PinholeCamera {
-        PinholeCamera {
-            intrinsics: k,
-            world_from_camera: CameraPose {
-                eye,
-                target,
-                up: [0.0, 0.0, 1.0],
-            }
-            .to_isometry()
-            .expect("pose"),
-        }
+        PinholeCamera::looking_at(k, eye, target).expect("pose")
     }
 
     fn bbox(points: impl Iterator<Item = (f64, f64)>) -> [f64; 4] {
