@@ -107,18 +107,42 @@ fn until_delivered(operator: &OperatorSite, robot: &mut RobotSite) {
     }
 }
 
-/// The operator's targets arrive, all 20 of a burst, and its liveliness token with them.
+/// The operator's targets arrive as she streams them, in order and checked, with her liveliness
+/// token. She publishes one every 5 ms (faster than the app's updates). Targets are express and
+/// dropped rather than queued behind a congested link (docs/network.md: the next target is an
+/// update away), so on a loaded machine a burst through routers can lose some: the test asks
+/// for 20 within 10 s, none refused and none out of order, and prints how many were sent.
 fn commands_arrive(operator: &OperatorSite, robot: &mut RobotSite) {
     until_delivered(operator, robot);
-    let now = operator.robot_now_s();
-    for seq in 0..20 {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let mut received = Vec::new();
+    let mut present = false;
+    let mut sent = 0;
+    while received.len() < 20 && Instant::now() < deadline {
+        let now = operator.robot_now_s();
         operator
-            .publish_target(&TargetMsg::new(seq, &target(now), now, true))
+            .publish_target(&TargetMsg::new(sent, &target(now), now, true))
             .expect("sent");
+        sent += 1;
+        std::thread::sleep(Duration::from_millis(5));
+        let inbox = robot.poll();
+        present = inbox.operator_present;
+        for t in inbox.targets {
+            let (m, _) = t.expect("a valid target is accepted");
+            received.push(m.seq);
+        }
     }
-    let inbox = collect(robot, |i| i.targets.len() >= 20 && i.operator_present);
-    assert_eq!(inbox.targets.len(), 20);
-    assert!(inbox.operator_present);
+    eprintln!("{} of {sent} streamed targets arrived", received.len());
+    assert!(
+        received.len() >= 20,
+        "{} of {sent} targets arrived in 10 s",
+        received.len()
+    );
+    assert!(
+        received.windows(2).all(|w| w[0] < w[1]),
+        "targets arrived out of order: {received:?}"
+    );
+    assert!(present, "the operator's liveliness token is seen");
 }
 
 #[test]
@@ -153,26 +177,33 @@ fn an_operator_joins_estimates_the_clock_and_its_targets_arrive_checked() {
         clock.now_s()
     );
     until_delivered(&operator, &mut robot);
+    // Each put a few ms after the last, as a live operator's are: targets are dropped rather
+    // than queued behind a congested link, and a burst on a loaded machine can lose some.
+    let pause = || std::thread::sleep(Duration::from_millis(5));
     let now = operator.robot_now_s();
     for seq in 0..5 {
         operator
             .publish_target(&TargetMsg::new(seq, &target(now), now, true))
             .expect("sent");
+        pause();
     }
     // Malformed, foreign and out-of-range targets arrive refused, each with its reason.
     operator
         .publish_raw_target(b"{\"v\":1,".to_vec())
         .expect("sent");
+    pause();
     let mut foreign = TargetMsg::new(9, &target(now), now, true);
     foreign.v = PROTOCOL_VERSION + 1;
     operator
         .publish_raw_target(serde_json::to_vec(&foreign).expect("encodes"))
         .expect("sent");
+    pause();
     let mut far = TargetMsg::new(10, &target(now), now, true);
     far.position = [1e3, 0.0, 0.0];
     operator
         .publish_raw_target(serde_json::to_vec(&far).expect("encodes"))
         .expect("sent");
+    pause();
     operator
         .publish_raw_target(vec![b'x'; 100_000])
         .expect("sent");
