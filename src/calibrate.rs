@@ -8,7 +8,10 @@
 //! `--look-at EYE,TARGET` or the recording. [`avatarm_core::vision::calibrate`] fits the pose
 //! (and with `--intrinsics` fx, fy) on the `--fit` frames; the IoU of the model silhouette
 //! against the reference is measured on every frame before and after, so that `--eval` frames
-//! left out of the fit say how well the pose generalises. Written to `--out`:
+//! left out of the fit say how well the pose generalises. With `--edges` no silhouette is
+//! needed: the fit draws the robot's outline to each frame's own image edges (Canny's), among
+//! the room's ([`Observed::Edges`]); reference masks, where the recording has them, only score
+//! it. Written to `--out`:
 //! `camera_pose.yaml` (`base_from_camera`, a 4x4 matrix: what `--pose` and `avatarm import
 //! --pose` read), `camera_info.yaml` with `--intrinsics`, `overlay_before_NNNNN.png` and
 //! `overlay_after_NNNNN.png` (the model's silhouette tinted red, the reference's outline in
@@ -28,7 +31,8 @@ use std::time::Instant;
 use avatarm_core::dr;
 use avatarm_core::robot::{PackagePath, RobotModel};
 use avatarm_core::vision::calibrate::{
-    CalibrationOptions, RobotSilhouette, SilhouetteFrame, calibrate, clip_below, rasterize,
+    CalibrationOptions, Observed, RobotSilhouette, SilhouetteFrame, calibrate, clip_below,
+    rasterize,
 };
 use avatarm_core::vision::camera::CameraPose;
 use avatarm_core::vision::distortion::Distortion;
@@ -47,6 +51,10 @@ const MAX_PAIRING_FRAMES: usize = 60;
 
 /// Frames one fit takes at most (10 take 50 s on two cores).
 const MAX_FIT_FRAMES: usize = 100;
+
+/// The largest Sobel gradient's magnitude of 8-bit luma, in imageproc's scale (its `canny`
+/// doc): a higher threshold finds no edge.
+const MAX_SOBEL: f32 = 1141.0;
 
 /// Frames one run decodes, draws and scores at most (fit and held out).
 const MAX_USED_FRAMES: usize = 300;
@@ -86,6 +94,10 @@ pub struct CalibrateOptions {
     pub background: Option<PathBuf>,
     /// The difference (8-bit levels, any channel) that counts as the robot.
     pub background_threshold: u8,
+    /// Fit to each frame's image edges instead of silhouettes: Canny's low and high
+    /// thresholds on the Sobel gradient's magnitude of the blurred luma (imageproc's scale: a
+    /// clean step of N 8-bit levels gives about 2N to 4N; at most about 1140).
+    pub edges: Option<(f32, f32)>,
     /// Output folder.
     pub out: PathBuf,
     /// Show a progress bar.
@@ -110,6 +122,22 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     let head_from_camera =
         recording_mount(&recording, o.mount.as_deref(), pose_flag, "--mount", &name)?;
     let on_head = head_from_camera.is_some();
+    if o.edges.is_some() && o.background.is_some() {
+        return Err(AppError::flag(
+            "--edges",
+            "fits to the frames' own edges: give it or --background, not both",
+        ));
+    }
+    if let Some((low, high)) = o.edges
+        && !(low.is_finite() && high.is_finite() && low > 0.0 && low <= high && high <= MAX_SOBEL)
+    {
+        return Err(AppError::flag(
+            "--edge-thresholds",
+            format!(
+                "{low},{high}: give LOW,HIGH with 0 < LOW <= HIGH <= {MAX_SOBEL} (the Sobel gradient's magnitude)"
+            ),
+        ));
+    }
     if on_head && o.background.is_some() {
         return Err(AppError::flag(
             "--background",
@@ -166,7 +194,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         None => None,
     };
     // How many frames there are to decode and draw, before any is.
-    let candidates = if background.is_some() {
+    let candidates = if background.is_some() || o.edges.is_some() {
         recording.frames.len()
     } else {
         recording.reference_masks.len()
@@ -176,7 +204,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         return Err(AppError::flag(
             "--every",
             format!(
-                "{used} frames to use (of {candidates} with a silhouette): at most {MAX_USED_FRAMES}; thin them with --every {}",
+                "{used} frames to use (of {candidates} with a silhouette or edges): at most {MAX_USED_FRAMES}; thin them with --every {}",
                 candidates.div_ceil(MAX_USED_FRAMES)
             ),
         ));
@@ -193,7 +221,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             .reference_masks
             .iter()
             .find(|m| m.stamp_ns.abs_diff(f.stamp_ns) <= 1_000_000);
-        if reference.is_none() && background.is_none() {
+        if reference.is_none() && background.is_none() && o.edges.is_none() {
             continue;
         }
         with_silhouette += 1;
@@ -213,8 +241,29 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             }
             None => None,
         };
-        let observed = match &background {
-            Some(bg) => {
+        let observed = match (&background, o.edges) {
+            (_, Some((low, high))) => {
+                let frame = decode(f, &name)?;
+                if frame.dimensions() != size {
+                    return Err(bad(format!(
+                        "the frame at {} ns is {}x{}, the camera {}x{}",
+                        f.stamp_ns,
+                        frame.width(),
+                        frame.height(),
+                        size.0,
+                        size.1
+                    )));
+                }
+                let edges = image_edges(&frame, (low, high));
+                if !edges.contains(&1) {
+                    notes.push(format!(
+                        "frame {i}: no edge above --edge-thresholds {low},{high}: left out"
+                    ));
+                    continue;
+                }
+                edges
+            }
+            (Some(bg), None) => {
                 let frame = decode(f, &name)?;
                 let frame = dr::RgbaView::new("frame", size.0, size.1, frame.as_raw())?;
                 let bg = dr::RgbaView::new("--background", size.0, size.1, bg)?;
@@ -234,13 +283,17 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
                 }
                 m
             }
-            None => match &reference {
+            (None, None) => match &reference {
                 Some(r) => r.clone(),
                 None => continue,
             },
         };
-        // Scored (IoUs, pairing) against the reference where there is one, fitted to `observed`.
-        let scored = reference.unwrap_or_else(|| observed.clone());
+        // Scored (IoUs, pairing) against the reference where there is one, fitted to `observed`
+        // (a silhouette; edges score nothing).
+        let scored = match reference {
+            Some(r) => Some(r),
+            None => o.edges.is_none().then(|| observed.clone()),
+        };
         let q = interpolate(&states, f.stamp_ns);
         let mut triangles = silhouette.at(&model, &Isometry3::identity(), q.as_slice());
         if let Some(z) = o.hidden_below {
@@ -278,9 +331,14 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             HEAD_POSE_SLACK_NS / 1_000_000
         )));
     }
+    if frames.is_empty() && o.edges.is_some() {
+        return Err(bad(
+            "no frame has an edge above the thresholds: lower --edge-thresholds".into(),
+        ));
+    }
     if frames.is_empty() {
         return Err(bad(
-            "no frame has a reference mask (the robot's silhouette to fit): import the frames with their masks, or give an empty-room photograph with --background".into(),
+            "no frame has a reference mask (the robot's silhouette to fit): import the frames with their masks, give an empty-room photograph with --background (a fixed camera), or fit to the frames' own edges with --edges".into(),
         ));
     }
     let in_fit = |i: usize| o.fit.is_empty() || o.fit.iter().any(|&(a, b)| (a..=b).contains(&i));
@@ -293,7 +351,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         return Err(AppError::flag(
             "--fit",
             format!(
-                "no frame with a silhouette in that range (frames {} to {})",
+                "no frame with a silhouette (or edges) in that range (frames {} to {})",
                 frames[0].0,
                 frames[frames.len() - 1].0
             ),
@@ -314,6 +372,11 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         source,
     })?;
     let options = CalibrationOptions {
+        observed: if o.edges.is_some() {
+            Observed::Edges
+        } else {
+            Observed::Silhouette
+        },
         fit_focal: o.fit_focal,
         distortion: lens,
         ..CalibrationOptions::default()
@@ -337,10 +400,15 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             &result.intrinsics,
             &lens,
         );
-        let iou = |m: &[u8]| dr::mask_scores(m, scored).map_or(f64::NAN, |s| s.iou);
+        let iou = |m: &[u8]| {
+            scored
+                .as_deref()
+                .and_then(|r| dr::mask_scores(m, r))
+                .map_or(f64::NAN, |s| s.iou)
+        };
         let image = decode(&recording.frames[*i], &name)?.into_raw();
         for (tag, m) in [("before", &before), ("after", &after)] {
-            let picture = overlay(&image, m, Some(scored), w);
+            let picture = overlay(&image, m, scored.as_deref(), w);
             let path = o.out.join(format!("overlay_{tag}_{i:05}.png"));
             image::RgbaImage::from_raw(w, h, picture)
                 .ok_or(AppError::ImageSize {
@@ -368,7 +436,12 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     // own was recorded with the wrong joints (or a wrong stamp): no pose can fit it.
     let mut pairing = Vec::new();
     let mut mispaired = Vec::new();
-    if frames.len() > MAX_PAIRING_FRAMES {
+    if frames.iter().any(|(_, _, scored)| scored.is_none()) {
+        notes.push(
+            "the pairing check was skipped: it needs every frame's reference mask (fitted to edges)"
+                .into(),
+        );
+    } else if frames.len() > MAX_PAIRING_FRAMES {
         notes.push(format!(
             "the pairing check was skipped: {} frames (at most {MAX_PAIRING_FRAMES}; thin them with --every)",
             frames.len()
@@ -377,7 +450,12 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         for (a, (i, _, scored)) in frames.iter().enumerate() {
             let scores: Vec<f64> = drawn
                 .iter()
-                .map(|m| dr::mask_scores(m, scored).map_or(0.0, |s| s.iou))
+                .map(|m| {
+                    scored
+                        .as_deref()
+                        .and_then(|r| dr::mask_scores(m, r))
+                        .map_or(0.0, |s| s.iou)
+                })
                 .collect();
             let (best, best_iou) =
                 scores.iter().enumerate().fold(
@@ -412,6 +490,27 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     // For a camera on a head, "base" below is the head: the pose is the mount.
     let base_from_camera = result.camera_from_base.inverse();
     let change = result.camera_from_base * rough.inverse();
+    // The starts reach 8 deg and 0.1 m from the rough pose: an answer far beyond them is more
+    // likely a wrong basin (with --edges, the robot drawn small onto clutter) than the camera.
+    let (moved_deg, moved_m) = (
+        change.rotation.angle().to_degrees(),
+        change.translation.vector.norm(),
+    );
+    if moved_deg > 2.0 * options.start_deg || moved_m > 3.0 * options.start_m {
+        notes.push(format!(
+            "the fit moved {moved_deg:.1} deg and {:.0} mm from the rough {}, far beyond its starts ({} deg, {} mm): check the overlays; a closer rough {}{} may be needed",
+            1e3 * moved_m,
+            if on_head { "mount" } else { "pose" },
+            options.start_deg,
+            1e3 * options.start_m,
+            if on_head { "mount" } else { "pose" },
+            if o.edges.is_some() {
+                ", or silhouettes instead of --edges,"
+            } else {
+                ""
+            }
+        ));
+    }
     let (pose_file, key, frame_name) = if on_head {
         (
             "camera_mount.yaml",
@@ -486,8 +585,12 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
         "hidden_below_m": o.hidden_below,
         "distortion": {"model": calibration.distortion_model.ros_name(), "coefficients": calibration.d, "applied": !lens.is_none()},
         "frames_used": frames.len(),
-        "silhouettes": match &o.background {
-            Some(path) => json!({
+        "silhouettes": match (&o.background, o.edges) {
+            (_, Some((low, high))) => json!({
+                "source": "image edges (Canny): no silhouette; IoUs against reference masks where the recording has them",
+                "canny_thresholds": [low, high],
+            }),
+            (Some(path), None) => json!({
                 "source": "background difference",
                 "background": path.display().to_string(),
                 "threshold": o.background_threshold,
@@ -495,7 +598,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
                     difference_vs_reference.iter().sum::<f64>() / difference_vs_reference.len() as f64
                 }),
             }),
-            None => json!({"source": "reference masks"}),
+            (None, None) => json!({"source": "reference masks"}),
         },
         "frames_fit": fit.len(),
         "iou": {
@@ -525,7 +628,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             "starts": result.starts.iter().map(|s| json!({
                 "start_deg": s.start.0, "start_m": s.start.1, "cost_px": s.cost_px,
             })).collect::<Vec<_>>(),
-            "note": "cost_px: the mean truncated chamfer distance between the outlines at half resolution; spread: the largest difference between the answer and another start that ended within 10 % of its cost",
+            "note": "cost_px: the mean truncated chamfer distance between the outlines at half resolution (with --edges, from the model's outline to the nearest image edge); spread: the largest difference between the answer and another start that ended within 10 % of its cost",
         },
         "pairing": pairing,
         "mispaired_frames": mispaired,
@@ -539,4 +642,17 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     let text = serde_json::to_string_pretty(&report)?;
     std::fs::write(&path, text + "\n").map_err(|e| AppError::write(path, e))?;
     Ok(report)
+}
+
+/// The frame's image edges, 0/1 per pixel (top row first): Canny's detector on its luma
+/// (`imageproc::edges::canny`: a Gaussian of σ 1.4, Sobel gradients, non-maximum suppression,
+/// then hysteresis between `low` and `high` on the gradient's magnitude, in imageproc's scale,
+/// [`MAX_SOBEL`] at most).
+fn image_edges(frame: &image::RgbaImage, (low, high): (f32, f32)) -> Vec<u8> {
+    let grey = image::imageops::grayscale(frame);
+    imageproc::edges::canny(&grey, low, high)
+        .into_raw()
+        .into_iter()
+        .map(|v| u8::from(v != 0))
+        .collect()
 }

@@ -224,10 +224,12 @@ enum Command {
         overrides: EraseOverrides,
     },
     /// Fit the camera's pose to the robot itself: the pose (and with --intrinsics fx, fy) that
-    /// puts the robot's silhouette at the recorded joints on the recording's reference masks;
-    /// writes DIR/camera_pose.yaml, before/after overlays and report.json (docs/real-footage.md).
+    /// puts the robot's silhouette at the recorded joints on the recording's reference masks
+    /// (or with --background on each frame's difference from an empty room, with --edges on
+    /// each frame's own image edges); writes DIR/camera_pose.yaml (a head camera's
+    /// DIR/camera_mount.yaml), before/after overlays and report.json (docs/real-footage.md).
     Calibrate {
-        /// The recording (MCAP) with the robot's reference masks.
+        /// The recording (MCAP): frames, joint states, and the robot's reference masks if any.
         #[arg(long, value_name = "FILE.mcap")]
         recording: PathBuf,
         /// The robot's description.
@@ -257,8 +259,8 @@ enum Command {
         look_at: Option<Vec<f64>>,
         /// The frames the fit uses: FIRST-LAST ranges or single indices, comma-separated (indices
         /// in the recording, e.g. 0-4 or 0,1,5; the others are held out and only measured).
-        /// Default: every frame with a silhouette (a reference mask, or with --background
-        /// every frame).
+        /// Default: every frame with a silhouette (a reference mask, or with --background or
+        /// --edges every frame).
         #[arg(long, value_name = "FRAMES", value_parser = frame_range, value_delimiter = ',')]
         fit: Vec<(usize, usize)>,
         /// Use only every N-th frame with a silhouette (long recordings).
@@ -287,6 +289,22 @@ enum Command {
             default_value_t = 30
         )]
         background_threshold: u8,
+        /// Fit to each frame's own image edges (Canny's) instead of silhouettes: no reference
+        /// masks or empty-room photograph needed (a moving camera's footage). Reference masks,
+        /// where the recording has them, only score the fit.
+        #[arg(long, conflicts_with = "background")]
+        edges: bool,
+        /// With --edges: Canny's LOW,HIGH thresholds on the Sobel gradient's magnitude of the
+        /// blurred luma (imageproc's scale: a clean step of N 8-bit levels gives about 2N to
+        /// 4N; at most about 1140).
+        #[arg(
+            long = "edge-thresholds",
+            requires = "edges",
+            value_name = "LOW,HIGH",
+            value_delimiter = ',',
+            default_values_t = [20.0, 60.0]
+        )]
+        edge_thresholds: Vec<f32>,
         /// Output folder.
         #[arg(long, value_name = "DIR", default_value = "out/calibrate")]
         out: PathBuf,
@@ -1380,8 +1398,20 @@ fn run(cli: Cli) -> Result<(), AppError> {
             hidden_below,
             background,
             background_threshold,
+            edges,
+            edge_thresholds,
             out,
         } => {
+            let edges = match (edges, edge_thresholds.as_slice()) {
+                (false, _) => None,
+                (true, &[low, high]) => Some((low, high)),
+                (true, v) => {
+                    return Err(AppError::flag(
+                        "--edge-thresholds",
+                        format!("{} numbers: give LOW,HIGH", v.len()),
+                    ));
+                }
+            };
             if let Some(z) = hidden_below.filter(|z| !z.is_finite()) {
                 return Err(AppError::flag(
                     "--hidden-below",
@@ -1422,6 +1452,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 hidden_below,
                 background,
                 background_threshold,
+                edges,
                 out: out.clone(),
                 progress: true,
             })?;
@@ -1429,8 +1460,10 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 eprintln!("note: {}", note.as_str().unwrap_or_default());
             }
             let iou = &report["iou"];
-            let f =
-                |v: &serde_json::Value| v.as_f64().map_or("-".to_owned(), |x| format!("{x:.3}"));
+            let f = |v: &serde_json::Value| {
+                v.as_f64()
+                    .map_or("- (no reference mask)".to_owned(), |x| format!("{x:.3}"))
+            };
             println!(
                 "calibrated on {} frames in {:.1} s: IoU {} -> {} on the fit frames, {} -> {} held out; moved {:.2} deg, {:.1} mm from the rough pose; spread over starts {:.2} deg, {:.1} mm",
                 report["frames_fit"],
