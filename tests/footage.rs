@@ -704,26 +704,47 @@ fn the_mount_of_a_camera_on_a_head_is_calibrated_from_its_recording() {
         !ok && log.contains("--edge-thresholds") && log.contains("0 < LOW <= HIGH"),
         "{log}"
     );
-    let fitted = out.join("calibrated");
-    let (ok, log) = calibrate(&[
-        "--recording",
-        recording.to_str().expect("utf-8"),
-        "--urdf",
-        urdf_arg,
-        "--every",
-        "4",
-        "--hidden-below",
-        "0",
-        "--out",
-        fitted.to_str().expect("utf-8"),
-    ]);
-    assert!(ok, "{log}");
-    assert!(log.contains("[camera.head] mount = { xyz = ["), "{log}");
-    let rep = report(&fitted.join("report.json"));
-    let mount_path = fitted.join("camera_mount.yaml");
-    let mount = avatarm_record::camera::read_mount(&mount_path).expect("mount");
-    let (angle, offset) = avatarm_core::vision::head::pose_error(&mount, &head.mount);
-    let (deg, mm) = (angle.to_degrees(), 1e3 * offset);
+    // The mount fitted on every 4th frame (with `extra` flags), its report, its file and how
+    // far it is from the truth (deg, mm).
+    let fit_mount = |name: &str, extra: &[&str]| {
+        let dir = out.join(name);
+        let mut args = vec![
+            "--recording",
+            recording.to_str().expect("utf-8"),
+            "--urdf",
+            urdf_arg,
+            "--every",
+            "4",
+            "--hidden-below",
+            "0",
+            "--out",
+            dir.to_str().expect("utf-8"),
+        ];
+        args.extend_from_slice(extra);
+        let (ok, log) = calibrate(&args);
+        assert!(ok, "{log}");
+        assert!(log.contains("[camera.head] mount = { xyz = ["), "{log}");
+        let path = dir.join("camera_mount.yaml");
+        let mount = avatarm_record::camera::read_mount(&path).expect("mount");
+        let (angle, offset) = avatarm_core::vision::head::pose_error(&mount, &head.mount);
+        let rep = report(&dir.join("report.json"));
+        (rep, path, angle.to_degrees(), 1e3 * offset)
+    };
+    // The scene replayed with a mount believed: the report's mask figures.
+    let with_mount = |name: &str, mount: &Path| {
+        let dir = out.join(name);
+        let (ok, log) = replay(&[
+            scene_path.to_str().expect("utf-8"),
+            "--believed-mount",
+            mount.to_str().expect("utf-8"),
+            "--out",
+            dir.to_str().expect("utf-8"),
+        ]);
+        assert!(ok, "{log}");
+        report(&dir.join("report.json"))["mask"].clone()
+    };
+    let leak = |r: &serde_json::Value| r["leak_pct_mean"].as_f64().expect("leak");
+    let (rep, mount_path, deg, mm) = fit_mount("calibrated", &[]);
     eprintln!("calibrated mount vs truth: {deg:.3} deg, {mm:.2} mm");
     assert!(deg <= 0.3 && mm <= 6.0, "{deg} deg {mm} mm\n{rep}");
     let iou = &rep["iou"];
@@ -731,43 +752,18 @@ fn the_mount_of_a_camera_on_a_head_is_calibrated_from_its_recording() {
     assert!(iou["fit_after"].as_f64() > Some(0.95), "{iou}");
     // The scene with the calibrated mount: no dilation, the robot erased.
     let mount_arg = mount_path.to_str().expect("utf-8");
-    let replayed = out.join("replayed");
-    let (ok, log) = replay(&[
-        scene_path.to_str().expect("utf-8"),
-        "--believed-mount",
-        mount_arg,
-        "--out",
-        replayed.to_str().expect("utf-8"),
-    ]);
-    assert!(ok, "{log}");
-    let leak = |r: &serde_json::Value| r["leak_pct_mean"].as_f64().expect("leak");
-    let before = report(&out.join("recorded/report.json"));
-    let after = report(&replayed.join("report.json"));
+    let before = report(&out.join("recorded/report.json"))["mask"].clone();
+    let after = with_mount("replayed", &mount_path);
     eprintln!(
         "scene: leak {:.2} % -> {:.3} %",
-        leak(&before["mask"]),
-        leak(&after["mask"])
+        leak(&before),
+        leak(&after)
     );
-    assert!(leak(&before["mask"]) > 5.0, "{}", before["mask"]);
-    assert!(leak(&after["mask"]) <= 1.0, "{}", after["mask"]);
+    assert!(leak(&before) > 5.0, "{before}");
+    assert!(leak(&after) <= 1.0, "{after}");
     // With no silhouette at all: the frames' own edges (Canny's), the room's among them. The
     // reference masks only score it.
-    let edged = out.join("calibrated_edges");
-    let (ok, log) = calibrate(&[
-        "--recording",
-        recording.to_str().expect("utf-8"),
-        "--urdf",
-        urdf_arg,
-        "--every",
-        "4",
-        "--hidden-below",
-        "0",
-        "--edges",
-        "--out",
-        edged.to_str().expect("utf-8"),
-    ]);
-    assert!(ok, "{log}");
-    let rep = report(&edged.join("report.json"));
+    let (rep, edges_mount, deg, mm) = fit_mount("calibrated_edges", &["--edges"]);
     assert!(
         rep["silhouettes"]["source"]
             .as_str()
@@ -775,34 +771,18 @@ fn the_mount_of_a_camera_on_a_head_is_calibrated_from_its_recording() {
         "{}",
         rep["silhouettes"]
     );
-    let edges_mount = edged.join("camera_mount.yaml");
-    let mount = avatarm_record::camera::read_mount(&edges_mount).expect("mount");
-    let (angle, offset) = avatarm_core::vision::head::pose_error(&mount, &head.mount);
-    let (deg, mm) = (angle.to_degrees(), 1e3 * offset);
     eprintln!("mount calibrated from edges vs truth: {deg:.3} deg, {mm:.2} mm");
-    // Measured: 0.22 deg, 5.0 mm (from the silhouettes, 0.14 deg, 3.1 mm).
+    // Measured: 0.22 deg, 4.8 mm (from the silhouettes, 0.14 deg, 3.1 mm).
     assert!(deg <= 0.4 && mm <= 8.0, "{deg} deg {mm} mm\n{rep}");
     assert!(
         rep["iou"]["fit_after"].as_f64() > Some(0.95),
         "{}",
         rep["iou"]
     );
-    let replayed_edges = out.join("replayed_edges");
-    let (ok, log) = replay(&[
-        scene_path.to_str().expect("utf-8"),
-        "--believed-mount",
-        edges_mount.to_str().expect("utf-8"),
-        "--out",
-        replayed_edges.to_str().expect("utf-8"),
-    ]);
-    assert!(ok, "{log}");
-    let from_edges = report(&replayed_edges.join("report.json"));
-    eprintln!(
-        "scene, mount from edges: leak {:.3} %",
-        leak(&from_edges["mask"])
-    );
-    // Measured: 0.76 % (0.44 % from the silhouettes).
-    assert!(leak(&from_edges["mask"]) <= 1.0, "{}", from_edges["mask"]);
+    let from_edges = with_mount("replayed_edges", &edges_mount);
+    eprintln!("scene, mount from edges: leak {:.3} %", leak(&from_edges));
+    // Measured: 0.70 % (0.44 % from the silhouettes).
+    assert!(leak(&from_edges) <= 1.0, "{from_edges}");
     // The recording's own replay follows the head: its masks at the recorded head poses
     // times the recorded mount, then the calibrated one.
     let footage =

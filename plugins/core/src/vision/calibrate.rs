@@ -585,6 +585,21 @@ fn grown_box(
     ]
 }
 
+/// The share of each pixel of the box `u` (`[x0, y0, x1, y1)`) that [`coverage`]'s `bits`
+/// (rows `w` wide) cover, blurred by [`blur`]: `(x1 - x0) × (y1 - y0)` values, top row first.
+fn blurred_coverage(bits: &[u16], u: [usize; 4], w: usize) -> Vec<f32> {
+    let (bw, bh) = (u[2] - u[0], u[3] - u[1]);
+    let mut m = vec![0.0f32; bw * bh];
+    for y in 0..bh {
+        let row = &bits[(u[1] + y) * w + u[0]..(u[1] + y) * w + u[2]];
+        for (v, c) in m[y * bw..(y + 1) * bw].iter_mut().zip(row) {
+            *v = c.count_ones() as f32 / 16.0;
+        }
+    }
+    blur(&mut m, bw, bh);
+    m
+}
+
 /// Two passes of a box filter of radius 2 along rows and columns (edges repeat).
 fn blur(v: &mut [f32], w: usize, h: usize) {
     let mut tmp = vec![0.0f32; v.len()];
@@ -680,14 +695,7 @@ impl Area {
                 ]
             };
             let (bw, bh) = (u[2] - u[0], u[3] - u[1]);
-            let mut m = vec![0.0f32; bw * bh];
-            for y in 0..bh {
-                let row = &bits[(u[1] + y) * w + u[0]..(u[1] + y) * w + u[2]];
-                for (v, c) in m[y * bw..(y + 1) * bw].iter_mut().zip(row) {
-                    *v = c.count_ones() as f32 / 16.0;
-                }
-            }
-            blur(&mut m, bw, bh);
+            let m = blurred_coverage(&bits, u, w);
             let mut ssd = 0.0f64;
             for y in 0..bh {
                 let observed = &f.observed[(u[1] + y) * w + u[0]..(u[1] + y) * w + u[2]];
@@ -757,14 +765,7 @@ impl EdgeArea {
                 return far * far;
             }
             let bits = coverage(triangles, &pose, &k, &self.d);
-            let mut m = vec![0.0f32; bw * bh];
-            for y in 0..bh {
-                let row = &bits[(u[1] + y) * w + u[0]..(u[1] + y) * w + u[2]];
-                for (v, c) in m[y * bw..(y + 1) * bw].iter_mut().zip(row) {
-                    *v = c.count_ones() as f32 / 16.0;
-                }
-            }
-            blur(&mut m, bw, bh);
+            let m = blurred_coverage(&bits, u, w);
             let (mut weight, mut sum) = (0.0f64, 0.0f64);
             for y in 1..bh - 1 {
                 for x in 1..bw - 1 {
