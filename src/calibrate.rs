@@ -15,7 +15,8 @@
 //! `camera_pose.yaml` (`base_from_camera`, a 4x4 matrix: what `--pose` and `avatarm import
 //! --pose` read), `camera_info.yaml` with `--intrinsics`, `overlay_before_NNNNN.png` and
 //! `overlay_after_NNNNN.png` (the model's silhouette tinted red, the reference's outline in
-//! green), and `report.json`.
+//! green; with `--edges` the frame's Canny edges in yellow, and each frame's edge map, white on
+//! black, in `edges_NNNNN.png`), and `report.json`.
 //!
 //! A recording of a camera on a head (Alice's headset camera: the head's tracked poses and the
 //! mount, `avatarm_record::HEAD_FRAME`) gets its *mount* fitted instead: each frame's robot is
@@ -209,6 +210,14 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
             ),
         ));
     }
+    if o.edges.is_some() {
+        // For the edge maps, written as they are found.
+        std::fs::create_dir_all(&o.out).map_err(|source| AppError::Io {
+            path: o.out.clone(),
+            action: "create",
+            source,
+        })?;
+    }
     // Where both exist, how well the background's silhouettes match the reference masks.
     let mut difference_vs_reference = Vec::new();
     // The frames with a silhouette: the robot's at its joints, and the observed one.
@@ -255,6 +264,12 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
                     )));
                 }
                 let edges = image_edges(&frame, (low, high));
+                // Written before the fit, for tuning the thresholds by eye even when the fit
+                // is refused or stopped.
+                let map = edges.iter().map(|&v| 255 * v).collect();
+                if let Some(map) = image::GrayImage::from_raw(size.0, size.1, map) {
+                    save_png(&o.out.join(format!("edges_{i:05}.png")), map)?;
+                }
                 if !edges.contains(&1) {
                     notes.push(format!(
                         "frame {i}: no edge above --edge-thresholds {low},{high}: left out"
@@ -407,21 +422,16 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
                 .map_or(f64::NAN, |s| s.iou)
         };
         let image = decode(&recording.frames[*i], &name)?.into_raw();
+        // With --edges: what the fit drew the outline to, for tuning --edge-thresholds.
+        let edges = o.edges.is_some().then_some(f.observed.as_slice());
         for (tag, m) in [("before", &before), ("after", &after)] {
-            let picture = overlay(&image, m, scored.as_deref(), w);
-            let path = o.out.join(format!("overlay_{tag}_{i:05}.png"));
-            image::RgbaImage::from_raw(w, h, picture)
-                .ok_or(AppError::ImageSize {
-                    what: "overlay".into(),
-                    width: w,
-                    height: h,
-                })?
-                .save(&path)
-                .map_err(|source| AppError::Image {
-                    path: path.clone(),
-                    action: "write",
-                    source,
-                })?;
+            let picture = overlay(&image, m, edges, scored.as_deref(), w);
+            let picture = image::RgbaImage::from_raw(w, h, picture).ok_or(AppError::ImageSize {
+                what: "overlay".into(),
+                width: w,
+                height: h,
+            })?;
+            save_png(&o.out.join(format!("overlay_{tag}_{i:05}.png")), picture)?;
         }
         per_frame.push(json!({
             "frame": i,
@@ -491,7 +501,7 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     let base_from_camera = result.camera_from_base.inverse();
     let change = result.camera_from_base * rough.inverse();
     // The starts reach 8 deg and 0.1 m from the rough pose: an answer far beyond them is more
-    // likely a wrong basin (with --edges, the robot drawn small onto clutter) than the camera.
+    // likely a wrong basin (with --edges, the outline laid on other edges) than the camera.
     let (moved_deg, moved_m) = (
         change.rotation.angle().to_degrees(),
         change.translation.vector.norm(),
@@ -642,6 +652,20 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     let text = serde_json::to_string_pretty(&report)?;
     std::fs::write(&path, text + "\n").map_err(|e| AppError::write(path, e))?;
     Ok(report)
+}
+
+/// Writes a PNG, naming the path in the error.
+fn save_png<P, C>(path: &std::path::Path, picture: image::ImageBuffer<P, C>) -> Result<(), AppError>
+where
+    P: image::PixelWithColorType,
+    [P::Subpixel]: image::EncodableLayout,
+    C: std::ops::Deref<Target = [P::Subpixel]>,
+{
+    picture.save(path).map_err(|source| AppError::Image {
+        path: path.to_path_buf(),
+        action: "write",
+        source,
+    })
 }
 
 /// The frame's image edges, 0/1 per pixel (top row first): Canny's detector on its luma

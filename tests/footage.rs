@@ -964,7 +964,8 @@ fn the_real_panda_camera_is_calibrated_from_its_own_frames() {
     // From the lab's own edges, no mask: from the fitted pose turned 2 deg and moved 9 mm (a
     // close rough pose), the edges find it again as well as the masks did (measured: IoU
     // 0.597 -> 0.754 on the fit frames, 0.653 held out; the masks from the same start 0.753,
-    // 0.655). From the recording's far rough pose they do not (docs/real-footage.md).
+    // 0.655). From the recording's far rough pose they do so at one Canny setting of three
+    // (docs/real-footage.md).
     let fitted_pose = avatarm_record::camera::read_pose(&fitted.join("camera_pose.yaml"))
         .expect("the fitted pose");
     let nudge = Isometry3::from_parts(
@@ -1009,6 +1010,37 @@ fn the_real_panda_camera_is_calibrated_from_its_own_frames() {
     let v = |k: &str| iou[k].as_f64().expect(k);
     assert!(v("fit_before") < 0.65, "{iou}");
     assert!(v("fit_after") > 0.72 && v("held_out_after") > 0.62, "{iou}");
+    // What the fit drew to, for tuning the thresholds: each frame's edge map, and the same
+    // edges in yellow on its overlays; a fit to masks writes no edge map.
+    let map = image::open(edged.join("edges_00005.png"))
+        .expect("the edge map")
+        .into_luma8();
+    let on = map.pixels().filter(|p| p.0[0] == 255).count();
+    let share = on as f64 / f64::from(map.width() * map.height());
+    assert!(
+        map.pixels().all(|p| matches!(p.0[0], 0 | 255)) && (0.005..0.3).contains(&share),
+        "edge pixels: {:.2} %",
+        100.0 * share
+    );
+    let drawn = image::open(edged.join("overlay_after_00005.png"))
+        .expect("the overlay")
+        .into_rgba8();
+    assert_eq!(drawn.dimensions(), map.dimensions());
+    // Each edge pixel is yellow there, or green where the reference's outline lies over it.
+    let (mut yellow, mut green) = (0, 0);
+    for ((x, y, e), p) in map.enumerate_pixels().zip(drawn.pixels()) {
+        match (e.0[0], p.0) {
+            (0, _) => {}
+            (_, [255, 220, 0, 255]) => yellow += 1,
+            (_, [40, 255, 40, 255]) => green += 1,
+            (_, other) => panic!("edge pixel ({x}, {y}) drawn {other:?}"),
+        }
+    }
+    assert!(
+        yellow > on * 3 / 4,
+        "{yellow} yellow, {green} green, {on} edges"
+    );
+    assert!(!fitted.join("edges_00000.png").exists());
     // The calibrated pose through the erase.
     let (ok, log) = replay(&[
         "--recording",

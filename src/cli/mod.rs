@@ -296,7 +296,8 @@ enum Command {
         edges: bool,
         /// With --edges: Canny's LOW,HIGH thresholds on the Sobel gradient's magnitude of the
         /// blurred luma (imageproc's scale: a clean step of N 8-bit levels gives about 2N to
-        /// 4N; at most about 1140).
+        /// 4N; at most about 1140). Each frame's edge map is written to `edges_NNNNN.png`
+        /// and drawn in yellow on the overlays, to tune them by eye.
         #[arg(
             long = "edge-thresholds",
             requires = "edges",

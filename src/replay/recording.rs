@@ -918,13 +918,22 @@ enum Part {
     Raw,
 }
 
-/// The frame with the mask tinted red over it and the reference mask's outline in green: where
-/// the mask lands against where the robot is, by eye.
-pub(crate) fn overlay(frame: &[u8], mask: &[u8], reference: Option<&[u8]>, width: u32) -> Vec<u8> {
+/// The frame (RGBA8, `width` wide) with the mask tinted red over it, image `edges` (0/1 per
+/// pixel, as `avatarm calibrate --edges` fits to) in yellow, and the reference mask's outline
+/// in green on top: where the mask lands against where the robot is, by eye.
+pub(crate) fn overlay(
+    frame: &[u8],
+    mask: &[u8],
+    edges: Option<&[u8]>,
+    reference: Option<&[u8]>,
+    width: u32,
+) -> Vec<u8> {
     let w = width as usize;
     let mut out = frame.to_vec();
     for (i, px) in out.chunks_exact_mut(4).enumerate() {
-        if mask[i] > 0 {
+        if edges.is_some_and(|e| e[i] > 0) {
+            px.copy_from_slice(&EDGE_COLOUR);
+        } else if mask[i] > 0 {
             px[0] = ((u16::from(px[0]) + 255) / 2) as u8;
             px[1] /= 2;
             px[2] /= 2;
@@ -954,6 +963,9 @@ pub(crate) fn overlay(frame: &[u8], mask: &[u8], reference: Option<&[u8]>, width
 }
 
 use super::spread;
+
+/// The colour [`overlay`] draws image edges in (RGBA8).
+pub(crate) const EDGE_COLOUR: [u8; 4] = [255, 220, 0, 255];
 
 fn mean(v: &[f64]) -> Option<f64> {
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
@@ -1081,7 +1093,7 @@ fn write_outputs(
             }));
         }
         if let Some(live) = result.inputs.as_ref().map(|x| &x.0) {
-            let picture = overlay(live, mask, input.references[i].as_deref(), w);
+            let picture = overlay(live, mask, None, input.references[i].as_deref(), w);
             png(format!("overlay_{i:05}.png"), rgb(&picture)?)?;
         }
         let erased_png = png(format!("erased_{i:05}.png"), rgb(composite)?)?;

@@ -489,15 +489,12 @@ struct Level {
 
 /// The fit's cost at one working resolution.
 struct Chamfer {
-    k: Intrinsics,
-    d: Distortion,
+    /// At this resolution.
+    correction: Correction,
     frames: Vec<Level>,
     truncate_px: f64,
     /// Edges ([`Observed::Edges`]): only the model's outline is drawn to the observed map.
     one_sided: bool,
-    rough: Isometry3<f64>,
-    fit_focal: bool,
-    evaluations: std::sync::atomic::AtomicU64,
 }
 
 /// The finest cost: the squared difference between the model's sub-pixel coverage and the
@@ -506,12 +503,8 @@ struct Chamfer {
 /// model's outline moves by a fraction of a pixel, and the observed outline's quantisation
 /// averages out over its thousands of pixels; a binary raster's chamfer is flat there.
 struct Area {
-    k: Intrinsics,
-    d: Distortion,
+    correction: Correction,
     frames: Vec<AreaFrame>,
-    rough: Isometry3<f64>,
-    fit_focal: bool,
-    evaluations: std::sync::atomic::AtomicU64,
 }
 
 /// One frame of the area cost: the triangles, the observed silhouette blurred, the box
@@ -530,13 +523,9 @@ struct AreaFrame {
 /// outline's chamfer is flat; squared, its minimum is where the soft outline is centred on the
 /// edges, not anywhere within its width.
 struct EdgeArea {
-    k: Intrinsics,
-    d: Distortion,
+    correction: Correction,
     frames: Vec<EdgeFrame>,
     truncate_px: f32,
-    rough: Isometry3<f64>,
-    fit_focal: bool,
-    evaluations: std::sync::atomic::AtomicU64,
 }
 
 /// One frame of the soft edge cost: the triangles, and the truncated distance (px) from each
@@ -627,17 +616,10 @@ fn blur(v: &mut [f32], w: usize, h: usize) {
 }
 
 impl Area {
-    fn new(
-        frames: &[SilhouetteFrame],
-        k: &Intrinsics,
-        d: Distortion,
-        rough: Isometry3<f64>,
-        fit_focal: bool,
-    ) -> Self {
-        let (w, h) = (k.width as usize, k.height as usize);
+    fn new(frames: &[SilhouetteFrame], correction: Correction) -> Self {
+        let (w, h) = (correction.k.width as usize, correction.k.height as usize);
         Self {
-            k: *k,
-            d,
+            correction,
             frames: frames
                 .iter()
                 .map(|f| {
@@ -662,25 +644,20 @@ impl Area {
                     }
                 })
                 .collect(),
-            rough,
-            fit_focal,
-            evaluations: Default::default(),
         }
     }
 
     fn at(&self, p: &[f64]) -> f64 {
-        self.evaluations
-            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let (pose, k) = candidate(p, &self.rough, &self.k, self.fit_focal);
+        let (pose, k, d) = self.correction.evaluate(p);
         let (w, h) = (k.width as usize, k.height as usize);
         let per_frame = |f: &AreaFrame| {
-            let bits = coverage(&f.triangles, &pose, &k, &self.d);
+            let bits = coverage(&f.triangles, &pose, &k, &d);
             // Both silhouettes, blurred, are zero outside the union of their grown boxes: the
             // blur and the difference run there alone.
             let model = f
                 .triangles
                 .iter()
-                .filter_map(|t| project(t, &pose, &k, &self.d))
+                .filter_map(|t| project(t, &pose, &k, &d))
                 .flatten();
             let b = grown_box(model, BLUR_MARGIN, w, h);
             let o = f.within;
@@ -713,18 +690,10 @@ impl Area {
 }
 
 impl EdgeArea {
-    fn new(
-        frames: &[SilhouetteFrame],
-        k: &Intrinsics,
-        d: Distortion,
-        truncate_px: f32,
-        rough: Isometry3<f64>,
-        fit_focal: bool,
-    ) -> Self {
-        let (w, h) = (k.width as usize, k.height as usize);
+    fn new(frames: &[SilhouetteFrame], correction: Correction, truncate_px: f32) -> Self {
+        let (w, h) = (correction.k.width as usize, correction.k.height as usize);
         Self {
-            k: *k,
-            d,
+            correction,
             frames: frames
                 .iter()
                 .map(|f| {
@@ -739,16 +708,11 @@ impl EdgeArea {
                 })
                 .collect(),
             truncate_px,
-            rough,
-            fit_focal,
-            evaluations: Default::default(),
         }
     }
 
     fn at(&self, p: &[f64]) -> f64 {
-        self.evaluations
-            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let (pose, k) = candidate(p, &self.rough, &self.k, self.fit_focal);
+        let (pose, k, d) = self.correction.evaluate(p);
         let (w, h) = (k.width as usize, k.height as usize);
         let far = f64::from(self.truncate_px);
         let per_frame = |EdgeFrame {
@@ -757,14 +721,14 @@ impl EdgeArea {
                          }: &EdgeFrame| {
             let model = triangles
                 .iter()
-                .filter_map(|t| project(t, &pose, &k, &self.d))
+                .filter_map(|t| project(t, &pose, &k, &d))
                 .flatten();
             let u = grown_box(model, BLUR_MARGIN, w, h);
             let (bw, bh) = (u[2].saturating_sub(u[0]), u[3].saturating_sub(u[1]));
             if bw < 3 || bh < 3 {
                 return far * far;
             }
-            let bits = coverage(triangles, &pose, &k, &self.d);
+            let bits = coverage(triangles, &pose, &k, &d);
             let m = blurred_coverage(&bits, u, w);
             let (mut weight, mut sum) = (0.0f64, 0.0f64);
             for y in 1..bh - 1 {
@@ -800,6 +764,13 @@ impl FullCost {
             Self::Edges(e) => e.at(p),
         }
     }
+
+    fn correction(&self) -> &Correction {
+        match self {
+            Self::Area(a) => &a.correction,
+            Self::Edges(e) => &e.correction,
+        }
+    }
 }
 
 /// The mean of `per_frame` over the frames, on two threads (this machine's cores; the sum
@@ -826,41 +797,77 @@ impl CostFunction for Stage<'_> {
     }
 }
 
-/// `T(t) · exp(ω) · rough`, and the intrinsics scaled by `(1 + p[6], 1 + p[7])`.
-fn candidate(
-    p: &[f64],
-    rough: &Isometry3<f64>,
-    k: &Intrinsics,
+/// What a stage's parameters mean, shared by every cost: a correction of the rough pose in
+/// the camera frame, `T(t) · exp(ω) · rough` (`p[0..3]` = ω in rad, `p[3..6]` = t in m), and
+/// with `fit_focal` the intrinsics `k` (at the stage's resolution) scaled by `(1 + p[6],
+/// 1 + p[7])`; the lens `d` the stage draws through; and the stage's count of evaluations.
+struct Correction {
+    rough: Isometry3<f64>,
+    k: Intrinsics,
+    d: Distortion,
     fit_focal: bool,
-) -> (Isometry3<f64>, Intrinsics) {
-    let rotation = UnitQuaternion::from_scaled_axis(Vector3::new(p[0], p[1], p[2]));
-    let delta = Isometry3::from_parts(Translation3::new(p[3], p[4], p[5]), rotation);
-    let mut k = *k;
-    if fit_focal && p.len() >= 8 {
-        k.fx *= 1.0 + p[6];
-        k.fy *= 1.0 + p[7];
+    evaluations: std::sync::atomic::AtomicU64,
+}
+
+impl Correction {
+    fn new(rough: Isometry3<f64>, k: Intrinsics, d: Distortion, fit_focal: bool) -> Self {
+        Self {
+            rough,
+            k,
+            d,
+            fit_focal,
+            evaluations: Default::default(),
+        }
     }
-    (delta * rough, k)
+
+    /// The same correction at `scale` of the resolution, its count at zero.
+    fn scaled(&self, scale: f64) -> Self {
+        Self::new(self.rough, self.k.scaled(scale), self.d, self.fit_focal)
+    }
+
+    /// The same correction, its count at zero.
+    fn fresh(&self) -> Self {
+        Self::new(self.rough, self.k, self.d, self.fit_focal)
+    }
+
+    /// The pose (`camera_from_base`) and intrinsics that `p` stands for.
+    fn candidate(&self, p: &[f64]) -> (Isometry3<f64>, Intrinsics) {
+        let rotation = UnitQuaternion::from_scaled_axis(Vector3::new(p[0], p[1], p[2]));
+        let delta = Isometry3::from_parts(Translation3::new(p[3], p[4], p[5]), rotation);
+        let mut k = self.k;
+        if self.fit_focal && p.len() >= 8 {
+            k.fx *= 1.0 + p[6];
+            k.fy *= 1.0 + p[7];
+        }
+        (delta * self.rough, k)
+    }
+
+    /// Counts one evaluation of the stage's cost at `p`: its pose, intrinsics and lens.
+    fn evaluate(&self, p: &[f64]) -> (Isometry3<f64>, Intrinsics, Distortion) {
+        self.evaluations
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let (pose, k) = self.candidate(p);
+        (pose, k, self.d)
+    }
+
+    fn evaluations(&self) -> u64 {
+        self.evaluations.load(std::sync::atomic::Ordering::Relaxed)
+    }
 }
 
 impl Chamfer {
-    #[expect(
-        clippy::too_many_arguments,
-        reason = "one stage's settings, each used once, at two call sites"
-    )]
+    /// The cost at `scale` of `full`'s resolution.
     fn new(
         frames: &[SilhouetteFrame],
-        k: &Intrinsics,
-        d: Distortion,
+        full: &Correction,
         scale: f64,
         truncate_px: f64,
-        rough: Isometry3<f64>,
-        fit_focal: bool,
         observed: Observed,
     ) -> Self {
-        let small = k.scaled(scale);
+        let correction = full.scaled(scale);
+        let (small, rough, d) = (correction.k, correction.rough, correction.d);
         let (w, h) = (small.width as usize, small.height as usize);
-        let (w0, h0) = (k.width as usize, k.height as usize);
+        let (w0, h0) = (full.k.width as usize, full.k.height as usize);
         let levels = frames
             .iter()
             .map(|f| {
@@ -895,27 +902,21 @@ impl Chamfer {
             })
             .collect();
         Self {
-            k: small,
-            d,
+            correction,
             frames: levels,
             truncate_px,
             one_sided: observed == Observed::Edges,
-            rough,
-            fit_focal,
-            evaluations: Default::default(),
         }
     }
 
     /// The mean truncated chamfer distance (px at this resolution) over the frames: both ways
     /// for silhouettes, from the model's outline alone for edges.
     fn at(&self, p: &[f64]) -> f64 {
-        self.evaluations
-            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let (pose, k) = candidate(p, &self.rough, &self.k, self.fit_focal);
+        let (pose, k, d) = self.correction.evaluate(p);
         let (w, h) = (k.width as usize, k.height as usize);
         let tau = self.truncate_px;
         let per_frame = |f: &Level| {
-            let model = rasterize(&f.triangles, &pose, &k, &self.d);
+            let model = rasterize(&f.triangles, &pose, &k, &d);
             // Edges: where the image shows one, on either side; a robot cut by the frame's
             // border has no image edge there.
             let edges = if self.one_sided {
@@ -1104,17 +1105,9 @@ pub fn calibrate(
         p[3..6].copy_from_slice(&s.1);
         p
     };
+    let correction = Correction::new(*rough, *k, options.distortion, options.fit_focal);
     // Coarse: every start at a quarter of the resolution, outlines within 12 px there (48 px at full resolution) count.
-    let coarse = Chamfer::new(
-        frames,
-        k,
-        options.distortion,
-        0.25,
-        12.0,
-        *rough,
-        options.fit_focal,
-        options.observed,
-    );
+    let coarse = Chamfer::new(frames, &correction, 0.25, 12.0, options.observed);
     let mut steps = vec![0.05, 0.05, 0.05, 0.03, 0.03, 0.06];
     if options.fit_focal {
         steps.extend([0.03, 0.03]);
@@ -1131,22 +1124,13 @@ pub fn calibrate(
     coarse_ends.sort_by(|a, b| a.2.total_cmp(&b.2));
     let coarse_s = clock.elapsed().as_secs_f64();
     // Fine: the best few at half resolution, outlines within 10 px count.
-    let fine = Chamfer::new(
-        frames,
-        k,
-        options.distortion,
-        0.5,
-        10.0,
-        *rough,
-        options.fit_focal,
-        options.observed,
-    );
+    let fine = Chamfer::new(frames, &correction, 0.5, 10.0, options.observed);
     let fine_steps: Vec<f64> = steps.iter().map(|s| s * 0.3).collect();
     let rough_cost_px = fine.at(&vec![0.0; dims]);
     let mut ends = Vec::with_capacity(fine_count);
     for (j, (i, p, _)) in coarse_ends.iter().take(fine_count).enumerate() {
         let (p, c) = search(&|p| fine.at(p), p, &fine_steps, options.max_iters)?;
-        let (pose, _) = candidate(&p, rough, k, options.fit_focal);
+        let (pose, _) = correction.candidate(&p);
         ends.push((
             StartResult {
                 start: (starts[*i].0.map(f64::to_degrees), starts[*i].1),
@@ -1163,33 +1147,20 @@ pub fn calibrate(
     // sub-pixel coverage and the observed silhouette disagree; for edges the distance from the
     // model's soft outline to them, within 4 px.
     let full = match options.observed {
-        Observed::Silhouette => FullCost::Area(Area::new(
-            frames,
-            k,
-            options.distortion,
-            *rough,
-            options.fit_focal,
-        )),
-        Observed::Edges => FullCost::Edges(EdgeArea::new(
-            frames,
-            k,
-            options.distortion,
-            4.0,
-            *rough,
-            options.fit_focal,
-        )),
+        Observed::Silhouette => FullCost::Area(Area::new(frames, correction.fresh())),
+        Observed::Edges => FullCost::Edges(EdgeArea::new(frames, correction.fresh(), 4.0)),
     };
     let full_steps: Vec<f64> = fine_steps.iter().map(|s| s * 0.3).collect();
     // (Nelder-Mead returns its best, never worse than where it started on this cost.)
     let (p, _) = search(&|p| full.at(p), &ends[0].1, &full_steps, options.max_iters)?;
-    let (pose, _) = candidate(&p, rough, k, options.fit_focal);
+    let (pose, _) = correction.candidate(&p);
     ends[0].0.camera_from_base = pose;
     ends[0].0.cost_px = fine.at(&p);
     ends[0].1 = p;
     progress(total, total);
     let full_s = clock.elapsed().as_secs_f64() - coarse_s - fine_s;
     let (best, best_p) = ends[0].clone();
-    let (_, intrinsics) = candidate(&best_p, rough, k, options.fit_focal);
+    let (_, intrinsics) = correction.candidate(&best_p);
     let spread = ends
         .iter()
         .skip(1)
@@ -1201,12 +1172,8 @@ pub fn calibrate(
                 t.max(1e3 * d.translation.vector.norm()),
             )
         });
-    let full_evaluations = match &full {
-        FullCost::Area(a) => &a.evaluations,
-        FullCost::Edges(e) => &e.evaluations,
-    };
-    let stage_evaluations = [&coarse.evaluations, &fine.evaluations, full_evaluations]
-        .map(|c| c.load(std::sync::atomic::Ordering::Relaxed));
+    let stage_evaluations =
+        [&coarse.correction, &fine.correction, full.correction()].map(Correction::evaluations);
     let evaluations = stage_evaluations.iter().sum();
     Ok(CalibrationResult {
         camera_from_base: best.camera_from_base,
