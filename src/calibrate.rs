@@ -97,7 +97,7 @@ pub struct CalibrateOptions {
     pub background_threshold: u8,
     /// Fit to each frame's image edges instead of silhouettes: Canny's low and high
     /// thresholds on the Sobel gradient's magnitude of the blurred luma (imageproc's scale: a
-    /// clean step of N 8-bit levels gives about 2N to 4N; at most about 1140).
+    /// clean step of N 8-bit levels gives about 2N to 4N; at most 1141, `MAX_SOBEL`).
     pub edges: Option<(f32, f32)>,
     /// Output folder.
     pub out: PathBuf,

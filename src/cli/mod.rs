@@ -296,14 +296,14 @@ enum Command {
         edges: bool,
         /// With --edges: Canny's LOW,HIGH thresholds on the Sobel gradient's magnitude of the
         /// blurred luma (imageproc's scale: a clean step of N 8-bit levels gives about 2N to
-        /// 4N; at most about 1140). Each frame's edge map is written to `edges_NNNNN.png`
+        /// 4N; at most 1141). Each frame's edge map is written to `edges_NNNNN.png`
         /// and drawn in yellow on the overlays, to tune them by eye.
         #[arg(
             long = "edge-thresholds",
             requires = "edges",
             value_name = "LOW,HIGH",
             value_delimiter = ',',
-            default_values_t = [20.0, 60.0]
+            default_value = "20,60"
         )]
         edge_thresholds: Vec<f32>,
         /// Output folder.
@@ -1409,7 +1409,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 (true, v) => {
                     return Err(AppError::flag(
                         "--edge-thresholds",
-                        format!("{} numbers: give LOW,HIGH", v.len()),
+                        format!("{} given: give two numbers, LOW,HIGH", list(v)),
                     ));
                 }
             };
@@ -1432,8 +1432,8 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     return Err(AppError::flag(
                         "--look-at",
                         format!(
-                            "{} numbers: give the eye's x,y,z then the target's (6)",
-                            v.len()
+                            "{} given: give six numbers, the eye's x,y,z then the target's",
+                            list(v)
                         ),
                     ));
                 }
@@ -2001,6 +2001,14 @@ fn run(cli: Cli) -> Result<(), AppError> {
 }
 
 /// One `--fit` entry: `FIRST-LAST` frame indices (inclusive, FIRST ≤ LAST) or one index.
+/// Numbers as they were given on the command line, comma-separated (for error messages).
+fn list(v: &[impl std::fmt::Display]) -> String {
+    v.iter()
+        .map(|x| x.to_string())
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
 fn frame_range(s: &str) -> Result<(usize, usize), AppError> {
     let bad = || AppError::Value {
         text: s.to_owned(),
