@@ -268,7 +268,9 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
                 // is refused or stopped.
                 let map = edges.iter().map(|&v| 255 * v).collect();
                 if let Some(map) = image::GrayImage::from_raw(size.0, size.1, map) {
-                    save_png(&o.out.join(format!("edges_{i:05}.png")), map)?;
+                    let path = o.out.join(format!("edges_{i:05}.png"));
+                    map.save(&path)
+                        .map_err(|source| AppError::write_image(path, source))?;
                 }
                 if !edges.contains(&1) {
                     notes.push(format!(
@@ -431,7 +433,10 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
                 width: w,
                 height: h,
             })?;
-            save_png(&o.out.join(format!("overlay_{tag}_{i:05}.png")), picture)?;
+            let path = o.out.join(format!("overlay_{tag}_{i:05}.png"));
+            picture
+                .save(&path)
+                .map_err(|source| AppError::write_image(path, source))?;
         }
         per_frame.push(json!({
             "frame": i,
@@ -652,20 +657,6 @@ pub fn run_calibrate(o: &CalibrateOptions) -> Result<serde_json::Value, AppError
     let text = serde_json::to_string_pretty(&report)?;
     std::fs::write(&path, text + "\n").map_err(|e| AppError::write(path, e))?;
     Ok(report)
-}
-
-/// Writes a PNG, naming the path in the error.
-fn save_png<P, C>(path: &std::path::Path, picture: image::ImageBuffer<P, C>) -> Result<(), AppError>
-where
-    P: image::PixelWithColorType,
-    [P::Subpixel]: image::EncodableLayout,
-    C: std::ops::Deref<Target = [P::Subpixel]>,
-{
-    picture.save(path).map_err(|source| AppError::Image {
-        path: path.to_path_buf(),
-        action: "write",
-        source,
-    })
 }
 
 /// The frame's image edges, 0/1 per pixel (top row first): Canny's detector on its luma

@@ -148,6 +148,15 @@ impl AppError {
         }
     }
 
+    /// An [`AppError::Image`] for writing the image at `path`.
+    pub fn write_image(path: impl Into<PathBuf>, source: image::ImageError) -> Self {
+        Self::Image {
+            path: path.into(),
+            action: "write",
+            source,
+        }
+    }
+
     /// An [`AppError::Replay`].
     pub fn replay(message: impl Into<String>) -> Self {
         Self::Replay {

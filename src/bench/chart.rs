@@ -117,11 +117,7 @@ pub fn save_chart(
             height: h,
         })?
         .save(png)
-        .map_err(|source| AppError::Image {
-            path: png.to_owned(),
-            action: "write",
-            source,
-        })
+        .map_err(|source| AppError::write_image(png, source))
 }
 
 /// The axis range of some values with a margin; `(0, 1)` when none is finite.

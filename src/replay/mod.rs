@@ -104,11 +104,7 @@ fn png_bytes(width: u32, height: u32, data: &[u8], mask: bool) -> Result<Vec<u8>
     let mut out = std::io::Cursor::new(Vec::new());
     image
         .write_to(&mut out, image::ImageFormat::Png)
-        .map_err(|source| AppError::Image {
-            path: PathBuf::from("(recording)"),
-            action: "write",
-            source,
-        })?;
+        .map_err(|source| AppError::write_image("(recording)", source))?;
     Ok(out.into_inner())
 }
 
@@ -663,11 +659,7 @@ fn score_frame(
             image::DynamicImage::ImageRgba8(img)
                 .to_rgb8()
                 .save(&path)
-                .map_err(|source| AppError::Image {
-                    path,
-                    action: "write",
-                    source,
-                })
+                .map_err(|source| AppError::write_image(path, source))
         };
         save_rgba(format!("frame_{i:05}.png"), &inputs.live)?;
         save_rgba(format!("erased_{i:05}.png"), &gpu)?;
@@ -680,11 +672,8 @@ fn score_frame(
                     width: w,
                     height: h,
                 })?;
-            img.save(&path).map_err(|source| AppError::Image {
-                path,
-                action: "write",
-                source,
-            })
+            img.save(&path)
+                .map_err(|source| AppError::write_image(path, source))
         };
         gray(&gpu_mask, format!("mask_{i:05}.png"))?;
         gray(&truth, format!("gt_silhouette_{i:05}.png"))?;
@@ -1022,11 +1011,7 @@ fn finish(
                 height: k.height,
             })?
             .save(&path)
-            .map_err(|source| AppError::Image {
-                path,
-                action: "write",
-                source,
-            })?;
+            .map_err(|source| AppError::write_image(path, source))?;
     }
     write("report.json", &report)?;
     Ok(report)

@@ -983,11 +983,8 @@ fn write_outputs(
     let out = &o.out;
     let png = |name: String, img: image::DynamicImage| -> Result<Vec<u8>, AppError> {
         let path = out.join(&name);
-        img.save(&path).map_err(|source| AppError::Image {
-            path: path.clone(),
-            action: "write",
-            source,
-        })?;
+        img.save(&path)
+            .map_err(|source| AppError::write_image(&path, source))?;
         std::fs::read(&path).map_err(|source| AppError::Io {
             path,
             action: "read",

@@ -617,7 +617,7 @@ fn blur(v: &mut [f32], w: usize, h: usize) {
 
 impl Area {
     fn new(frames: &[SilhouetteFrame], correction: Correction) -> Self {
-        let (w, h) = (correction.k.width as usize, correction.k.height as usize);
+        let (w, h) = correction.size();
         Self {
             correction,
             frames: frames
@@ -691,7 +691,7 @@ impl Area {
 
 impl EdgeArea {
     fn new(frames: &[SilhouetteFrame], correction: Correction, truncate_px: f32) -> Self {
-        let (w, h) = (correction.k.width as usize, correction.k.height as usize);
+        let (w, h) = correction.size();
         Self {
             correction,
             frames: frames
@@ -828,6 +828,11 @@ impl Correction {
     /// The same correction, its count at zero.
     fn fresh(&self) -> Self {
         Self::new(self.rough, self.k, self.d, self.fit_focal)
+    }
+
+    /// The image size at the stage's resolution (px).
+    fn size(&self) -> (usize, usize) {
+        (self.k.width as usize, self.k.height as usize)
     }
 
     /// The pose (`camera_from_base`) and intrinsics that `p` stands for.
