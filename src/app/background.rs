@@ -53,6 +53,25 @@ pub struct BackgroundProgress {
     pub empty_room_done: bool,
 }
 
+impl BackgroundProgress {
+    /// Where a camera switched to at `now_s` (app clock) starts: from the beginning, except a
+    /// capture whose time has passed, which is not taken (the robot is in view by then: B
+    /// captures one).
+    pub(crate) fn after_switch(scene: &avatarm_scene::Scene, now_s: f64) -> Self {
+        let passed =
+            matches!(scene.file.background, BackgroundSpec::Capture { at_s } if at_s <= now_s);
+        if passed {
+            info!(
+                "background: the capture time has passed for this camera; press B with the robot out of view to capture one"
+            );
+        }
+        Self {
+            captured: passed,
+            ..default()
+        }
+    }
+}
+
 /// Loads an image file as RGBA8.
 pub fn load_rgba(path: &std::path::Path) -> Result<(u32, u32, Vec<u8>), AppError> {
     let img = image::open(path).map_err(|source| AppError::Image {
@@ -64,7 +83,9 @@ pub fn load_rgba(path: &std::path::Path) -> Result<(u32, u32, Vec<u8>), AppError
     Ok((rgba.width(), rgba.height(), rgba.into_raw()))
 }
 
-fn load_file(scene: Res<SceneResource>, mut out: MessageWriter<SetBackground>) {
+/// Sends the scene's `[background]` image file as H, if it names one. Runs at start-up, and
+/// again after a camera switch (the next camera's background).
+pub(crate) fn load_file(scene: Res<SceneResource>, mut out: MessageWriter<SetBackground>) {
     let Some(path) = &scene.0.background_path else {
         return;
     };
@@ -125,11 +146,16 @@ fn empty_room(
     let pose = scene.0.head.as_ref().map(|h| h.believed_camera_at(t));
     // The frame number this update's render carries (the count goes up in `Last`).
     let requested = frame.0.wrapping_add(1);
-    read_image_once(&mut commands, handle).observe(
+    read_image_once(&mut commands, handle.clone()).observe(
         move |read: On<ImageRead>,
               mut commands: Commands,
               settled: Res<RenderSettled>,
+              cameras: Option<Res<SimCameras>>,
               mut progress: ResMut<BackgroundProgress>| {
+            // A capture through a camera the app no longer looks through (a switch since).
+            if cameras.is_none_or(|c| c.no_robot.as_ref() != Some(&handle)) {
+                return;
+            }
             progress.in_flight = false;
             let rgba = read.data.clone();
             // A render with no mesh drawn yet is black: not a room.
@@ -197,5 +223,25 @@ fn capture_at(
     {
         progress.captured = true;
         out.write(CaptureBackground);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// After a camera switch a capture whose time has passed is not taken (the robot is in
+    /// view); one still to come is.
+    #[test]
+    fn a_switch_takes_no_capture_whose_time_has_passed() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("assets/scenes/pouring_two_views.toml");
+        let mut scene = avatarm_scene::Scene::load(&path, &Default::default()).expect("scene");
+        scene.file.background = BackgroundSpec::Capture { at_s: 1.0 };
+        assert!(BackgroundProgress::after_switch(&scene, 2.0).captured);
+        assert!(!BackgroundProgress::after_switch(&scene, 0.5).captured);
+        scene.file.background = BackgroundSpec::EmptyRoom;
+        let p = BackgroundProgress::after_switch(&scene, 2.0);
+        assert!(!p.captured && !p.empty_room_done);
     }
 }

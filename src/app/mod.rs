@@ -5,6 +5,7 @@
 //! - [`background`]: where the background H comes from (the scene's `[background]`).
 
 pub mod background;
+pub mod switch;
 
 use std::time::Duration;
 
@@ -202,8 +203,7 @@ impl PluginGroup for AvatarmPlugins {
             Mode::Preview(options) => options.webcam,
             Mode::Headless(_) | Mode::Serve(_) => None,
         };
-        let live_scores =
-            webcam.is_none() && self.scene.file.background == BackgroundSpec::EmptyRoom;
+        let live_scores = webcam.is_none() && empty_room_anywhere(&self.scene, &self.mode);
         // Two scored frames a second.
         let every = (self.scene.file.camera.fps / 2.0).round().max(1.0) as u64;
         let mut group = PluginGroupBuilder::start::<Self>()
@@ -245,6 +245,12 @@ impl PluginGroup for AvatarmPlugins {
                     // The room renders its ground truth anyway (the empty room is H).
                     group = group.add(preview::live_scores::LiveDrPlugin { every });
                 }
+                if options.cameras.len() > 1 {
+                    group = group.add(switch::CameraSwitchPlugin(switch::CameraViews {
+                        scenes: options.cameras.clone(),
+                        current: self.scene.camera_index,
+                    }));
+                }
                 group.add(preview::PreviewPlugin(options))
             }
         }
@@ -274,6 +280,68 @@ pub enum AvatarmSystems {
     /// `Last`, after the simulated room's capture: read-backs, scores and the replay's
     /// stepping.
     Score,
+}
+
+/// The scene's camera, or one the preview can switch to
+/// ([`preview::PreviewOptions::cameras`]), takes the simulated empty room as its background.
+fn empty_room_anywhere(scene: &Scene, mode: &Mode) -> bool {
+    let others = match mode {
+        Mode::Preview(options) => options.cameras.as_slice(),
+        Mode::Headless(_) | Mode::Serve(_) => &[],
+    };
+    std::iter::once(scene)
+        .chain(others)
+        .any(|s| s.file.background == BackgroundSpec::EmptyRoom)
+}
+
+/// The simulated camera's video for `scene`'s camera: its sensor model, latency and fps.
+fn sim_video(scene: &Scene) -> SimVideo {
+    SimVideo {
+        sensor: scene.file.camera.sensor.clone(),
+        frame_latency_s: scene.file.camera.frame_latency_s,
+        seed: scene.file.seed,
+        fps: scene.file.camera.fps,
+    }
+}
+
+/// The simulated head `scene`'s camera rides on, if it does.
+fn sim_head(scene: &Scene) -> Option<SimHead> {
+    scene.head.as_ref().map(|h| SimHead {
+        motion: h.motion.clone(),
+        mount: h.mount,
+        tracking: h.tracking,
+        seed: scene.file.seed,
+    })
+}
+
+/// The live video's state for `scene`'s camera (the webcam `webcam`, else the simulated
+/// camera): stale after three frame periods (at least 0.2 s) plus the camera's latency.
+fn live_video(scene: &Scene, webcam: Option<u32>) -> LiveVideo {
+    LiveVideo::new(
+        match webcam {
+            Some(i) => format!("webcam {i}"),
+            None => "simulated camera".to_owned(),
+        },
+        (3.0 / scene.file.camera.fps).max(0.2) + scene.file.camera.frame_latency_s,
+    )
+}
+
+/// The erase pipeline's configuration for `scene`'s camera (no source twin yet: the app's
+/// twin, once spawned).
+fn erase_config(scene: &Scene) -> EraseConfig {
+    EraseConfig {
+        settings: scene.file.erase,
+        camera: scene.believed_camera,
+        distortion: scene.lens,
+        joint_map: JointMap::new(&scene.model, &scene.twin_model),
+        model: scene.twin_model.clone(),
+        detail: twin_detail(&scene.file.twin),
+        base: scene.robot_base(),
+        source_twin: None,
+        occluders: scene_occluders(scene),
+        head_mount: scene.head.as_ref().map(|h| h.believed_mount),
+        view_background: view_background(scene),
+    }
 }
 
 /// The head's tracked poses (empty for a fixed camera), kept long enough for a frame's capture
@@ -350,45 +418,17 @@ impl Plugin for AvatarmSetupPlugin {
                 camera: scene.true_camera,
                 distortion: scene.lens,
                 props: scene.props.clone(),
-                // The no-robot view also gives the simulated "empty room" background.
-                ground_truth: matches!(mode, Mode::Headless(_))
-                    || scene.file.background == BackgroundSpec::EmptyRoom,
+                // The no-robot view also gives the simulated "empty room" background (of this
+                // camera, or of one the preview can switch to).
+                ground_truth: matches!(mode, Mode::Headless(_)) || empty_room_anywhere(scene, mode),
                 twin: None,
-                video: webcam.is_none().then(|| SimVideo {
-                    sensor: scene.file.camera.sensor.clone(),
-                    frame_latency_s: scene.file.camera.frame_latency_s,
-                    seed: scene.file.seed,
-                    fps: scene.file.camera.fps,
-                }),
-                head: scene.head.as_ref().map(|h| SimHead {
-                    motion: h.motion.clone(),
-                    mount: h.mount,
-                    tracking: h.tracking,
-                    seed: scene.file.seed,
-                }),
+                video: webcam.is_none().then(|| sim_video(scene)),
+                head: sim_head(scene),
                 external_drive: false,
             })
-            .insert_resource(LiveVideo::new(
-                match webcam {
-                    Some(i) => format!("webcam {i}"),
-                    None => "simulated camera".to_owned(),
-                },
-                (3.0 / scene.file.camera.fps).max(0.2) + scene.file.camera.frame_latency_s,
-            ))
+            .insert_resource(live_video(scene, webcam))
             .insert_resource(head_tracking(scene))
-            .insert_resource(EraseConfig {
-                settings: scene.file.erase,
-                camera: scene.believed_camera,
-                distortion: scene.lens,
-                joint_map: JointMap::new(&scene.model, &scene.twin_model),
-                model: scene.twin_model.clone(),
-                detail: twin_detail(&scene.file.twin),
-                base: scene.robot_base(),
-                source_twin: None,
-                occluders: scene_occluders(scene),
-                head_mount: scene.head.as_ref().map(|h| h.believed_mount),
-                view_background: view_background(scene),
-            })
+            .insert_resource(erase_config(scene))
             .insert_resource(interaction_config(scene))
             .add_systems(
                 PreStartup,

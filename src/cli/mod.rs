@@ -131,7 +131,7 @@ enum Command {
         /// Start an OpenXR session; without a runtime the preview window is used.
         #[arg(long)]
         xr: bool,
-        /// Quit after N frames.
+        /// Quit after N frames (with --screenshot, 10 more for it to be written).
         #[arg(long, value_name = "N")]
         frames: Option<u32>,
         /// Advance simulated time by MS per rendered frame instead of by the wall clock
@@ -141,6 +141,11 @@ enum Command {
         /// Save a screenshot of the window at the last frame.
         #[arg(long, value_name = "PATH")]
         screenshot: Option<PathBuf>,
+        /// Press KEY at rendered frame N (from 1) for one frame, for scripted runs (repeatable;
+        /// e.g. `--press 60:C` switches camera at frame 60). KEY: one of the keys below
+        /// (V, C, E, M, W, B, R, F12, Esc).
+        #[arg(long, value_name = "N:KEY", value_parser = crate::preview::keys::parse_press)]
+        press: Vec<(u32, bevy::input::keyboard::KeyCode)>,
         /// Folder searched for package:// URIs (repeatable).
         #[arg(long = "package-path", value_name = "DIR")]
         package_path: Vec<PathBuf>,
@@ -1169,6 +1174,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             frames,
             step_ms,
             screenshot,
+            press,
             package_path,
             webcam,
             hand,
@@ -1186,18 +1192,38 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 ));
             }
             let path = scene.unwrap_or_else(default_scene);
-            let mut scene = Scene::load_view(&path, &packages(package_path), view.as_deref())?;
-            overrides.apply(&mut scene)?;
-            if let Some(mount) = leap_mount {
-                if mount == LeapMountKind::FirstWrist && scene.file.leap.device_at.is_some() {
-                    return Err(AppError::flag(
-                        "--leap-mount",
-                        "first_wrist places a recording by its first wrist, but the scene's \
-                         [leap] gives device_at",
-                    ));
+            let packages = packages(package_path);
+            // The scene through camera `view`, with the command line's changes.
+            let through = |view: Option<&str>| -> Result<Scene, AppError> {
+                let mut scene = Scene::load_view(&path, &packages, view)?;
+                overrides.apply(&mut scene)?;
+                if let Some(mount) = leap_mount {
+                    if mount == LeapMountKind::FirstWrist && scene.file.leap.device_at.is_some() {
+                        return Err(AppError::flag(
+                            "--leap-mount",
+                            "first_wrist places a recording by its first wrist, but the \
+                             scene's [leap] gives device_at",
+                        ));
+                    }
+                    scene.file.leap.mount = mount;
                 }
-                scene.file.leap.mount = mount;
-            }
+                Ok(scene)
+            };
+            let mut scene = through(view.as_deref())?;
+            let xr = xr || scene.file.xr;
+            // In XR a camera on a head rides on the wearer's head (the scripted motion until
+            // the headset reports; docs/alice-view.md).
+            let ride = |scene: &mut Scene| {
+                #[cfg(feature = "xr")]
+                if xr && let Some(head) = scene.head.as_mut() {
+                    head.motion = avatarm_core::vision::head::HeadMotion::Live(
+                        avatarm_core::vision::head::LiveHead::new(head.motion.clone()),
+                    );
+                }
+                #[cfg(not(feature = "xr"))]
+                let _ = (xr, scene);
+            };
+            ride(&mut scene);
             if webcam.is_some() && scene.head.is_some() {
                 return Err(AppError::flag(
                     "--webcam",
@@ -1215,15 +1241,35 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 );
                 scene.file.background = BackgroundSpec::None;
             }
-            let xr = xr || scene.file.xr;
-            // In XR a camera on a head rides on the wearer's head (the scripted motion until
-            // the headset reports; docs/alice-view.md).
-            #[cfg(feature = "xr")]
-            if xr && let Some(head) = scene.head.as_mut() {
-                head.motion = avatarm_core::vision::head::HeadMotion::Live(
-                    avatarm_core::vision::head::LiveHead::new(head.motion.clone()),
-                );
-            }
+            // The C key switches between the scene's cameras in place; a recording and a
+            // webcam hold one camera.
+            let no_switch = match (&record, webcam) {
+                _ if scene.cameras.len() < 2 => None,
+                (Some(_), _) => Some(format!(
+                    "a recording holds one camera; start again with --view {}",
+                    scene.cameras[(scene.camera_index + 1) % scene.cameras.len()]
+                )),
+                (None, Some(_)) => Some("the webcam is the one camera".to_owned()),
+                (None, None) => None,
+            };
+            let cameras = if no_switch.is_none() && scene.cameras.len() > 1 {
+                let names = scene.cameras.clone();
+                names
+                    .iter()
+                    .enumerate()
+                    .map(|(i, name)| {
+                        if i == scene.camera_index {
+                            Ok(scene.clone())
+                        } else {
+                            let mut other = through(Some(name))?;
+                            ride(&mut other);
+                            Ok(other)
+                        }
+                    })
+                    .collect::<Result<Vec<_>, AppError>>()?
+            } else {
+                Vec::new()
+            };
             let hand = live_hand(&scene, hand.as_deref(), xr)?;
             let robot = if robot == "ros" {
                 if hand.is_none() {
@@ -1236,10 +1282,6 @@ fn run(cli: Cli) -> Result<(), AppError> {
             } else {
                 crate::teleop::RobotChoice::Sim
             };
-            // The C key's next camera; a recording holds one camera.
-            let next_view = record
-                .is_none()
-                .then(std::sync::Arc::<std::sync::Mutex<Option<String>>>::default);
             let mode = Mode::Preview(PreviewOptions {
                 frames,
                 screenshot,
@@ -1250,7 +1292,9 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 webcam,
                 hand,
                 robot,
-                next_view: next_view.clone(),
+                cameras,
+                no_switch,
+                press,
             });
             let mut app = build_app(&scene, &mode)?;
             if let Some(path) = &record {
@@ -1259,11 +1303,6 @@ fn run(cli: Cli) -> Result<(), AppError> {
             let exit = app.run();
             if exit.is_error() {
                 return Err(AppError::Preview);
-            }
-            let next = next_view.and_then(|slot| slot.lock().ok().and_then(|mut v| v.take()));
-            if let Some(view) = next {
-                eprintln!("looking through the camera '{view}': starting again");
-                return Err(crate::preview::restart_with_view(&view));
             }
             Ok(())
         }

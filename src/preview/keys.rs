@@ -26,6 +26,46 @@ pub const DESKTOP_HAND_KEYS: [(&str, &str); 5] = [
     ("Home", "puts it (and a dropped twin) back at the start"),
 ];
 
+/// A scripted key press, `N:KEY` (`--press`): rendered frame N (from 1) and one of
+/// [`PREVIEW_KEYS`] (a letter in either case, `F12`, `Esc`). Errors name the text and what is
+/// expected.
+pub fn parse_press(text: &str) -> Result<(u32, bevy::input::keyboard::KeyCode), String> {
+    use bevy::input::keyboard::KeyCode;
+    let keys = || PREVIEW_KEYS.map(|(k, _)| k).join(", ");
+    let Some((frame, key)) = text.split_once(':') else {
+        return Err(format!(
+            "'{text}': expected N:KEY, N a frame from 1 and KEY one of {}",
+            keys()
+        ));
+    };
+    let frame = match frame.trim().parse::<u32>() {
+        Ok(n) if n > 0 => n,
+        _ => {
+            return Err(format!(
+                "'{text}': the frame '{frame}' is not a whole number from 1 (N:KEY)"
+            ));
+        }
+    };
+    let code = match key.trim().to_ascii_uppercase().as_str() {
+        "V" => KeyCode::KeyV,
+        "C" => KeyCode::KeyC,
+        "E" => KeyCode::KeyE,
+        "M" => KeyCode::KeyM,
+        "W" => KeyCode::KeyW,
+        "B" => KeyCode::KeyB,
+        "R" => KeyCode::KeyR,
+        "F12" => KeyCode::F12,
+        "ESC" => KeyCode::Escape,
+        _ => {
+            return Err(format!(
+                "'{text}': the key '{key}' is not one of the preview's: {} (N:KEY, either case)",
+                keys()
+            ));
+        }
+    };
+    Ok((frame, code))
+}
+
 /// `keys` as one line: `V: cycles the panel (...), E: ...`.
 pub fn line(keys: &[(&str, &str)]) -> String {
     keys.iter()
@@ -67,5 +107,35 @@ mod tests {
         }
         let help = help();
         assert!(help.contains("V: cycles the panel") && help.contains("Home: puts it"));
+    }
+
+    /// Every preview key can be scripted with `--press`, in either case; bad text is refused
+    /// naming it.
+    #[test]
+    fn every_preview_key_can_be_pressed_by_script() {
+        for (key, _) in PREVIEW_KEYS {
+            assert!(parse_press(&format!("3:{key}")).is_ok(), "{key}");
+            assert!(
+                parse_press(&format!("3:{}", key.to_lowercase())).is_ok(),
+                "{key}"
+            );
+        }
+        assert_eq!(
+            parse_press("60:c"),
+            Ok((60, bevy::input::keyboard::KeyCode::KeyC))
+        );
+        for (bad, what) in [
+            ("60", "expected N:KEY"),
+            ("0:C", "the frame '0'"),
+            ("x:C", "the frame 'x'"),
+            ("-1:C", "the frame '-1'"),
+            ("60:Q", "the key 'Q'"),
+        ] {
+            let e = parse_press(bad).expect_err(bad);
+            assert!(
+                e.contains(&format!("'{bad}'")) && e.contains(what) && e.contains("N:KEY"),
+                "{e}"
+            );
+        }
     }
 }

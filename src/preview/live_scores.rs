@@ -76,6 +76,15 @@ impl LiveDr {
         self.stopped = true;
     }
 
+    /// Starts again for another camera (a switch): the recent scores and the frames waiting
+    /// for their images are dropped (a read-back still in flight finds no frame to fill);
+    /// `scored` keeps counting.
+    pub fn restart(&mut self) {
+        self.recent.clear();
+        self.pending.clear();
+        self.last_index = None;
+    }
+
     /// Mean IoU, leak % and PSNR (dB) over the recent scored frames.
     pub fn means(&self) -> Option<(f64, f64, Option<f64>)> {
         let n = self.recent.len();
@@ -200,6 +209,14 @@ fn score_parts(mut live: ResMut<LiveDr>, scene: Res<SceneResource>, config: Res<
             &norobot,
         ) {
             Some(s) => {
+                // Each frame's scores: RUST_LOG=avatarm::preview::live_scores=debug.
+                debug!(
+                    "live scores of the frame captured at {:.3} s: IoU {:.4}, leak {:.3} %, PSNR {}",
+                    p.t_s,
+                    s.mask.iou,
+                    s.mask.leak_pct,
+                    s.psnr_db.map_or("-".to_owned(), |d| format!("{d:.2} dB"))
+                );
                 live.recent.push_back((s.mask, s.psnr_db));
                 while live.recent.len() > WINDOW {
                     live.recent.pop_front();

@@ -14,7 +14,6 @@ pub mod live_scores;
 pub mod xr;
 
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
 
 use avatarm_erase::{
     CaptureBackground, EraseConfig, EraseState, EraseTargets, InteractionTargets, toggle_erasure,
@@ -34,7 +33,7 @@ use bevy::ui_render::UiMaterialPlugin;
 use bevy::ui_render::ui_material::{MaterialNode, UiMaterial};
 
 use crate::preview::live_scores::LiveDr;
-use crate::{AppError, AvatarmSystems, SceneResource};
+use crate::{AvatarmSystems, SceneResource};
 
 /// Options of the preview.
 #[derive(Debug, Clone, Default)]
@@ -56,11 +55,16 @@ pub struct PreviewOptions {
     pub hand: Option<avatarm_scene::hand::HandChoice>,
     /// The robot the live task commands: the simulated arm or the scene's ROS link.
     pub robot: crate::teleop::RobotChoice,
-    /// Where the `C` key leaves the name of the scene's camera to look through next (a scene
-    /// with several `[[cameras]]`): the preview then quits, and the caller starts it again
-    /// through that camera ([`crate::preview::restart_with_view`]). `None`: the camera cannot
-    /// be switched (a recording holds one camera).
-    pub next_view: Option<Arc<Mutex<Option<String>>>>,
+    /// The scene through each of its cameras (its `[[cameras]]`, the file's order) for the
+    /// `C` key, which switches between them in place ([`crate::app::switch`]). Empty: `C` does
+    /// not switch (one camera; a recording or a webcam holds one camera).
+    pub cameras: Vec<avatarm_scene::Scene>,
+    /// Why `C` does not switch when `cameras` is empty and the scene has several (for its
+    /// log line).
+    pub no_switch: Option<String>,
+    /// Keys pressed by script: `(frame, key)`, the key pressed at the start of that rendered
+    /// frame (counted from 1) and released at the next (`--press`).
+    pub press: Vec<(u32, KeyCode)>,
 }
 
 /// The preview's cameras, panels and keys.
@@ -107,10 +111,21 @@ struct PreviewState {
     /// Updates left before quitting: read-backs already asked for (camera frames, scores,
     /// screenshots) come back first, so none is sent to a closed app.
     quit_in: Option<u32>,
-    /// The scene's camera the `C` key switches to ([`next_camera`]).
-    next_camera: Option<String>,
-    /// After the panel's title: the camera looked through, for a scene with several.
-    camera_title: String,
+}
+
+impl PreviewState {
+    /// At start: no frame yet, the interaction view, no overlay.
+    fn new(options: PreviewOptions) -> Self {
+        Self {
+            options,
+            frame: 0,
+            shots: 0,
+            view: PanelView::default(),
+            mask_overlay: false,
+            wireframe: false,
+            quit_in: None,
+        }
+    }
 }
 
 /// Updates between asking to quit and quitting, with no new read-backs.
@@ -160,18 +175,14 @@ impl Plugin for PreviewPlugin {
             WireframePlugin::default(),
             budget::FrameBudgetPlugin,
         ))
-        .insert_resource(PreviewState {
-            options: self.0.clone(),
-            frame: 0,
-            shots: 0,
-            view: PanelView::default(),
-            mask_overlay: false,
-            wireframe: false,
-            quit_in: None,
-            next_camera: None,
-            camera_title: String::new(),
-        })
+        .insert_resource(PreviewState::new(self.0.clone()))
+        // C asks for a switch; the switch itself is added with several cameras.
+        .add_message::<crate::app::switch::SwitchCamera>()
         .add_systems(Startup, setup_preview)
+        .add_systems(
+            PreUpdate,
+            press_scripted_keys.after(bevy::input::InputSystems),
+        )
         .add_systems(
             Update,
             (
@@ -193,18 +204,7 @@ fn setup_preview(
     scene: Res<SceneResource>,
     mut materials: ResMut<Assets<PanelMaterial>>,
     desktop_hand: Option<Res<crate::teleop::DesktopHand>>,
-    mut state: ResMut<PreviewState>,
 ) {
-    let s = &scene.0;
-    state.next_camera = next_camera(s).map(str::to_owned);
-    if s.cameras.len() > 1 {
-        state.camera_title = format!(
-            " - camera '{}' ({} of {}, C switches)",
-            s.camera_name(),
-            s.camera_index + 1,
-            s.cameras.len()
-        );
-    }
     let base = scene.0.robot_base().translation.vector;
     let focus = Vec3::new(base.x as f32 + 0.45, base.y as f32, base.z as f32 + 0.25);
     // Aimed a little left of the robot so that the twin shows right of the camera feed panel.
@@ -218,9 +218,8 @@ fn setup_preview(
         Transform::from_translation(eye).looking_at(focus - 0.45 * right, Vec3::Z),
         RenderLayers::from_layers(&[layers::ROOM, layers::TWIN]),
     ));
-    let k = &scene.0.true_camera.intrinsics;
-    let panel_w = 560.0;
-    let panel_h = panel_w * k.height as f32 / k.width as f32;
+    let panel_w = PANEL_WIDTH_PX;
+    let panel_h = panel_height(&scene.0);
     commands
         .spawn((
             Node {
@@ -295,12 +294,38 @@ fn setup_preview(
     ));
 }
 
+/// The panel's width on screen (px).
+const PANEL_WIDTH_PX: f32 = 560.0;
+
+/// The panel's height on screen (px): the camera's aspect at [`PANEL_WIDTH_PX`].
+fn panel_height(scene: &avatarm_scene::Scene) -> f32 {
+    let k = &scene.true_camera.intrinsics;
+    PANEL_WIDTH_PX * k.height as f32 / k.width.max(1) as f32
+}
+
+/// After the panel's title: the camera looked through, for a scene with several.
+fn camera_title(scene: &avatarm_scene::Scene, switches: bool) -> String {
+    if scene.cameras.len() < 2 {
+        return String::new();
+    }
+    format!(
+        " - camera '{}' ({} of {}{})",
+        scene.camera_name(),
+        scene.camera_index + 1,
+        scene.cameras.len(),
+        if switches { ", C switches" } else { "" }
+    )
+}
+
+#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn show_panel(
     state: Res<PreviewState>,
+    scene: Res<SceneResource>,
+    views: Option<Res<crate::app::switch::CameraViews>>,
     cameras: Res<SimCameras>,
     interaction: Option<Res<InteractionTargets>>,
     erase: Option<Res<EraseTargets>>,
-    image: Query<&MaterialNode<PanelMaterial>, With<PanelImage>>,
+    mut image: Query<(&MaterialNode<PanelMaterial>, &mut Node), With<PanelImage>>,
     mut materials: ResMut<Assets<PanelMaterial>>,
     mut title: Query<&mut Text, With<PanelTitle>>,
 ) {
@@ -323,7 +348,12 @@ fn show_panel(
         Vec4::ZERO
     };
     if let (Some(handle), Some(erase)) = (handle, erase) {
-        for node in &image {
+        // Another camera (a switch) may have another aspect.
+        let height = Val::Px(panel_height(&scene.0));
+        for (node, mut layout) in &mut image {
+            if layout.height != height {
+                layout.height = height;
+            }
             let unchanged = materials.get(&node.0).is_some_and(|m| {
                 m.image == handle && m.tint == tint && m.mask == erase.mask && m.grey == grey
             });
@@ -335,7 +365,11 @@ fn show_panel(
             }
         }
     }
-    let wanted = format!("{}{}", state.view.title(), state.camera_title);
+    let wanted = format!(
+        "{}{}",
+        state.view.title(),
+        camera_title(&scene.0, views.is_some())
+    );
     for mut text in &mut title {
         if text.0 != wanted {
             text.0.clone_from(&wanted);
@@ -460,10 +494,30 @@ fn head_line(scene: &avatarm_scene::Scene, erase: &EraseState) -> String {
     )
 }
 
+/// Presses the keys `--press` scripts at their frames and releases them one frame later.
+fn press_scripted_keys(state: Res<PreviewState>, mut keys: ResMut<ButtonInput<KeyCode>>) {
+    // `frame` counts the updates done; this one is frame + 1.
+    let this = state.frame + 1;
+    // Releases first: a key pressed again at the next frame is pressed again.
+    for &(at, key) in &state.options.press {
+        if at + 1 == this {
+            keys.release(key);
+        }
+    }
+    for &(at, key) in &state.options.press {
+        if at == this {
+            keys.press(key);
+        }
+    }
+}
+
+#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn handle_keys(
     keys: Res<ButtonInput<KeyCode>>,
     mut commands: Commands,
     mut state: ResMut<PreviewState>,
+    views: Option<Res<crate::app::switch::CameraViews>>,
+    mut switch: MessageWriter<crate::app::switch::SwitchCamera>,
     mut config: ResMut<EraseConfig>,
     mut capture: MessageWriter<CaptureBackground>,
     #[cfg(feature = "xr")] mut recenter: MessageWriter<crate::preview::xr::RecenterXrPanel>,
@@ -477,21 +531,19 @@ fn handle_keys(
         info!("panel: {}", state.view.title());
     }
     if keys.just_pressed(KeyCode::KeyC) {
-        if let Some(next) = state.next_camera.clone() {
-            match &state.options.next_view {
-                Some(slot) => {
-                    info!("camera: switching to '{next}' (the preview starts again through it)");
-                    if let Ok(mut slot) = slot.lock() {
-                        *slot = Some(next);
-                    }
-                    state.quit_in.get_or_insert(QUIT_DRAIN);
-                }
-                None => info!(
-                    "camera: not switched while recording (a recording holds one camera); start again with --view {next}"
-                ),
+        match (views, &state.options.no_switch) {
+            (Some(views), _) => {
+                let next = views.next();
+                info!(
+                    "camera: switching to '{}'",
+                    views.scenes[next].camera_name()
+                );
+                switch.write(crate::app::switch::SwitchCamera(next));
             }
-        } else {
-            info!("camera: the scene has one camera (name several with [[cameras]])");
+            (None, Some(why)) => info!("camera: not switched: {why}"),
+            (None, None) => {
+                info!("camera: the scene has one camera (name several with [[cameras]])");
+            }
         }
     }
     if keys.just_pressed(KeyCode::KeyE) {
@@ -605,8 +657,11 @@ fn count_frames(
         let scores = live_dr
             .as_deref()
             .and_then(|l| l.means().map(|m| (l.scored, m)))
-            .map_or(String::new(), |(n, (iou, leak, _))| {
-                format!("; {n} frames scored live, last IoU {iou:.3}, leak {leak:.2} %")
+            .map_or(String::new(), |(n, (iou, leak, psnr))| {
+                format!(
+                    "; {n} frames scored live, last IoU {iou:.3}, leak {leak:.2} %, PSNR {} dB",
+                    psnr.map_or("-".to_owned(), |p| format!("{p:.1}"))
+                )
             });
         let gpu = gpu_pass_times(&gpu_times).map_or(String::new(), |g| format!("; {g}"));
         info!(
@@ -622,63 +677,6 @@ fn count_frames(
             info!("{line}");
         }
         state.quit_in.get_or_insert(QUIT_DRAIN);
-    }
-}
-
-/// The camera the `C` key switches to: the scene's next one (after the last, the first);
-/// `None` for a scene with one camera.
-pub fn next_camera(scene: &avatarm_scene::Scene) -> Option<&str> {
-    let n = scene.cameras.len();
-    (n > 1).then(|| scene.cameras[(scene.camera_index + 1) % n].as_str())
-}
-
-/// The command line that starts this preview again through the scene's camera `view`: this
-/// process's arguments with `--view` set to it.
-pub fn args_with_view(args: &[std::ffi::OsString], view: &str) -> Vec<std::ffi::OsString> {
-    let mut out = Vec::with_capacity(args.len() + 2);
-    let mut rest = args.iter();
-    while let Some(arg) = rest.next() {
-        if arg == "--view" {
-            rest.next();
-        } else if !arg.to_string_lossy().starts_with("--view=") {
-            out.push(arg.clone());
-        }
-    }
-    out.push("--view".into());
-    out.push(view.into());
-    out
-}
-
-/// Starts this program again in place of this process (Unix `exec`), looking through the
-/// scene's camera `view`: the window closes and a new one opens, the scene from its start
-/// (one process's windowing event loop cannot be made twice). Returns only on failure.
-pub fn restart_with_view(view: &str) -> AppError {
-    let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
-    let args = args_with_view(&args, view);
-    let exe = match std::env::current_exe() {
-        Ok(exe) => exe,
-        Err(e) => {
-            return AppError::flag(
-                "C (switch camera)",
-                format!("cannot find this program: {e}"),
-            );
-        }
-    };
-    #[cfg(unix)]
-    {
-        use std::os::unix::process::CommandExt;
-        let e = std::process::Command::new(&exe).args(&args[1..]).exec();
-        AppError::flag(
-            "C (switch camera)",
-            format!("cannot start {} again: {e}", exe.display()),
-        )
-    }
-    #[cfg(not(unix))]
-    {
-        AppError::flag(
-            "C (switch camera)",
-            format!("start it again with --view {view}: {}", exe.display()),
-        )
     }
 }
 
@@ -709,47 +707,36 @@ fn quit_when_drained(
 mod tests {
     use super::*;
 
-    /// C goes through the scene's cameras in turn; a scene with one camera has none to go to.
+    /// `--press` presses a key at the start of its frame and releases it at the next; a key
+    /// pressed at two frames in a row is pressed twice, whatever the order given.
     #[test]
-    fn c_goes_through_the_scenes_cameras() {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/scenes");
-        let view = |file: &str, v: Option<&str>| {
-            avatarm_scene::Scene::load_view(&root.join(file), &Default::default(), v)
-                .expect("scene")
-        };
-        let two = "pouring_two_views.toml";
-        assert_eq!(next_camera(&view(two, None)), Some("alice"));
-        assert_eq!(next_camera(&view(two, Some("alice"))), Some("blair"));
-        assert_eq!(next_camera(&view("pouring.toml", None)), None);
-    }
-
-    /// Switching camera starts the same command again with `--view` set, in either spelling,
-    /// and the other arguments as they were.
-    #[test]
-    fn the_restart_keeps_the_arguments_and_sets_the_view() {
-        let args = |a: &[&str]| a.iter().map(std::ffi::OsString::from).collect::<Vec<_>>();
+    fn scripted_keys_are_pressed_for_one_frame() {
+        let mut app = App::new();
+        app.insert_resource(ButtonInput::<KeyCode>::default())
+            .insert_resource(PreviewState::new(PreviewOptions {
+                // C at frames 2 and 3: pressed again, not held.
+                press: vec![(3, KeyCode::KeyV), (2, KeyCode::KeyC), (3, KeyCode::KeyC)],
+                ..default()
+            }))
+            .add_systems(Update, press_scripted_keys);
+        let mut pressed = Vec::new();
+        for frame in 0..4 {
+            app.world_mut().resource_mut::<PreviewState>().frame = frame;
+            app.update();
+            let mut keys = app.world_mut().resource_mut::<ButtonInput<KeyCode>>();
+            let mut now: Vec<KeyCode> = keys.get_just_pressed().copied().collect();
+            now.sort();
+            pressed.push((now, keys.get_pressed().count()));
+            keys.clear();
+        }
         assert_eq!(
-            args_with_view(
-                &args(&["avatarm", "run", "s.toml", "--frames", "9"]),
-                "alice"
-            ),
-            args(&[
-                "avatarm", "run", "s.toml", "--frames", "9", "--view", "alice"
-            ])
-        );
-        assert_eq!(
-            args_with_view(
-                &args(&["avatarm", "run", "--view", "alice", "s.toml"]),
-                "blair"
-            ),
-            args(&["avatarm", "run", "s.toml", "--view", "blair"])
-        );
-        assert_eq!(
-            args_with_view(
-                &args(&["avatarm", "run", "--view=alice", "s.toml"]),
-                "blair"
-            ),
-            args(&["avatarm", "run", "s.toml", "--view", "blair"])
+            pressed,
+            vec![
+                (vec![], 0),
+                (vec![KeyCode::KeyC], 1),
+                (vec![KeyCode::KeyC, KeyCode::KeyV], 2),
+                (vec![], 0),
+            ]
         );
     }
 }

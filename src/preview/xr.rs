@@ -316,6 +316,8 @@ fn place_panel(
         .spawn((
             Name::new("XR interaction panel"),
             XrPanel,
+            // It shows the camera's interaction view: a camera switch spawns it again.
+            avatarm_twin::CameraBound,
             Mesh3d(meshes.add(Rectangle::new(w, h))),
             MeshMaterial3d(materials.add(StandardMaterial {
                 base_color_texture: Some(targets.view.clone()),

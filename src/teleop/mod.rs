@@ -53,10 +53,6 @@ pub struct LiveTask {
     pub start_z: f64,
     /// The object twin's start (virtual scene), where Home puts it back.
     pub twin_start: Transform,
-    /// Alice's view (the scene's camera rides on a head): while the hand holds the object, the
-    /// object's twin and the hand are drawn on the real object as the robot carries it, not
-    /// where the physics twin is.
-    pub anchor_to_real: bool,
 }
 
 /// The desktop hand's state: wrist pose (virtual scene), grip, and its start.
@@ -94,7 +90,6 @@ pub struct LiveTeleop {
     object_twin: Option<usize>,
     centre_to_base: Isometry3<f64>,
     start_z: f64,
-    anchor_to_real: bool,
 }
 
 impl LiveTeleop {
@@ -133,7 +128,6 @@ impl LiveTeleop {
             object_twin,
             centre_to_base,
             start_z: setup.bottle_centre().translation.z,
-            anchor_to_real: scene.head.is_some(),
         })
     }
 
@@ -173,7 +167,6 @@ impl LiveTeleop {
             mode: self.mode,
             start_z: self.start_z,
             twin_start: avatarm_twin::iso_to_transform(&parts.twin_start),
-            anchor_to_real: self.anchor_to_real,
         })
         .insert_resource(hand)
         .insert_resource(parts.hand_drive)
@@ -636,13 +629,23 @@ pub fn place_prop(
     }
 }
 
+/// Alice's view: the camera looked through now rides on a head, and the held object's twin
+/// and the hand are drawn on the real object as the robot carries it.
+fn anchored(scene: &crate::SceneResource) -> bool {
+    scene.0.head.is_some()
+}
+
 /// The object's twin in the interaction view shows the physics twin mapped into the real
 /// world (it moves under the hand, the real one follows through the robot).
 fn follow_twin(
     live: Res<LiveTask>,
     teleop: Res<Teleop>,
     held: Res<HeldObject>,
-    (history, erase): (Res<JointHistory>, Res<EraseState>),
+    (history, erase, scene): (
+        Res<JointHistory>,
+        Res<EraseState>,
+        Res<crate::SceneResource>,
+    ),
     twin: Query<&Transform, With<GraspTarget>>,
     mut config: ResMut<InteractionConfig>,
 ) {
@@ -650,8 +653,9 @@ fn follow_twin(
         return;
     };
     let centre = match object_on_panel(&teleop, &history, &erase) {
-        // Alice's view: on the real object while the hand holds it.
-        Some(real) if live.anchor_to_real && held.held.is_some() => real,
+        // Alice's view (the camera looked through rides on a head): on the real object while
+        // the hand holds it, not where the physics twin is.
+        Some(real) if anchored(&scene) && held.held.is_some() => real,
         _ => teleop.v2r().pose(&transform_to_iso(t)),
     };
     let pose = centre * live.centre_to_base;
@@ -671,7 +675,11 @@ fn draw_hand(
     live: Res<LiveTask>,
     teleop: Res<Teleop>,
     config: Res<InteractionConfig>,
-    (history, erase): (Res<JointHistory>, Res<EraseState>),
+    (history, erase, scene): (
+        Res<JointHistory>,
+        Res<EraseState>,
+        Res<crate::SceneResource>,
+    ),
     twin: Query<&Transform, With<GraspTarget>>,
     mut view: Gizmos<HandViewGizmos>,
     mut interaction: Gizmos<HandInteractionGizmos>,
@@ -696,7 +704,7 @@ fn draw_hand(
     }
     let Some(i) = live.object_twin else { return };
     let real = match (twin.single(), object_on_panel(&teleop, &history, &erase)) {
-        (Ok(t), Some(object)) if live.anchor_to_real && held.held.is_some() => {
+        (Ok(t), Some(object)) if anchored(&scene) && held.held.is_some() => {
             avatarm_core::teleop::hand::carried_with(
                 &real,
                 &teleop.v2r().pose(&transform_to_iso(t)),

@@ -7,7 +7,7 @@
 use avatarm_core::vision::camera::PinholeCamera;
 use avatarm_core::vision::placement::{panel_corners, place_twin};
 use avatarm_twin::camera::{spawn_pinhole_camera, target_image};
-use avatarm_twin::{iso_to_transform, layers};
+use avatarm_twin::{CameraBound, iso_to_transform, layers};
 use bevy::asset::embedded_asset;
 use bevy::camera::visibility::RenderLayers;
 use bevy::pbr::{Material, MaterialPlugin};
@@ -89,7 +89,7 @@ impl Plugin for InteractionPlugin {
     fn build(&self, app: &mut App) {
         embedded_asset!(app, "video_panel.wgsl");
         app.add_plugins(MaterialPlugin::<VideoPanelMaterial>::default())
-            .add_systems(PostStartup, setup)
+            .add_systems(PostStartup, spawn_interaction)
             .add_systems(
                 Update,
                 (
@@ -156,7 +156,11 @@ fn follow_objects(
     }
 }
 
-fn setup(
+/// The interaction layer for the configured camera ([`InteractionConfig`]): the video panel
+/// showing [`EraseTargets::composite`], the object twins, a light and the interaction camera
+/// ([`InteractionTargets`]), each marked [`CameraBound`]. Runs after start-up; a camera switch
+/// despawns them and runs it again for the next camera.
+pub fn spawn_interaction(
     mut commands: Commands,
     config: Res<InteractionConfig>,
     erase: Option<Res<EraseTargets>>,
@@ -190,6 +194,7 @@ fn setup(
         })),
         iso_to_transform(&world_from_panel),
         layer.clone(),
+        CameraBound,
     ));
     for (index, object) in config.objects.iter().enumerate() {
         let (transform, scale) = match twin_transform(&config, object) {
@@ -215,6 +220,7 @@ fn setup(
                 ObjectTwin { index, scale },
                 transform,
                 Visibility::default(),
+                CameraBound,
             ))
             .id();
         for (mesh, local) in &object.parts {
@@ -235,9 +241,10 @@ fn setup(
         },
         iso_to_transform(&cam.world_from_view()),
         layer.clone(),
+        CameraBound,
     ));
     let view = images.add(target_image(k.width, k.height));
-    spawn_pinhole_camera(
+    let camera = spawn_pinhole_camera(
         &mut commands,
         cam,
         view.clone(),
@@ -246,5 +253,6 @@ fn setup(
         -17,
         "interaction camera",
     );
+    commands.entity(camera).insert(CameraBound);
     commands.insert_resource(InteractionTargets { view });
 }

@@ -51,8 +51,8 @@ use avatarm_core::vision::camera::PinholeCamera;
 use avatarm_core::vision::distortion::{Distortion, DistortionMap};
 use avatarm_twin::camera::rgba8_image;
 use avatarm_twin::flat::{FlatPart, FlatView, flat_target_image};
-use avatarm_twin::layers;
 use avatarm_twin::prelude::*;
+use avatarm_twin::{CameraBound, layers};
 use avatarm_video::{HeadTracking, LiveVideo, VideoSystems};
 use bevy::camera::visibility::RenderLayers;
 use bevy::prelude::*;
@@ -344,7 +344,7 @@ impl Plugin for ErasePlugin {
                     EraseSystems::Interaction.after(EraseSystems::Prepare),
                 ),
             )
-            .add_systems(Startup, setup)
+            .add_systems(Startup, spawn_pipeline)
             .add_systems(
                 Update,
                 (record_history, set_background, prepare_frame, gate_passes)
@@ -367,7 +367,12 @@ pub fn composite_image(width: u32, height: u32) -> Image {
     image
 }
 
-fn setup(
+/// The pipeline for the configured camera ([`EraseConfig`]): the mask twin with the occluders,
+/// the mask's [`FlatView`] and [`EraseJob`], their images ([`EraseTargets`]), the lens map and
+/// a view-following background's state in [`EraseState`]. Its entities are marked
+/// [`CameraBound`]. Runs at start-up; a camera switch despawns them, resets [`EraseState`] and
+/// runs it again for the next camera.
+pub fn spawn_pipeline(
     mut commands: Commands,
     config: Res<EraseConfig>,
     mut twin_assets: TwinAssets,
@@ -430,6 +435,7 @@ fn setup(
         &layer,
         "mask twin",
     );
+    commands.entity(twin.root).insert(CameraBound);
     commands.insert_resource(MaskTwin(twin.root));
     for (mesh, transform) in &config.occluders {
         commands.spawn((
@@ -438,6 +444,7 @@ fn setup(
             FlatPart::OCCLUDER,
             *transform,
             layer.clone(),
+            CameraBound,
         ));
     }
     let raw = images.add(flat_target_image(raw_k.width, raw_k.height));
@@ -451,6 +458,7 @@ fn setup(
     let pipeline = commands
         .spawn((
             Name::new("erase pipeline"),
+            CameraBound,
             FlatView {
                 camera: mask_camera,
                 target: raw.clone(),

@@ -263,12 +263,16 @@ impl Plugin for ErasePassesPlugin {
 #[derive(Resource)]
 struct UploadTimes(Option<GpuTimes>);
 
+/// The jobs with work this frame, and every job entity (one idle this frame keeps its GPU
+/// state: its uploaded background, its lens texture).
 #[derive(Resource, Default)]
-struct ExtractedJobs(Vec<(Entity, EraseJob)>);
+struct ExtractedJobs(Vec<(Entity, EraseJob)>, Vec<Entity>);
 
 fn extract_jobs(mut extracted: ResMut<ExtractedJobs>, jobs: Extract<Query<(Entity, &EraseJob)>>) {
     extracted.0.clear();
+    extracted.1.clear();
     for (entity, job) in &jobs {
+        extracted.1.push(entity);
         if job.render || job.frame.is_some() || job.background.is_some() {
             extracted.0.push((entity, job.clone()));
         }
@@ -533,6 +537,8 @@ fn prepare_jobs(
         return;
     };
     let p = &mut *p;
+    // A job despawned (a camera switch) leaves its textures and buffers behind otherwise.
+    p.jobs.retain(|e, _| extracted.1.contains(e));
     let layout = cache.get_bind_group_layout(&p.layout);
     for (entity, job) in &extracted.0 {
         let size = job.params.size;

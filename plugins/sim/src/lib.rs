@@ -23,9 +23,9 @@ use avatarm_twin::camera::camera_transform;
 use avatarm_twin::camera::{RenderSettled, SCENERY_DEPTH_BIAS, add_render_settled};
 pub use avatarm_twin::camera::{spawn_pinhole_camera, target_image};
 use avatarm_twin::flat::{FlatPart, FlatView, add_flat_render, flat_target_image};
-use avatarm_twin::layers;
 use avatarm_twin::prelude::*;
 use avatarm_twin::readback::{ImageRead, ImageReadbackPlugin, read_image_once};
+use avatarm_twin::{CameraBound, layers};
 use avatarm_video::{HeadPoseMessage, VideoFrame, VideoInbox};
 use bevy::camera::visibility::RenderLayers;
 use bevy::camera::visibility::VisibilitySystems;
@@ -231,7 +231,12 @@ impl Plugin for SimRoomPlugin {
                     .after(TransformSystems::Propagate)
                     .after(VisibilitySystems::VisibilityPropagate),
             )
-            .add_systems(PreStartup, setup_room.in_set(SimRoomSystems::Setup))
+            .add_systems(
+                PreStartup,
+                (setup_room, spawn_camera_views)
+                    .chain()
+                    .in_set(SimRoomSystems::Setup),
+            )
             .add_systems(
                 PostUpdate,
                 gate_no_robot_view.in_set(SimRoomSystems::GateTruth),
@@ -266,12 +271,7 @@ impl Plugin for SimRoomPlugin {
     }
 }
 
-fn setup_room(
-    mut commands: Commands,
-    config: Res<SimRoomConfig>,
-    mut assets: TwinAssets,
-    mut images: ResMut<Assets<Image>>,
-) {
+fn setup_room(mut commands: Commands, config: Res<SimRoomConfig>, mut assets: TwinAssets) {
     for (index, prop) in config.props.iter().enumerate() {
         let lit = assets.materials.add(StandardMaterial {
             base_color: Color::srgba(prop.rgba[0], prop.rgba[1], prop.rgba[2], prop.rgba[3]),
@@ -342,7 +342,24 @@ fn setup_room(
         .root
     });
     commands.insert_resource(SimTwins { real, silhouette });
+    commands.insert_resource(SimRobotState(SimRobot::new(
+        config.robot,
+        config.model.dof_limits(),
+        config.q0.clone(),
+    )));
+}
 
+/// The room's views through the configured camera ([`SimRoomConfig::camera`],
+/// `distortion`, `head`), each marked [`CameraBound`]: the real camera (the video's source),
+/// and with ground truth the robot-free camera and the robot's silhouette; [`SimCameras`] names
+/// their images, and a camera on a head gets its tracker ([`SimHeadTracker`]). Runs at start-up
+/// after the room; a camera switch despawns the views and runs it again for the next camera.
+pub fn spawn_camera_views(
+    mut commands: Commands,
+    config: Res<SimRoomConfig>,
+    mut images: ResMut<Assets<Image>>,
+    time: Res<Time<Fixed>>,
+) {
     // Through a lens, the views render its pinhole view (the read-backs are distorted).
     let lens = if config.distortion.is_none() {
         None
@@ -376,7 +393,9 @@ fn setup_room(
         -30,
         "real camera",
     );
-    commands.entity(real).insert((DepthPrepass, RoomView));
+    commands
+        .entity(real)
+        .insert((DepthPrepass, RoomView, CameraBound));
     let (mut no_robot, mut silhouette_image) = (None, None);
     if config.ground_truth {
         let image = images.add(target_image(k.width, k.height));
@@ -389,9 +408,12 @@ fn setup_room(
             -29,
             "ground truth: no robot",
         );
-        commands
-            .entity(no_robot_camera)
-            .insert((DepthPrepass, NoRobotCamera, RoomView));
+        commands.entity(no_robot_camera).insert((
+            DepthPrepass,
+            NoRobotCamera,
+            RoomView,
+            CameraBound,
+        ));
         no_robot = Some(image);
         // White robot, black scenery, drawn flat (no camera: avatarm_twin::flat).
         let image = images.add(flat_target_image(k.width, k.height));
@@ -406,6 +428,7 @@ fn setup_room(
             },
             RenderLayers::layer(layers::SIM_SILHOUETTE),
             RoomView,
+            CameraBound,
         ));
         silhouette_image = Some(image);
     }
@@ -415,14 +438,18 @@ fn setup_room(
         silhouette: silhouette_image,
         lens,
     });
-    if let Some(head) = &config.head {
-        commands.insert_resource(SimHeadTracker(HeadTracker::new(head.tracking, head.seed)));
+    match &config.head {
+        Some(head) => {
+            // From a second back (the frames in flight are older than now): at start-up, t = 0.
+            let from_s = time.elapsed_secs_f64() - 1.0;
+            commands.insert_resource(SimHeadTracker(HeadTracker::starting_at(
+                head.tracking,
+                head.seed,
+                from_s,
+            )));
+        }
+        None => commands.remove_resource::<SimHeadTracker>(),
     }
-    commands.insert_resource(SimRobotState(SimRobot::new(
-        config.robot,
-        config.model.dof_limits(),
-        config.q0.clone(),
-    )));
 }
 
 /// Meshes of a prop's parts with their transforms relative to the prop's base pose.
@@ -569,6 +596,7 @@ struct NoRobotCamera;
 /// render, which is what the camera would see. Its lights and the camera are fixed for the
 /// room's life. On a software rasteriser this view cost a third of a replay's update (measured:
 /// 90 ms of 326 on llvmpipe at 640x480).
+#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn gate_no_robot_view(
     frame: Res<FrameCount>,
     settled: Res<RenderSettled>,
@@ -576,13 +604,16 @@ fn gate_no_robot_view(
     mut removed: RemovedComponents<SimPropPart>,
     mut last_change: Local<Option<u32>>,
     mut cameras: Query<&mut Camera, With<NoRobotCamera>>,
+    added: Query<(), Added<NoRobotCamera>>,
     config: Res<SimRoomConfig>,
 ) {
     // The frame number this update's render carries (the count goes up in `Last`).
     let this = frame.0.wrapping_add(1);
-    // A camera on a head sees another room at every update.
+    // A camera on a head sees another room at every update; a new view (a camera switch) has
+    // not rendered yet.
     if last_change.is_none()
         || config.head.is_some()
+        || !added.is_empty()
         || !changed.is_empty()
         || removed.read().count() > 0
     {
@@ -658,7 +689,11 @@ fn capture_video(
     counter.last = Some((index, capture_s));
     let cameras = cameras.clone();
     read_image_once(&mut commands, cameras.real.clone()).observe(
-        move |read: On<ImageRead>, mut inbox: ResMut<VideoInbox>| {
+        move |read: On<ImageRead>, now: Option<Res<SimCameras>>, mut inbox: ResMut<VideoInbox>| {
+            // A capture of a camera the app no longer looks through (a switch since).
+            if now.is_none_or(|now| now.real != cameras.real) {
+                return;
+            }
             let size = (read.width, read.height, read.bytes_per_pixel);
             let (width, height, mut rgba) =
                 match cameras.camera_image(size, read.data.clone(), false) {

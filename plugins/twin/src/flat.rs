@@ -169,6 +169,8 @@ struct ExtractedPart {
 struct ExtractedFlat {
     views: Vec<ExtractedView>,
     parts: Vec<ExtractedPart>,
+    /// Every flat view entity, active or not: the GPU state of one that is gone is dropped.
+    existing: Vec<Entity>,
 }
 
 /// The clip-from-world matrix of a pinhole camera, as a Bevy camera with
@@ -198,7 +200,9 @@ fn extract_flat(
 ) {
     extracted.views.clear();
     extracted.parts.clear();
+    extracted.existing.clear();
     for (entity, view, layers) in &views {
+        extracted.existing.push(entity);
         if !view.active {
             continue;
         }
@@ -377,6 +381,8 @@ fn prepare_flat(
         return;
     };
     p.frame.clear();
+    // A view despawned (a camera switch) leaves its depth texture and buffers behind otherwise.
+    p.views.retain(|e, _| extracted.existing.contains(e));
     if extracted.views.is_empty() {
         return;
     }

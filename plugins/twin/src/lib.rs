@@ -132,6 +132,12 @@ pub struct RobotTwin {
     pub strict_names: bool,
 }
 
+/// Marks an entity that belongs to the camera the app looks through now (its room views, its
+/// mask twin and erase pipeline, its interaction camera and panel): a camera switch despawns
+/// every such entity and the plugins spawn the next camera's (`avatarm`'s preview, key C).
+#[derive(Component, Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CameraBound;
+
 /// Marks a link entity of a twin.
 #[derive(Component, Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TwinLink {

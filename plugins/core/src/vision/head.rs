@@ -389,6 +389,21 @@ impl HeadTracker {
         }
     }
 
+    /// A tracker whose first sample is the first at or after `from_s` (s; a camera switched
+    /// to mid-session tracks from then on, not from t = 0). Each sample is the one
+    /// [`HeadTracker::new`]'s tracker gives at that time, noise included.
+    pub fn starting_at(model: TrackingModel, seed: u64, from_s: f64) -> Self {
+        let first = if from_s.is_finite() && from_s > 0.0 {
+            (from_s * model.rate_hz - 1e-9).ceil() as u64
+        } else {
+            0
+        };
+        Self {
+            next_sample: first,
+            ..Self::new(model, seed)
+        }
+    }
+
     /// Takes every sample due up to `now_s` and returns, oldest first, those that have arrived
     /// by then.
     pub fn poll(&mut self, motion: &HeadMotion, now_s: f64) -> Vec<TrackedPose> {
@@ -787,6 +802,14 @@ mod tests {
         // Same seed, same samples.
         let again = HeadTracker::new(noisy, 3).poll(&m, 4.0);
         assert_eq!(again, samples);
+        // Started later: the same samples from then on, none before.
+        let late = HeadTracker::starting_at(noisy, 3, 2.5).poll(&m, 4.0);
+        assert!(late.first().is_some_and(|p| (p.stamp_s - 2.5).abs() < 1e-9));
+        assert_eq!(late[..], samples[samples.len() - late.len()..]);
+        assert_eq!(
+            HeadTracker::starting_at(noisy, 3, f64::NAN).poll(&m, 4.0),
+            samples
+        );
     }
 
     #[test]
