@@ -772,7 +772,8 @@ fn the_mount_of_a_camera_on_a_head_is_calibrated_from_its_recording() {
         rep["silhouettes"]
     );
     eprintln!("mount calibrated from edges vs truth: {deg:.3} deg, {mm:.2} mm");
-    // Measured: 0.22 deg, 4.8 mm (from the silhouettes, 0.14 deg, 3.1 mm).
+    // Measured: 0.19 deg, 4.1 mm (from the silhouettes, 0.14 deg, 3.1 mm); 0.51 deg, 11.0 mm
+    // on one machine when the best half-resolution end alone was refined at full resolution.
     assert!(deg <= 0.4 && mm <= 8.0, "{deg} deg {mm} mm\n{rep}");
     assert!(
         rep["iou"]["fit_after"].as_f64() > Some(0.95),
@@ -781,7 +782,7 @@ fn the_mount_of_a_camera_on_a_head_is_calibrated_from_its_recording() {
     );
     let from_edges = with_mount("replayed_edges", &edges_mount);
     eprintln!("scene, mount from edges: leak {:.3} %", leak(&from_edges));
-    // Measured: 0.70 % (0.44 % from the silhouettes).
+    // Measured: 0.69 % (0.44 % from the silhouettes).
     assert!(leak(&from_edges) <= 1.0, "{from_edges}");
     // The recording's own replay follows the head: its masks at the recorded head poses
     // times the recorded mount, then the calibrated one.

@@ -384,6 +384,7 @@ struct LiveTeleopStatus<'w, 's> {
     teleop: Option<Res<'w, avatarm_mapping::Teleop>>,
     contacts: Option<Res<'w, avatarm_hand::ObjectContacts>>,
     held: Option<Res<'w, avatarm_hand::HeldObject>>,
+    anchor: Option<Res<'w, crate::teleop::HandAnchor>>,
     twin: Query<'w, 's, &'static Transform, With<avatarm_hand::GraspTarget>>,
 }
 
@@ -394,7 +395,13 @@ impl LiveTeleopStatus<'_, '_> {
             return None;
         };
         let twin = self.twin.single().ok().map(avatarm_twin::transform_to_iso);
-        Some(crate::teleop::summary(live, teleop, held, twin))
+        Some(crate::teleop::summary(
+            live,
+            teleop,
+            held,
+            twin,
+            self.anchor.as_deref(),
+        ))
     }
 
     /// The teleoperation's line and a line break, or nothing without one.

@@ -171,6 +171,7 @@ impl LiveTeleop {
         .insert_resource(hand)
         .insert_resource(parts.hand_drive)
         .insert_resource(parts.teleop)
+        .init_resource::<HandAnchor>()
         .init_gizmo_group::<HandViewGizmos>()
         .init_gizmo_group::<HandInteractionGizmos>()
         .add_systems(
@@ -180,7 +181,7 @@ impl LiveTeleop {
         .add_systems(FixedUpdate, mirror_room.in_set(AvatarmSystems::Mirror))
         .add_systems(
             Update,
-            (follow_twin, draw_hand)
+            (anchor_to_real_object, follow_twin, draw_hand)
                 .chain()
                 .in_set(AvatarmSystems::Teleop),
         );
@@ -188,7 +189,7 @@ impl LiveTeleop {
             app.insert_resource(desktop).add_systems(
                 Update,
                 drive_desktop_hand
-                    .before(follow_twin)
+                    .before(anchor_to_real_object)
                     .in_set(AvatarmSystems::Teleop),
             );
         }
@@ -585,7 +586,7 @@ fn mirror_room(
     live: Res<LiveTask>,
     twin: Option<Res<AppTwin>>,
     room: Res<SimRoomConfig>,
-    mut robot: ResMut<SimRobotState>,
+    (mut robot, mut anchor): (ResMut<SimRobotState>, ResMut<HandAnchor>),
     mut states: MessageWriter<JointStateMessage>,
     mut parts: Query<(&SimPropPart, &mut Transform)>,
 ) {
@@ -609,6 +610,9 @@ fn mirror_room(
     }
     if let Some(centre) = arm.true_object_pose() {
         place_prop(&mut parts, live.prop, &(centre * live.centre_to_base));
+        if let Some(sim) = arm.simulated() {
+            anchor.record_truth(sim.time_s(), centre);
+        }
     }
 }
 
@@ -629,16 +633,122 @@ pub fn place_prop(
     }
 }
 
-/// Alice's view: the camera looked through now rides on a head, and the held object's twin
-/// and the hand are drawn on the real object as the robot carries it.
+/// Alice's view (the camera looked through rides on a head) while the hand holds the object:
+/// the object's twin and the hand are drawn on the real object as the frame on the panel shows
+/// it, not where the physics twin is, so the hand holds the bottle Alice sees even while the
+/// arm lags the twin or the video is older than the hand. This update's anchor, and what the
+/// run measured of it.
+#[derive(Resource, Debug, Default)]
+pub struct HandAnchor {
+    /// This update's anchor: the physics twin mapped into the real world, and the real object
+    /// as the panel's frame shows it (both the object's centre frame, real world, m); `None`
+    /// when the hand is not drawn on the real object.
+    pub now: Option<(Isometry3<f64>, Isometry3<f64>)>,
+    /// Updates anchored.
+    pub frames: u64,
+    /// Per anchored update: how far the anchor moved the twin and the hand (twin to real
+    /// object, mm), at most [`HandAnchor::MAX_SAMPLES`].
+    pub correction_mm: Vec<f64>,
+    /// Per anchored update where the robot is simulated: how far the drawn object is from
+    /// where the real object truly was when the panel's frame was captured (mm; the frame
+    /// shows it there), at most [`HandAnchor::MAX_SAMPLES`].
+    pub error_mm: Vec<f64>,
+    /// The simulated real object's true pose after each control tick (robot clock, s),
+    /// oldest first, the last [`HandAnchor::TRUTH_S`].
+    truths: std::collections::VecDeque<(f64, Isometry3<f64>)>,
+}
+
+impl HandAnchor {
+    /// Samples kept per series (an hour at 120 updates a second): a long session's memory
+    /// stays bounded, later samples are not kept.
+    pub const MAX_SAMPLES: usize = 432_000;
+    /// How long the true poses are kept (s): longer than any frame's age on the panel.
+    pub const TRUTH_S: f64 = 2.0;
+
+    /// Keeps the simulated real object's true pose `pose` at robot time `t_s`.
+    fn record_truth(&mut self, t_s: f64, pose: Isometry3<f64>) {
+        if self.truths.back().is_some_and(|&(last, _)| t_s <= last) {
+            return;
+        }
+        self.truths.push_back((t_s, pose));
+        while self
+            .truths
+            .front()
+            .is_some_and(|&(t, _)| t < t_s - Self::TRUTH_S)
+        {
+            self.truths.pop_front();
+        }
+    }
+
+    /// The true pose at `t_s`: the newest kept at or before it (the simulated room shows the
+    /// object where the last control tick put it), `None` outside what is kept.
+    fn truth_at(&self, t_s: f64) -> Option<Isometry3<f64>> {
+        let first = self.truths.front()?.0;
+        if t_s < first {
+            return None;
+        }
+        self.truths
+            .iter()
+            .rev()
+            .find(|&&(t, _)| t <= t_s + 1e-9)
+            .map(|&(_, pose)| pose)
+    }
+
+    /// This update: anchored from `twin` (the physics twin mapped into the real world) onto
+    /// `real` (the real object as the frame captured at `capture_s` shows it), or not (`None`).
+    fn update(&mut self, anchor: Option<(Isometry3<f64>, Isometry3<f64>)>, capture_s: Option<f64>) {
+        self.now = anchor;
+        let Some((twin, real)) = anchor else { return };
+        self.frames += 1;
+        let mm = |a: &Isometry3<f64>, b: &Isometry3<f64>| {
+            1e3 * (a.translation.vector - b.translation.vector).norm()
+        };
+        if self.correction_mm.len() < Self::MAX_SAMPLES {
+            self.correction_mm.push(mm(&twin, &real));
+        }
+        if let Some(truth) = capture_s.and_then(|t| self.truth_at(t))
+            && self.error_mm.len() < Self::MAX_SAMPLES
+        {
+            self.error_mm.push(mm(&real, &truth));
+        }
+    }
+
+    /// For the end of a run: the updates anchored, how far the anchor moved the hand, and
+    /// (simulation) how far the drawn object was from the real one in the frame; empty when
+    /// nothing was anchored.
+    pub fn summary(&self) -> String {
+        if self.frames == 0 {
+            return String::new();
+        }
+        let spread = |v: &[f64]| {
+            let s = crate::net::serve::Spread::of(v);
+            format!("median {:.1} mm, max {:.1} mm", s.median, s.max)
+        };
+        let truth = if self.error_mm.is_empty() {
+            String::new()
+        } else {
+            format!(
+                ", drawn off the real object in the frame {}",
+                spread(&self.error_mm)
+            )
+        };
+        format!(
+            "; hand on the real object in {} updates (moved from the twin {}{truth})",
+            self.frames,
+            spread(&self.correction_mm)
+        )
+    }
+}
+
+/// Alice's view: whether the camera looked through now rides on a head (the held object's
+/// twin and the hand are drawn on the real object as the robot carries it).
 fn anchored(scene: &crate::SceneResource) -> bool {
     scene.0.head.is_some()
 }
 
-/// The object's twin in the interaction view shows the physics twin mapped into the real
-/// world (it moves under the hand, the real one follows through the robot).
-fn follow_twin(
-    live: Res<LiveTask>,
+/// This update's [`HandAnchor`]: in Alice's view while the hand holds the object, the physics
+/// twin mapped into the real world and the real object as the panel's frame shows it.
+fn anchor_to_real_object(
     teleop: Res<Teleop>,
     held: Res<HeldObject>,
     (history, erase, scene): (
@@ -647,16 +757,34 @@ fn follow_twin(
         Res<crate::SceneResource>,
     ),
     twin: Query<&Transform, With<GraspTarget>>,
+    mut anchor: ResMut<HandAnchor>,
+) {
+    let now = match twin.single() {
+        Ok(t) if anchored(&scene) && held.held.is_some() => {
+            object_on_panel(&teleop, &history, &erase)
+                .map(|real| (teleop.v2r().pose(&transform_to_iso(t)), real))
+        }
+        _ => None,
+    };
+    anchor.update(now, erase.frame_capture_s);
+}
+
+/// The object's twin in the interaction view shows the physics twin mapped into the real
+/// world (it moves under the hand, the real one follows through the robot); in Alice's view
+/// while held, the real object ([`HandAnchor`]).
+fn follow_twin(
+    live: Res<LiveTask>,
+    teleop: Res<Teleop>,
+    anchor: Res<HandAnchor>,
+    twin: Query<&Transform, With<GraspTarget>>,
     mut config: ResMut<InteractionConfig>,
 ) {
     let (Some(i), Ok(t)) = (live.object_twin, twin.single()) else {
         return;
     };
-    let centre = match object_on_panel(&teleop, &history, &erase) {
-        // Alice's view (the camera looked through rides on a head): on the real object while
-        // the hand holds it, not where the physics twin is.
-        Some(real) if anchored(&scene) && held.held.is_some() => real,
-        _ => teleop.v2r().pose(&transform_to_iso(t)),
+    let centre = match anchor.now {
+        Some((_, real)) => real,
+        None => teleop.v2r().pose(&transform_to_iso(t)),
     };
     let pose = centre * live.centre_to_base;
     if let Some(object) = config.objects.get(i)
@@ -668,19 +796,12 @@ fn follow_twin(
 
 /// The hand as a skeleton: in the 3-D view where the mapping puts it in the real world, and
 /// in the interaction view around the object's twin as drawn there.
-#[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn draw_hand(
     hand: Res<ActiveHand>,
     held: Res<HeldObject>,
     live: Res<LiveTask>,
     teleop: Res<Teleop>,
-    config: Res<InteractionConfig>,
-    (history, erase, scene): (
-        Res<JointHistory>,
-        Res<EraseState>,
-        Res<crate::SceneResource>,
-    ),
-    twin: Query<&Transform, With<GraspTarget>>,
+    (config, anchor): (Res<InteractionConfig>, Res<HandAnchor>),
     mut view: Gizmos<HandViewGizmos>,
     mut interaction: Gizmos<HandInteractionGizmos>,
 ) {
@@ -703,15 +824,9 @@ fn draw_hand(
         view.line(v(&real[a]), v(&real[b]), colour);
     }
     let Some(i) = live.object_twin else { return };
-    let real = match (twin.single(), object_on_panel(&teleop, &history, &erase)) {
-        (Ok(t), Some(object)) if anchored(&scene) && held.held.is_some() => {
-            avatarm_core::teleop::hand::carried_with(
-                &real,
-                &teleop.v2r().pose(&transform_to_iso(t)),
-                &object,
-            )
-        }
-        _ => real,
+    let real = match anchor.now {
+        Some((twin, object)) => avatarm_core::teleop::hand::carried_with(&real, &twin, &object),
+        None => real,
     };
     for (a, b) in hand_in_interaction_view(&real, &config, i) {
         interaction.line(a, b, colour);
@@ -928,6 +1043,7 @@ pub fn summary(
     teleop: &Teleop,
     held: &HeldObject,
     twin: Option<Isometry3<f64>>,
+    anchor: Option<&HandAnchor>,
 ) -> String {
     // Only a simulated robot knows where the real object is; a real one's is not measured.
     let object = match teleop.robot().true_object_pose() {
@@ -942,8 +1058,9 @@ pub fn summary(
         .robot()
         .status_line()
         .map_or_else(String::new, |l| format!("; {l}"));
+    let anchor = anchor.map_or_else(String::new, HandAnchor::summary);
     format!(
-        "teleop: {} ticks, {} grasps, {}, {object}, max TCP speed {:.3} m/s{link}",
+        "teleop: {} ticks, {} grasps, {}, {object}, max TCP speed {:.3} m/s{anchor}{link}",
         teleop.status.ticks,
         held.grasps,
         holding(held),
@@ -1033,5 +1150,47 @@ mod tests {
         assert!(step(&mut hand, &home, 0.0));
         assert_eq!(hand.wrist, start);
         assert!(!hand.closing && hand.grip == 0.0);
+    }
+
+    /// The anchor's record: the true pose at a frame's capture is the one the last control
+    /// tick set (sample and hold), none before the kept history; an anchored update counts
+    /// how far it moved the hand and how far the drawn object is from that truth.
+    #[test]
+    fn the_hand_anchor_measures_its_correction_and_its_error_at_the_frame_s_capture() {
+        let at = |x: f64| Isometry3::translation(x, 0.0, 0.0);
+        let mut anchor = HandAnchor::default();
+        for k in 0..=300 {
+            let t = f64::from(k) * 0.01;
+            anchor.record_truth(t, at(t));
+        }
+        // A tick's stamp again, or an older one, is not kept twice.
+        anchor.record_truth(3.0, at(9.0));
+        anchor.record_truth(1.5, at(9.0));
+        // The last 2 s are kept.
+        assert!(anchor.truth_at(0.5).is_none());
+        let held = anchor.truth_at(2.005).unwrap();
+        assert!((held.translation.x - 2.0).abs() < 1e-12, "{held}");
+        assert!((anchor.truth_at(3.0).unwrap().translation.x - 3.0).abs() < 1e-12);
+        assert!(anchor.summary().is_empty(), "nothing anchored yet");
+        // Not anchored: nothing counted, nothing drawn on the real object.
+        anchor.update(None, Some(2.0));
+        assert!(anchor.now.is_none() && anchor.frames == 0);
+        // The twin 20 mm ahead of the real object the frame (captured at 2.0 s) shows, which
+        // is 1 mm off the truth there; a frame captured before the history: no error counted.
+        anchor.update(Some((at(2.021), at(2.001))), Some(2.0));
+        anchor.update(Some((at(2.021), at(2.001))), Some(0.2));
+        assert_eq!(anchor.frames, 2);
+        assert_eq!(anchor.now, Some((at(2.021), at(2.001))));
+        assert_eq!(anchor.correction_mm.len(), 2);
+        assert!((anchor.correction_mm[0] - 20.0).abs() < 1e-9);
+        assert_eq!(anchor.error_mm.len(), 1);
+        assert!((anchor.error_mm[0] - 1.0).abs() < 1e-9);
+        let line = anchor.summary();
+        assert!(
+            line.contains("hand on the real object in 2 updates")
+                && line.contains("median 20.0 mm")
+                && line.contains("in the frame median 1.0 mm"),
+            "{line}"
+        );
     }
 }

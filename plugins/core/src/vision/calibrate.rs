@@ -17,8 +17,11 @@
 //! `fit_focal` a relative change of fx and fy. It starts from several corrections of the rough
 //! pose (±`start_deg` about the camera's axes, ± `start_m` along its view), coarse to fine: a
 //! quarter-resolution pass with a wide truncation from every start, then a half-resolution pass
-//! from the best few. The spread of the starts that end in the best basin is the pose's
-//! uncertainty.
+//! from the best few, then a full-resolution pass (sub-pixel areas for silhouettes, a soft
+//! outline for edges) from the best; for edges, from every half-resolution end within 10 % of
+//! the best, the answer the lowest at full resolution (a cluttered edge map leaves near-equal
+//! basins at half resolution). The spread of the starts that end in the best basin is the
+//! pose's uncertainty.
 
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::neldermead::NelderMead;
@@ -231,7 +234,8 @@ pub struct CalibrationResult {
     /// The cost at the rough pose (px at half resolution).
     pub rough_cost_px: f64,
     /// Every start of the fine stage: the answer (refined at full resolution) first, then the
-    /// others by their cost.
+    /// others by their cost (those refined at full resolution too, with edges, at their
+    /// refined pose).
     pub starts: Vec<StartResult>,
     /// The largest rotation (deg) and translation (mm) between the answer and another start
     /// that ended within 10 % of its cost: the spread of the basin.
@@ -1156,12 +1160,31 @@ pub fn calibrate(
         Observed::Edges => FullCost::Edges(EdgeArea::new(frames, correction.fresh(), 4.0)),
     };
     let full_steps: Vec<f64> = fine_steps.iter().map(|s| s * 0.3).collect();
-    // (Nelder-Mead returns its best, never worse than where it started on this cost.)
-    let (p, _) = search(&|p| full.at(p), &ends[0].1, &full_steps, options.max_iters)?;
-    let (pose, _) = correction.candidate(&p);
-    ends[0].0.camera_from_base = pose;
-    ends[0].0.cost_px = fine.at(&p);
-    ends[0].1 = p;
+    // Edges: every fine end within 10 % of the best is refined, and the answer is the lowest
+    // at full resolution (the half-resolution chamfer to a cluttered edge map cannot tell
+    // such basins apart); silhouettes: the best alone.
+    let contenders = match options.observed {
+        Observed::Silhouette => 1,
+        Observed::Edges => ends
+            .iter()
+            .filter(|(s, _)| s.cost_px <= ends[0].0.cost_px * 1.1 + 1e-9)
+            .count()
+            .max(1),
+    };
+    let mut chosen = (0, f64::INFINITY);
+    for (j, (end, end_p)) in ends.iter_mut().enumerate().take(contenders) {
+        // (Nelder-Mead returns its best, never worse than where it started on this cost.)
+        let (p, c) = search(&|p| full.at(p), end_p, &full_steps, options.max_iters)?;
+        let (pose, _) = correction.candidate(&p);
+        end.camera_from_base = pose;
+        end.cost_px = fine.at(&p);
+        *end_p = p;
+        if c < chosen.1 {
+            chosen = (j, c);
+        }
+    }
+    ends.swap(0, chosen.0);
+    ends[1..].sort_by(|a, b| a.0.cost_px.total_cmp(&b.0.cost_px));
     progress(total, total);
     let full_s = clock.elapsed().as_secs_f64() - coarse_s - fine_s;
     let (best, best_p) = ends[0].clone();
