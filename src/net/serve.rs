@@ -63,7 +63,7 @@ pub struct OperatorChange {
 /// for hours must not grow the report without bound.
 pub const MAX_OPERATOR_CHANGES: usize = 1000;
 
-/// Median, 95th percentile and largest of a series (ms).
+/// Median, 95th percentile and largest of a series (in the series' unit: ms, mm).
 #[derive(Debug, Clone, Copy, Serialize, Default, PartialEq)]
 pub struct Spread {
     /// Median.
@@ -77,6 +77,17 @@ pub struct Spread {
 }
 
 impl Spread {
+    /// The most samples a series kept for a spread holds (an hour at 120 a second), so a long
+    /// session's memory stays bounded; later samples are not kept.
+    pub const MAX_SAMPLES: usize = 432_000;
+
+    /// Appends `value` to `series` while it holds fewer than [`Spread::MAX_SAMPLES`].
+    pub fn push(series: &mut Vec<f64>, value: f64) {
+        if series.len() < Self::MAX_SAMPLES {
+            series.push(value);
+        }
+    }
+
     /// Of `values` (any order).
     pub fn of(values: &[f64]) -> Self {
         let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();

@@ -211,18 +211,6 @@ struct WindowRecord {
     correction_mm: Vec<f64>,
 }
 
-/// The most samples each of the window's series keeps (an hour at 120 frames a second), so a
-/// long session's memory stays bounded; later samples are not kept.
-const MAX_SAMPLES: usize = 432_000;
-
-impl WindowRecord {
-    fn push(series: &mut Vec<f64>, ms: f64) {
-        if series.len() < MAX_SAMPLES {
-            series.push(ms);
-        }
-    }
-}
-
 /// The window's record, shared with the [`WindowHandle`].
 #[derive(Resource, Clone, Default)]
 struct WindowOutcome(Arc<Mutex<WindowRecord>>);
@@ -454,7 +442,7 @@ fn show_session(
                 config.real_camera.world_from_camera = frame.world_from_camera;
             }
             if let Ok(mut record) = outcome.0.lock() {
-                WindowRecord::push(&mut record.panel_wait_ms, wait_ms);
+                Spread::push(&mut record.panel_wait_ms, wait_ms);
             }
         }
     }
@@ -489,7 +477,7 @@ fn show_session(
             state.report.anchored_hand_frames += 1;
             if let Ok(mut record) = outcome.0.lock() {
                 let d = twin.translation.vector - real.translation.vector;
-                WindowRecord::push(&mut record.correction_mm, 1e3 * d.norm());
+                Spread::push(&mut record.correction_mm, 1e3 * d.norm());
             }
         }
         for (a, b) in lines {
@@ -537,7 +525,7 @@ fn count_frames(
     }
     if let Ok(mut record) = outcome.0.lock() {
         if state.report.frames > 1 {
-            WindowRecord::push(&mut record.frame_ms, time.delta_secs_f64() * 1e3);
+            Spread::push(&mut record.frame_ms, time.delta_secs_f64() * 1e3);
         }
         record.report = state.report.clone();
     }

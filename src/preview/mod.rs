@@ -411,7 +411,14 @@ impl LiveTeleopStatus<'_, '_> {
                 let twin = self.twin.single().ok().map(avatarm_twin::transform_to_iso);
                 format!(
                     "{}\n",
-                    crate::teleop::status_line(live, teleop, contacts, held, twin)
+                    crate::teleop::status_line(
+                        live,
+                        teleop,
+                        contacts,
+                        held,
+                        twin,
+                        self.anchor.as_deref()
+                    )
                 )
             }
             _ => String::new(),

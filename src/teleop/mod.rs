@@ -33,6 +33,7 @@ use bevy::prelude::*;
 use bevy_rapier3d::prelude::{NoUserData, RapierPhysicsPlugin, Velocity};
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
+use crate::net::serve::Spread;
 use crate::{AppError, AppTwin, AvatarmSystems};
 use avatarm_scene::Scene;
 
@@ -647,11 +648,11 @@ pub struct HandAnchor {
     /// Updates anchored.
     pub frames: u64,
     /// Per anchored update: how far the anchor moved the twin and the hand (twin to real
-    /// object, mm), at most [`HandAnchor::MAX_SAMPLES`].
+    /// object, mm), at most [`Spread::MAX_SAMPLES`].
     pub correction_mm: Vec<f64>,
     /// Per anchored update where the robot is simulated: how far the drawn object is from
     /// where the real object truly was when the panel's frame was captured (mm; the frame
-    /// shows it there), at most [`HandAnchor::MAX_SAMPLES`].
+    /// shows it there), at most [`Spread::MAX_SAMPLES`].
     pub error_mm: Vec<f64>,
     /// The simulated real object's true pose after each control tick (robot clock, s),
     /// oldest first, the last [`HandAnchor::TRUTH_S`].
@@ -659,9 +660,6 @@ pub struct HandAnchor {
 }
 
 impl HandAnchor {
-    /// Samples kept per series (an hour at 120 updates a second): a long session's memory
-    /// stays bounded, later samples are not kept.
-    pub const MAX_SAMPLES: usize = 432_000;
     /// How long the true poses are kept (s): longer than any frame's age on the panel.
     pub const TRUTH_S: f64 = 2.0;
 
@@ -698,19 +696,19 @@ impl HandAnchor {
     /// `real` (the real object as the frame captured at `capture_s` shows it), or not (`None`).
     fn update(&mut self, anchor: Option<(Isometry3<f64>, Isometry3<f64>)>, capture_s: Option<f64>) {
         self.now = anchor;
-        let Some((twin, real)) = anchor else { return };
-        self.frames += 1;
-        let mm = |a: &Isometry3<f64>, b: &Isometry3<f64>| {
-            1e3 * (a.translation.vector - b.translation.vector).norm()
+        let (Some((_, real)), Some(moved)) = (anchor, self.moved_mm()) else {
+            return;
         };
-        if self.correction_mm.len() < Self::MAX_SAMPLES {
-            self.correction_mm.push(mm(&twin, &real));
+        self.frames += 1;
+        Spread::push(&mut self.correction_mm, moved);
+        if let Some(truth) = capture_s.and_then(|t| self.truth_at(t)) {
+            Spread::push(&mut self.error_mm, apart_mm(&real, &truth));
         }
-        if let Some(truth) = capture_s.and_then(|t| self.truth_at(t))
-            && self.error_mm.len() < Self::MAX_SAMPLES
-        {
-            self.error_mm.push(mm(&real, &truth));
-        }
+    }
+
+    /// How far this update's anchor moves the twin and the hand (mm); `None` when not anchored.
+    pub fn moved_mm(&self) -> Option<f64> {
+        self.now.map(|(twin, real)| apart_mm(&twin, &real))
     }
 
     /// For the end of a run: the updates anchored, how far the anchor moved the hand, and
@@ -721,7 +719,7 @@ impl HandAnchor {
             return String::new();
         }
         let spread = |v: &[f64]| {
-            let s = crate::net::serve::Spread::of(v);
+            let s = Spread::of(v);
             format!("median {:.1} mm, max {:.1} mm", s.median, s.max)
         };
         let truth = if self.error_mm.is_empty() {
@@ -738,6 +736,11 @@ impl HandAnchor {
             spread(&self.correction_mm)
         )
     }
+}
+
+/// The distance between two poses' origins (m apart, in mm).
+fn apart_mm(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
+    1e3 * (a.translation.vector - b.translation.vector).norm()
 }
 
 /// Alice's view: whether the camera looked through now rides on a head (the held object's
@@ -1069,13 +1072,15 @@ pub fn summary(
 }
 
 /// The live trial's status for the preview's status line; `twin` is the physics twin's pose
-/// (virtual scene), for the error between it mapped into the real world and the real object.
+/// (virtual scene), for the error between it mapped into the real world and the real object;
+/// `anchor` says when the hand is drawn on the real object (Alice's view) and how far it moved.
 pub fn status_line(
     live: &LiveTask,
     teleop: &Teleop,
     contacts: &ObjectContacts,
     held: &HeldObject,
     twin: Option<Isometry3<f64>>,
+    anchor: Option<&HandAnchor>,
 ) -> String {
     let s = &teleop.status;
     let error = match object_error_mm(teleop, twin) {
@@ -1087,6 +1092,11 @@ pub fn status_line(
     } else {
         String::new()
     };
+    let anchored = anchor
+        .and_then(HandAnchor::moved_mm)
+        .map_or_else(String::new, |mm| {
+            format!("; hand drawn on the real object ({mm:.1} mm from the twin)")
+        });
     let link = teleop
         .robot()
         .status_line()
@@ -1097,7 +1107,7 @@ pub fn status_line(
         holding(held)
     };
     format!(
-        "teleop ({}, {}): {}, {} contacts, max TCP {:.3} m/s{refused}{error}{link}",
+        "teleop ({}, {}): {}, {} contacts, max TCP {:.3} m/s{refused}{error}{anchored}{link}",
         live.source,
         live.mode.name(),
         doing,
@@ -1174,13 +1184,14 @@ mod tests {
         assert!(anchor.summary().is_empty(), "nothing anchored yet");
         // Not anchored: nothing counted, nothing drawn on the real object.
         anchor.update(None, Some(2.0));
-        assert!(anchor.now.is_none() && anchor.frames == 0);
+        assert!(anchor.now.is_none() && anchor.frames == 0 && anchor.moved_mm().is_none());
         // The twin 20 mm ahead of the real object the frame (captured at 2.0 s) shows, which
         // is 1 mm off the truth there; a frame captured before the history: no error counted.
         anchor.update(Some((at(2.021), at(2.001))), Some(2.0));
         anchor.update(Some((at(2.021), at(2.001))), Some(0.2));
         assert_eq!(anchor.frames, 2);
         assert_eq!(anchor.now, Some((at(2.021), at(2.001))));
+        assert!((anchor.moved_mm().unwrap() - 20.0).abs() < 1e-9);
         assert_eq!(anchor.correction_mm.len(), 2);
         assert!((anchor.correction_mm[0] - 20.0).abs() < 1e-9);
         assert_eq!(anchor.error_mm.len(), 1);
