@@ -2,7 +2,11 @@
 //! needed). Each type carries its ROS md5 sum, which a ROS master checks on every connection.
 
 fn main() {
-    let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("msg");
+    // Read when the script runs, not when it is compiled: a target folder shared by clones at
+    // other paths (CI's, outside the clone) reuses the compiled script.
+    let root =
+        std::path::PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("CARGO_MANIFEST_DIR"))
+            .join("msg");
     let (tokens, inputs) =
         roslibrust_codegen::find_and_generate_ros_messages_without_ros_package_path(vec![
             root.clone(),

@@ -163,7 +163,7 @@ fn empty_room(
                 return;
             }
             let (width, height) = (read.width, read.height);
-            if settled.last_complete_frame() < requested {
+            if !settled.completed(requested) {
                 progress.last = Some((width, height, rgba, pose));
                 return;
             }

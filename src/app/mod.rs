@@ -328,7 +328,7 @@ fn live_video(scene: &Scene, webcam: Option<u32>) -> LiveVideo {
 
 /// The erase pipeline's configuration for `scene`'s camera (no source twin yet: the app's
 /// twin, once spawned).
-fn erase_config(scene: &Scene) -> EraseConfig {
+pub(crate) fn erase_config(scene: &Scene) -> EraseConfig {
     EraseConfig {
         settings: scene.file.erase,
         camera: scene.believed_camera,

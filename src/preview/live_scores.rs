@@ -6,13 +6,17 @@
 //! as a replay scores every frame ([`crate::replay`]): IoU and leak of the erased region
 //! against the silhouette, PSNR of Ĩ(t) inside it. The preview shows the
 //! mean of the last [`WINDOW`] scored frames. Sampling keeps the read-backs (four images per
-//! scored frame) off most frames.
+//! scored frame) off most frames. A frame whose truth was read from a render that did not
+//! complete (a pipeline still compiling: the first updates, the views a camera switch spawns,
+//! [`RenderSettled`]) is not scored: its truth would miss what was not drawn yet.
 
 use std::collections::{BTreeMap, VecDeque};
 
 use avatarm_core::dr::MaskScores;
 use avatarm_erase::{EraseConfig, EraseState, EraseTargets};
 use avatarm_sim::{SimCameras, VideoCounter};
+use avatarm_twin::camera::RenderSettled;
+use bevy::diagnostic::FrameCount;
 use bevy::prelude::*;
 
 use crate::score::{
@@ -39,6 +43,9 @@ pub struct LiveDr {
     pub recent: VecDeque<(MaskScores, Option<f64>)>,
     /// Frames scored so far.
     pub scored: u64,
+    /// Sampled frames not scored because the render their truth was read from had not
+    /// completed.
+    pub incomplete: u64,
     every: u64,
     stopped: bool,
     last_index: Option<u64>,
@@ -49,6 +56,8 @@ pub struct LiveDr {
 #[derive(Default, Debug)]
 struct Parts {
     t_s: f64,
+    /// The frame number of the render the truth was read from.
+    truth_frame: u32,
     images: FrameImages,
     /// The composite's α_H (0 without H or with erasure off), known when it is requested.
     alpha_h: Option<f32>,
@@ -109,7 +118,9 @@ impl Plugin for LiveDrPlugin {
             Last,
             (request_parts, score_parts)
                 .chain()
-                .in_set(AvatarmSystems::Score),
+                .in_set(AvatarmSystems::Score)
+                // The frame count goes up in `Last` too: read before it does.
+                .before(bevy::diagnostic::update_frame_count),
         );
     }
 }
@@ -117,7 +128,7 @@ impl Plugin for LiveDrPlugin {
 fn request_parts(
     mut commands: Commands,
     mut live: ResMut<LiveDr>,
-    counter: Option<Res<VideoCounter>>,
+    (counter, frame): (Option<Res<VideoCounter>>, Res<FrameCount>),
     cameras: Option<Res<SimCameras>>,
     targets: Option<Res<EraseTargets>>,
     state: Res<EraseState>,
@@ -139,7 +150,17 @@ fn request_parts(
         live.last_index = Some(index);
         if index.is_multiple_of(live.every) && live.pending.len() < MAX_PENDING {
             let k = frame_key(t_s);
-            live.pending.insert(k, Parts { t_s, ..default() });
+            // The frame number this update's render carries (the count goes up in `Last`,
+            // after this system's set).
+            let truth_frame = frame.0.wrapping_add(1);
+            live.pending.insert(
+                k,
+                Parts {
+                    t_s,
+                    truth_frame,
+                    ..default()
+                },
+            );
             request_truth::<LiveDr>(&mut commands, &cameras, FramePart::NoRobot, k);
             request_truth::<LiveDr>(&mut commands, &cameras, FramePart::Silhouette, k);
         }
@@ -176,7 +197,12 @@ fn request_parts(
     );
 }
 
-fn score_parts(mut live: ResMut<LiveDr>, scene: Res<SceneResource>, config: Res<EraseConfig>) {
+fn score_parts(
+    mut live: ResMut<LiveDr>,
+    scene: Res<SceneResource>,
+    config: Res<EraseConfig>,
+    settled: Option<Res<RenderSettled>>,
+) {
     let done: Vec<i64> = live
         .pending
         .iter()
@@ -188,6 +214,19 @@ fn score_parts(mut live: ResMut<LiveDr>, scene: Res<SceneResource>, config: Res<
         let Some(p) = live.pending.remove(&key) else {
             continue;
         };
+        // The truth arrived, so its render has ended; it completed only if the renderer
+        // said so (without the room's settle record, every render counts as complete).
+        if settled
+            .as_ref()
+            .is_some_and(|s| !s.completed(p.truth_frame))
+        {
+            debug!(
+                "live scores: the frame captured at {:.3} s is not scored: its truth's render (frame {}) did not complete",
+                p.t_s, p.truth_frame
+            );
+            live.incomplete += 1;
+            continue;
+        }
         let FrameImages {
             norobot: Some(mut norobot),
             silhouette: Some(silhouette),
@@ -229,5 +268,69 @@ fn score_parts(mut live: ResMut<LiveDr>, scene: Res<SceneResource>, config: Res<
     // Frames the pipeline never delivered (dropped, refused) are forgotten, oldest first.
     while live.pending.len() > MAX_PENDING / 2 {
         live.pending.pop_first();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use bevy::ecs::system::RunSystemOnce;
+
+    use super::*;
+
+    /// A sampled frame whose truth was read from a render that had not completed is counted
+    /// and not scored; the same frame read from a complete render is scored.
+    #[test]
+    fn a_frame_whose_truth_render_did_not_complete_is_not_scored() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/scenes/pouring.toml");
+        let scene = avatarm_scene::Scene::load(&path, &Default::default()).expect("scene");
+        let config = crate::app::erase_config(&scene);
+        let k = config.camera.intrinsics;
+        let n = (k.width * k.height) as usize;
+        // A robot in the top rows, erased exactly, the room grey where it stood.
+        let robot: Vec<u8> = (0..n).map(|i| if i < n / 4 { 255 } else { 0 }).collect();
+        let parts = |truth_frame| {
+            let mut images = FrameImages::default();
+            let size = (k.width, k.height);
+            images.put(FramePart::NoRobot, size, 4, vec![120; n * 4]);
+            images.put(FramePart::Silhouette, size, 1, robot.clone());
+            images.put(FramePart::Mask, size, 1, robot.clone());
+            images.put(FramePart::Composite, size, 4, vec![120; n * 4]);
+            Parts {
+                t_s: 0.5,
+                truth_frame,
+                images,
+                alpha_h: Some(1.0),
+                requested: true,
+            }
+        };
+        let mut app = App::new();
+        let settled = RenderSettled::default();
+        app.insert_resource(settled.clone())
+            .insert_resource(SceneResource(scene))
+            .insert_resource(config)
+            .insert_resource(LiveDr::default());
+        // The frame's truth read at `truth_frame`: (scored, not scored as incomplete).
+        let mut score = |truth_frame| {
+            app.world_mut()
+                .resource_mut::<LiveDr>()
+                .pending
+                .insert(frame_key(0.5), parts(truth_frame));
+            app.world_mut().run_system_once(score_parts).unwrap();
+            let l = app.world().resource::<LiveDr>();
+            (l.scored, l.incomplete)
+        };
+        // Frame 5 rendered with a pipeline compiling, frame 6 complete (a view spawned at 5).
+        settled.note_complete(4);
+        settled.note_incomplete(5);
+        settled.note_complete(6);
+        assert_eq!(score(5), (0, 1), "read at an incomplete frame");
+        assert_eq!(score(7), (0, 2), "read at a frame not known complete");
+        assert_eq!(score(6), (1, 2));
+        assert_eq!(score(4), (2, 2));
+        let (iou, leak, psnr) = app.world().resource::<LiveDr>().means().unwrap();
+        assert_eq!((iou, leak), (1.0, 0.0));
+        assert!(psnr.is_some_and(|p| p > 60.0), "{psnr:?}");
     }
 }

@@ -670,10 +670,17 @@ fn count_frames(
         // One line for scripted runs (and the tests that run them).
         let scores = live_dr
             .as_deref()
-            .and_then(|l| l.means().map(|m| (l.scored, m)))
-            .map_or(String::new(), |(n, (iou, leak, psnr))| {
+            .and_then(|l| l.means().map(|m| (l.scored, l.incomplete, m)))
+            .map_or(String::new(), |(n, incomplete, (iou, leak, psnr))| {
+                let unscored = if incomplete > 0 {
+                    format!(
+                        " ({incomplete} sampled frames not scored: their truth's render had not completed)"
+                    )
+                } else {
+                    String::new()
+                };
                 format!(
-                    "; {n} frames scored live, last IoU {iou:.3}, leak {leak:.2} %, PSNR {} dB",
+                    "; {n} frames scored live, last IoU {iou:.3}, leak {leak:.2} %, PSNR {} dB{unscored}",
                     psnr.map_or("-".to_owned(), |p| format!("{p:.1}"))
                 )
             });

@@ -31,6 +31,7 @@ use bevy::camera::visibility::RenderLayers;
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::core_pipeline::prepass::DepthPrepass;
 use bevy::diagnostic::FrameCount;
+use bevy::light::SimulationLightSystems;
 use bevy::prelude::*;
 use bevy::transform::TransformSystems;
 use nalgebra::{DVector, Isometry3};
@@ -227,9 +228,15 @@ impl Plugin for SimRoomPlugin {
             )
             .configure_sets(
                 PostUpdate,
+                // Before the systems that skip an inactive camera (its visible meshes, its
+                // shadow cascades, its light clusters): a view turned on again renders this
+                // update with them up to date, not with those of its last active update.
                 SimRoomSystems::GateTruth
                     .after(TransformSystems::Propagate)
-                    .after(VisibilitySystems::VisibilityPropagate),
+                    .after(VisibilitySystems::VisibilityPropagate)
+                    .before(VisibilitySystems::CheckVisibility)
+                    .before(SimulationLightSystems::UpdateDirectionalLightCascades)
+                    .before(SimulationLightSystems::AssignLightsToClusters),
             )
             .add_systems(
                 PreStartup,

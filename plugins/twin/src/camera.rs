@@ -1,8 +1,9 @@
 //! A Bevy camera projection built from pinhole intrinsics, render targets, and the signal that
 //! a frame rendered completely ([`RenderSettled`]).
 
-use std::sync::Arc;
+use std::collections::VecDeque;
 use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Arc, Mutex};
 
 use avatarm_core::vision::camera::PinholeCamera;
 use bevy::asset::RenderAssetUsages;
@@ -179,21 +180,62 @@ impl CameraProjection for PinholeProjection {
     }
 }
 
-/// The newest frame (Bevy's [`FrameCount`] as the render world saw it) whose rendering ended
-/// with no pipeline still being compiled: every draw of that frame had its pipeline, so what it
+/// Which frames (Bevy's [`FrameCount`] as the render world saw it) ended their rendering with
+/// no pipeline still being compiled: every draw of such a frame had its pipeline, so what it
 /// rendered is complete. Shared by the main and the render world ([`RenderSettledPlugin`]).
 #[derive(Resource, Debug, Clone, Default)]
-pub struct RenderSettled(Arc<AtomicU32>);
+pub struct RenderSettled(Arc<SettledFrames>);
+
+/// The record behind [`RenderSettled`].
+#[derive(Debug, Default)]
+struct SettledFrames {
+    /// The newest complete frame (0 before the first).
+    last_complete: AtomicU32,
+    /// The newest incomplete frames, oldest first, at most [`RenderSettled::INCOMPLETE_KEPT`].
+    incomplete: Mutex<VecDeque<u32>>,
+}
 
 impl RenderSettled {
+    /// Incomplete frames remembered for [`RenderSettled::completed`] (about a minute at 60
+    /// updates a second).
+    pub const INCOMPLETE_KEPT: usize = 4096;
+
     /// The newest complete frame (0 before the first).
     pub fn last_complete_frame(&self) -> u32 {
-        self.0.load(Ordering::Acquire)
+        self.0.last_complete.load(Ordering::Acquire)
     }
 
     /// Notes that `frame` rendered completely (the render world does, after each frame).
     pub fn note_complete(&self, frame: u32) {
-        self.0.fetch_max(frame, Ordering::AcqRel);
+        self.0.last_complete.fetch_max(frame, Ordering::AcqRel);
+    }
+
+    /// Notes that `frame` rendered with a pipeline still compiling (what it drew may miss
+    /// meshes).
+    pub fn note_incomplete(&self, frame: u32) {
+        let mut incomplete = self.incomplete();
+        incomplete.push_back(frame);
+        while incomplete.len() > Self::INCOMPLETE_KEPT {
+            incomplete.pop_front();
+        }
+    }
+
+    /// Whether `frame` itself rendered completely: a complete frame has been noted at or after
+    /// it and it is not among the incomplete ones remembered. (A later complete frame alone
+    /// does not make an earlier one complete: a view spawned later compiles its pipelines
+    /// then.) Frames older than the incomplete ones remembered count as complete when a later
+    /// frame was.
+    pub fn completed(&self, frame: u32) -> bool {
+        let last = self.last_complete_frame();
+        last > 0 && frame <= last && !self.incomplete().contains(&frame)
+    }
+
+    fn incomplete(&self) -> std::sync::MutexGuard<'_, VecDeque<u32>> {
+        // A render thread that panicked while holding it left a whole list.
+        self.0
+            .incomplete
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 }
 
@@ -228,5 +270,35 @@ fn note_complete_frame(
 ) {
     if cache.waiting_pipelines().next().is_none() {
         settled.note_complete(frame.0);
+    } else {
+        settled.note_incomplete(frame.0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::RenderSettled;
+
+    /// A frame is complete when it was not noted incomplete and a frame at or after it was
+    /// complete; incomplete frames past the record's length are forgotten.
+    #[test]
+    fn each_frame_s_own_completion_is_kept() {
+        let settled = RenderSettled::default();
+        assert!(!settled.completed(0) && !settled.completed(1));
+        settled.note_incomplete(1);
+        settled.note_complete(2);
+        settled.note_incomplete(3);
+        settled.note_complete(4);
+        assert_eq!(settled.last_complete_frame(), 4);
+        assert!(!settled.completed(1) && settled.completed(2));
+        assert!(!settled.completed(3) && settled.completed(4));
+        assert!(!settled.completed(5), "not rendered yet");
+        let kept = RenderSettled::INCOMPLETE_KEPT as u32;
+        for frame in 5..5 + kept {
+            settled.note_incomplete(frame);
+        }
+        settled.note_complete(5 + kept);
+        assert!(settled.completed(1) && settled.completed(3), "forgotten");
+        assert!(!settled.completed(5) && !settled.completed(4 + kept));
     }
 }
