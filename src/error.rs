@@ -23,6 +23,9 @@ pub enum AppError {
     /// A camera file (intrinsics, distortion, pose) that could not be used.
     #[error(transparent)]
     CameraFile(Box<avatarm_record::CameraFileError>),
+    /// Footage or a bag that could not be imported.
+    #[error(transparent)]
+    Import(Box<avatarm_import::ImportError>),
     /// A two-site session that could not be set up or was refused.
     #[error(transparent)]
     Net(Box<avatarm_net::NetError>),
@@ -97,10 +100,21 @@ pub enum AppError {
         /// The files looked for.
         searched: String,
     },
-    /// A replay that did not finish or measured something wrong (names what).
-    #[error("replay: {message}")]
-    Replay {
+    /// A command that did not finish or measured something wrong: the command (`replay`,
+    /// `serve`, `bench gpu`, ...) and what.
+    #[error("{command}: {message}")]
+    Command {
+        /// The command, as typed after `avatarm`.
+        command: &'static str,
         /// What went wrong.
+        message: String,
+    },
+    /// A recording (or a file of frames) whose content cannot be used: the file and what.
+    #[error("{file}: {message}")]
+    Recording {
+        /// The recording's path, as given.
+        file: String,
+        /// What is wrong in it.
         message: String,
     },
     /// A bench setting that could not run.
@@ -157,9 +171,18 @@ impl AppError {
         }
     }
 
-    /// An [`AppError::Replay`].
-    pub fn replay(message: impl Into<String>) -> Self {
-        Self::Replay {
+    /// An [`AppError::Command`] of `command` (as typed after `avatarm`).
+    pub fn command(command: &'static str, message: impl Into<String>) -> Self {
+        Self::Command {
+            command,
+            message: message.into(),
+        }
+    }
+
+    /// An [`AppError::Recording`] of the recording `file`.
+    pub fn recording(file: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::Recording {
+            file: file.into(),
             message: message.into(),
         }
     }
@@ -167,6 +190,12 @@ impl AppError {
 
 /// Result with [`AppError`].
 pub type Result<T, E = AppError> = std::result::Result<T, E>;
+
+impl From<avatarm_import::ImportError> for AppError {
+    fn from(e: avatarm_import::ImportError) -> Self {
+        Self::Import(Box::new(e))
+    }
+}
 
 impl From<avatarm_scene::SceneError> for AppError {
     fn from(e: avatarm_scene::SceneError) -> Self {

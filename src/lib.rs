@@ -2,11 +2,14 @@
 //!
 //! This crate is the application; its rooms (docs/architecture.md shows them and the data flow):
 //!
-//! - [`cli`]: the `avatarm` command line: the clap types, the scene overrides, dispatch, and the
-//!   `avatarm robot` description check. `main.rs` only calls [`cli::main`].
-//! - [`app`]: the Bevy app assembled from the plugins ([`build_app`], [`AvatarmPlugins`]), the
-//!   app's one system-set enum ([`AvatarmSystems`]), and the background sources.
-//! - [`preview`]: the desktop preview (panel, keys, status line, live scores) and the XR view.
+//! - [`cli`]: the `avatarm` command line: one module per command, each a clap `Args` struct
+//!   with its own `run()`, and a dispatch. `main.rs` only calls [`cli::main`].
+//! - [`app`]: the app's base assembled from the plugins ([`app::build_app`],
+//!   [`AvatarmPlugins`]), the app's one system-set enum ([`AvatarmSystems`]), and the
+//!   background sources. The front ends build on it: [`preview::build_app`],
+//!   [`replay::build_app`], [`net::video::build_app`].
+//! - [`preview`]: the desktop preview (panel, keys, status line, live scores, the camera
+//!   switch) and the XR view.
 //! - [`teleop`]: live teleoperation of a scene's `[task]` with any hand source.
 //! - [`replay`]: headless scene replay: capture, scores, the report and the task's trials.
 //! - [`score`]: the capture-and-score path shared by the replay and the live scores.
@@ -19,12 +22,10 @@
 //! `avatarm_core`, the ECS plugins from the `avatarm_*` plugin crates.
 
 pub mod app;
-pub mod bag;
 pub mod bench;
 pub mod calibrate;
 pub mod cli;
 pub mod error;
-pub mod footage;
 pub mod import;
 pub mod net;
 pub mod preview;
@@ -34,6 +35,6 @@ pub mod score;
 pub mod session;
 pub mod teleop;
 
-pub use app::{AppTwin, AvatarmPlugins, AvatarmSystems, Mode, SceneResource, build_app};
+pub use app::{AppBase, AppTwin, AvatarmPlugins, AvatarmSystems, Runner, SceneResource};
 pub use avatarm_scene as scene;
 pub use error::AppError;

@@ -144,8 +144,7 @@ fn empty_room(
     progress.in_flight = true;
     let t = robot.map_or(0.0, |r| r.0.time_s());
     let pose = scene.0.head.as_ref().map(|h| h.believed_camera_at(t));
-    // The frame number this update's render carries (the count goes up in `Last`).
-    let requested = frame.0.wrapping_add(1);
+    let requested = RenderSettled::this_update_frame(&frame);
     read_image_once(&mut commands, handle.clone()).observe(
         move |read: On<ImageRead>,
               mut commands: Commands,

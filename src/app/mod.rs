@@ -1,11 +1,13 @@
-//! The app assembled from the plugins: [`build_app`] for a scene in a [`Mode`] (the desktop
-//! preview or a headless replay), with the app's own twin of the robot ([`AppTwin`]) and the
-//! scene as a resource ([`SceneResource`]).
+//! The app's base, assembled from the plugins: [`build_app`] for a scene with what the front
+//! end on top needs of it ([`AppBase`]: the clock and window, the webcam, the room's ground
+//! truth), the app's own twin of the robot ([`AppTwin`]) and the scene as a resource
+//! ([`SceneResource`]). The front ends build on it and add their own plugin: the preview
+//! ([`crate::preview::build_app`]), the headless replay ([`crate::replay::build_app`]) and the
+//! robot site's video ([`crate::net::video::build_app`]). Nothing here knows them.
 //!
 //! - [`background`]: where the background H comes from (the scene's `[background]`).
 
 pub mod background;
-pub mod switch;
 
 use std::time::Duration;
 
@@ -27,18 +29,61 @@ use bevy::winit::WinitPlugin;
 use avatarm_scene::Scene;
 use avatarm_scene::spec::BackgroundSpec;
 
-use crate::{AppError, preview, replay, teleop};
+use crate::AppError;
 
-/// How the app runs.
+/// How the app's clock and window run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Runner {
+    /// No window: one camera frame of simulated time per update, as fast as it renders (the
+    /// replay).
+    Replay,
+    /// No window, in real time: one update per camera frame at most (the robot site's video).
+    /// Bevy's log set-up is left out: the caller's stays.
+    RealTime,
+    /// A window, through OpenXR's plugins when `xr` (falling back to the window without a
+    /// runtime), with a fixed step (s) per update when given.
+    Window {
+        /// Through OpenXR.
+        xr: bool,
+        /// Simulated seconds per update, instead of the wall clock's.
+        fixed_step_s: Option<f64>,
+    },
+}
+
+/// What the app's base ([`AvatarmPlugins`]) takes from the front end built on top of it.
 #[derive(Debug, Clone)]
-pub enum Mode {
-    /// A window with the camera feed and the twin.
-    Preview(preview::PreviewOptions),
-    /// No window: replay the scene on a fixed timestep and write frames and a report.
-    Headless(replay::ReplayOptions),
-    /// No window, in real time: the robot site's erased video (`avatarm serve`), its arm
-    /// driven by the site's control loop.
-    Serve(crate::net::video::ServeVideoOptions),
+pub struct AppBase {
+    /// The clock and the window.
+    pub runner: Runner,
+    /// The webcam's index where the camera is a webcam (nothing renders the simulated room's
+    /// video then).
+    pub webcam: Option<u32>,
+    /// Render the room's ground truth (its robot-free view) even where no camera takes the
+    /// empty room as its background: a replay scores against it.
+    pub ground_truth: bool,
+    /// The scene through the other cameras the front end may switch to (their backgrounds
+    /// count for [`AppBase::empty_room_anywhere`]).
+    pub other_cameras: Vec<Scene>,
+}
+
+impl AppBase {
+    /// A base with `runner`, the simulated camera, no forced ground truth and no other camera.
+    pub fn new(runner: Runner) -> Self {
+        Self {
+            runner,
+            webcam: None,
+            ground_truth: false,
+            other_cameras: Vec::new(),
+        }
+    }
+
+    /// Whether the scene's camera, or one the front end can switch to, takes the simulated
+    /// empty room as its background.
+    pub fn empty_room_anywhere(&self, scene: &Scene) -> bool {
+        std::iter::once(scene)
+            .chain(&self.other_cameras)
+            .any(|s| s.file.background == BackgroundSpec::EmptyRoom)
+    }
 }
 
 /// The app's own twin of the robot (what the app believes, from received joint states).
@@ -66,35 +111,20 @@ pub fn headless_plugins() -> PluginGroupBuilder {
         .disable::<WinitPlugin>()
 }
 
-/// Builds the app for a scene; shared by `main` and the tests. Errors when the preview's live
-/// teleoperation cannot be set up (the hand source, the task's grasp).
-pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
-    // Before any window: a hand or task that cannot be set up is refused at start-up.
-    let live = match mode {
-        Mode::Preview(options) => options
-            .hand
-            .as_ref()
-            .map(|choice| {
-                teleop::LiveTeleop::prepare(scene, choice, options.robot).map_err(|e| {
-                    AppError::Teleop {
-                        source: Box::new(e),
-                    }
-                })
-            })
-            .transpose()?,
-        Mode::Headless(_) | Mode::Serve(_) => None,
-    };
+/// Builds the app's base for a scene: Bevy's window or headless renderer as `base.runner`
+/// says, then [`AvatarmPlugins`]. The front end adds its own plugin after.
+pub fn build_app(scene: &Scene, base: &AppBase) -> Result<App, AppError> {
     let mut app = App::new();
     let frame_dt = Duration::from_secs_f64(1.0 / scene.file.camera.fps);
-    match mode {
-        Mode::Headless(_) => {
+    match base.runner {
+        Runner::Replay => {
             app.add_plugins((
                 headless_plugins(),
                 ScheduleRunnerPlugin::run_loop(Duration::ZERO),
             ))
             .insert_resource(TimeUpdateStrategy::ManualDuration(frame_dt));
         }
-        Mode::Serve(_) => {
+        Runner::RealTime => {
             // Real time (the clock is the wall's); one update per camera frame at most. The
             // site's own log set-up stays (the control loop logs before the app exists).
             app.add_plugins((
@@ -102,7 +132,7 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
                 ScheduleRunnerPlugin::run_loop(frame_dt),
             ));
         }
-        Mode::Preview(options) => {
+        Runner::Window { xr, fixed_step_s } => {
             check_display()?;
             let window = Window {
                 title: format!("Avatarm — {}", scene.file.name),
@@ -113,8 +143,8 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
                 primary_window: Some(window),
                 ..default()
             });
-            add_window_plugins(&mut app, plugins, options.xr);
-            if let Some(step) = options.fixed_step_s {
+            add_window_plugins(&mut app, plugins, xr);
+            if let Some(step) = fixed_step_s {
                 app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
                     step,
                 )));
@@ -123,11 +153,8 @@ pub fn build_app(scene: &Scene, mode: &Mode) -> Result<App, AppError> {
     }
     app.add_plugins(AvatarmPlugins {
         scene: scene.clone(),
-        mode: mode.clone(),
+        base: base.clone(),
     });
-    if let Some(live) = live {
-        live.install(&mut app)?;
-    }
     Ok(app)
 }
 
@@ -185,31 +212,26 @@ pub fn scene_occluders(scene: &Scene) -> Vec<(Mesh, Transform)> {
         .collect()
 }
 
-/// Every plugin of Avatarm for a scene in a mode, on top of Bevy's window or headless
-/// renderer ([`build_app`] adds those): the robot twin, image read-backs, the simulated room,
-/// the video, the erase pipeline and the interaction layer, the background source, and the
-/// replay or the preview (with live scores and the XR view). [`AvatarmSetupPlugin`] goes first:
-/// it inserts the scene's resources the others read, and orders [`AvatarmSystems`].
+/// Avatarm's base plugins for a scene, on top of Bevy's window or headless renderer
+/// ([`build_app`] adds those): the robot twin, image read-backs, the simulated room, the video
+/// (the simulated camera's or a webcam), the erase pipeline and the interaction layer, and the
+/// background source. [`AvatarmSetupPlugin`] goes first: it inserts the scene's resources the
+/// others read, and orders [`AvatarmSystems`]. The front end's own plugin (the replay, the
+/// preview, the robot site's video) comes after.
 pub struct AvatarmPlugins {
     /// The scene.
     pub scene: Scene,
-    /// How the app runs.
-    pub mode: Mode,
+    /// What the front end needs of the base.
+    pub base: AppBase,
 }
 
 impl PluginGroup for AvatarmPlugins {
     fn build(self) -> PluginGroupBuilder {
-        let webcam = match &self.mode {
-            Mode::Preview(options) => options.webcam,
-            Mode::Headless(_) | Mode::Serve(_) => None,
-        };
-        let live_scores = webcam.is_none() && empty_room_anywhere(&self.scene, &self.mode);
-        // Two scored frames a second.
-        let every = (self.scene.file.camera.fps / 2.0).round().max(1.0) as u64;
+        #[allow(unused_mut)] // changed with the feature `webcam`
         let mut group = PluginGroupBuilder::start::<Self>()
             .add(AvatarmSetupPlugin {
                 scene: self.scene.clone(),
-                mode: self.mode.clone(),
+                base: self.base.clone(),
             })
             .add(RobotTwinPlugin)
             // Before the room (which adds it too when alone): the replay, the live scores and
@@ -221,7 +243,7 @@ impl PluginGroup for AvatarmPlugins {
             .add(InteractionPlugin)
             .add(background::BackgroundSourcePlugin);
         #[cfg(feature = "webcam")]
-        if let Some(index) = webcam {
+        if let Some(index) = self.base.webcam {
             let k = &self.scene.true_camera.intrinsics;
             group = group.add(avatarm_video::webcam::WebcamPlugin(
                 avatarm_video::webcam::WebcamConfig {
@@ -233,27 +255,7 @@ impl PluginGroup for AvatarmPlugins {
                 },
             ));
         }
-        match self.mode {
-            Mode::Headless(options) => group.add(replay::ReplayPlugin(options)),
-            Mode::Serve(options) => group.add(crate::net::video::ServeVideoPlugin(options)),
-            Mode::Preview(options) => {
-                #[cfg(feature = "xr")]
-                if options.xr {
-                    group = group.add(preview::xr::XrViewPlugin);
-                }
-                if live_scores {
-                    // The room renders its ground truth anyway (the empty room is H).
-                    group = group.add(preview::live_scores::LiveDrPlugin { every });
-                }
-                if options.cameras.len() > 1 {
-                    group = group.add(switch::CameraSwitchPlugin(switch::CameraViews {
-                        scenes: options.cameras.clone(),
-                        current: self.scene.camera_index,
-                    }));
-                }
-                group.add(preview::PreviewPlugin(options))
-            }
-        }
+        group
     }
 }
 
@@ -282,20 +284,8 @@ pub enum AvatarmSystems {
     Score,
 }
 
-/// The scene's camera, or one the preview can switch to
-/// ([`preview::PreviewOptions::cameras`]), takes the simulated empty room as its background.
-fn empty_room_anywhere(scene: &Scene, mode: &Mode) -> bool {
-    let others = match mode {
-        Mode::Preview(options) => options.cameras.as_slice(),
-        Mode::Headless(_) | Mode::Serve(_) => &[],
-    };
-    std::iter::once(scene)
-        .chain(others)
-        .any(|s| s.file.background == BackgroundSpec::EmptyRoom)
-}
-
 /// The simulated camera's video for `scene`'s camera: its sensor model, latency and fps.
-fn sim_video(scene: &Scene) -> SimVideo {
+pub(crate) fn sim_video(scene: &Scene) -> SimVideo {
     SimVideo {
         sensor: scene.file.camera.sensor.clone(),
         frame_latency_s: scene.file.camera.frame_latency_s,
@@ -305,7 +295,7 @@ fn sim_video(scene: &Scene) -> SimVideo {
 }
 
 /// The simulated head `scene`'s camera rides on, if it does.
-fn sim_head(scene: &Scene) -> Option<SimHead> {
+pub(crate) fn sim_head(scene: &Scene) -> Option<SimHead> {
     scene.head.as_ref().map(|h| SimHead {
         motion: h.motion.clone(),
         mount: h.mount,
@@ -316,7 +306,7 @@ fn sim_head(scene: &Scene) -> Option<SimHead> {
 
 /// The live video's state for `scene`'s camera (the webcam `webcam`, else the simulated
 /// camera): stale after three frame periods (at least 0.2 s) plus the camera's latency.
-fn live_video(scene: &Scene, webcam: Option<u32>) -> LiveVideo {
+pub(crate) fn live_video(scene: &Scene, webcam: Option<u32>) -> LiveVideo {
     LiveVideo::new(
         match webcam {
             Some(i) => format!("webcam {i}"),
@@ -346,7 +336,7 @@ pub(crate) fn erase_config(scene: &Scene) -> EraseConfig {
 
 /// The head's tracked poses (empty for a fixed camera), kept long enough for a frame's capture
 /// time to stay inside them: the frames' and the tracking's latency and half a second more.
-fn head_tracking(scene: &Scene) -> avatarm_video::HeadTracking {
+pub(crate) fn head_tracking(scene: &Scene) -> avatarm_video::HeadTracking {
     let mut tracking = avatarm_video::HeadTracking::default();
     if let Some(head) = &scene.head {
         tracking.history.window_s =
@@ -396,17 +386,14 @@ pub fn room_proxy(
 pub struct AvatarmSetupPlugin {
     /// The scene.
     pub scene: Scene,
-    /// How the app runs.
-    pub mode: Mode,
+    /// What the front end needs of the base.
+    pub base: AppBase,
 }
 
 impl Plugin for AvatarmSetupPlugin {
     fn build(&self, app: &mut App) {
-        let (scene, mode) = (&self.scene, &self.mode);
-        let webcam = match mode {
-            Mode::Preview(options) => options.webcam,
-            Mode::Headless(_) | Mode::Serve(_) => None,
-        };
+        let (scene, base) = (&self.scene, &self.base);
+        let webcam = base.webcam;
         app.insert_resource(SceneResource(scene.clone()))
             .insert_resource(SimRoomConfig {
                 model: scene.model.clone(),
@@ -420,7 +407,7 @@ impl Plugin for AvatarmSetupPlugin {
                 props: scene.props.clone(),
                 // The no-robot view also gives the simulated "empty room" background (of this
                 // camera, or of one the preview can switch to).
-                ground_truth: matches!(mode, Mode::Headless(_)) || empty_room_anywhere(scene, mode),
+                ground_truth: base.ground_truth || base.empty_room_anywhere(scene),
                 twin: None,
                 video: webcam.is_none().then(|| sim_video(scene)),
                 head: sim_head(scene),

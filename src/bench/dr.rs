@@ -96,8 +96,8 @@ pub struct DrPoint {
 }
 
 impl DrPoint {
-    /// GPU time of the whole erase per camera frame (mask twin, dilation, feathering, composite), ms;
-    /// NaN without GPU times.
+    /// GPU time of the whole erase per camera frame (mask twin, dilation, feathering, composite),
+    /// ms; NaN without GPU times.
     pub fn erase_gpu_ms(&self) -> f64 {
         match (self.gpu_mask_ms, self.gpu_composite_ms) {
             (Some(m), Some(c)) => m + c,
@@ -200,7 +200,12 @@ pub fn run_dr(scene: &Scene, sweep: &DrSweep, out: &Path) -> Result<DrOutputs, A
             path.split('.')
                 .fold(&report, |v, k| &v[k])
                 .as_f64()
-                .ok_or_else(|| in_setting(AppError::replay(format!("the report has no {path}"))))
+                .ok_or_else(|| {
+                    in_setting(AppError::command(
+                        "bench dr",
+                        format!("the report has no {path}"),
+                    ))
+                })
         };
         let on_gpu = report["timing_ms"]["source"] == "gpu";
         points.push(DrPoint {

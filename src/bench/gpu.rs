@@ -19,6 +19,7 @@ use std::time::{Duration, Instant};
 use avatarm_core::dr::{EraseSettings, Photometric};
 use avatarm_core::rng::Rng;
 use avatarm_core::robot::JointMap;
+use avatarm_core::stats::Spread;
 use avatarm_core::vision::camera::{Intrinsics, PinholeCamera};
 use avatarm_erase::{
     EraseJob, EraseParams, ErasePassesPlugin, FLOOR_SPAN, GpuTimes, PASS_NAMES, SpanTimes,
@@ -76,30 +77,6 @@ const WARMUP: u32 = 20;
 
 /// Updates after the measured ones for their timestamps to come back.
 const DRAIN: u32 = 12;
-
-/// A median and a 95th percentile (ms).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Spread {
-    /// Median.
-    pub median: f64,
-    /// 95th percentile.
-    pub p95: f64,
-}
-
-impl Spread {
-    fn of(values: &[f64]) -> Option<Self> {
-        if values.is_empty() {
-            return None;
-        }
-        let mut v = values.to_vec();
-        v.sort_by(f64::total_cmp);
-        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-        Some(Self {
-            median: at(0.5),
-            p95: at(0.95),
-        })
-    }
-}
 
 /// One point: a frame size and a number of cameras.
 #[derive(Debug, Clone)]
@@ -306,12 +283,15 @@ fn measure(
         .add_systems(Startup, setup_bench)
         .add_systems(Update, drive_bench);
     app.run();
-    let (times, marks, update_ms) = result
-        .lock()
-        .ok()
-        .and_then(|mut r| r.take())
-        .ok_or_else(|| AppError::replay("bench gpu: the app stopped before its times arrived"))?;
-    let update_ms = Spread::of(&update_ms).map_or(f64::NAN, |s| s.median);
+    let (times, marks, update_ms) =
+        result
+            .lock()
+            .ok()
+            .and_then(|mut r| r.take())
+            .ok_or_else(|| {
+                AppError::command("bench gpu", "the app stopped before its times arrived")
+            })?;
+    let update_ms = Spread::some_of(&update_ms).map_or(f64::NAN, |s| s.median);
     let clock = match (clock_before, gpu_clock()) {
         (Some(a), Some(b)) => Some(format!("before: {a}; after: {b}")),
         _ => None,
@@ -329,7 +309,7 @@ fn summarise(
     clock: Option<String>,
 ) -> Result<GpuPoint, AppError> {
     if let Some(why) = &times.unavailable {
-        return Err(AppError::replay(format!("bench gpu: {why}")));
+        return Err(AppError::command("bench gpu", why.clone()));
     }
     let since = |name: &str| times.since(name, marks.get(name).copied().unwrap_or(0));
     // Per update, summed over the spans given (of every camera): the n-th sample of each span
@@ -364,34 +344,40 @@ fn summarise(
         (0..n).map(|k| series.iter().map(|s| s[k]).sum()).collect()
     };
     let need = |what: &str, v: Vec<f64>| {
-        Spread::of(&v).ok_or_else(|| {
-            AppError::replay(format!(
-                "bench gpu {}x{} x{cameras}: no {what} time arrived",
-                size.0, size.1
-            ))
+        Spread::some_of(&v).ok_or_else(|| {
+            AppError::command(
+                "bench gpu",
+                format!(
+                    "bench gpu {}x{} x{cameras}: no {what} time arrived",
+                    size.0, size.1
+                ),
+            )
         })
     };
     let erase = need("erase", per_update(&PASS_NAMES))?;
     let passes = need("pass", per_update(&PASS_NAMES[1..]))?;
     let mask_twin = need("mask twin", per_update(&PASS_NAMES[..1]))?;
     let floor = need("copy floor", per_update(&[FLOOR_SPAN]))?;
-    let upload = Spread::of(&per_update(&[UPLOAD_SPAN]));
+    let upload = Spread::some_of(&per_update(&[UPLOAD_SPAN]));
     if !missing.is_empty() {
         missing.sort();
         missing.dedup();
-        return Err(AppError::replay(format!(
-            "bench gpu {}x{} x{cameras}: some cameras were not timed ({})",
-            size.0,
-            size.1,
-            missing.join(", ")
-        )));
+        return Err(AppError::command(
+            "bench gpu",
+            format!(
+                "bench gpu {}x{} x{cameras}: some cameras were not timed ({})",
+                size.0,
+                size.1,
+                missing.join(", ")
+            ),
+        ));
     }
     let spans = times
         .spans
         .keys()
         .filter_map(|name| {
             let v = since(name);
-            Spread::of(&v).map(|s| (name.clone(), s, v.len()))
+            Spread::some_of(&v).map(|s| (name.clone(), s, v.len()))
         })
         .collect();
     Ok(GpuPoint {

@@ -113,6 +113,10 @@ pub struct HeadOutputs {
 
 /// Runs the sweep on `scene` (which needs a `[camera.head]` with a sweep), writing into `out`
 /// (one replay folder per point under `runs/`).
+#[expect(
+    clippy::too_many_lines,
+    reason = "the sweep's loops over latency, speed, compensation and mount error around one measurement"
+)]
 pub fn run_head(scene: &Scene, sweep: &HeadSweep, out: &Path) -> Result<HeadOutputs, AppError> {
     let amplitude = scene
         .file
@@ -242,7 +246,12 @@ pub fn run_head(scene: &Scene, sweep: &HeadSweep, out: &Path) -> Result<HeadOutp
             path.split('.')
                 .fold(&report, |v, k| &v[k])
                 .as_f64()
-                .ok_or_else(|| in_setting(AppError::replay(format!("the report has no {path}"))))
+                .ok_or_else(|| {
+                    in_setting(AppError::command(
+                        "bench head",
+                        format!("the report has no {path}"),
+                    ))
+                })
         };
         points.push(HeadPoint {
             speed_deg_s: speed,

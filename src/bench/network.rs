@@ -115,7 +115,7 @@ fn free_port(udp: bool) -> Result<u16, AppError> {
         std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr())
     };
     port.map(|a| a.port())
-        .map_err(|e| AppError::replay(format!("no free port on 127.0.0.1: {e}")))
+        .map_err(|e| AppError::command("bench network", format!("no free port on 127.0.0.1: {e}")))
 }
 
 /// One trial through the relay.
@@ -171,13 +171,13 @@ fn run_cell(
     };
     let upstream = format!("127.0.0.1:{port}")
         .parse()
-        .map_err(|e| AppError::replay(format!("{e}")))?;
+        .map_err(|e| AppError::command("bench network", format!("{e}")))?;
     let relay = if udp {
         Relay::udp(upstream, impairment)
     } else {
         Relay::tcp(upstream, impairment)
     }
-    .map_err(|e| AppError::replay(format!("the impairment relay: {e}")))?;
+    .map_err(|e| AppError::command("bench network", format!("the impairment relay: {e}")))?;
     let start_z = scene
         .trial
         .as_ref()
@@ -198,7 +198,9 @@ fn run_cell(
             site.close();
             report
         })
-        .map_err(|e| AppError::replay(format!("cannot start the robot site: {e}")))?;
+        .map_err(|e| {
+            AppError::command("bench network", format!("cannot start the robot site: {e}"))
+        })?;
     let joined = OperatorSite::join(
         &config(
             Role::Operator,
@@ -216,7 +218,7 @@ fn run_cell(
     stop.store(true, Ordering::Relaxed);
     let report: ServeReport = robot
         .join()
-        .map_err(|_| AppError::replay("the robot site's loop panicked"))?;
+        .map_err(|_| AppError::command("bench network", "the robot site's loop panicked"))?;
     drop(relay);
     let (op, rtt_s) = match operated {
         Ok(r) => r?,

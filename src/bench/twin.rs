@@ -195,6 +195,10 @@ pub fn peak_link_speed(
 /// Runs every variant on `scene` (its timeline retimed so that the TCP's peak over the whole
 /// scene is `sweep.tcp_speed`; the peak within the replayed window is reported beside it),
 /// writing into `out`.
+#[expect(
+    clippy::too_many_lines,
+    reason = "the sweep's loop over the twins around one measurement, then the chart and the table"
+)]
 pub fn run_twin(scene: &Scene, sweep: &TwinSweep, out: &Path) -> Result<TwinOutputs, AppError> {
     if !(sweep.duration_s.is_finite() && sweep.duration_s > 0.0) {
         return Err(AppError::flag(
@@ -312,7 +316,12 @@ pub fn run_twin(scene: &Scene, sweep: &TwinSweep, out: &Path) -> Result<TwinOutp
             path.split('.')
                 .fold(&report, |v, k| &v[k])
                 .as_f64()
-                .ok_or_else(|| in_setting(AppError::replay(format!("the report has no {path}"))))
+                .ok_or_else(|| {
+                    in_setting(AppError::command(
+                        "bench twin",
+                        format!("the report has no {path}"),
+                    ))
+                })
         };
         let on_gpu = report["timing_ms"]["source"] == "gpu";
         let gpu_mask_twin_ms = on_gpu
@@ -421,12 +430,15 @@ pub fn leak_by_dilation_in(dir: &Path, max: u32) -> Result<Vec<f64>, AppError> {
                 .collect::<Vec<u8>>()
         };
         if t.dimensions() != (w, h) {
-            return Err(AppError::replay(format!(
-                "{} is {}x{} but its mask is {w}x{h}",
-                dir.join(&name).display(),
-                t.width(),
-                t.height()
-            )));
+            return Err(AppError::command(
+                "bench twin",
+                format!(
+                    "{} is {}x{} but its mask is {w}x{h}",
+                    dir.join(&name).display(),
+                    t.width(),
+                    t.height()
+                ),
+            ));
         }
         if let Some(leaks) = dr::leak_by_dilation(&bin(&m), &bin(&t), w, h, max) {
             for (s, l) in sums.iter_mut().zip(leaks) {
@@ -436,10 +448,13 @@ pub fn leak_by_dilation_in(dir: &Path, max: u32) -> Result<Vec<f64>, AppError> {
         }
     }
     if frames == 0 {
-        return Err(AppError::replay(format!(
-            "{}: no saved frame shows the robot, so no dilation can be measured",
-            dir.display()
-        )));
+        return Err(AppError::command(
+            "bench twin",
+            format!(
+                "{}: no saved frame shows the robot, so no dilation can be measured",
+                dir.display()
+            ),
+        ));
     }
     Ok(sums.into_iter().map(|s| s / frames as f64).collect())
 }

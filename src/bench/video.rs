@@ -12,7 +12,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use avatarm_net::codec::{Codec, Decoded, EncoderSettings, VideoDecoder, VideoEncoder, psnr_rgba};
+use avatarm_net::codec::{Decoded, EncoderSettings, VideoDecoder, VideoEncoder, psnr_rgba};
+use avatarm_net::msg::Codec;
 use avatarm_net::msg::{FrameHeader, PROTOCOL_VERSION};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -20,7 +21,7 @@ use serde::Serialize;
 
 use super::chart::{Chart, axes, drawing_error, legend, padded, save_chart, write_table};
 use crate::AppError;
-use crate::net::serve::Spread;
+use avatarm_core::stats::Spread;
 
 /// What `bench video` codes.
 #[derive(Debug, Clone)]
@@ -212,16 +213,22 @@ fn code(
                 shown = Some(rgba);
             }
             Decoded::Stale => {
-                return Err(AppError::replay(format!(
-                    "{} frame {i} of an unbroken stream was taken as stale",
-                    settings.codec
-                )));
+                return Err(AppError::command(
+                    "bench video",
+                    format!(
+                        "{} frame {i} of an unbroken stream was taken as stale",
+                        settings.codec
+                    ),
+                ));
             }
             Decoded::NeedKeyframe { reason } => {
-                return Err(AppError::replay(format!(
-                    "{} frame {i} of an unbroken stream did not decode: {reason}",
-                    settings.codec
-                )));
+                return Err(AppError::command(
+                    "bench video",
+                    format!(
+                        "{} frame {i} of an unbroken stream did not decode: {reason}",
+                        settings.codec
+                    ),
+                ));
             }
         }
     }

@@ -67,7 +67,7 @@ pub struct EraseOverrides {
     pub believed_mount: Option<PathBuf>,
     /// Run the scene's camera at WIDTHxHEIGHT pixels, its pose and vertical field of view kept
     /// (the principal point at the centre): the same scene at 1080p.
-    #[arg(long = "camera-size", value_name = "WxH", value_parser = super::frame_size)]
+    #[arg(long = "camera-size", value_name = "WxH", value_parser = super::args::frame_size)]
     pub camera_size: Option<(u32, u32)>,
 }
 

@@ -1,11 +1,16 @@
 //! `avatarm robot`: print a robot description's tree, limits and link poses.
 
 use std::fmt::Write;
+use std::path::PathBuf;
 
 use avatarm_core::robot::mesh::load_shape_mesh;
 use avatarm_core::robot::{JointKind, LinkId, RobotModel, Shape};
+use clap::Args;
 use nalgebra::Isometry3;
 use serde_json::{Map, Value, json};
+
+use crate::AppError;
+use crate::cli::args::packages;
 
 /// One mesh file a link names, loaded.
 #[derive(Debug, Clone)]
@@ -193,4 +198,46 @@ pub fn poses_json(model: &RobotModel, q: &[f64]) -> Value {
         "notes": model.notes,
         "links": links,
     })
+}
+
+/// The arguments of `avatarm robot`.
+#[derive(Args, Debug)]
+pub struct RobotArgs {
+    /// The URDF file.
+    urdf: PathBuf,
+    /// Folder searched for package://NAME/... URIs (repeatable; ROS_PACKAGE_PATH is added).
+    #[arg(long = "package-path", value_name = "DIR")]
+    package_path: Vec<PathBuf>,
+    /// Joint values: v1,v2,... in the printed q order, or name=value,... (others are 0).
+    #[arg(long, value_name = "Q", allow_hyphen_values = true)]
+    q: Option<String>,
+    /// Print link poses at q as JSON instead of the tree.
+    #[arg(long)]
+    json: bool,
+}
+
+impl RobotArgs {
+    /// Runs `avatarm robot`.
+    pub fn run(self) -> Result<(), AppError> {
+        let Self {
+            urdf,
+            package_path,
+            q,
+            json,
+        } = self;
+        let model = RobotModel::from_urdf_file(&urdf, &packages(package_path))?;
+        let meshes = check_meshes(&model)?;
+        let q = model
+            .parse_q(q.as_deref().unwrap_or(""))
+            .map_err(|e| AppError::flag("--q", e.to_string()))?;
+        let q: Vec<f64> = q.iter().copied().collect();
+        if json {
+            let text = serde_json::to_string_pretty(&poses_json(&model, &q))?;
+            println!("{text}");
+        } else {
+            print!("{}", tree_text(&model, &meshes));
+            print!("{}", mesh_text(&model, &meshes));
+        }
+        Ok(())
+    }
 }

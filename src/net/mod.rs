@@ -110,7 +110,7 @@ pub fn encoder_settings(
     keyframe_interval_s: f64,
     fps: f64,
 ) -> Result<avatarm_net::codec::EncoderSettings, AppError> {
-    let codec = avatarm_net::codec::Codec::from_name(codec)
+    let codec = avatarm_net::msg::Codec::from_name(codec)
         .ok_or_else(|| AppError::flag("--codec", format!("'{codec}' must be jpeg or h264")))?;
     if !(bitrate_mbit_s.is_finite() && (0.01..=200.0).contains(&bitrate_mbit_s)) {
         return Err(AppError::flag(

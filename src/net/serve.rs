@@ -16,28 +16,18 @@ use std::sync::mpsc::Sender;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use avatarm_core::sim::JointState;
+use avatarm_core::stats::Spread;
 use avatarm_core::teleop::mapping::{MappingMode, pose_rmse};
 use avatarm_mapping::{RemoteTarget, Teleop, TeleopSample, TickSource};
 use avatarm_net::RobotSite;
+use avatarm_net::episodes::RefusalEpisodes;
+use avatarm_net::msg::MAX_AHEAD_S;
 use avatarm_net::msg::{JointStatesMsg, PROTOCOL_VERSION, RobotStatusMsg};
 use bevy::log::{info, warn};
+
+use super::video::ArmUpdate;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use serde::Serialize;
-
-/// A target stamped further ahead of the robot's clock than this is refused: the operator's
-/// clock estimate is wrong, and its age could not be trusted (s).
-pub const MAX_AHEAD_S: f64 = 0.5;
-
-/// What the video side gets from the loop: each joint state, with the real object's pose
-/// where the robot backend knows it (simulation).
-#[derive(Debug, Clone)]
-pub struct ArmUpdate {
-    /// The joint state (stamp on the site's clock).
-    pub state: JointState,
-    /// The real object's centre (real world).
-    pub object: Option<Isometry3<f64>>,
-}
 
 /// One stop of the arm: when it began (s, site clock), why, and how long it lasted.
 #[derive(Debug, Clone, Serialize)]
@@ -62,48 +52,6 @@ pub struct OperatorChange {
 /// How many operator changes the report lists (the counts go on beyond): a link that flaps
 /// for hours must not grow the report without bound.
 pub const MAX_OPERATOR_CHANGES: usize = 1000;
-
-/// Median, 95th percentile and largest of a series (in the series' unit: ms, mm).
-#[derive(Debug, Clone, Copy, Serialize, Default, PartialEq)]
-pub struct Spread {
-    /// Median.
-    pub median: f64,
-    /// 95th percentile.
-    pub p95: f64,
-    /// Largest.
-    pub max: f64,
-    /// Samples.
-    pub n: usize,
-}
-
-impl Spread {
-    /// The most samples a series kept for a spread holds (an hour at 120 a second), so a long
-    /// session's memory stays bounded; later samples are not kept.
-    pub const MAX_SAMPLES: usize = 432_000;
-
-    /// Appends `value` to `series` while it holds fewer than [`Spread::MAX_SAMPLES`].
-    pub fn push(series: &mut Vec<f64>, value: f64) {
-        if series.len() < Self::MAX_SAMPLES {
-            series.push(value);
-        }
-    }
-
-    /// Of `values` (any order).
-    pub fn of(values: &[f64]) -> Self {
-        let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
-        if v.is_empty() {
-            return Self::default();
-        }
-        v.sort_by(f64::total_cmp);
-        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-        Self {
-            median: at(0.5),
-            p95: at(0.95),
-            max: v[v.len() - 1],
-            n: v.len(),
-        }
-    }
-}
 
 /// The paper's measure at the robot site: the real object against the twin's target of the
 /// same moment (the target stamped then, interpolated), from the grasp on.
@@ -156,6 +104,10 @@ pub struct ServeReport {
     pub targets_refused: u64,
     /// The first refusals' reasons (at most 10).
     pub refusals: Vec<String>,
+    /// Episodes of refusals (each logged once, with a summary every 5 s while it lasts).
+    pub refusal_episodes: u64,
+    /// Refusals by kind (the reason with its numbers as `N`).
+    pub refusals_by_kind: std::collections::BTreeMap<String, u64>,
     /// Times an operator joined.
     pub operator_joins: u64,
     /// Times the operator left.
@@ -274,6 +226,10 @@ fn stop_reason(
 impl ControlLoop {
     /// Runs until `stop` is set or `duration` passes, publishing on `site` and feeding each
     /// camera's video app in `video` (none: the loop alone). Returns the report.
+    #[expect(
+        clippy::too_many_lines,
+        reason = "the robot site's control loop: one tick's steps in their order, on the loop's own state"
+    )]
     pub fn run(
         mut self,
         site: &mut RobotSite,
@@ -298,6 +254,7 @@ impl ControlLoop {
         let mut latest: Option<RemoteTarget> = None;
         let mut last_seq: Option<(u64, f64)> = None;
         let mut refused: Option<String> = None;
+        let mut episodes = RefusalEpisodes::new(2.0, 5.0);
         let mut stop_since: Option<(f64, String)> = None;
         let mut samples: Vec<TeleopSample> = Vec::new();
         // Every target used: (its stamp, the pose), and when it arrived.
@@ -358,7 +315,14 @@ impl ControlLoop {
                                  estimate is off)",
                                 t.stamp_s - now
                             );
-                            refuse(&mut report, &mut refused, &mut latest, e);
+                            refuse(
+                                &mut report,
+                                &mut episodes,
+                                now,
+                                &mut refused,
+                                &mut latest,
+                                e,
+                            );
                             continue;
                         }
                         // Older than one used (reordered, duplicated): dropped; a restarted
@@ -381,8 +345,18 @@ impl ControlLoop {
                         latest_arrival_s = now;
                         report.targets_used += 1;
                     }
-                    Err(e) => refuse(&mut report, &mut refused, &mut latest, e.to_string()),
+                    Err(e) => refuse(
+                        &mut report,
+                        &mut episodes,
+                        now,
+                        &mut refused,
+                        &mut latest,
+                        e.to_string(),
+                    ),
                 }
+            }
+            if let Some(line) = episodes.tick(now) {
+                warn!("robot site: {line}");
             }
             if !present {
                 latest = None;
@@ -420,7 +394,8 @@ impl ControlLoop {
                     });
                 }
             }
-            // Stops as episodes, one line each.
+            // Stops as episodes, one line each; those of a refusal episode are told by it.
+            let quiet = episodes.active();
             let reason = stop_reason(
                 present,
                 refused.as_deref(),
@@ -432,13 +407,13 @@ impl ControlLoop {
             .filter(|_| stopping || use_target.is_none());
             match (&stop_since, &reason) {
                 (None, Some(r)) => {
-                    if tick > 1 && report.targets_used > 0 {
+                    if tick > 1 && report.targets_used > 0 && !quiet {
                         warn!("robot site: stopping the arm: {r}");
                     }
                     stop_since = Some((now, r.clone()));
                 }
                 (Some((since, r)), None) => {
-                    if report.targets_used > 0 {
+                    if report.targets_used > 0 && !quiet {
                         info!(
                             "robot site: resumed on fresh targets after {:.2} s stopped ({r})",
                             now - since
@@ -479,6 +454,8 @@ impl ControlLoop {
                 length_s: None,
             });
         }
+        report.refusal_episodes = episodes.episodes();
+        report.refusals_by_kind = episodes.by_kind().clone();
         report.duration_s = started.elapsed().as_secs_f64();
         report.ticks = self.teleop.status.ticks;
         report.mapping_errors = self.teleop.status.errors;
@@ -499,8 +476,12 @@ impl ControlLoop {
     }
 }
 
+/// A refused target: counted, its episode logged ([`RefusalEpisodes`]), the arm stopped until
+/// a fresh valid target.
 fn refuse(
     report: &mut ServeReport,
+    episodes: &mut RefusalEpisodes,
+    now: f64,
     refused: &mut Option<String>,
     latest: &mut Option<RemoteTarget>,
     reason: String,
@@ -509,8 +490,8 @@ fn refuse(
     if report.refusals.len() < 10 {
         report.refusals.push(reason.clone());
     }
-    if refused.is_none() {
-        warn!("robot site: {reason}; stopping the arm until a fresh valid target");
+    if let Some(line) = episodes.refused(now, &reason) {
+        warn!("robot site: {line}; stopping the arm until a fresh valid target");
     }
     *refused = Some(reason);
     *latest = None;
@@ -725,6 +706,10 @@ pub fn robot_info(
 
 /// Runs the robot site until the duration passes (or the process is killed). Errors when the
 /// scene has no task, the robot or the network cannot be set up.
+#[expect(
+    clippy::too_many_lines,
+    reason = "the robot site set up in its order (network, control loop thread, one app per camera) and torn down whatever ends first"
+)]
 pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
     let scene = &options.scene;
     if !(options.target_timeout_s.is_finite() && (0.0..=10.0).contains(&options.target_timeout_s))
@@ -849,7 +834,9 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
                 let report = control.run(&mut site, duration, &loop_stop, feeds);
                 (report, site)
             })
-            .map_err(|e| crate::AppError::replay(format!("cannot start the control loop: {e}")))?;
+            .map_err(|e| {
+                crate::AppError::command("serve", format!("cannot start the control loop: {e}"))
+            })?;
         let mut apps = apps.into_iter();
         let (first, first_video) = apps.next().expect("one camera at least");
         let others: Vec<_> = apps
@@ -861,7 +848,7 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
                     .spawn(move || {
                         // However this camera's app ends, the site ends with it.
                         let _stop = StopOnDrop(stop);
-                        crate::build_app(&view, &crate::Mode::Serve(video))
+                        super::video::build_app(&view, video)
                             .map(|mut app| {
                                 app.run();
                             })
@@ -870,13 +857,13 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
                 (camera, thread)
             })
             .collect();
-        let ran = crate::build_app(&first, &crate::Mode::Serve(first_video)).map(|mut app| {
+        let ran = super::video::build_app(&first, first_video).map(|mut app| {
             app.run();
         });
         stop.store(true, Ordering::Relaxed);
         let (mut report, site) = handle
             .join()
-            .map_err(|_| crate::AppError::replay("the control loop panicked"))?;
+            .map_err(|_| crate::AppError::command("serve", "the control loop panicked"))?;
         // Every app has ended (the stop flag) before an error is returned.
         let others: Vec<_> = others
             .into_iter()
@@ -888,7 +875,9 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
                             .map_err(|_| "its app panicked".to_owned())
                             .and_then(|r| r)
                     })
-                    .map_err(|e| crate::AppError::replay(format!("camera '{camera}': {e}")))
+                    .map_err(|e| {
+                        crate::AppError::command("serve", format!("camera '{camera}': {e}"))
+                    })
             })
             .collect();
         ran?;

@@ -1,6 +1,6 @@
 //! The robot site's erased video (`avatarm serve`, video on): the app runs headless in real
 //! time; the simulated room's arm (and the app's twin behind the mask) follow the control
-//! loop's joint states ([`super::serve::ArmUpdate`]), the real object where the arm carries
+//! loop's joint states ([`ArmUpdate`]), the real object where the arm carries
 //! it. Each erased frame is read back once, coded (JPEG, or H.264 with IDR frames on time and
 //! on a viewer's request; [`avatarm_net::codec`]) on a thread of its own and published with
 //! its stage stamps (capture, erased, sent; the site's clock).
@@ -12,6 +12,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::sync::{Arc, Mutex};
 
+use avatarm_core::sim::JointState;
 use avatarm_erase::{EraseState, EraseTargets};
 use avatarm_net::msg::{FrameHeader, PROTOCOL_VERSION};
 use avatarm_net::{FrameSender, SiteClock};
@@ -23,7 +24,6 @@ use avatarm_twin::readback::{ImageRead, read_image_once};
 use bevy::prelude::*;
 use nalgebra::Isometry3;
 
-use super::serve::ArmUpdate;
 use crate::AppTwin;
 
 /// The least time between two IDR frames forced by viewers' requests (s): many viewers
@@ -82,8 +82,27 @@ impl std::fmt::Debug for ServeVideoOptions {
     }
 }
 
+/// What the video side gets from the loop: each joint state, with the real object's pose
+/// where the robot backend knows it (simulation).
+#[derive(Debug, Clone)]
+pub struct ArmUpdate {
+    /// The joint state (stamp on the site's clock).
+    pub state: JointState,
+    /// The real object's centre (real world).
+    pub object: Option<Isometry3<f64>>,
+}
+
 /// The robot site's video: mirrors the loop into the room, publishes erased frames.
 pub struct ServeVideoPlugin(pub ServeVideoOptions);
+
+/// Builds the robot site's app for one camera of `scene`: the app's base without a window, in
+/// real time ([`crate::app::build_app`]), then [`ServeVideoPlugin`].
+pub fn build_app(scene: &Scene, options: ServeVideoOptions) -> Result<App, crate::AppError> {
+    let base = crate::app::AppBase::new(crate::app::Runner::RealTime);
+    let mut app = crate::app::build_app(scene, &base)?;
+    app.add_plugins(ServeVideoPlugin(options));
+    Ok(app)
+}
 
 #[derive(Resource)]
 struct ServeVideo {
@@ -211,7 +230,7 @@ fn mirror_loop(
 
 /// A camera on a head: the wearer's head poses from the network into the scene's live head,
 /// their stamps moved from the site's clock to the app's. A refused one (malformed, stamped
-/// more than [`super::serve::MAX_AHEAD_S`] ahead, not newer than the last) is counted and
+/// more than [`avatarm_net::msg::MAX_AHEAD_S`] ahead, not newer than the last) is counted and
 /// logged (one line until a pose is taken again); the head then holds its last pose.
 fn take_remote_head(
     mut video: ResMut<ServeVideo>,
@@ -237,10 +256,10 @@ fn take_remote_head(
     for m in receiver.poll() {
         let taken = match m {
             // A pose from the future would hold every later one off as older.
-            Ok(m) if m.stamp_s > site_now + super::serve::MAX_AHEAD_S => Err(format!(
+            Ok(m) if m.stamp_s > site_now + avatarm_net::msg::MAX_AHEAD_S => Err(format!(
                 "a pose stamped {:.3} s, more than {} s ahead of the site's clock ({site_now:.3} s)",
                 m.stamp_s,
-                super::serve::MAX_AHEAD_S
+                avatarm_net::msg::MAX_AHEAD_S
             )),
             Ok(m) if live.push_world(m.stamp_s - site_minus_app, &m.world_from_head()) => Ok(()),
             Ok(m) => Err(format!(
@@ -383,7 +402,7 @@ fn encode_and_send(
         if coded.keyframe {
             // Any keyframe answers the viewers' requests (JPEG: every frame).
             requested = false;
-            if force && settings.codec == avatarm_net::codec::Codec::H264 {
+            if force && settings.codec == avatarm_net::msg::Codec::H264 {
                 last_forced_s = now;
                 counters.forced_keyframes.fetch_add(1, Ordering::Relaxed);
             }

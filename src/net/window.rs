@@ -25,9 +25,9 @@ use bevy::render::view::screenshot::{Screenshot, save_to_disk};
 use nalgebra::{Isometry3, Vector3};
 use serde::Serialize;
 
-use super::serve::Spread;
 use crate::teleop::{DesktopControls, DesktopHand, HandInteractionGizmos, HandViewGizmos};
 use crate::{AppError, SceneResource};
+use avatarm_core::stats::Spread;
 
 /// The window's options (`avatarm join --window`).
 #[derive(Debug, Clone, Default)]

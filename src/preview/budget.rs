@@ -97,9 +97,8 @@ fn end_render(mut clock: ResMut<RenderClock>) {
 }
 
 fn median(values: impl Iterator<Item = f64>) -> Option<f64> {
-    let mut v: Vec<f64> = values.filter(|x| x.is_finite()).collect();
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied()
+    let v: Vec<f64> = values.collect();
+    avatarm_core::stats::Spread::some_of(&v).map(|s| s.median)
 }
 
 impl FrameBudget {

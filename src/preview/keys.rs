@@ -29,21 +29,25 @@ pub const DESKTOP_HAND_KEYS: [(&str, &str); 5] = [
 /// A scripted key press, `N:KEY` (`--press`): rendered frame N (from 1) and one of
 /// [`PREVIEW_KEYS`] (a letter in either case, `F12`, `Esc`). Errors name the text and what is
 /// expected.
-pub fn parse_press(text: &str) -> Result<(u32, bevy::input::keyboard::KeyCode), String> {
+pub fn parse_press(text: &str) -> Result<(u32, bevy::input::keyboard::KeyCode), crate::AppError> {
     use bevy::input::keyboard::KeyCode;
     let keys = || PREVIEW_KEYS.map(|(k, _)| k).join(", ");
+    let bad = |message: String| crate::AppError::Value {
+        text: text.to_owned(),
+        message,
+    };
     let Some((frame, key)) = text.split_once(':') else {
-        return Err(format!(
-            "'{text}': expected N:KEY, N a frame from 1 and KEY one of {}",
+        return Err(bad(format!(
+            "expected N:KEY, N a frame from 1 and KEY one of {}",
             keys()
-        ));
+        )));
     };
     let frame = match frame.trim().parse::<u32>() {
         Ok(n) if n > 0 => n,
         _ => {
-            return Err(format!(
-                "'{text}': the frame '{frame}' is not a whole number from 1 (N:KEY)"
-            ));
+            return Err(bad(format!(
+                "the frame '{frame}' is not a whole number from 1 (N:KEY)"
+            )));
         }
     };
     let code = match key.trim().to_ascii_uppercase().as_str() {
@@ -57,10 +61,10 @@ pub fn parse_press(text: &str) -> Result<(u32, bevy::input::keyboard::KeyCode), 
         "F12" => KeyCode::F12,
         "ESC" => KeyCode::Escape,
         _ => {
-            return Err(format!(
-                "'{text}': the key '{key}' is not one of the preview's: {} (N:KEY, either case)",
+            return Err(bad(format!(
+                "the key '{key}' is not one of the preview's: {} (N:KEY, either case)",
                 keys()
-            ));
+            )));
         }
     };
     Ok((frame, code))
@@ -121,8 +125,8 @@ mod tests {
             );
         }
         assert_eq!(
-            parse_press("60:c"),
-            Ok((60, bevy::input::keyboard::KeyCode::KeyC))
+            parse_press("60:c").ok(),
+            Some((60, bevy::input::keyboard::KeyCode::KeyC))
         );
         for (bad, what) in [
             ("60", "expected N:KEY"),
@@ -131,7 +135,7 @@ mod tests {
             ("-1:C", "the frame '-1'"),
             ("60:Q", "the key 'Q'"),
         ] {
-            let e = parse_press(bad).expect_err(bad);
+            let e = parse_press(bad).expect_err(bad).to_string();
             assert!(
                 e.contains(&format!("'{bad}'")) && e.contains(what) && e.contains("N:KEY"),
                 "{e}"

@@ -150,9 +150,7 @@ fn request_parts(
         live.last_index = Some(index);
         if index.is_multiple_of(live.every) && live.pending.len() < MAX_PENDING {
             let k = frame_key(t_s);
-            // The frame number this update's render carries (the count goes up in `Last`,
-            // after this system's set).
-            let truth_frame = frame.0.wrapping_add(1);
+            let truth_frame = RenderSettled::this_update_frame(&frame);
             live.pending.insert(
                 k,
                 Parts {

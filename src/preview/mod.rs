@@ -5,11 +5,13 @@
 //! Keys: [`keys::PREVIEW_KEYS`] (the one list the on-screen help, `--help` and the README
 //! show). The status lines show the frame time, the ages of the
 //! camera frame and joint state, how often the mask was rendered per camera frame and, in the
-//! simulated room, the live erasure scores against its ground truth ([`crate::preview::live_scores`]).
+//! simulated room, the live erasure scores against its ground truth
+//! ([`crate::preview::live_scores`]).
 
 pub mod budget;
 pub mod keys;
 pub mod live_scores;
+pub mod switch;
 #[cfg(feature = "xr")]
 pub mod xr;
 
@@ -32,8 +34,9 @@ use bevy::shader::ShaderRef;
 use bevy::ui_render::UiMaterialPlugin;
 use bevy::ui_render::ui_material::{MaterialNode, UiMaterial};
 
+use crate::app::{AppBase, Runner};
 use crate::preview::live_scores::LiveDr;
-use crate::{AvatarmSystems, SceneResource};
+use crate::{AppError, AvatarmSystems, SceneResource};
 
 /// Options of the preview.
 #[derive(Debug, Clone, Default)]
@@ -56,7 +59,7 @@ pub struct PreviewOptions {
     /// The robot the live task commands: the simulated arm or the scene's ROS link.
     pub robot: crate::teleop::RobotChoice,
     /// The scene through each of its cameras (its `[[cameras]]`, the file's order) for the
-    /// `C` key, which switches between them in place ([`crate::app::switch`]). Empty: `C` does
+    /// `C` key, which switches between them in place ([`crate::preview::switch`]). Empty: `C` does
     /// not switch (one camera; a recording or a webcam holds one camera).
     pub cameras: Vec<avatarm_scene::Scene>,
     /// Why `C` does not switch when `cameras` is empty and the scene has several (for its
@@ -69,6 +72,56 @@ pub struct PreviewOptions {
 
 /// The preview's cameras, panels and keys.
 pub struct PreviewPlugin(pub PreviewOptions);
+
+/// Builds the preview's app for `scene`: the app's base in a window ([`crate::app::build_app`]),
+/// then the XR view, the live scores (where the simulated empty room gives their truth), the
+/// camera switch (several cameras), [`PreviewPlugin`] and the live teleoperation of the
+/// scene's `[task]`. Errors before any window when the hand or the task's grasp cannot be set
+/// up, or when no display can open a window.
+pub fn build_app(scene: &avatarm_scene::Scene, options: &PreviewOptions) -> Result<App, AppError> {
+    // Before any window: a hand or task that cannot be set up is refused at start-up.
+    let live = options
+        .hand
+        .as_ref()
+        .map(|choice| {
+            crate::teleop::LiveTeleop::prepare(scene, choice, options.robot).map_err(|e| {
+                AppError::Teleop {
+                    source: Box::new(e),
+                }
+            })
+        })
+        .transpose()?;
+    let base = AppBase {
+        webcam: options.webcam,
+        other_cameras: options.cameras.clone(),
+        ..AppBase::new(Runner::Window {
+            xr: options.xr,
+            fixed_step_s: options.fixed_step_s,
+        })
+    };
+    let mut app = crate::app::build_app(scene, &base)?;
+    #[cfg(feature = "xr")]
+    if options.xr {
+        app.add_plugins(xr::XrViewPlugin);
+    }
+    if options.webcam.is_none() && base.empty_room_anywhere(scene) {
+        // The room renders its ground truth anyway (the empty room is H); two scored frames a
+        // second.
+        let every = (scene.file.camera.fps / 2.0).round().max(1.0) as u64;
+        app.add_plugins(live_scores::LiveDrPlugin { every });
+    }
+    if options.cameras.len() > 1 {
+        app.add_plugins(switch::CameraSwitchPlugin(switch::CameraViews {
+            scenes: options.cameras.clone(),
+            current: scene.camera_index,
+        }));
+    }
+    app.add_plugins(PreviewPlugin(options.clone()));
+    if let Some(live) = live {
+        live.install(&mut app)?;
+    }
+    Ok(app)
+}
 
 /// What the preview's panel shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -177,7 +230,7 @@ impl Plugin for PreviewPlugin {
         ))
         .insert_resource(PreviewState::new(self.0.clone()))
         // C asks for a switch; the switch itself is added with several cameras.
-        .add_message::<crate::app::switch::SwitchCamera>()
+        .add_message::<crate::preview::switch::SwitchCamera>()
         .add_systems(Startup, setup_preview)
         .add_systems(
             PreUpdate,
@@ -321,7 +374,7 @@ fn camera_title(scene: &avatarm_scene::Scene, switches: bool) -> String {
 fn show_panel(
     state: Res<PreviewState>,
     scene: Res<SceneResource>,
-    views: Option<Res<crate::app::switch::CameraViews>>,
+    views: Option<Res<crate::preview::switch::CameraViews>>,
     cameras: Res<SimCameras>,
     interaction: Option<Res<InteractionTargets>>,
     erase: Option<Res<EraseTargets>>,
@@ -530,8 +583,8 @@ fn handle_keys(
     keys: Res<ButtonInput<KeyCode>>,
     mut commands: Commands,
     mut state: ResMut<PreviewState>,
-    views: Option<Res<crate::app::switch::CameraViews>>,
-    mut switch: MessageWriter<crate::app::switch::SwitchCamera>,
+    views: Option<Res<crate::preview::switch::CameraViews>>,
+    mut switch: MessageWriter<crate::preview::switch::SwitchCamera>,
     mut config: ResMut<EraseConfig>,
     mut capture: MessageWriter<CaptureBackground>,
     #[cfg(feature = "xr")] mut recenter: MessageWriter<crate::preview::xr::RecenterXrPanel>,
@@ -552,7 +605,7 @@ fn handle_keys(
                     "camera: switching to '{}'",
                     views.scenes[next].camera_name()
                 );
-                switch.write(crate::app::switch::SwitchCamera(next));
+                switch.write(crate::preview::switch::SwitchCamera(next));
             }
             (None, Some(why)) => info!("camera: not switched: {why}"),
             (None, None) => {

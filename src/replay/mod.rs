@@ -47,6 +47,14 @@ use crate::score::{
 };
 use crate::{AppError, AppTwin, AvatarmSystems, SceneResource};
 
+mod report;
+use report::{head_report, mean, stage_timings};
+pub(crate) use report::{lens_report, spread};
+
+mod record;
+use record::{RecordedFrame, png_bytes, write_recording};
+pub(crate) use record::{scene_calibration, write_scene_camera};
+
 /// Options of a replay.
 #[derive(Debug, Clone)]
 pub struct ReplayOptions {
@@ -75,37 +83,6 @@ impl ReplayOptions {
             record: None,
         }
     }
-}
-
-/// One scored frame as `--record` writes it (PNG bytes, the robot's joints at capture).
-struct RecordedFrame {
-    t_s: f64,
-    frame: Vec<u8>,
-    truth: Vec<u8>,
-    erased: Vec<u8>,
-    mask: Vec<u8>,
-    q_true: Vec<f64>,
-}
-
-/// PNG bytes of an RGBA8 image (as RGB) or of a 0/1 mask (as 0/255 grey).
-fn png_bytes(width: u32, height: u32, data: &[u8], mask: bool) -> Result<Vec<u8>, AppError> {
-    let image = if mask {
-        image::GrayImage::from_raw(width, height, data.iter().map(|&v| v * 255).collect())
-            .map(image::DynamicImage::ImageLuma8)
-    } else {
-        image::RgbaImage::from_raw(width, height, data.to_vec())
-            .map(|i| image::DynamicImage::ImageRgb8(image::DynamicImage::ImageRgba8(i).to_rgb8()))
-    }
-    .ok_or(AppError::ImageSize {
-        what: "recorded frame".into(),
-        width,
-        height,
-    })?;
-    let mut out = std::io::Cursor::new(Vec::new());
-    image
-        .write_to(&mut out, image::ImageFormat::Png)
-        .map_err(|source| AppError::write_image("(recording)", source))?;
-    Ok(out.into_inner())
 }
 
 /// Drives a replay: capture, ground truth, report, exit.
@@ -335,6 +312,10 @@ fn spawn_capture(
 }
 
 #[expect(clippy::too_many_arguments, reason = "a system's inputs")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "the replay's Bevy system: one update's steps in their order (warm-up, capture, scoring, the end)"
+)]
 fn drive_replay(
     mut commands: Commands,
     mut replay: ResMut<Replay>,
@@ -550,7 +531,7 @@ fn score_ready(mut replay: ResMut<Replay>, scene: Res<SceneResource>) {
                 }
                 replay.scores.push(score);
             }
-            Err(AppError::Replay { message }) => replay.errors.push(message),
+            Err(AppError::Command { message, .. }) => replay.errors.push(message),
             Err(e) => replay.errors.push(e.to_string()),
         }
     }
@@ -585,7 +566,7 @@ fn score_frame(
         Some(inputs),
     ) = (p.images, p.inputs)
     else {
-        return Err(AppError::replay("incomplete frame"));
+        return Err(AppError::command("replay", "incomplete frame"));
     };
     // The robot-free truth as the camera would have exposed it at capture (noise-free).
     scene
@@ -644,7 +625,7 @@ fn score_frame(
         &silhouette,
         &norobot,
     )
-    .ok_or_else(|| AppError::replay("the mask and the truth differ in size"))?;
+    .ok_or_else(|| AppError::command("replay", "the mask and the truth differ in size"))?;
     if inputs.save {
         let out = &replay.options.out;
         let i = inputs.index;
@@ -702,189 +683,6 @@ fn score_frame(
     Ok((score, recorded))
 }
 
-/// Median and 95th percentile of some times, or null.
-pub(crate) fn spread(values: &[f64]) -> serde_json::Value {
-    if values.is_empty() {
-        return json!(null);
-    }
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-    json!({"median": at(0.5), "p95": at(0.95)})
-}
-
-fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
-    let (mut s, mut n) = (0.0, 0usize);
-    for v in values {
-        s += v;
-        n += 1;
-    }
-    (n > 0).then(|| s / n as f64)
-}
-
-/// `timing_ms`: the erase's mask (the mask twin's render and the dilation passes) and
-/// composite (feathering and the composite, which thresholds too when nothing dilates) per
-/// camera frame, timed on the GPU when the device has timestamp queries, else the CPU
-/// reference; each pass, the uploads and every other timed view (the room's cameras, the
-/// ground truth, the interaction camera) beside them.
-fn stage_timings(replay: &Replay, gpu: &SpanTimes) -> serde_json::Value {
-    let cpu_mask: Vec<f64> = replay.scores.iter().map(|f| f.cpu_mask_ms).collect();
-    let cpu_comp: Vec<f64> = replay.scores.iter().map(|f| f.cpu_composite_ms).collect();
-    let since = |name: &str| {
-        gpu.since(
-            name,
-            replay.gpu_measured_at_start.get(name).copied().unwrap_or(0),
-        )
-    };
-    let passes: Vec<(&str, Vec<f64>)> = PASS_NAMES
-        .iter()
-        .map(|&name| (name, since(name)))
-        .filter(|(_, ms)| !ms.is_empty())
-        .collect();
-    // The n-th render of each pass works on the same camera frame (a frame's spans arrive
-    // together or not at all).
-    let per_frame = |names: &[&str]| -> Vec<f64> {
-        let chosen: Vec<&Vec<f64>> = passes
-            .iter()
-            .filter(|(n, _)| names.contains(n))
-            .map(|(_, ms)| ms)
-            .collect();
-        let n = chosen.iter().map(|v| v.len()).min().unwrap_or(0);
-        (0..n).map(|i| chosen.iter().map(|v| v[i]).sum()).collect()
-    };
-    let gpu_mask = per_frame(&PASS_NAMES[..3]);
-    let gpu_comp = per_frame(&PASS_NAMES[3..]);
-    let gpu_erase = per_frame(&PASS_NAMES);
-    let on_gpu = !gpu_mask.is_empty() && !gpu_comp.is_empty();
-    let source = match (&gpu.unavailable, on_gpu) {
-        (_, true) => "gpu".to_string(),
-        (Some(why), false) => format!("cpu reference: {why}"),
-        (None, false) => "cpu reference: no GPU pass time arrived".to_string(),
-    };
-    let entry = |ms: &[f64]| json!({"ms": spread(ms), "renders_timed": ms.len()});
-    let gpu_passes: serde_json::Map<String, serde_json::Value> = passes
-        .iter()
-        .map(|(name, ms)| (name.to_string(), entry(ms)))
-        .collect();
-    let views: serde_json::Map<String, serde_json::Value> = gpu
-        .spans
-        .keys()
-        .filter(|k| !PASS_NAMES.contains(&k.as_str()) && *k != UPLOAD_SPAN && *k != UPLOAD_CPU_SPAN)
-        .map(|name| (name.clone(), entry(&since(name))))
-        .collect();
-    json!({
-        "mask": spread(if on_gpu { &gpu_mask } else { &cpu_mask }),
-        "composite": spread(if on_gpu { &gpu_comp } else { &cpu_comp }),
-        "erase": spread(&gpu_erase),
-        "upload": spread(&since(UPLOAD_SPAN)),
-        "upload_cpu": spread(&since(UPLOAD_CPU_SPAN)),
-        "frame": spread(&replay.frame_ms),
-        "source": source,
-        "gpu_passes": gpu_passes,
-        "gpu_views": views,
-        "cpu_reference": {"mask": spread(&cpu_mask), "composite": spread(&cpu_comp)},
-        "note": "mask: the mask twin's flat render plus the dilation passes; composite: the feathering and composite passes (the composite thresholds too when nothing dilates); erase: all of them; each the GPU time between timestamps written around the pass (source \"gpu\"), or the CPU reference of the same steps when the device has no timestamp queries; upload: the GPU copies of the live frame and H from their staging buffers, upload_cpu: the CPU copies into them; gpu_views: every other timed render (cameras and flat views) in this replay; cpu_reference: avatarm_core::dr on the same frame; frame: wall time per app update, all cameras included",
-    })
-}
-
-/// The scene's believed camera as a recording's calibration: K, the size and the lens, as its
-/// `camera_info` would give them.
-pub(crate) fn scene_calibration(s: &avatarm_scene::Scene) -> avatarm_record::CameraCalibration {
-    let k = &s.believed_camera.intrinsics;
-    let mut calibration = avatarm_record::CameraCalibration::pinhole(
-        k.width,
-        k.height,
-        [k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0],
-    );
-    if let Some(model) = avatarm_record::DistortionModel::from_ros_name(s.lens.ros_name()) {
-        calibration.distortion_model = model;
-        calibration.d = s.lens.coefficients().to_vec();
-    }
-    calibration
-}
-
-/// Writes the scene's believed camera's place at `stamp_ns`: its pose in the robot's base
-/// frame, or for a camera on a head the believed mount (the head's poses follow as they are
-/// tracked).
-pub(crate) fn write_scene_camera(
-    w: &mut avatarm_record::RecordingWriter,
-    stamp_ns: u64,
-    s: &avatarm_scene::Scene,
-) -> Result<(), avatarm_record::RecordError> {
-    match &s.head {
-        Some(head) => w.camera_mount(stamp_ns, &head.believed_mount),
-        None => w.camera_pose(
-            stamp_ns,
-            &(s.robot_base().inverse() * s.believed_camera.world_from_camera),
-        ),
-    }
-}
-
-/// Writes `--record`'s MCAP: the believed camera ([`write_scene_camera`]; for a camera on a
-/// head, every tracked head pose received), and per scored frame the frame, the simulated
-/// robot's joints at capture, the true silhouette as the reference mask, Avatarm's erased
-/// frame and mask; stamped with the capture time.
-fn write_recording(path: &Path, replay: &Replay, scene: &SceneResource) -> Result<(), AppError> {
-    use avatarm_record::{CompressedFrame, ImageFormat, JointStates, RecordingWriter};
-    let s = &scene.0;
-    let mut w = RecordingWriter::create(path)?;
-    let ns = |t: f64| (t.max(0.0) * 1e9).round() as u64;
-    let first = replay
-        .recorded
-        .iter()
-        .map(|r| r.t_s)
-        .fold(f64::INFINITY, f64::min);
-    let t0 = ns(if first.is_finite() { first } else { 0.0 });
-    w.calibration(t0, &scene_calibration(s))?;
-    write_scene_camera(&mut w, t0, s)?;
-    let base_from_world = s.robot_base().inverse();
-    for (stamp_s, world_from_head) in &replay.head_poses {
-        w.head_pose(&avatarm_record::HeadPose {
-            stamp_ns: ns(*stamp_s),
-            base_from_head: base_from_world * world_from_head,
-        })?;
-    }
-    let names: Vec<String> = s.model.dof_names().iter().map(|n| n.to_string()).collect();
-    let mut frames: Vec<&RecordedFrame> = replay.recorded.iter().collect();
-    frames.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
-    for r in frames {
-        let stamp_ns = ns(r.t_s);
-        let png = |data: &Vec<u8>| CompressedFrame {
-            stamp_ns,
-            format: ImageFormat::Png,
-            data: data.clone(),
-        };
-        if r.q_true.len() == names.len() {
-            w.joint_states(&JointStates {
-                stamp_ns,
-                names: names.clone(),
-                positions: r.q_true.clone(),
-                velocities: Vec::new(),
-            })?;
-        }
-        w.frame(&png(&r.frame))?;
-        w.reference_mask(&png(&r.truth))?;
-        w.erased(&png(&r.erased))?;
-        w.mask(&png(&r.mask))?;
-    }
-    w.finish()?;
-    Ok(())
-}
-
-/// The report's account of the camera's lens: its model and coefficients, whether the mask
-/// honoured it and the size of the mask's pinhole render.
-pub(crate) fn lens_report(lens: &Distortion, map: Option<&DistortionMap>) -> serde_json::Value {
-    json!({
-        "model": lens.ros_name(),
-        "coefficients": lens.coefficients(),
-        "honoured": map.is_some(),
-        "mask_render": map.map(|m| [m.pinhole.width, m.pinhole.height]),
-        // Pixels never masked: past a barrel's fold, or beyond the render's 3x cap.
-        "pixels_unmapped": map.map(|m| m.unmapped),
-        "pixels_outside_render": map.map(|m| m.outside),
-    })
-}
-
 fn finish(
     replay: &Replay,
     scene: &SceneResource,
@@ -895,7 +693,7 @@ fn finish(
     gpu: &SpanTimes,
 ) -> Result<serde_json::Value, AppError> {
     if !replay.errors.is_empty() {
-        return Err(AppError::replay(replay.errors.join("; ")));
+        return Err(AppError::command("replay", replay.errors.join("; ")));
     }
     let wall = replay.started.map_or(0.0, |s| s.elapsed().as_secs_f64());
     if let Some(path) = &replay.options.record {
@@ -1017,89 +815,17 @@ fn finish(
     Ok(report)
 }
 
-/// The `head` section of a replay's report (null for a fixed camera): the head's motion and
-/// tracking, and how far each frame's mask camera was from the true camera.
-fn head_report(
-    s: &avatarm_scene::Scene,
-    errors: &[HeadFrameError],
-    scores: &[FrameScore],
-    erase: &EraseState,
-) -> serde_json::Value {
-    let Some(head) = &s.head else {
-        return serde_json::Value::Null;
+/// Builds the replay's app for `scene`: the app's base without a window, one camera frame of
+/// simulated time per update, rendering the room's ground truth ([`crate::app::build_app`]),
+/// then [`ReplayPlugin`].
+pub fn build_app(scene: &avatarm_scene::Scene, options: ReplayOptions) -> Result<App, AppError> {
+    let base = crate::app::AppBase {
+        ground_truth: true,
+        ..crate::app::AppBase::new(crate::app::Runner::Replay)
     };
-    // The background's PSNR in the robot's region against how far the frame's camera was from
-    // the nearest view captured before it.
-    let psnr_at: std::collections::HashMap<i64, f64> = scores
-        .iter()
-        .filter_map(|f| f.psnr_robot_db.map(|p| (frame_key(f.t_s), p)))
-        .collect();
-    let by_angle = |angle: &dyn Fn(&HeadFrameError) -> Option<f64>| -> serde_json::Value {
-        let bins = [
-            (0.0, 1.0),
-            (1.0, 2.0),
-            (2.0, 4.0),
-            (4.0, 8.0),
-            (8.0, 16.0),
-            (16.0, 180.0),
-        ];
-        let rows: Vec<serde_json::Value> = bins
-            .iter()
-            .filter_map(|&(lo, hi)| {
-                let psnrs: Vec<f64> = errors
-                    .iter()
-                    .filter(|e| angle(e).is_some_and(|a| a >= lo && a < hi))
-                    .filter_map(|e| psnr_at.get(&frame_key(e.t_s)).copied())
-                    .collect();
-                (!psnrs.is_empty()).then(|| {
-                    json!({
-                        "angle_deg": [lo, hi],
-                        "frames": psnrs.len(),
-                        "psnr_robot_db_mean": mean(psnrs.iter().copied()),
-                    })
-                })
-            })
-            .collect();
-        json!(rows)
-    };
-    let seen: Vec<f64> = errors.iter().filter_map(|e| e.seen_share).collect();
-    let nearest: Vec<f64> = errors.iter().filter_map(|e| e.nearest_view_deg).collect();
-    let cpu: Vec<f64> = errors.iter().filter_map(|e| e.view_background_ms).collect();
-    let background = match &erase.view_background {
-        Some(vb) => json!({
-            "views_kept": vb.views.len(),
-            "views_offered": vb.views.offered(),
-            "blank_frames_refused": vb.views.blank(),
-            "view_times_s": vb.views.times(),
-            "seen_share_of_robot_region": mean(seen.iter().copied()),
-            "nearest_view_deg": spread(&nearest),
-            "cpu_ms": spread(&cpu),
-            "psnr_by_nearest_view": by_angle(&|e| e.nearest_view_deg),
-        }),
-        None => json!(null),
-    };
-    let angles: Vec<f64> = errors.iter().map(|e| e.angle_deg).collect();
-    let offsets: Vec<f64> = errors.iter().map(|e| e.offset_mm).collect();
-    let ages: Vec<f64> = errors.iter().filter_map(|e| e.tracking_age_ms).collect();
-    let speeds: Vec<f64> = errors.iter().map(|e| e.speed_deg_s).collect();
-    let t = &head.tracking;
-    json!({
-        "peak_speed_deg_s": head.motion.peak_angular_speed(s.file.duration_s).to_degrees(),
-        "speed_deg_s_at_frames": spread(&speeds),
-        "tracking": {
-            "rate_hz": t.rate_hz,
-            "latency_s": t.latency_s,
-            "position_sigma_mm": t.position_sigma_m * 1e3,
-            "angle_sigma_deg": t.angle_sigma_rad.to_degrees(),
-        },
-        "pose_compensation": s.file.erase.pose_compensation,
-        "mask_camera_error_deg": spread(&angles),
-        "mask_camera_error_mm": spread(&offsets),
-        "newest_tracked_pose_age_ms": spread(&ages),
-        "frames": errors.len(),
-        "view_background": background,
-        "psnr_by_angle_from_photo": by_angle(&|e| Some(e.photo_angle_deg)),
-    })
+    let mut app = crate::app::build_app(scene, &base)?;
+    app.add_plugins(ReplayPlugin(options));
+    Ok(app)
 }
 
 /// Runs a replay to the end and returns its report.
@@ -1127,7 +853,10 @@ pub fn run_views(
     options: ReplayOptions,
 ) -> Result<serde_json::Value, AppError> {
     let Some(first) = scenes.first() else {
-        return Err(AppError::replay("no camera to replay".to_owned()));
+        return Err(AppError::command(
+            "replay",
+            "no camera to replay".to_owned(),
+        ));
     };
     if options.record.is_some() {
         return Err(AppError::flag(
@@ -1195,14 +924,15 @@ fn run_video(
     options: ReplayOptions,
 ) -> Result<serde_json::Value, AppError> {
     let slot = options.result.clone();
-    let mut app = crate::build_app(scene, &crate::Mode::Headless(options))?;
+    let mut app = build_app(scene, options)?;
     let exit = app.run();
     slot.lock()
         .ok()
         .and_then(|mut s| s.take())
         .unwrap_or_else(|| {
-            Err(AppError::replay(format!(
-                "stopped before finishing ({exit:?})"
-            )))
+            Err(AppError::command(
+                "replay",
+                format!("stopped before finishing ({exit:?})"),
+            ))
         })
 }

@@ -43,6 +43,13 @@ use serde_json::json;
 
 use crate::AppError;
 
+mod outputs;
+pub(crate) use outputs::overlay;
+use outputs::write_outputs;
+
+mod source;
+pub(crate) use source::{decode, interpolate, joint_vectors, recording_camera, recording_mount};
+
 /// What `avatarm replay --recording` is given.
 #[derive(Debug, Clone)]
 pub struct RecordingOptions {
@@ -184,7 +191,12 @@ pub fn run_recording(o: &RecordingOptions) -> Result<serde_json::Value, AppError
         .lock()
         .ok()
         .and_then(|mut r| r.take())
-        .ok_or_else(|| AppError::replay("the recording's replay stopped before it finished"))?;
+        .ok_or_else(|| {
+            AppError::command(
+                "replay --recording",
+                "the recording's replay stopped before it finished",
+            )
+        })?;
     let Finished {
         outputs,
         background,
@@ -192,7 +204,7 @@ pub fn run_recording(o: &RecordingOptions) -> Result<serde_json::Value, AppError
         errors,
     } = finished;
     if !errors.is_empty() {
-        return Err(AppError::replay(errors.join("; ")));
+        return Err(AppError::command("replay --recording", errors.join("; ")));
     }
     write_outputs(o, &input, &outputs, &background, &times, started)
 }
@@ -227,7 +239,7 @@ impl Input {
     fn load(o: &RecordingOptions) -> Result<Self, AppError> {
         let recording = Recording::open(&o.recording)?;
         let name = o.recording.display().to_string();
-        let bad = |message: String| AppError::replay(format!("{name}: {message}"));
+        let bad = |message: String| AppError::recording(name.to_owned(), message);
         let (calibration, intrinsics) = recording_camera(&recording, o.camera.as_deref(), &name)?;
         let size = (intrinsics.width, intrinsics.height);
         let mut notes = Vec::new();
@@ -412,170 +424,6 @@ fn room_background(
         min_separation_rad,
         threads,
     })
-}
-
-/// A recording of a camera on a head: its mount (`head_from_camera`), from `mount_file` or
-/// else the recording's; `None` for a fixed camera. Errors: `pose_flag` (a fixed camera's pose
-/// given on the command line) for a camera on a head, `mount_flag` for a fixed camera, a
-/// camera on a head with no tracked head pose, or with no mount at all.
-pub(crate) fn recording_mount(
-    recording: &Recording,
-    mount_file: Option<&Path>,
-    pose_flag: Option<&str>,
-    mount_flag: &str,
-    name: &str,
-) -> Result<Option<Isometry3<f64>>, AppError> {
-    let bad = |message: String| AppError::replay(format!("{name}: {message}"));
-    if !recording.camera_on_head() {
-        return match mount_file {
-            Some(_) => Err(AppError::flag(
-                mount_flag,
-                format!(
-                    "{name}: the recording's camera is fixed, not on a head: give its pose with --pose"
-                ),
-            )),
-            None => Ok(None),
-        };
-    }
-    if let Some(flag) = pose_flag {
-        return Err(AppError::flag(
-            flag,
-            format!(
-                "{name}: the camera rides on a head ({} tracked head poses): its pose is the head's times the mount; give the mount with {mount_flag} FILE (head_from_camera), or none for the recording's",
-                recording.head_poses.len()
-            ),
-        ));
-    }
-    if recording.head_poses.is_empty() {
-        return Err(bad(
-            "the camera rides on a head (the recording has its mount) but there is no tracked head pose".into(),
-        ));
-    }
-    match mount_file {
-        Some(path) => Ok(Some(read_mount(path)?)),
-        None => recording.head_from_camera.map(Some).ok_or_else(|| {
-            bad(format!(
-                "the recording has head poses but no mount: give one with {mount_flag} FILE"
-            ))
-        }),
-    }
-}
-
-/// A recording's camera: its calibration (or `camera`, a camera file, instead) checked against
-/// the frames' size, and the pinhole intrinsics from its K. Errors: no frames, no calibration,
-/// a calibration for another image size.
-pub(crate) fn recording_camera(
-    recording: &Recording,
-    camera: Option<&Path>,
-    name: &str,
-) -> Result<(CameraCalibration, Intrinsics), AppError> {
-    let bad = |message: String| AppError::replay(format!("{name}: {message}"));
-    let first = recording
-        .frames
-        .first()
-        .ok_or_else(|| bad("the recording has no camera frames".into()))?;
-    let size = decode(first, name)?.dimensions();
-    let calibration = match camera {
-        Some(path) => read_calibration(path, Some(size))?,
-        None => recording.calibration.clone().ok_or_else(|| {
-            bad("the recording has no camera calibration: give one with --camera FILE".into())
-        })?,
-    };
-    if (calibration.width, calibration.height) != size {
-        return Err(bad(format!(
-            "the calibration is for {}x{} images, the frames are {}x{}",
-            calibration.width, calibration.height, size.0, size.1
-        )));
-    }
-    let k = calibration.k;
-    let intrinsics = Intrinsics {
-        fx: k[0],
-        fy: k[4],
-        cx: k[2],
-        cy: k[5],
-        width: size.0,
-        height: size.1,
-    };
-    Ok((calibration, intrinsics))
-}
-
-/// The recording's joint states in the description's q order, by stamp. Errors name a joint
-/// the description does not have; joints the recording never names stay at 0 (said in the
-/// notes).
-pub(crate) fn joint_vectors(
-    recording: &Recording,
-    model: &RobotModel,
-    name: &str,
-    notes: &mut Vec<String>,
-) -> Result<Vec<(u64, DVector<f64>)>, AppError> {
-    if recording.joint_states.is_empty() {
-        return Err(AppError::replay(format!(
-            "{name}: the recording has no joint states"
-        )));
-    }
-    let mut named = vec![false; model.dof()];
-    let mut q = DVector::zeros(model.dof());
-    let mut out = Vec::with_capacity(recording.joint_states.len());
-    for s in &recording.joint_states {
-        for (joint, &v) in s.names.iter().zip(&s.positions) {
-            match model.dof_index(joint) {
-                Ok(i) => {
-                    q[i] = v;
-                    named[i] = true;
-                }
-                // A mimic joint follows its leader (ROS names it too).
-                Err(avatarm_core::Error::MimicJoint { .. }) => {}
-                Err(_) => {
-                    return Err(AppError::replay(format!(
-                        "{name}: joint states at {} ns: joint '{joint}' is not in the description '{}'",
-                        s.stamp_ns, model.name
-                    )));
-                }
-            }
-        }
-        out.push((s.stamp_ns, q.clone()));
-    }
-    let never: Vec<&str> = model
-        .dof_names()
-        .into_iter()
-        .zip(&named)
-        .filter(|(_, n)| !**n)
-        .map(|(j, _)| j)
-        .collect();
-    if !never.is_empty() {
-        notes.push(format!(
-            "joints the recording never names, held at 0: {}",
-            never.join(", ")
-        ));
-    }
-    Ok(out)
-}
-
-/// The joints at `stamp_ns`: linear between the two states around it, the first before the
-/// first, the last after the last.
-pub(crate) fn interpolate(states: &[(u64, DVector<f64>)], stamp_ns: u64) -> DVector<f64> {
-    let i = states.partition_point(|s| s.0 <= stamp_ns);
-    match (i.checked_sub(1).map(|j| &states[j]), states.get(i)) {
-        (Some(a), Some(b)) if b.0 > a.0 => {
-            let s = (stamp_ns - a.0) as f64 / (b.0 - a.0) as f64;
-            &a.1 + (&b.1 - &a.1) * s
-        }
-        (Some(a), _) => a.1.clone(),
-        (None, Some(b)) => b.1.clone(),
-        (None, None) => DVector::zeros(0),
-    }
-}
-
-pub(crate) fn decode(f: &CompressedFrame, name: &str) -> Result<image::RgbaImage, AppError> {
-    image::load_from_memory(&f.data)
-        .map(|i| i.to_rgba8())
-        .map_err(|e| {
-            AppError::replay(format!(
-                "{name}: the {} image at {} ns cannot be decoded: {e}",
-                f.format.name(),
-                f.stamp_ns
-            ))
-        })
 }
 
 fn load_background(path: &Path, size: (u32, u32)) -> Result<Arc<Vec<u8>>, AppError> {
@@ -918,290 +766,7 @@ enum Part {
     Raw,
 }
 
-/// The frame (RGBA8, `width` wide) with the mask tinted red over it, image `edges` (0/1 per
-/// pixel, as `avatarm calibrate --edges` fits to) in yellow, and the reference mask's outline
-/// in green on top: where the mask lands against where the robot is, by eye.
-pub(crate) fn overlay(
-    frame: &[u8],
-    mask: &[u8],
-    edges: Option<&[u8]>,
-    reference: Option<&[u8]>,
-    width: u32,
-) -> Vec<u8> {
-    let w = width as usize;
-    let mut out = frame.to_vec();
-    for (i, px) in out.chunks_exact_mut(4).enumerate() {
-        if edges.is_some_and(|e| e[i] > 0) {
-            px.copy_from_slice(&EDGE_COLOUR);
-        } else if mask[i] > 0 {
-            px[0] = ((u16::from(px[0]) + 255) / 2) as u8;
-            px[1] /= 2;
-            px[2] /= 2;
-        }
-    }
-    if let Some(r) = reference {
-        let h = r.len() / w;
-        for y in 0..h {
-            for x in 0..w {
-                let i = y * w + x;
-                let edge = r[i] > 0
-                    && [(0, -1), (0, 1), (-1, 0), (1, 0)].iter().any(|(dx, dy)| {
-                        let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-                        nx < 0
-                            || ny < 0
-                            || nx >= w as i64
-                            || ny >= h as i64
-                            || r[ny as usize * w + nx as usize] == 0
-                    });
-                if edge {
-                    out[i * 4..i * 4 + 4].copy_from_slice(&[40, 255, 40, 255]);
-                }
-            }
-        }
-    }
-    out
-}
-
 use super::spread;
-
-/// The colour [`overlay`] draws image edges in (RGBA8).
-pub(crate) const EDGE_COLOUR: [u8; 4] = [255, 220, 0, 255];
-
-fn mean(v: &[f64]) -> Option<f64> {
-    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-}
-
-fn write_outputs(
-    o: &RecordingOptions,
-    input: &Input,
-    outputs: &[FrameOutput],
-    background: &Option<(BackgroundEstimate, String)>,
-    times: &avatarm_erase::SpanTimes,
-    started: Instant,
-) -> Result<serde_json::Value, AppError> {
-    let (w, h) = input.size;
-    let out = &o.out;
-    let png = |name: String, img: image::DynamicImage| -> Result<Vec<u8>, AppError> {
-        let path = out.join(&name);
-        img.save(&path)
-            .map_err(|source| AppError::write_image(&path, source))?;
-        std::fs::read(&path).map_err(|source| AppError::Io {
-            path,
-            action: "read",
-            source,
-        })
-    };
-    let gray = |m: &[u8]| -> Result<image::DynamicImage, AppError> {
-        image::GrayImage::from_raw(w, h, m.iter().map(|&v| v * 255).collect())
-            .map(image::DynamicImage::ImageLuma8)
-            .ok_or(AppError::ImageSize {
-                what: "mask".into(),
-                width: w,
-                height: h,
-            })
-    };
-    let rgb = |rgba: &[u8]| -> Result<image::DynamicImage, AppError> {
-        image::RgbaImage::from_raw(w, h, rgba.to_vec())
-            .map(|i| image::DynamicImage::ImageRgb8(image::DynamicImage::ImageRgba8(i).to_rgb8()))
-            .ok_or(AppError::ImageSize {
-                what: "erased frame".into(),
-                width: w,
-                height: h,
-            })
-    };
-    let mcap_path = out.join("erased.mcap");
-    let mut mcap = RecordingWriter::create(&mcap_path)?;
-    let first_stamp = input.frames.first().map_or(0, |f| f.stamp_ns);
-    mcap.calibration(first_stamp, &input.calibration)?;
-    match input.head_mount {
-        Some(mount) => {
-            mcap.camera_mount(first_stamp, &mount)?;
-            for p in &input.recording.head_poses {
-                mcap.head_pose(p)?;
-            }
-        }
-        None => mcap.camera_pose(first_stamp, &input.camera.world_from_camera)?,
-    }
-    for s in &input.recording.joint_states {
-        mcap.joint_states(s)?;
-    }
-    let settings = o.settings;
-    // The lens map the mask was drawn through (the same function as the pipeline's).
-    let lens = &input.lens_map;
-    let (mut coverage, mut max_diff, mut mismatch) = (Vec::new(), 0u8, 0u64);
-    let mut scored = Vec::new();
-    let mut robot_union = vec![0u8; (w * h) as usize];
-    for (i, (frame, result)) in input.frames.iter().zip(outputs).enumerate() {
-        let (Some(mask), Some(composite)) = (&result.mask, &result.composite) else {
-            return Err(AppError::replay(format!(
-                "frame {i}: its mask or erased image never arrived"
-            )));
-        };
-        coverage.push(100.0 * mask.iter().filter(|&&m| m > 0).count() as f64 / mask.len() as f64);
-        // The CPU reference on the same inputs.
-        if let (Some((rw, rh, raw)), Some((live, bg, photometric))) = (&result.raw, &result.inputs)
-        {
-            let raw = RgbaView::new("mask twin render", *rw, *rh, raw)?;
-            let cpu_mask = dr::threshold_mask(
-                &raw,
-                w,
-                h,
-                &settings.ranges,
-                settings.mask_radius(),
-                lens.0.as_deref(),
-            )?;
-            let alpha = dr::feather_alpha(&cpu_mask, w, h, settings.feather_px);
-            let black = vec![0u8; live.len()];
-            let alpha_h = if settings.enabled && bg.is_some() {
-                settings.alpha_h
-            } else {
-                0.0
-            };
-            let live_view = RgbaView::new("live frame", w, h, live)?;
-            let bg_view = RgbaView::new("background", w, h, bg.as_deref().unwrap_or(&black))?;
-            let cpu = dr::composite(&live_view, &bg_view, &alpha, alpha_h, photometric)?;
-            mismatch =
-                mismatch.max(mask.iter().zip(&cpu_mask).filter(|(a, b)| a != b).count() as u64);
-            let diff = composite
-                .chunks_exact(4)
-                .zip(cpu.chunks_exact(4))
-                .flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c])))
-                .max()
-                .unwrap_or(0);
-            max_diff = max_diff.max(diff);
-        }
-        let erased_region: Vec<u8> = dr::feather_alpha(mask, w, h, settings.feather_px)
-            .iter()
-            .map(|&a| u8::from(a >= 0.5))
-            .collect();
-        for (u, &m) in robot_union.iter_mut().zip(mask) {
-            *u |= m;
-        }
-        if let Some(truth) = &input.references[i]
-            && let Some(s) = dr::mask_scores(&erased_region, truth)
-        {
-            scored.push(json!({
-                "frame": i,
-                "stamp_ns": frame.stamp_ns,
-                "iou": s.iou,
-                "leak_pct": s.leak_pct,
-                "overmask_pct": s.overmask_pct,
-                "robot_px": s.robot_px,
-            }));
-        }
-        if let Some(live) = result.inputs.as_ref().map(|x| &x.0) {
-            let picture = overlay(live, mask, None, input.references[i].as_deref(), w);
-            png(format!("overlay_{i:05}.png"), rgb(&picture)?)?;
-        }
-        let erased_png = png(format!("erased_{i:05}.png"), rgb(composite)?)?;
-        let mask_png = png(format!("mask_{i:05}.png"), gray(mask)?)?;
-        mcap.frame(frame)?;
-        mcap.erased(&CompressedFrame {
-            stamp_ns: frame.stamp_ns,
-            format: ImageFormat::Png,
-            data: erased_png,
-        })?;
-        mcap.mask(&CompressedFrame {
-            stamp_ns: frame.stamp_ns,
-            format: ImageFormat::Png,
-            data: mask_png,
-        })?;
-    }
-    for m in &input.recording.reference_masks {
-        mcap.reference_mask(m)?;
-    }
-    mcap.finish()?;
-    let background_report = match background {
-        Some((estimate, origin)) => {
-            png("background.png".into(), rgb(&estimate.rgba)?)?;
-            png("background_seen.png".into(), gray(&estimate.seen)?)?;
-            json!({
-                "source": origin,
-                "margin_px": o.background_margin_px,
-                "robot_region_seen_pct": estimate.seen_fraction(&robot_union).map(|f| 100.0 * f),
-                "filled_pct_of_frame": 100.0 * estimate.filled_fraction(),
-                "note": "robot_region_seen_pct: of the pixels any frame's mask covered, the share whose background some frame showed; the rest was filled from the surroundings (background_seen.png: white where seen)",
-            })
-        }
-        None => json!({"source": o.background.as_ref().map(|p| p.display().to_string())}),
-    };
-    let mut background_report = background_report;
-    if let Some(vb) = &input.view_background {
-        let seen: Vec<f64> = outputs
-            .iter()
-            .filter_map(|f| f.view.and_then(|v| v.0))
-            .collect();
-        let nearest: Vec<f64> = outputs
-            .iter()
-            .filter_map(|f| f.view.and_then(|v| v.1))
-            .map(f64::to_degrees)
-            .collect();
-        background_report["view_following"] = json!({
-            "room": o.room.as_ref().map(|p| p.display().to_string()),
-            "proxy_rects": vb.proxy.rects.len(),
-            "max_views": vb.max_views,
-            "min_separation_deg": vb.min_separation_rad.to_degrees(),
-            "robot_region_seen_pct_mean": mean(&seen).map(|f| 100.0 * f),
-            "nearest_view_deg": spread(&nearest),
-            "note": "each frame's H: the kept views re-projected through the room's boxes where the robot may be, the frame itself elsewhere; robot_region_seen_pct_mean: of the robot's region, the share some view saw (the footage's median fills the rest)",
-        });
-    }
-    let get = |key: &str| -> Vec<f64> { scored.iter().filter_map(|s| s[key].as_f64()).collect() };
-    let (iou, leak, over) = (get("iou"), get("leak_pct"), get("overmask_pct"));
-    let span = |name: &str| {
-        spread(
-            &times
-                .spans
-                .get(name)
-                .map_or_else(Vec::new, |s| s.ms.iter().copied().collect::<Vec<_>>()),
-        )
-    };
-    let gpu_passes: serde_json::Map<String, serde_json::Value> = PASS_NAMES
-        .iter()
-        .filter(|n| times.spans.contains_key(**n))
-        .map(|n| (n.to_string(), span(n)))
-        .collect();
-    let k = &input.camera.intrinsics;
-    let report = json!({
-        "recording": o.recording.display().to_string(),
-        "robot": input.model.name,
-        "frames": input.frames.len(),
-        "size": [w, h],
-        "camera": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
-                   "distortion_model": input.calibration.distortion_model.ros_name(),
-                   "lens": super::lens_report(&input.lens, lens.0.as_deref()),
-                   "head": input.head_mount.map(|m| {
-                       let q = m.rotation;
-                       json!({"head_poses": input.recording.head_poses.len(),
-                              "head_from_camera": {"translation": [m.translation.x, m.translation.y, m.translation.z],
-                                                   "quaternion_xyzw": [q.i, q.j, q.k, q.w]}})
-                   })},
-        "erase": {"dilate_px": settings.dilate_px, "feather_px": settings.feather_px,
-                  "resolution_scale": settings.resolution_scale, "photometric": settings.photometric},
-        "background": background_report,
-        "mask": {
-            "coverage_pct_mean": mean(&coverage),
-            "vs_reference": {
-                "frames_scored": scored.len(),
-                "iou_mean": mean(&iou),
-                "iou_min": iou.iter().copied().reduce(f64::min),
-                "leak_pct_mean": mean(&leak),
-                "overmask_pct_mean": mean(&over),
-                "per_frame": scored,
-            },
-        },
-        "gpu_vs_cpu": {"max_abs_diff": max_diff, "mask_mismatch_px_max": mismatch},
-        "timing_ms": {"gpu_passes": gpu_passes, "upload": span(UPLOAD_SPAN),
-                      "source": times.unavailable.clone().unwrap_or_else(|| "gpu".into())},
-        "wall_time_s": started.elapsed().as_secs_f64(),
-        "notes": input.notes,
-        "outputs": {"mcap": mcap_path.display().to_string()},
-    });
-    let path = out.join("report.json");
-    let text = serde_json::to_string_pretty(&report)?;
-    std::fs::write(&path, text + "\n").map_err(|e| AppError::write(path, e))?;
-    Ok(report)
-}
 
 #[cfg(test)]
 mod tests {

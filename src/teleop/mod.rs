@@ -11,8 +11,8 @@
 //! and the hand is drawn as a skeleton there and in the 3-D view.
 //!
 //! Hand sources ([`HandChoice`], `--hand` or `hand = "..."` in the scene): the trial's scripted
-//! hand (default), the desktop hand (keys and mouse, [`crate::preview::keys::DESKTOP_HAND_KEYS`]), OpenXR hand tracking
-//! (`--xr`), Leap Motion (feature `leap`), or a recorded `.hand.jsonl` file.
+//! hand (default), the desktop hand (keys and mouse, [`crate::preview::keys::DESKTOP_HAND_KEYS`]),
+//! OpenXR hand tracking (`--xr`), Leap Motion (feature `leap`), or a recorded `.hand.jsonl` file.
 
 use avatarm_core::teleop::hand::{HandFrame, Handedness, SKELETON, skeleton};
 use avatarm_core::teleop::mapping::MappingMode;
@@ -33,9 +33,26 @@ use bevy::prelude::*;
 use bevy_rapier3d::prelude::{NoUserData, RapierPhysicsPlugin, Velocity};
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 
-use crate::net::serve::Spread;
 use crate::{AppError, AppTwin, AvatarmSystems};
+use avatarm_core::stats::Spread;
 use avatarm_scene::Scene;
+
+mod robot;
+pub use robot::RobotChoice;
+#[cfg(feature = "ros")]
+pub use robot::link_settings;
+use robot::{prepared_q0, ros_arm};
+
+mod hands;
+pub(crate) use hands::{hand_source, xr_inbox};
+
+mod anchor;
+pub use anchor::HandAnchor;
+use anchor::anchor_to_real_object;
+
+mod desktop;
+pub use desktop::DesktopHand;
+pub(crate) use desktop::{DesktopControls, drive_desktop_hand};
 
 /// The live trial's fixed parts, for the systems.
 #[derive(Resource, Debug, Clone)]
@@ -54,16 +71,6 @@ pub struct LiveTask {
     pub start_z: f64,
     /// The object twin's start (virtual scene), where Home puts it back.
     pub twin_start: Transform,
-}
-
-/// The desktop hand's state: wrist pose (virtual scene), grip, and its start.
-#[derive(Resource, Debug, Clone)]
-pub struct DesktopHand {
-    inbox: HandInbox,
-    start: Isometry3<f64>,
-    wrist: Isometry3<f64>,
-    grip: f64,
-    closing: bool,
 }
 
 /// Hand skeletons in the preview's 3-D view (real world).
@@ -132,8 +139,8 @@ impl LiveTeleop {
         })
     }
 
-    /// Adds the trial to a preview app built by [`crate::build_app`] (the simulated room drives
-    /// nothing then: the trial's arm does). Errors only for OpenXR hand tracking without the
+    /// Adds the trial to a preview app built by [`crate::preview::build_app`] (the simulated room
+    /// drives nothing then: the trial's arm does). Errors only for OpenXR hand tracking without the
     /// XR view.
     pub fn install(self, app: &mut App) -> Result<(), AppError> {
         let (hand, desktop) = match self.hand {
@@ -198,11 +205,11 @@ impl LiveTeleop {
     }
 }
 
-/// The live trial's world for `scene`'s `[task]` (trial `trial`'s seeded hand) on `robot`, in `mode` (default: the
-/// closed loop where the task has it, else its first mode), and that mode: what `avatarm run`
-/// and the robot site of `avatarm serve` drive. A real robot first moves to the grasp's start
-/// ([`avatarm_mapping::Approach`]). Errors name `flag` when the scene has no task, and the
-/// setting when the task cannot be set up.
+/// The live trial's world for `scene`'s `[task]` (trial `trial`'s seeded hand) on `robot`, in
+/// `mode` (default: the closed loop where the task has it, else its first mode), and that mode:
+/// what `avatarm run` and the robot site of `avatarm serve` drive. A real robot first moves to the
+/// grasp's start ([`avatarm_mapping::Approach`]). Errors name `flag` when the scene has no task,
+/// and the setting when the task cannot be set up.
 pub fn trial_parts(
     scene: &Scene,
     robot: RobotChoice,
@@ -245,42 +252,6 @@ pub fn trial_parts(
     Ok((parts, mode))
 }
 
-/// The hand source `choice` names for a trial (`parts`: its scripted hand and start pose),
-/// polled at `rate_hz` when scripted; the desktop hand also gives its key-driven state. `None`
-/// for OpenXR hand tracking, which comes from an app's XR view ([`xr_inbox`]). Errors when a
-/// recording cannot be read, a device cannot start or a feature is left out of this build.
-pub(crate) fn hand_source(
-    scene: &Scene,
-    choice: &HandChoice,
-    parts: &TrialParts,
-    rate_hz: f64,
-) -> Result<(Option<ActiveHand>, Option<DesktopHand>), AppError> {
-    let start = parts.script.wrist_at(0.0).0;
-    Ok(match choice {
-        HandChoice::Scripted => (
-            Some(ActiveHand::new(ScriptedHand::new(
-                parts.script.clone(),
-                rate_hz,
-            ))),
-            None,
-        ),
-        HandChoice::Desktop => {
-            let desktop = DesktopHand::new(start);
-            (Some(ActiveHand::new(desktop.inbox.clone())), Some(desktop))
-        }
-        HandChoice::Xr => (None, None),
-        HandChoice::Leap => (Some(leap_hand(&start, &scene.file.leap)?), None),
-        HandChoice::File(path) => (
-            Some(ActiveHand::new(avatarm_hand::RecordedHand::open(path)?)),
-            None,
-        ),
-        HandChoice::LeapRecording { path, hand } => (
-            Some(leap_recording(path, *hand, &start, &scene.file.leap)?),
-            None,
-        ),
-    })
-}
-
 /// The scene's carried object (its `[task]` object): its index among the interaction layer's
 /// object twins (`None` when it is not drawn as one) and its base pose from its centre (the
 /// frame the mapping carries). `None` without a task.
@@ -310,265 +281,6 @@ pub fn add_live_teleop(
     robot: RobotChoice,
 ) -> Result<(), AppError> {
     LiveTeleop::prepare(scene, choice, robot)?.install(app)
-}
-
-/// The robot a live task commands (`avatarm run --robot`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum RobotChoice {
-    /// The embedded simulated arm (the simulated room's).
-    #[default]
-    Sim,
-    /// The real robot through the scene's `[robot.link]` (ROS 1, feature `ros`).
-    Ros,
-}
-
-/// The scene's `[robot.link]` as the ROS link's settings: Intera's topics by default, the
-/// master from the scene, else `ROS_MASTER_URI`, else `http://localhost:11311`.
-#[cfg(feature = "ros")]
-pub fn link_settings(
-    scene: &Scene,
-    setup: &avatarm_scene::task::TrialSetup,
-) -> Result<avatarm_ros::LinkSettings, AppError> {
-    use avatarm_ros::{CommandKind, LinkSettings};
-    use avatarm_scene::spec::{RobotLinkKind, RosControlController};
-    let spec = &scene.file.robot.link;
-    let intera = spec.kind == RobotLinkKind::Intera;
-    let master_uri = spec
-        .master_uri
-        .clone()
-        .or_else(|| std::env::var("ROS_MASTER_URI").ok())
-        .unwrap_or_else(|| "http://localhost:11311".into());
-    let sawyer = LinkSettings::sawyer(&master_uri);
-    // A topic given (or "" for none), else Intera's where the link is Intera's.
-    let topic = |given: &Option<String>, intera_topic: Option<String>| match given {
-        Some(t) if t.is_empty() => None,
-        Some(t) => Some(t.clone()),
-        None if intera => intera_topic,
-        None => None,
-    };
-    let names = setup.model.dof_names();
-    let arm_joints: Vec<String> = if spec.arm_joints.is_empty() {
-        setup.arm.iter().map(|&i| names[i].to_owned()).collect()
-    } else {
-        spec.arm_joints.clone()
-    };
-    let command_topic =
-        topic(&spec.command_topic, Some(sawyer.command_topic.clone())).ok_or_else(|| {
-            AppError::flag(
-                "robot.link.command_topic",
-                "a ros_control link needs its controller's command topic",
-            )
-        })?;
-    Ok(LinkSettings {
-        master_uri,
-        node_name: spec.node_name.clone(),
-        joint_states_topic: spec.joint_states_topic.clone(),
-        command_topic,
-        command: {
-            let joints = if spec.controller_joints.is_empty() {
-                arm_joints.clone()
-            } else {
-                spec.controller_joints.clone()
-            };
-            match (intera, spec.controller) {
-                (true, _) => CommandKind::InteraVelocity,
-                (false, RosControlController::Velocity) => CommandKind::GroupVelocity { joints },
-                (false, RosControlController::Position) => CommandKind::GroupPosition { joints },
-            }
-        },
-        arm_joints,
-        robot_state_topic: topic(&spec.robot_state_topic, sawyer.robot_state_topic.clone()),
-        command_timeout_topic: topic(
-            &spec.command_timeout_topic,
-            sawyer.command_timeout_topic.clone(),
-        ),
-        command_timeout_s: spec.command_timeout_s,
-        speed_ratio: topic(
-            &spec.speed_ratio_topic,
-            sawyer.speed_ratio.as_ref().map(|(t, _)| t.clone()),
-        )
-        .map(|t| (t, spec.speed_ratio)),
-        gripper: match (&spec.gripper_device, intera) {
-            (Some(d), _) if d.is_empty() => None,
-            (Some(d), _) => Some(avatarm_ros::GripperLink {
-                device: Some(d.clone()),
-                ..Default::default()
-            }),
-            (None, true) => Some(avatarm_ros::GripperLink::default()),
-            (None, false) => None,
-        },
-        joint_state_rate: spec
-            .joint_state_rate_hz
-            .map(|hz| ("/robot/joint_state_publish_rate".to_owned(), hz)),
-        stale_after_s: spec.stale_after_s,
-    })
-}
-
-#[cfg(feature = "ros")]
-fn ros_arm(
-    scene: &Scene,
-    setup: &avatarm_scene::task::TrialSetup,
-    q0: &nalgebra::DVector<f64>,
-) -> Result<Box<dyn avatarm_mapping::robot::RobotInterface>, AppError> {
-    let settings = link_settings(scene, setup)?;
-    let names = setup
-        .model
-        .dof_names()
-        .iter()
-        .map(|s| (*s).to_owned())
-        .collect();
-    let arm = avatarm_ros::RosArm::start(settings, names, q0.clone())
-        .map_err(|e| AppError::flag("--robot ros", e.to_string()))?;
-    Ok(Box::new(arm))
-}
-
-#[cfg(not(feature = "ros"))]
-fn ros_arm(
-    _: &Scene,
-    _: &avatarm_scene::task::TrialSetup,
-    _: &nalgebra::DVector<f64>,
-) -> Result<Box<dyn avatarm_mapping::robot::RobotInterface>, AppError> {
-    Err(AppError::flag(
-        "--robot ros",
-        "this avatarm was built without the ros feature; rebuild with `cargo build --features ros`",
-    ))
-}
-
-/// The simulated arm's start (the room shows it there from the first frame).
-fn prepared_q0(teleop: &Teleop) -> Option<nalgebra::DVector<f64>> {
-    teleop
-        .robot()
-        .simulated()
-        .map(|r| r.true_positions().clone())
-}
-
-/// OpenXR hand tracking's frames (the app's XR view pushes them), its tracking space placed so
-/// that a hand held at rest lands on the trial's `start`. Errors without the XR view.
-#[cfg(feature = "xr")]
-pub(crate) fn xr_inbox(app: &mut App, start: &Isometry3<f64>) -> Result<HandInbox, AppError> {
-    let mut xr = app
-        .world_mut()
-        .get_resource_mut::<crate::preview::xr::XrHand>()
-        .ok_or_else(|| AppError::flag("--hand xr", "needs XR mode (--xr or xr = true)"))?;
-    // A hand held 35 cm ahead at 1 m above the tracking origin (seated, stage space) lands
-    // on the trial's start pose.
-    let rest = Vector3::new(0.0, 1.0, -0.35);
-    let r = xr.mount.scene_from_xr.rotation;
-    xr.mount.scene_from_xr = Isometry3::from_parts(
-        nalgebra::Translation3::from(start.translation.vector - r * rest),
-        r,
-    );
-    Ok(xr.inbox.clone())
-}
-
-/// Errors: this build has no XR view.
-#[cfg(not(feature = "xr"))]
-pub(crate) fn xr_inbox(_: &mut App, _: &Isometry3<f64>) -> Result<HandInbox, AppError> {
-    Err(AppError::flag(
-        "--hand xr",
-        "this avatarm was built without the xr feature",
-    ))
-}
-
-/// The scene rotation of a Leap mounted as `kind` (`[leap] mount`); `None` for `first_wrist`.
-fn leap_rotation(kind: LeapMountKind) -> Option<nalgebra::UnitQuaternion<f64>> {
-    use avatarm_hand::leap::LeapMount;
-    match kind {
-        LeapMountKind::Desk => Some(LeapMount::desk()),
-        LeapMountKind::Head => Some(LeapMount::head()),
-        LeapMountKind::FirstWrist => None,
-    }
-}
-
-/// Where a Leap device sits for `spec` (`[leap]`): at `device_at`, else placed so that
-/// `rest_mm` (Leap frame) lands on `start`.
-fn leap_mount(
-    spec: &LeapSpec,
-    rotation: nalgebra::UnitQuaternion<f64>,
-    rest_mm: Vector3<f64>,
-    start: &Isometry3<f64>,
-) -> avatarm_hand::leap::LeapMount {
-    use avatarm_hand::leap::LeapMount;
-    match spec.device_at {
-        Some(at) => LeapMount::placed(rotation, Vector3::from(at)),
-        None => LeapMount::anchored(rotation, rest_mm, start.translation.vector),
-    }
-}
-
-#[cfg(feature = "leap")]
-fn leap_hand(start: &Isometry3<f64>, spec: &LeapSpec) -> Result<ActiveHand, AppError> {
-    use avatarm_hand::leap::{LeapHand, LeapOptions};
-    let rotation = leap_rotation(spec.mount).ok_or_else(|| {
-        AppError::flag(
-            "leap.mount",
-            "first_wrist places a recording; a live Leap is mounted on the desk or the head",
-        )
-    })?;
-    // A hand at rest: 20 cm above a desk device, 35 cm ahead of and 20 cm below a head-mounted
-    // one (Leap's +y out of the device's face, +z up on the head).
-    let rest = match spec.mount {
-        LeapMountKind::Head => Vector3::new(0.0, 350.0, -200.0),
-        _ => Vector3::new(0.0, 200.0, 0.0),
-    };
-    let hand = LeapHand::start(LeapOptions {
-        mount: leap_mount(spec, rotation, rest, start),
-        ..LeapOptions::default()
-    })?;
-    Ok(ActiveHand::new(hand))
-}
-
-/// A Leap recording's `hand` (default: the first one it shows) from a device mounted as `spec`
-/// says: its first wrist at the task's start position (`desk`, `head`) or pose (`first_wrist`),
-/// or the device at `device_at`.
-fn leap_recording(
-    path: &std::path::Path,
-    hand: Option<avatarm_core::teleop::hand::Handedness>,
-    start: &Isometry3<f64>,
-    spec: &LeapSpec,
-) -> Result<ActiveHand, AppError> {
-    use avatarm_hand::leap::LeapMount;
-    use avatarm_hand::leap_recording::LeapRecording;
-    let recording = LeapRecording::open(path)?;
-    let first = recording
-        .frames
-        .iter()
-        .find_map(|f| {
-            f.hands
-                .iter()
-                .find(|(_, h)| hand.is_none_or(|side| h.hand == side))
-        })
-        .map(|(_, h)| h.clone())
-        .ok_or_else(|| {
-            AppError::flag(
-                "--hand",
-                format!("{}: no such hand in the recording", path.display()),
-            )
-        })?;
-    let mount = match leap_rotation(spec.mount) {
-        None => LeapMount::with_wrist_pose(&first, start)?,
-        Some(rotation) => {
-            let wrist = first.arm.next.map(f64::from);
-            leap_mount(spec, rotation, Vector3::from(wrist), start)
-        }
-    };
-    let frames = recording.hand_frames(Some(first.hand), &mount)?;
-    Ok(ActiveHand::new(avatarm_hand::RecordedHand::from_frames(
-        format!(
-            "Leap recording {} ({} mount)",
-            path.display(),
-            spec.mount.name()
-        ),
-        frames,
-    )?))
-}
-
-#[cfg(not(feature = "leap"))]
-fn leap_hand(_: &Isometry3<f64>, _: &LeapSpec) -> Result<ActiveHand, AppError> {
-    Err(AppError::flag(
-        "--hand leap",
-        "this avatarm was built without the leap feature; rebuild with `cargo build --features \
-         leap` (needs the Ultraleap SDK, docs/hardware.md)",
-    ))
 }
 
 pub(crate) fn configure_gizmos(mut store: ResMut<GizmoConfigStore>) {
@@ -632,144 +344,6 @@ pub fn place_prop(
             }
         }
     }
-}
-
-/// Alice's view (the camera looked through rides on a head) while the hand holds the object:
-/// the object's twin and the hand are drawn on the real object as the frame on the panel shows
-/// it, not where the physics twin is, so the hand holds the bottle Alice sees even while the
-/// arm lags the twin or the video is older than the hand. This update's anchor, and what the
-/// run measured of it.
-#[derive(Resource, Debug, Default)]
-pub struct HandAnchor {
-    /// This update's anchor: the physics twin mapped into the real world, and the real object
-    /// as the panel's frame shows it (both the object's centre frame, real world, m); `None`
-    /// when the hand is not drawn on the real object.
-    pub now: Option<(Isometry3<f64>, Isometry3<f64>)>,
-    /// Updates anchored.
-    pub frames: u64,
-    /// Per anchored update: how far the anchor moved the twin and the hand (twin to real
-    /// object, mm), at most [`Spread::MAX_SAMPLES`].
-    pub correction_mm: Vec<f64>,
-    /// Per anchored update where the robot is simulated: how far the drawn object is from
-    /// where the real object truly was when the panel's frame was captured (mm; the frame
-    /// shows it there), at most [`Spread::MAX_SAMPLES`].
-    pub error_mm: Vec<f64>,
-    /// The simulated real object's true pose after each control tick (robot clock, s),
-    /// oldest first, the last [`HandAnchor::TRUTH_S`].
-    truths: std::collections::VecDeque<(f64, Isometry3<f64>)>,
-}
-
-impl HandAnchor {
-    /// How long the true poses are kept (s): longer than any frame's age on the panel.
-    pub const TRUTH_S: f64 = 2.0;
-
-    /// Keeps the simulated real object's true pose `pose` at robot time `t_s`.
-    fn record_truth(&mut self, t_s: f64, pose: Isometry3<f64>) {
-        if self.truths.back().is_some_and(|&(last, _)| t_s <= last) {
-            return;
-        }
-        self.truths.push_back((t_s, pose));
-        while self
-            .truths
-            .front()
-            .is_some_and(|&(t, _)| t < t_s - Self::TRUTH_S)
-        {
-            self.truths.pop_front();
-        }
-    }
-
-    /// The true pose at `t_s`: the newest kept at or before it (the simulated room shows the
-    /// object where the last control tick put it), `None` outside what is kept.
-    fn truth_at(&self, t_s: f64) -> Option<Isometry3<f64>> {
-        let first = self.truths.front()?.0;
-        if t_s < first {
-            return None;
-        }
-        self.truths
-            .iter()
-            .rev()
-            .find(|&&(t, _)| t <= t_s + 1e-9)
-            .map(|&(_, pose)| pose)
-    }
-
-    /// This update: anchored from `twin` (the physics twin mapped into the real world) onto
-    /// `real` (the real object as the frame captured at `capture_s` shows it), or not (`None`).
-    fn update(&mut self, anchor: Option<(Isometry3<f64>, Isometry3<f64>)>, capture_s: Option<f64>) {
-        self.now = anchor;
-        let (Some((_, real)), Some(moved)) = (anchor, self.moved_mm()) else {
-            return;
-        };
-        self.frames += 1;
-        Spread::push(&mut self.correction_mm, moved);
-        if let Some(truth) = capture_s.and_then(|t| self.truth_at(t)) {
-            Spread::push(&mut self.error_mm, apart_mm(&real, &truth));
-        }
-    }
-
-    /// How far this update's anchor moves the twin and the hand (mm); `None` when not anchored.
-    pub fn moved_mm(&self) -> Option<f64> {
-        self.now.map(|(twin, real)| apart_mm(&twin, &real))
-    }
-
-    /// For the end of a run: the updates anchored, how far the anchor moved the hand, and
-    /// (simulation) how far the drawn object was from the real one in the frame; empty when
-    /// nothing was anchored.
-    pub fn summary(&self) -> String {
-        if self.frames == 0 {
-            return String::new();
-        }
-        let spread = |v: &[f64]| {
-            let s = Spread::of(v);
-            format!("median {:.1} mm, max {:.1} mm", s.median, s.max)
-        };
-        let truth = if self.error_mm.is_empty() {
-            String::new()
-        } else {
-            format!(
-                ", drawn off the real object in the frame {}",
-                spread(&self.error_mm)
-            )
-        };
-        format!(
-            "; hand on the real object in {} updates (moved from the twin {}{truth})",
-            self.frames,
-            spread(&self.correction_mm)
-        )
-    }
-}
-
-/// The distance between two poses' origins (m apart, in mm).
-fn apart_mm(a: &Isometry3<f64>, b: &Isometry3<f64>) -> f64 {
-    1e3 * (a.translation.vector - b.translation.vector).norm()
-}
-
-/// Alice's view: whether the camera looked through now rides on a head (the held object's
-/// twin and the hand are drawn on the real object as the robot carries it).
-fn anchored(scene: &crate::SceneResource) -> bool {
-    scene.0.head.is_some()
-}
-
-/// This update's [`HandAnchor`]: in Alice's view while the hand holds the object, the physics
-/// twin mapped into the real world and the real object as the panel's frame shows it.
-fn anchor_to_real_object(
-    teleop: Res<Teleop>,
-    held: Res<HeldObject>,
-    (history, erase, scene): (
-        Res<JointHistory>,
-        Res<EraseState>,
-        Res<crate::SceneResource>,
-    ),
-    twin: Query<&Transform, With<GraspTarget>>,
-    mut anchor: ResMut<HandAnchor>,
-) {
-    let now = match twin.single() {
-        Ok(t) if anchored(&scene) && held.held.is_some() => {
-            object_on_panel(&teleop, &history, &erase)
-                .map(|real| (teleop.v2r().pose(&transform_to_iso(t)), real))
-        }
-        _ => None,
-    };
-    anchor.update(now, erase.frame_capture_s);
 }
 
 /// The object's twin in the interaction view shows the physics twin mapped into the real
@@ -889,140 +463,6 @@ pub(crate) fn hand_in_interaction_view(
         .collect()
 }
 
-/// Keys and mouse move the desktop hand (virtual scene; speeds are the hand's, before the
-/// mapping's scale). Home puts the hand, open, and the twin (when the hand does not hold it,
-/// e.g. knocked over) back at the start.
-fn drive_desktop_hand(
-    live: Res<LiveTask>,
-    held: Res<HeldObject>,
-    mut twin: Query<(&mut Transform, &mut Velocity), With<GraspTarget>>,
-    controls: DesktopControls,
-    time: Res<Time<Real>>,
-    fixed: Res<Time<Fixed>>,
-    mut hand: ResMut<DesktopHand>,
-) {
-    let home = hand.step(
-        &controls.input(),
-        time.delta_secs_f64(),
-        fixed.elapsed_secs_f64(),
-    );
-    if home
-        && held.held.is_none()
-        && let Ok((mut t, mut v)) = twin.single_mut()
-    {
-        *t = live.twin_start;
-        *v = Velocity::zero();
-    }
-}
-
-/// The keyboard and mouse a system reads for the desktop hand ([`DesktopControls::input`]).
-#[derive(bevy::ecs::system::SystemParam)]
-pub(crate) struct DesktopControls<'w> {
-    keys: Res<'w, ButtonInput<KeyCode>>,
-    buttons: Res<'w, ButtonInput<MouseButton>>,
-    motion: Res<'w, AccumulatedMouseMotion>,
-    scroll: Res<'w, AccumulatedMouseScroll>,
-}
-
-impl DesktopControls<'_> {
-    /// This update's input.
-    pub(crate) fn input(&self) -> DesktopInput<'_> {
-        DesktopInput {
-            keys: &self.keys,
-            buttons: &self.buttons,
-            mouse: self.motion.delta,
-            scroll: self.scroll.delta.y,
-        }
-    }
-}
-
-/// One update's keys and mouse for the desktop hand.
-pub(crate) struct DesktopInput<'a> {
-    /// The keyboard.
-    pub keys: &'a ButtonInput<KeyCode>,
-    /// The mouse buttons.
-    pub buttons: &'a ButtonInput<MouseButton>,
-    /// The mouse's motion this update (pixels).
-    pub mouse: Vec2,
-    /// The wheel's vertical scroll this update (lines).
-    pub scroll: f32,
-}
-
-impl DesktopHand {
-    /// The desktop hand at `start` (wrist pose, virtual scene), open.
-    pub(crate) fn new(start: Isometry3<f64>) -> Self {
-        Self {
-            inbox: HandInbox::new("desktop hand"),
-            start,
-            wrist: start,
-            grip: 0.0,
-            closing: false,
-        }
-    }
-
-    /// The hand source its frames go to.
-    pub(crate) fn inbox(&self) -> &HandInbox {
-        &self.inbox
-    }
-
-    /// Moves the hand by one update's `input` over `dt_s` (capped at 0.1 s) and pushes its
-    /// skeleton, stamped `t_s` (the hand app's clock), to [`DesktopHand::inbox`]. Returns
-    /// whether Home was pressed: the hand went back to the start, open.
-    pub(crate) fn step(&mut self, input: &DesktopInput<'_>, dt_s: f64, t_s: f64) -> bool {
-        let dt = dt_s.clamp(0.0, 0.1);
-        let speed = 0.15;
-        let mut step = Vector3::zeros();
-        for (key, dir) in [
-            (KeyCode::ArrowUp, Vector3::x()),
-            (KeyCode::ArrowDown, -Vector3::x()),
-            (KeyCode::ArrowLeft, Vector3::y()),
-            (KeyCode::ArrowRight, -Vector3::y()),
-            (KeyCode::PageUp, Vector3::z()),
-            (KeyCode::PageDown, -Vector3::z()),
-        ] {
-            if input.keys.pressed(key) {
-                step += dir * speed * dt;
-            }
-        }
-        if input.buttons.pressed(MouseButton::Left) {
-            // 1 mm per pixel; screen right is the scene's -y, screen up its +x (the preview
-            // looks along the table).
-            let d = input.mouse;
-            step += Vector3::new(-f64::from(d.y), -f64::from(d.x), 0.0) * 0.001;
-        }
-        step.z += f64::from(input.scroll) * 0.01;
-        let mut roll = 0.0;
-        if input.keys.pressed(KeyCode::KeyZ) {
-            roll -= 1.2 * dt;
-        }
-        if input.keys.pressed(KeyCode::KeyX) {
-            roll += 1.2 * dt;
-        }
-        if input.keys.just_pressed(KeyCode::Space) {
-            self.closing = !self.closing;
-        }
-        let home = input.keys.just_pressed(KeyCode::Home);
-        if home {
-            self.wrist = self.start;
-            self.closing = false;
-            self.grip = 0.0;
-        }
-        self.wrist.translation.vector += step;
-        // Tilt about the hand's own forward axis, as one pours.
-        let forward = self.wrist.rotation * Vector3::x_axis();
-        self.wrist.rotation = UnitQuaternion::from_axis_angle(&forward, roll) * self.wrist.rotation;
-        let target = if self.closing { 1.0 } else { 0.0 };
-        self.grip += (target - self.grip).clamp(-2.0 * dt, 2.0 * dt);
-        self.inbox.push(HandFrame {
-            t_s,
-            hand: Handedness::Right,
-            tracked: true,
-            joints: skeleton(&self.wrist, self.grip, Handedness::Right),
-        });
-        home
-    }
-}
-
 /// How far the real object is from its twin mapped into the real world (mm), where the robot
 /// backend knows the real object (simulation).
 fn object_error_mm(teleop: &Teleop, twin: Option<Isometry3<f64>>) -> Option<f64> {
@@ -1118,6 +558,7 @@ pub fn status_line(
 
 #[cfg(test)]
 mod tests {
+    use super::desktop::DesktopInput;
     use super::*;
 
     fn step(hand: &mut DesktopHand, keys: &ButtonInput<KeyCode>, dt_s: f64) -> bool {

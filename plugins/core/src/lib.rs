@@ -10,6 +10,7 @@
 //!   safety limiter.
 //! - [`sim`]: the simulated robot (command latency, first-order response, limits, delayed joint
 //!   states) that stands in for the real arm.
+//! - [`stats`]: quantiles and [`stats::Spread`] (median, p95, largest) of measured series.
 //! - [`rng`]: a small seeded generator so that every replay is reproducible.
 //! - [`shared_data`]: where the real robot descriptions and footage beside the checkout are.
 //! - [`error`]: the crate's error type.
@@ -22,6 +23,7 @@ pub mod rng;
 pub mod robot;
 pub mod shared_data;
 pub mod sim;
+pub mod stats;
 pub mod teleop;
 pub mod vision;
 

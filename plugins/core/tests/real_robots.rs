@@ -13,7 +13,7 @@ fn real(relative: &str) -> Option<(RobotModel, PathBuf)> {
     let ros = match ros_packages() {
         Ok(dir) => dir,
         Err(why) => {
-            eprintln!("skipped: {why}");
+            why.skip(relative);
             return None;
         }
     };

@@ -1,6 +1,6 @@
 //! The erase and interaction plugins without a renderer (`MinimalPlugins`): what they spawn on
 //! which layers, when the passes render, which background they take, where the object twins
-//! go. The rendered result is the replay tests' job (`tests/replay.rs`).
+//! go. The rendered result is the replay tests' job (`tests/app/replay/`).
 
 use std::path::Path;
 

@@ -595,6 +595,10 @@ fn set_background(
 }
 
 #[expect(clippy::too_many_arguments, reason = "a system's inputs")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "one camera frame's inputs to the erase in one system (the mask camera's pose, the lens, latency compensation, H, the photometric fit)"
+)]
 fn prepare_frame(
     config: Res<EraseConfig>,
     live: Res<LiveVideo>,

@@ -524,6 +524,10 @@ fn target_view(
         .create_view(&TextureViewDescriptor::default())
 }
 
+#[expect(
+    clippy::too_many_lines,
+    reason = "the render world's preparation of every erase job in one system: uploads, bind groups and the passes' settings share the job's state"
+)]
 fn prepare_jobs(
     extracted: Res<ExtractedJobs>,
     pipelines: Option<ResMut<ErasePipelines>>,

@@ -188,7 +188,7 @@ fn a_real_grab_recording_grasps_and_releases_a_handle() {
     use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
     let dir = match avatarm_core::shared_data::shared_data() {
         Ok(dir) => dir,
-        Err(why) => return eprintln!("skipped: {why}"),
+        Err(why) => return why.skip("a_real_grab_recording_grasps_and_releases_a_handle"),
     };
     let rec = LeapRecording::open(&dir.join("real/leap/grab.json.gz")).expect("recording");
     let first = rec.frames[0].hands[0].1.clone();

@@ -22,13 +22,8 @@ pub enum MappingError {
         source: Box<avatarm_core::Error>,
     },
     /// A robot backend refused a command.
-    #[error("{robot}: {message}")]
-    Robot {
-        /// The backend's name.
-        robot: String,
-        /// What it refused and why.
-        message: String,
-    },
+    #[error(transparent)]
+    Robot(#[from] avatarm_core::sim::arm::RobotError),
     /// A trial's world lost a part it needs (the twin, the loop state) or measured nothing.
     #[error("trial: {message}")]
     Trial {

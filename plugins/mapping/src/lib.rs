@@ -8,7 +8,9 @@
 //! a ramped stop; the gripper keeps its state while the robot is being stopped, so a lost hand
 //! does not drop the real object.
 //!
-//! Modules: [`robot`] (the robot-interface trait and the simulated arm), [`pouring`], [`error`].
+//! Modules: [`pouring`], [`error`]. The robot-interface trait and the simulated arm are
+//! Bevy-free, in [`avatarm_core::sim::arm`], so that a robot link (`avatarm_ros`) builds without
+//! Bevy.
 //!
 //! [`pouring`] is the paper's experiment with the same [`Teleop`] (ticked after each physics
 //! step of a headless hand world, as a two-site session's operator steps it): a scripted hand
@@ -17,13 +19,13 @@
 
 pub mod error;
 pub mod pouring;
-pub mod robot;
 
 use std::sync::Arc;
 
 use avatarm_core::robot::kinematics::Frame;
 use avatarm_core::robot::{LinkId, RobotModel};
 use avatarm_core::sim::JointState;
+use avatarm_core::sim::arm::RobotInterface;
 use avatarm_core::teleop::grasp::Contact;
 use avatarm_core::teleop::mapping::{
     Mapper, MappingSettings, OperatorInputs, OperatorTarget, RobotInputs, RobotSide, VirtualToReal,
@@ -34,15 +36,12 @@ use bevy::prelude::*;
 use nalgebra::{DVector, Isometry3, Matrix6xX, Translation3, UnitQuaternion, Vector3};
 
 pub use error::MappingError;
-pub use robot::{CarriedObject, RobotInterface, SimArm};
 
 /// What most users of the mapping need.
 pub mod prelude {
     pub use crate::pouring::{PouringTask, TrialParts, TrialSetup, run_trials};
-    pub use crate::{
-        Approach, MappingError, MappingPlugin, MappingSystems, RobotInterface, SimArm, Teleop,
-        TeleopConfig,
-    };
+    pub use crate::{Approach, MappingError, MappingPlugin, MappingSystems, Teleop, TeleopConfig};
+    pub use avatarm_core::sim::arm::{RobotInterface, SimArm};
 }
 
 /// Adds the control tick. Needs the [`avatarm_hand::HandPlugin`] and a [`Teleop`] resource.
@@ -500,6 +499,10 @@ impl Teleop {
     /// in [`Teleop::status`] and recorded in [`Teleop::log`] when [`Teleop::record`]. Every
     /// failure becomes a stop of the robot (a non-finite command the limiter ramps to zero),
     /// counted, never a panic.
+    #[expect(
+        clippy::too_many_lines,
+        reason = "one control tick's steps in their order (inputs, mapping, limiter, gripper, command), each reading the one before"
+    )]
     pub fn tick(&mut self, now_s: f64, dt_s: f64, source: TickSource) {
         let started = std::time::Instant::now();
         let t = self;

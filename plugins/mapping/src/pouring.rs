@@ -26,8 +26,8 @@ use bevy_rapier3d::prelude::*;
 use nalgebra::{DVector, Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
 
-use crate::robot::RobotInterface;
-use crate::{CarriedObject, MappingError, SimArm, Teleop, TeleopConfig, TeleopSample, TickSource};
+use crate::{MappingError, Teleop, TeleopConfig, TeleopSample, TickSource};
+use avatarm_core::sim::arm::{CarriedObject, RobotInterface, SimArm};
 
 /// The arm of `setup` with its open gripper around the bottle: a side grasp at the body's
 /// centre, approaching horizontally from the robot's base, fingers closing horizontally.
@@ -456,11 +456,11 @@ impl TrialParts {
     }
 
     /// The operator's physics world for this trial: [`avatarm_hand::headless_app`] (one fixed
-    /// step of the control period per `App::update` after the first, which has none) with the hand driven by `hand` and the
-    /// trial's bodies. The one-process trials ([`run_trial`]) and the operator's site of a
-    /// two-site session step this same world, so the same hand moves the same twin to the bit:
-    /// Rapier's contacts depend on the order bodies enter it, which anything else in the world
-    /// (a resource more) can change, and a grasp that brushes the bottle first turns a
+    /// step of the control period per `App::update` after the first, which has none) with the hand
+    /// driven by `hand` and the trial's bodies. The one-process trials ([`run_trial`]) and the
+    /// operator's site of a two-site session step this same world, so the same hand moves the same
+    /// twin to the bit: Rapier's contacts depend on the order bodies enter it, which anything else
+    /// in the world (a resource more) can change, and a grasp that brushes the bottle first turns a
     /// micrometre into a different grasp.
     pub fn hand_app(&self, hand: ActiveHand) -> App {
         let mut app = avatarm_hand::headless_app(self.period);

@@ -487,7 +487,9 @@ fn a_real_leap_grab_takes_the_bottle_twin_by_its_neck_and_lets_go() {
     use nalgebra::{Translation3, UnitQuaternion, Vector3};
     let dir = match avatarm_core::shared_data::shared_data() {
         Ok(dir) => dir,
-        Err(why) => return eprintln!("skipped: {why}"),
+        Err(why) => {
+            return why.skip("a_real_leap_grab_takes_the_bottle_twin_by_its_neck_and_lets_go");
+        }
     };
     let rec = LeapRecording::open(&dir.join("real/leap/grab.json.gz")).expect("recording");
     let first = rec.frames[0].hands[0].1.clone();

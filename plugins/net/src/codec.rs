@@ -22,42 +22,7 @@ use openh264::formats::{RgbaSliceU8, YUVBuffer, YUVSource};
 use openh264::{OpenH264API, Timestamp};
 
 use crate::NetError;
-use crate::msg::FrameHeader;
-
-/// A video codec on the wire (`FrameHeader::codec`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Codec {
-    /// Baseline JPEG (ISO/IEC 10918-1) per frame, through the `image` crate.
-    #[default]
-    Jpeg,
-    /// H.264 Constrained Baseline (ITU-T H.264, Annex B byte stream), through OpenH264.
-    H264,
-}
-
-impl Codec {
-    /// The name on the wire and on the command line: `jpeg` or `h264`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Jpeg => "jpeg",
-            Self::H264 => "h264",
-        }
-    }
-
-    /// The codec of a name, if it is one.
-    pub fn from_name(name: &str) -> Option<Self> {
-        match name {
-            "jpeg" => Some(Self::Jpeg),
-            "h264" => Some(Self::H264),
-            _ => None,
-        }
-    }
-}
-
-impl std::fmt::Display for Codec {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
+use crate::msg::{Codec, FrameHeader};
 
 /// How the robot site codes its video.
 #[derive(Debug, Clone, Copy, PartialEq)]

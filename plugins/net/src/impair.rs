@@ -22,6 +22,8 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError, channel};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use crate::NetError;
+
 /// What the relay does to traffic, each direction.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Impairment {
@@ -59,28 +61,42 @@ impl Default for Impairment {
 
 impl Impairment {
     /// Checks the numbers; the error names the field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), NetError> {
         if !(self.delay_s.is_finite() && (0.0..=60.0).contains(&self.delay_s)) {
-            return Err(format!("delay_s {} must be in 0..=60", self.delay_s));
+            return Err(invalid(format!(
+                "delay_s {} must be in 0..=60",
+                self.delay_s
+            )));
         }
         if !(self.jitter_s.is_finite() && (0.0..=60.0).contains(&self.jitter_s)) {
-            return Err(format!("jitter_s {} must be in 0..=60", self.jitter_s));
+            return Err(invalid(format!(
+                "jitter_s {} must be in 0..=60",
+                self.jitter_s
+            )));
         }
         if !(0.0..=1.0).contains(&self.loss) {
-            return Err(format!("loss {} must be in 0..=1", self.loss));
+            return Err(invalid(format!("loss {} must be in 0..=1", self.loss)));
         }
         if let Some(b) = self.bandwidth_bps
             && !(b.is_finite() && b > 0.0)
         {
-            return Err(format!("bandwidth_bps {b} must be > 0"));
+            return Err(invalid(format!("bandwidth_bps {b} must be > 0")));
         }
         if self.queue_bytes < MIN_QUEUE_BYTES {
-            return Err(format!(
+            return Err(invalid(format!(
                 "queue_bytes {} must be at least {MIN_QUEUE_BYTES}",
                 self.queue_bytes
-            ));
+            )));
         }
         Ok(())
+    }
+}
+
+/// An impairment setting out of range: [`NetError::Config`] naming the impairment.
+fn invalid(message: String) -> NetError {
+    NetError::Config {
+        what: "impairment".to_owned(),
+        message,
     }
 }
 
@@ -219,7 +235,7 @@ impl Relay {
     }
 
     /// Changes the impairment from now on, after checking it ([`Impairment::validate`]).
-    pub fn set_checked(&self, impairment: Impairment) -> Result<(), String> {
+    pub fn set_checked(&self, impairment: Impairment) -> Result<(), NetError> {
         impairment.validate()?;
         self.set(impairment);
         Ok(())

@@ -12,10 +12,13 @@
 //!   [`config`]: endpoints, authentication, TLS and access control; [`site`]: the two ends;
 //!   [`codec`]: the video's codecs (JPEG, H.264) and the viewer's keyframe handling;
 //!   [`impair`]: a seeded impairment relay (delay, jitter, loss, bandwidth, cuts) for tests
-//!   and `avatarm bench network`, since these machines have no `netem`.
+//!   and `avatarm bench network`, since these machines have no `netem`; [`episodes`]: refusals
+//!   logged once per episode with a summary every few seconds, so a bad peer cannot flood the
+//!   log.
 
 pub mod codec;
 pub mod config;
+pub mod episodes;
 pub mod impair;
 pub mod keys;
 pub mod msg;
@@ -24,7 +27,7 @@ pub mod site;
 pub use config::{Credentials, NetConfig, Role, TlsFiles};
 pub use keys::Keys;
 pub use site::{
-    ClockOffset, FrameSender, HeadReceiver, OperatorInbox, OperatorSite, ReceivedFrame, RobotInbox,
+    ClockSample, FrameSender, HeadReceiver, OperatorInbox, OperatorSite, ReceivedFrame, RobotInbox,
     RobotSite, Router, SiteClock,
 };
 

@@ -3,7 +3,7 @@
 //! Every message but a video frame's payload is JSON (serde) with the protocol version `v`
 //! first; a frame is the coded image as the payload and its JSON [`FrameHeader`] as the
 //! sample's attachment. Stamps are seconds on the **robot site's clock** (its session start);
-//! the operator converts its own with its estimate of the offset ([`crate::ClockOffset`]).
+//! the operator converts its own with its estimate of the offset ([`crate::ClockSample`]).
 //!
 //! Decoding checks, in order: the size ([`MAX_TARGET_BYTES`] and the others), the version
 //! ([`PROTOCOL_VERSION`]), the fields (unknown fields are refused), then every number (finite,
@@ -15,6 +15,45 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::NetError;
+
+/// A video codec on the wire ([`FrameHeader::codec`]; its coders are in `crate::codec`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Codec {
+    /// Baseline JPEG (ISO/IEC 10918-1) per frame, through the `image` crate.
+    #[default]
+    Jpeg,
+    /// H.264 Constrained Baseline (ITU-T H.264, Annex B byte stream), through OpenH264.
+    H264,
+}
+
+impl Codec {
+    /// The name on the wire and on the command line: `jpeg` or `h264`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Jpeg => "jpeg",
+            Self::H264 => "h264",
+        }
+    }
+
+    /// The codec of a name, if it is one.
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "jpeg" => Some(Self::Jpeg),
+            "h264" => Some(Self::H264),
+            _ => None,
+        }
+    }
+}
+
+impl std::fmt::Display for Codec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A target stamped further ahead of the robot's clock than this is refused: the operator's
+/// clock estimate is wrong, and its age could not be trusted (s).
+pub const MAX_AHEAD_S: f64 = 0.5;
 
 /// The protocol's version: a peer with another is refused with both versions named. Raised
 /// on every change of a message's fields or meaning.
@@ -231,7 +270,7 @@ pub struct FrameHeader {
     pub camera: String,
     /// Frame index at the camera.
     pub index: u64,
-    /// Codec: `jpeg` or `h264` ([`crate::codec::Codec`]).
+    /// Codec: `jpeg` or `h264` ([`Codec`]).
     pub codec: String,
     /// Coded frame number of this camera's stream (from 0, one per published frame): a gap
     /// tells an H.264 viewer that a frame its next ones refer to was lost.
@@ -272,7 +311,7 @@ impl FrameHeader {
     }
 
     fn check(&self) -> Result<(), NetError> {
-        let ok = crate::codec::Codec::from_name(&self.codec).is_some()
+        let ok = Codec::from_name(&self.codec).is_some()
             && self.seq <= MAX_SEQ
             && self.index <= MAX_SEQ
             && self.stream <= MAX_SEQ
@@ -344,8 +383,8 @@ pub struct HandMsg {
     /// Joint positions (m, real world), in OpenXR's joint order.
     pub joints: Vec<[f64; 3]>,
     /// While the hand holds the object: the object's twin in the real world (its centre,
-    /// position then quaternion `[x, y, z, w]`) at the control tick the message is sent. A viewer whose
-    /// camera rides on a head (Alice's view) draws the hand carried with the real object from
+    /// position then quaternion `[x, y, z, w]`) at the control tick the message is sent. A viewer
+    /// whose camera rides on a head (Alice's view) draws the hand carried with the real object from
     /// it, so that it holds the bottle she sees.
     pub held_object: Option<[f64; 7]>,
 }

@@ -416,9 +416,11 @@ impl FrameSender {
 }
 
 /// The operator's estimate of the robot site's clock: `robot = local + offset_s`, from the
-/// query with the shortest round trip (Cristian's algorithm).
+/// query with the shortest round trip (Cristian's algorithm). Its sign is robot minus local;
+/// the ROS link's `avatarm_ros::ClockOffset` (a filter over joint-state arrivals) gives
+/// Avatarm's clock minus the robot's.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ClockOffset {
+pub struct ClockSample {
     /// Robot clock minus this process's clock (s).
     pub offset_s: f64,
     /// The round trip of the query it came from (s): the estimate is within half of it.
@@ -457,7 +459,7 @@ pub struct OperatorSite {
     keys: Keys,
     info: RobotInfo,
     local: SiteClock,
-    offset: Arc<std::sync::Mutex<ClockOffset>>,
+    offset: Arc<std::sync::Mutex<ClockSample>>,
     refresh: Arc<std::sync::atomic::AtomicBool>,
     target: Publisher<'static>,
     hand: Publisher<'static>,
@@ -549,7 +551,7 @@ impl OperatorSite {
 
     /// The clock offset's estimate (re-estimated every [`OFFSET_REFRESH`] on a thread of its
     /// own, so the operator's loop never waits for a round trip).
-    pub fn offset(&self) -> ClockOffset {
+    pub fn offset(&self) -> ClockSample {
         *self.offset.lock().unwrap_or_else(|e| e.into_inner())
     }
 
@@ -695,7 +697,7 @@ fn refresher(
     session: &Session,
     keys: &Keys,
     local: SiteClock,
-    offset: Arc<std::sync::Mutex<ClockOffset>>,
+    offset: Arc<std::sync::Mutex<ClockSample>>,
 ) -> Arc<std::sync::atomic::AtomicBool> {
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let (session, keys, flag) = (session.clone(), keys.clone(), stop.clone());
@@ -738,8 +740,8 @@ fn estimate_offset(
     keys: &Keys,
     local: &SiteClock,
     samples: usize,
-) -> Result<ClockOffset, NetError> {
-    let mut best: Option<ClockOffset> = None;
+) -> Result<ClockSample, NetError> {
+    let mut best: Option<ClockSample> = None;
     for _ in 0..samples {
         let sent = local.now_s();
         let Some(bytes) = query(session, &keys.clock(), Duration::from_secs(2)) else {
@@ -753,7 +755,7 @@ fn estimate_offset(
             continue;
         }
         let rtt_s = received - sent;
-        let estimate = ClockOffset {
+        let estimate = ClockSample {
             offset_s: reply.now_s - (sent + received) / 2.0,
             rtt_s,
         };

@@ -426,7 +426,7 @@ fn through_a_router_only_its_operator_commands_and_only_the_robot_site_publishes
     robot_config.insecure_lan = false;
     robot_config.credentials = login("desk", "robot-site-key");
     // It obeys the router it connects to: over plain TCP only on a trusted network (TLS with
-    // the router's authority otherwise; tests/network.rs's TLS test covers TLS).
+    // the router's authority otherwise; tests/realtime/network.rs's TLS test covers TLS).
     let e = robot_config
         .validate()
         .expect_err("a robot site connecting without TLS");

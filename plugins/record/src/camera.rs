@@ -35,6 +35,12 @@ pub enum CameraFileError {
     },
 }
 
+/// A camera calibration whose numbers cannot be used ([`CameraCalibration::validate`]): what
+/// is wrong, naming the field (`K`, `D`, the image size).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct InvalidCalibration(pub String);
+
 /// Lens distortion models, by ROS's `camera_info` names (the coefficients in OpenCV's order).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum DistortionModel {
@@ -105,35 +111,37 @@ impl CameraCalibration {
 
     /// Checks the numbers: a size, finite values, fx and fy > 0, the last row of K `0 0 1`,
     /// as many coefficients as the model takes. The message names the field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), InvalidCalibration> {
         if self.width == 0 || self.height == 0 {
-            return Err(format!(
+            return Err(InvalidCalibration(format!(
                 "image size {}x{}: must not be 0",
                 self.width, self.height
-            ));
+            )));
         }
         if let Some(v) = self.k.iter().chain(&self.d).find(|v| !v.is_finite()) {
-            return Err(format!("K or D holds {v}: every value must be finite"));
+            return Err(InvalidCalibration(format!(
+                "K or D holds {v}: every value must be finite"
+            )));
         }
         if !(self.k[0] > 0.0 && self.k[4] > 0.0) {
-            return Err(format!(
+            return Err(InvalidCalibration(format!(
                 "K: fx {} and fy {} must be > 0",
                 self.k[0], self.k[4]
-            ));
+            )));
         }
         if self.k[6..] != [0.0, 0.0, 1.0] {
-            return Err(format!(
+            return Err(InvalidCalibration(format!(
                 "K: the last row is {:?}, not [0, 0, 1]",
                 &self.k[6..]
-            ));
+            )));
         }
         let n = self.distortion_model.coefficients();
         if self.d.len() != n {
-            return Err(format!(
+            return Err(InvalidCalibration(format!(
                 "D: {} coefficients for {} (which takes {n})",
                 self.d.len(),
                 self.distortion_model.ros_name()
-            ));
+            )));
         }
         Ok(())
     }
@@ -383,7 +391,7 @@ pub fn read_calibration(
             ),
         ));
     }
-    calibration.validate().map_err(|m| content(path, m))?;
+    calibration.validate().map_err(|m| content(path, m.0))?;
     Ok(calibration)
 }
 

@@ -1,18 +1,14 @@
 //! The ROS 1 link against a real ROS master (Debian's `rosmaster`) and a simulated Sawyer
-//! node (`support/fake_sawyer.py`, rospy, Intera's topics): joint states in, velocity
+//! node (`src/testing/fake_sawyer.py`, rospy, Intera's topics): joint states in, velocity
 //! commands out with the md5 sums the robot checks, the robot's state obeyed, a dead link
 //! noticed and recovered from. `scripts/setup.sh` installs the ROS packages.
 
-#[path = "support/mod.rs"]
-mod support;
-
 use std::time::{Duration, Instant};
 
-use avatarm_mapping::robot::RobotInterface;
+use avatarm_core::sim::arm::RobotInterface;
+use avatarm_ros::testing::{self as support, FakeSawyer, Master, wall_s};
 use avatarm_ros::{LinkSettings, RosArm};
 use nalgebra::DVector;
-
-use support::{FakeSawyer, Master, wall_s};
 
 const ARM: [&str; 7] = [
     "right_j0", "right_j1", "right_j2", "right_j3", "right_j4", "right_j5", "right_j6",
@@ -278,8 +274,12 @@ fn a_restarted_master_is_registered_with_again() {
     std::thread::sleep(Duration::from_millis(500));
     let master = Master::start_on(port);
     let sawyer = FakeSawyer::start(&master, 0.0);
+    // Commands go out once the new connection has both the joint states and the robot's state
+    // (each subscription connects to its publisher on its own; the state comes at 10 Hz): the
+    // test once pumped as soon as joint states came back, and the 80 ms before the robot's state
+    // arrived gave 16 refusals ("no robot state received yet").
     wait_until(&mut arm, "the robot through the new master", |a| {
-        a.alive() && a.status().connects >= 2
+        a.alive() && a.status().connects >= 2 && a.status().robot.is_some()
     });
     let (_, refused) = pump(&mut arm, 0.5, Some(&velocity(0.1)));
     assert!(refused.len() < 10, "{refused:?}");

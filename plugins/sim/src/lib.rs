@@ -614,8 +614,7 @@ fn gate_no_robot_view(
     added: Query<(), Added<NoRobotCamera>>,
     config: Res<SimRoomConfig>,
 ) {
-    // The frame number this update's render carries (the count goes up in `Last`).
-    let this = frame.0.wrapping_add(1);
+    let this = RenderSettled::this_update_frame(&frame);
     // A camera on a head sees another room at every update; a new view (a camera switch) has
     // not rendered yet.
     if last_change.is_none()

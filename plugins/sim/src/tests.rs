@@ -1,5 +1,5 @@
 //! The room without a renderer (`MinimalPlugins`): what it spawns, on which layers, and how its
-//! robot moves and reports. Rendering is the replay tests' job (`tests/replay.rs`).
+//! robot moves and reports. Rendering is the replay tests' job (`tests/app/replay/`).
 
 use std::path::Path;
 

@@ -200,6 +200,13 @@ impl RenderSettled {
     /// updates a second).
     pub const INCOMPLETE_KEPT: usize = 4096;
 
+    /// The frame number the render of this update carries, read from the main world's
+    /// [`FrameCount`] before Bevy's `update_frame_count` (in `Last`) adds one to it: the number
+    /// that [`RenderSettled::completed`] answers for once this update has rendered.
+    pub fn this_update_frame(count: &FrameCount) -> u32 {
+        count.0.wrapping_add(1)
+    }
+
     /// The newest complete frame (0 before the first).
     pub fn last_complete_frame(&self) -> u32 {
         self.0.last_complete.load(Ordering::Acquire)

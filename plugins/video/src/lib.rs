@@ -147,11 +147,6 @@ impl LiveVideo {
             stale_after_s,
         }
     }
-
-    /// Age of the frame on screen (now − capture), when there is one.
-    pub fn age_s(&self, now_s: f64) -> Option<f64> {
-        self.frame.as_ref().map(|f| now_s - f.capture_s)
-    }
 }
 
 /// The video system sets (`Update`).

@@ -10,6 +10,11 @@
 //!
 //! A command with NaN/inf values or the wrong length is refused and the robot keeps its last
 //! good command.
+//!
+//! [`arm`] puts the simulated robot behind [`arm::RobotInterface`], the trait every robot
+//! backend implements (ROS links included), with a gripper that carries the real object.
+
+pub mod arm;
 
 use std::collections::VecDeque;
 

@@ -1,0 +1,166 @@
+//! The link's settings: the command topic's kind, the ROS names, the timeouts and the gripper.
+
+/// How commands are sent.
+#[derive(Debug, Clone, PartialEq)]
+pub enum CommandKind {
+    /// Intera's `intera_core_msgs/JointCommand` in velocity mode, joints by name.
+    InteraVelocity,
+    /// ros_control's joint group velocity controller: `std_msgs/Float64MultiArray` with one
+    /// value per joint of `joints`, in that order (the controller's).
+    GroupVelocity {
+        /// The controller's joints, in its order.
+        joints: Vec<String>,
+    },
+    /// ros_control's joint group position controller: `std_msgs/Float64MultiArray` of
+    /// position targets, one per joint of `joints`, in that order. The velocities Avatarm
+    /// commands are integrated into the targets (`target += q̇ Δt`, Δt the time between two
+    /// commands, at most the link's stale time), starting from the measured positions after
+    /// every stop; a stop holds the last target.
+    GroupPosition {
+        /// The controller's joints, in its order.
+        joints: Vec<String>,
+    },
+}
+
+impl CommandKind {
+    /// The controller's joints (ros_control), `None` for Intera's.
+    pub fn controller_joints(&self) -> Option<&[String]> {
+        match self {
+            Self::InteraVelocity => None,
+            Self::GroupVelocity { joints } | Self::GroupPosition { joints } => Some(joints),
+        }
+    }
+}
+
+/// Where the robot is on ROS and how Avatarm talks to it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkSettings {
+    /// The master (`ROS_MASTER_URI`), e.g. `http://localhost:11311`.
+    pub master_uri: String,
+    /// This node's name.
+    pub node_name: String,
+    /// `sensor_msgs/JointState` in (Intera: `/robot/joint_states`).
+    pub joint_states_topic: String,
+    /// Commands out (Intera: `/robot/limb/right/joint_command`).
+    pub command_topic: String,
+    /// The command message.
+    pub command: CommandKind,
+    /// The joints commanded (Intera: `right_j0`..`right_j6`), matched to the model by name.
+    pub arm_joints: Vec<String>,
+    /// Intera's `/robot/state` (`intera_core_msgs/RobotAssemblyState`): no command unless
+    /// enabled and not stopped. `None`: the robot has no such state (ros_control).
+    pub robot_state_topic: Option<String>,
+    /// Latched `std_msgs/Float64` the robot's command timeout is set on (Intera:
+    /// `/robot/limb/right/joint_command_timeout`).
+    pub command_timeout_topic: Option<String>,
+    /// The robot's command timeout (s): with no command for longer, it holds position.
+    pub command_timeout_s: f64,
+    /// Latched `std_msgs/Float64` speed ratio of position moves (Intera:
+    /// `/robot/limb/right/set_speed_ratio`), and its value (0..1).
+    pub speed_ratio: Option<(String, f64)>,
+    /// Intera's electric gripper (an IO device of the end effector's IO node).
+    pub gripper: Option<GripperLink>,
+    /// Latched `std_msgs/UInt16` the robot's joint-state rate is set on (Intera:
+    /// `/robot/joint_state_publish_rate`), and the rate (Hz). `None`: the robot's own rate.
+    pub joint_state_rate: Option<(String, u16)>,
+    /// The link is lost when no joint state arrived for this long (s).
+    pub stale_after_s: f64,
+}
+
+impl LinkSettings {
+    /// A right-arm Sawyer through Intera (topics as Intera names them), its master at
+    /// `master_uri`.
+    pub fn sawyer(master_uri: &str) -> Self {
+        Self {
+            master_uri: master_uri.to_owned(),
+            node_name: "avatarm".into(),
+            joint_states_topic: "/robot/joint_states".into(),
+            command_topic: "/robot/limb/right/joint_command".into(),
+            command: CommandKind::InteraVelocity,
+            arm_joints: (0..7).map(|i| format!("right_j{i}")).collect(),
+            robot_state_topic: Some("/robot/state".into()),
+            command_timeout_topic: Some("/robot/limb/right/joint_command_timeout".into()),
+            command_timeout_s: 0.2,
+            speed_ratio: Some(("/robot/limb/right/set_speed_ratio".into(), 0.3)),
+            gripper: Some(GripperLink::default()),
+            joint_state_rate: None,
+            stale_after_s: 0.2,
+        }
+    }
+
+    pub(crate) fn check(&self) -> Result<(), String> {
+        if !(self.command_timeout_s.is_finite() && self.command_timeout_s > 0.0) {
+            return Err(format!(
+                "command timeout {} s: must be > 0",
+                self.command_timeout_s
+            ));
+        }
+        if !(self.stale_after_s.is_finite() && self.stale_after_s > 0.0) {
+            return Err(format!("stale_after_s {}: must be > 0", self.stale_after_s));
+        }
+        if let Some((_, r)) = &self.speed_ratio
+            && !(r.is_finite() && *r > 0.0 && *r <= 1.0)
+        {
+            return Err(format!("speed ratio {r}: must be in (0, 1]"));
+        }
+        if self.arm_joints.is_empty() {
+            return Err("no arm joints to command".into());
+        }
+        if let Some((topic, 0)) = &self.joint_state_rate {
+            return Err(format!("joint-state rate 0 Hz on {topic}: must be > 0"));
+        }
+        if let Some(GripperLink {
+            device: Some(d), ..
+        }) = &self.gripper
+            && (d.is_empty() || d.contains('/'))
+        {
+            return Err(format!(
+                "gripper device '{d}': must be a name (as the IO node's config gives it)"
+            ));
+        }
+        if let Some(joints) = self.command.controller_joints() {
+            if joints.is_empty() {
+                return Err("the controller has no joints".into());
+            }
+            if let Some((i, j)) = joints
+                .iter()
+                .enumerate()
+                .find(|(i, j)| joints[..*i].contains(j))
+            {
+                return Err(format!(
+                    "the controller's joint '{j}' is listed twice (at {i})"
+                ));
+            }
+        }
+        if let Some(joints) = self.command.controller_joints()
+            && let Some(j) = joints.iter().find(|j| !self.arm_joints.contains(j))
+        {
+            return Err(format!(
+                "the controller's joint '{j}' is not one of the arm joints"
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Intera's electric gripper: an IO device of the end effector's IO node (Intera's IO
+/// framework: `{io_node}/config` is an `intera_core_msgs/IONodeConfiguration` naming the
+/// devices; a device takes `{io_node}/{device}/command` (`IOComponentCommand`) and reports
+/// `{io_node}/{device}/state` (`IODeviceStatus`), as `intera_interface.Gripper` uses them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GripperLink {
+    /// The IO node (Intera: `/io/end_effector`).
+    pub io_node: String,
+    /// The device (Intera's electric gripper: `right_gripper`); `None`: the first device the
+    /// node's config names, found when the config arrives (it is latched).
+    pub device: Option<String>,
+}
+
+impl Default for GripperLink {
+    fn default() -> Self {
+        Self {
+            io_node: "/io/end_effector".into(),
+            device: None,
+        }
+    }
+}

@@ -1,0 +1,193 @@
+//! Test support (feature `testing`): a ROS master on a free port and the simulated Sawyer node
+//! (`fake_sawyer.py` beside this file, rospy), each stopped when dropped. Used by this crate's
+//! tests and by the app's; needs Debian's `python3-rosmaster` and `python3-rospy`
+//! (`scripts/setup.sh`). Panics with the reason when one of them is missing or stops.
+
+use std::io::{BufRead, BufReader};
+use std::net::TcpListener;
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use avatarm_core::sim::arm::RobotInterface;
+use serde_json::Value;
+
+use crate::RosArm;
+
+/// One ROS test at a time in a test binary: each starts its own master and robot node, and
+/// on a 2-core machine their rates suffer when several run at once.
+pub fn serial() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: Mutex<()> = Mutex::new(());
+    LOCK.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// A ROS master on a free port, stopped when dropped.
+pub struct Master {
+    child: Child,
+    /// `http://127.0.0.1:PORT`.
+    pub uri: String,
+}
+
+impl Master {
+    /// Starts `rosmaster --core` on a free port and waits until it listens.
+    pub fn start() -> Self {
+        let port = TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .expect("a free port")
+            .port();
+        Self::start_on(port)
+    }
+
+    /// Starts `rosmaster --core` on `port` (a restarted master: the same URI, no memory of
+    /// the nodes that registered with the one before).
+    pub fn start_on(port: u16) -> Self {
+        let home = std::env::temp_dir().join(format!("avatarm_ros_home_{port}"));
+        std::fs::create_dir_all(&home).expect("ROS_HOME");
+        let child = Command::new("rosmaster")
+            .args(["--core", "-p", &port.to_string()])
+            .env("ROS_HOME", &home)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect(
+                "rosmaster (Debian's python3-rosmaster; scripts/setup.sh installs it) must be on PATH",
+            );
+        let started = Instant::now();
+        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(
+                started.elapsed() < Duration::from_secs(20),
+                "rosmaster did not listen"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Self {
+            child,
+            uri: format!("http://127.0.0.1:{port}"),
+        }
+    }
+}
+
+impl Master {
+    /// The port it listens on.
+    pub fn port(&self) -> u16 {
+        self.uri
+            .rsplit(':')
+            .next()
+            .and_then(|p| p.parse().ok())
+            .expect("port")
+    }
+}
+
+impl Drop for Master {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The simulated Sawyer: its process and the last report it printed.
+pub struct FakeSawyer {
+    child: Child,
+    report: Arc<Mutex<Option<Value>>>,
+}
+
+impl FakeSawyer {
+    /// The node with its clock `offset_s` ahead of the wall clock, its arm at zero.
+    pub fn start(master: &Master, offset_s: f64) -> Self {
+        Self::start_at(master, offset_s, "")
+    }
+
+    /// The node with its arm at `start` (right_j0..right_j6, comma-separated; "" for zeros).
+    pub fn start_at(master: &Master, offset_s: f64, start: &str) -> Self {
+        Self::start_with(master, offset_s, start, &[])
+    }
+
+    /// [`FakeSawyer::start_at`] with more of the script's arguments (`--gripper-device`,
+    /// `--rate`, `--disabled`).
+    pub fn start_with(master: &Master, offset_s: f64, start: &str, more: &[&str]) -> Self {
+        let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src/testing/fake_sawyer.py");
+        let mut child = Command::new("/usr/bin/python3")
+            .arg(&script)
+            .args(["--offset", &offset_s.to_string(), "--start", start])
+            .args(more)
+            .env("ROS_MASTER_URI", &master.uri)
+            .env("ROS_HOME", std::env::temp_dir())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("/usr/bin/python3 with rospy (python3-rospy)");
+        let report = Arc::new(Mutex::new(None));
+        let out = child.stdout.take().expect("stdout");
+        let sink = report.clone();
+        std::thread::spawn(move || {
+            for line in BufReader::new(out).lines().map_while(Result::ok) {
+                if let Ok(v) = serde_json::from_str::<Value>(&line) {
+                    *sink.lock().expect("report") = Some(v);
+                }
+            }
+        });
+        Self { child, report }
+    }
+
+    /// The node's newest report, waiting for one printed after now.
+    pub fn report(&self) -> Value {
+        let asked = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .expect("clock")
+            .as_secs_f64();
+        let started = Instant::now();
+        loop {
+            if let Some(v) = self.report.lock().expect("report").clone()
+                && v["t"].as_f64().is_some_and(|t| t > asked)
+            {
+                return v;
+            }
+            assert!(
+                started.elapsed() < Duration::from_secs(10),
+                "the fake Sawyer stopped reporting"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Sends `sig` (`-USR1`: toggle the e-stop, `-USR2`: toggle enabled).
+    pub fn signal(&self, sig: &str) {
+        let ok = Command::new("kill")
+            .args([sig, &self.child.id().to_string()])
+            .status()
+            .expect("kill");
+        assert!(ok.success());
+    }
+}
+
+impl Drop for FakeSawyer {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The wall clock (s since the Unix epoch): the tests' app clock.
+pub fn wall_s() -> f64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .expect("clock")
+        .as_secs_f64()
+}
+
+/// Pumps the link until a joint state and the robot's state have arrived.
+pub fn wait_alive(arm: &mut RosArm) {
+    let started = Instant::now();
+    while !(arm.alive() && arm.status().robot.is_some()) {
+        assert!(
+            started.elapsed() < Duration::from_secs(15),
+            "no joint state from the robot: {:?}",
+            arm.status()
+        );
+        arm.advance(wall_s());
+        arm.receive();
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}

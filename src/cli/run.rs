@@ -1,0 +1,210 @@
+//! `avatarm run`: the desktop preview of a scene, live teleoperation of its `[task]`, XR
+//! with fallback, a webcam, the robot over ROS, a session recording.
+
+use std::path::PathBuf;
+
+use avatarm_scene::Scene;
+use avatarm_scene::spec::{BackgroundSpec, LeapMountKind};
+use clap::Args;
+
+use crate::AppError;
+use crate::cli::args::{default_scene, leap_mount, live_hand, packages, step_ms};
+use crate::cli::overrides::EraseOverrides;
+use crate::preview::PreviewOptions;
+
+/// The arguments of `avatarm run`.
+#[derive(Args, Debug)]
+pub struct RunArgs {
+    /// The scene file.
+    scene: Option<PathBuf>,
+    /// Look through the scene's camera NAME (one of its [[cameras]]; default: the first).
+    #[arg(long, value_name = "NAME")]
+    view: Option<String>,
+    /// Start an OpenXR session; without a runtime the preview window is used.
+    #[arg(long)]
+    xr: bool,
+    /// Quit after N frames (with --screenshot, 10 more for it to be written).
+    #[arg(long, value_name = "N")]
+    frames: Option<u32>,
+    /// Advance simulated time by MS per rendered frame instead of by the wall clock
+    /// (default with --frames: half a camera frame, a display twice as fast as the camera).
+    #[arg(long = "step-ms", value_name = "MS", value_parser = step_ms)]
+    step_ms: Option<f64>,
+    /// Save a screenshot of the window at the last frame.
+    #[arg(long, value_name = "PATH")]
+    screenshot: Option<PathBuf>,
+    /// Press KEY at rendered frame N (from 1) for one frame, for scripted runs (repeatable;
+    /// e.g. `--press 60:C` switches camera at frame 60). KEY: one of the keys below
+    /// (V, C, E, M, W, B, R, F12, Esc).
+    #[arg(long, value_name = "N:KEY", value_parser = crate::preview::keys::parse_press)]
+    press: Vec<(u32, bevy::input::keyboard::KeyCode)>,
+    /// Folder searched for package:// URIs (repeatable).
+    #[arg(long = "package-path", value_name = "DIR")]
+    package_path: Vec<PathBuf>,
+    /// Take the camera feed from webcam N (feature `webcam`) instead of the simulated room.
+    #[arg(long, value_name = "N")]
+    webcam: Option<u32>,
+    /// With a scene that has a [task]: teleoperate it live with this hand: scripted (the
+    /// task's trial, default), desktop (keys and mouse), xr (OpenXR hand tracking, with
+    /// --xr), leap (feature `leap`), a recorded FILE.hand.jsonl, or none.
+    #[arg(long, value_name = "SOURCE")]
+    hand: Option<String>,
+    /// How the Leap (live or recorded) is mounted: desk, head or first_wrist (the scene's
+    /// [leap] mount otherwise; docs/hand.md).
+    #[arg(long = "leap-mount", value_name = "MOUNT", value_parser = leap_mount)]
+    leap_mount: Option<LeapMountKind>,
+    /// The robot the live task commands: sim (the simulated arm) or ros (the real robot
+    /// through the scene's [robot.link], ROS 1; docs/robot-ros.md).
+    #[arg(long, value_name = "ROBOT", value_parser = ["sim", "ros"], default_value = "sim")]
+    robot: String,
+    /// Record the session (MCAP, Foxglove's schemas): camera frames, calibration and pose,
+    /// joint states, Avatarm's erased frames and masks, the hand, the robot's commands and
+    /// safety events (docs/real-footage.md).
+    #[arg(long, value_name = "FILE.mcap")]
+    record: Option<PathBuf>,
+    #[command(flatten)]
+    overrides: EraseOverrides,
+}
+
+impl RunArgs {
+    /// Runs `avatarm run`.
+    pub fn run(self) -> Result<(), AppError> {
+        let Self {
+            scene,
+            xr,
+            frames,
+            step_ms,
+            screenshot,
+            press,
+            package_path,
+            webcam,
+            hand,
+            leap_mount,
+            robot,
+            record,
+            overrides,
+            view,
+        } = self;
+        if webcam.is_some() && !cfg!(feature = "webcam") {
+            return Err(AppError::flag(
+                "--webcam",
+                "this avatarm was built without the webcam feature; rebuild with `cargo \
+                 build --features webcam`",
+            ));
+        }
+        let path = scene.unwrap_or_else(default_scene);
+        let packages = packages(package_path);
+        // The scene through camera `view`, with the command line's changes.
+        let through = |view: Option<&str>| -> Result<Scene, AppError> {
+            let mut scene = Scene::load_view(&path, &packages, view)?;
+            overrides.apply(&mut scene)?;
+            if let Some(mount) = leap_mount {
+                if mount == LeapMountKind::FirstWrist && scene.file.leap.device_at.is_some() {
+                    return Err(AppError::flag(
+                        "--leap-mount",
+                        "first_wrist places a recording by its first wrist, but the \
+                         scene's [leap] gives device_at",
+                    ));
+                }
+                scene.file.leap.mount = mount;
+            }
+            Ok(scene)
+        };
+        let mut scene = through(view.as_deref())?;
+        let xr = xr || scene.file.xr;
+        // In XR a camera on a head rides on the wearer's head (the scripted motion until
+        // the headset reports; docs/alice-view.md).
+        let ride = |scene: &mut Scene| {
+            #[cfg(feature = "xr")]
+            if xr && let Some(head) = scene.head.as_mut() {
+                head.motion = avatarm_core::vision::head::HeadMotion::Live(
+                    avatarm_core::vision::head::LiveHead::new(head.motion.clone()),
+                );
+            }
+            #[cfg(not(feature = "xr"))]
+            let _ = (xr, scene);
+        };
+        ride(&mut scene);
+        if webcam.is_some() && scene.head.is_some() {
+            return Err(AppError::flag(
+                "--webcam",
+                format!(
+                    "the scene '{}' has a camera on a head, whose poses only the simulated \
+                     head gives yet; use a scene with a fixed camera",
+                    scene.file.name
+                ),
+            ));
+        }
+        if webcam.is_some() && scene.file.background == BackgroundSpec::EmptyRoom {
+            eprintln!(
+                "webcam: the simulated empty room is no background for it; press B with the \
+                 robot out of view to capture one (or pass --background PATH)"
+            );
+            scene.file.background = BackgroundSpec::None;
+        }
+        // The C key switches between the scene's cameras in place; a recording and a
+        // webcam hold one camera.
+        let no_switch = match (&record, webcam) {
+            _ if scene.cameras.len() < 2 => None,
+            (Some(_), _) => Some(format!(
+                "a recording holds one camera; start again with --view {}",
+                scene.cameras[(scene.camera_index + 1) % scene.cameras.len()]
+            )),
+            (None, Some(_)) => Some("the webcam is the one camera".to_owned()),
+            (None, None) => None,
+        };
+        let cameras = if no_switch.is_none() && scene.cameras.len() > 1 {
+            let names = scene.cameras.clone();
+            names
+                .iter()
+                .enumerate()
+                .map(|(i, name)| {
+                    if i == scene.camera_index {
+                        Ok(scene.clone())
+                    } else {
+                        let mut other = through(Some(name))?;
+                        ride(&mut other);
+                        Ok(other)
+                    }
+                })
+                .collect::<Result<Vec<_>, AppError>>()?
+        } else {
+            Vec::new()
+        };
+        let hand = live_hand(&scene, hand.as_deref(), xr)?;
+        let robot = if robot == "ros" {
+            if hand.is_none() {
+                return Err(AppError::flag(
+                    "--robot ros",
+                    "commands the robot from a live task: the scene needs a [task] and a hand",
+                ));
+            }
+            crate::teleop::RobotChoice::Ros
+        } else {
+            crate::teleop::RobotChoice::Sim
+        };
+        let options = PreviewOptions {
+            frames,
+            screenshot,
+            xr,
+            fixed_step_s: step_ms
+                .map(|ms| ms / 1e3)
+                .or_else(|| frames.map(|_| 0.5 / scene.file.camera.fps)),
+            webcam,
+            hand,
+            robot,
+            cameras,
+            no_switch,
+            press,
+        };
+        let mut app = crate::preview::build_app(&scene, &options)?;
+        if let Some(path) = &record {
+            crate::session::add_session_recorder(&mut app, path, &scene)?;
+        }
+        let exit = app.run();
+        if exit.is_error() {
+            return Err(AppError::Preview);
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,136 @@
+//! `avatarm serve`: the robot site of a two-site session (Alice's desk, docs/network.md):
+//! the robot, the cameras, the erase and the robot's side of the mapping, over Zenoh.
+
+use std::path::PathBuf;
+
+use avatarm_scene::Scene;
+use clap::Args;
+
+use crate::AppError;
+use crate::cli::args::{mapping_mode, packages, pouring_scene};
+use crate::cli::overrides::on_off;
+
+/// The arguments of `avatarm serve`.
+#[derive(Args, Debug)]
+pub struct ServeArgs {
+    /// The scene file.
+    scene: Option<PathBuf>,
+    /// Serve the scene's cameras NAME,... (of its [[cameras]]; repeatable; default: every
+    /// one), each erased by an app of its own and published under its name.
+    #[arg(long, value_name = "NAME", value_delimiter = ',')]
+    view: Vec<String>,
+    /// The robot: sim (the simulated arm) or ros (the scene's [robot.link], ROS 1).
+    #[arg(long, value_name = "ROBOT", value_parser = ["sim", "ros"], default_value = "sim")]
+    robot: String,
+    /// Where to listen (tcp/HOST:PORT, udp/HOST:PORT or tls/HOST:PORT; default
+    /// tcp/0.0.0.0:7447 unless --connect is given).
+    #[arg(long, value_name = "ENDPOINT")]
+    listen: Vec<String>,
+    /// Connect to a router instead of listening (`avatarm router`, docs/network.md):
+    /// nothing listens at the robot site, which logs in to the router with --credentials
+    /// (its user:password line).
+    #[arg(long, value_name = "ENDPOINT")]
+    connect: Vec<String>,
+    /// The mapping mode: paper or closed_loop (default: the task's closed loop).
+    #[arg(long, value_name = "MODE", value_parser = mapping_mode)]
+    mode: Option<avatarm_core::teleop::mapping::MappingMode>,
+    /// Targets older than this stop the arm (s): above the network's one-way delay.
+    #[arg(long = "target-timeout", value_name = "S", default_value_t = 0.5)]
+    target_timeout: f64,
+    /// Render, erase and publish the camera's video: on or off (the control loop alone).
+    #[arg(long, value_name = "on|off", value_parser = on_off)]
+    video: Option<bool>,
+    /// The video's codec: jpeg (each frame stands alone) or h264 (OpenH264, Constrained
+    /// Baseline; IDR frames periodically and when a viewer asks after a loss).
+    #[arg(long, value_name = "CODEC", value_parser = ["jpeg", "h264"], default_value = "jpeg")]
+    codec: String,
+    /// JPEG quality (1-100).
+    #[arg(long = "jpeg-quality", value_name = "Q", default_value_t = 85)]
+    jpeg_quality: u8,
+    /// H.264 target bit rate (Mbit/s).
+    #[arg(long, value_name = "MBIT_S", default_value_t = 2.0)]
+    bitrate: f64,
+    /// Seconds between periodic H.264 IDR frames.
+    #[arg(long = "keyframe-interval", value_name = "S", default_value_t = 2.0)]
+    keyframe_interval: f64,
+    /// Stop after this many seconds (default: until killed).
+    #[arg(long, value_name = "S")]
+    duration: Option<f64>,
+    /// Write the site's report (JSON) here when it stops.
+    #[arg(long, value_name = "FILE")]
+    report: Option<PathBuf>,
+    /// Folder searched for package://NAME/... URIs (repeatable).
+    #[arg(long = "package-path", value_name = "DIR")]
+    package_path: Vec<PathBuf>,
+    #[command(flatten)]
+    net: crate::net::NetArgs,
+}
+
+impl ServeArgs {
+    /// Runs `avatarm serve`.
+    pub fn run(self) -> Result<(), AppError> {
+        let Self {
+            scene,
+            robot,
+            mut listen,
+            connect,
+            mode,
+            target_timeout,
+            video,
+            codec,
+            jpeg_quality,
+            bitrate,
+            keyframe_interval,
+            duration,
+            report,
+            package_path,
+            net,
+            view,
+        } = self;
+        crate::net::init_log();
+        let path = scene.unwrap_or_else(pouring_scene);
+        let packages = packages(package_path);
+        let scene = Scene::load_view(&path, &packages, view.first().map(String::as_str))?;
+        // Every camera of the scene unless named.
+        let more: Vec<String> = if view.is_empty() {
+            scene.cameras.iter().skip(1).cloned().collect()
+        } else {
+            view[1..].to_vec()
+        };
+        let more_views = more
+            .iter()
+            .map(|name| Scene::load_view(&path, &packages, Some(name)))
+            .collect::<Result<Vec<_>, _>>()?;
+        let encoder = crate::net::encoder_settings(
+            &codec,
+            jpeg_quality,
+            bitrate,
+            keyframe_interval,
+            scene.file.camera.fps,
+        )?;
+        let options = crate::net::serve::ServeOptions {
+            net: {
+                if listen.is_empty() && connect.is_empty() {
+                    listen.push("tcp/0.0.0.0:7447".to_owned());
+                }
+                net.config(avatarm_net::Role::RobotSite, listen, connect)?
+            },
+            scene,
+            more_views,
+            robot: if robot == "ros" {
+                crate::teleop::RobotChoice::Ros
+            } else {
+                crate::teleop::RobotChoice::Sim
+            },
+            mode,
+            duration_s: duration,
+            report,
+            video: video.unwrap_or(true),
+            target_timeout_s: target_timeout,
+            encoder,
+        };
+        let r = crate::net::serve::serve(&options)?;
+        println!("{}", crate::net::serve::summary(&r));
+        Ok(())
+    }
+}

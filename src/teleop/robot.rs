@@ -1,0 +1,134 @@
+//! The robot the live task commands: the simulated arm, or the scene's ROS link (its settings from
+//! the scene's `[robot.link]`).
+
+use super::*;
+
+/// The robot a live task commands (`avatarm run --robot`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RobotChoice {
+    /// The embedded simulated arm (the simulated room's).
+    #[default]
+    Sim,
+    /// The real robot through the scene's `[robot.link]` (ROS 1, feature `ros`).
+    Ros,
+}
+
+/// The scene's `[robot.link]` as the ROS link's settings: Intera's topics by default, the
+/// master from the scene, else `ROS_MASTER_URI`, else `http://localhost:11311`.
+#[cfg(feature = "ros")]
+pub fn link_settings(
+    scene: &Scene,
+    setup: &avatarm_scene::task::TrialSetup,
+) -> Result<avatarm_ros::LinkSettings, AppError> {
+    use avatarm_ros::{CommandKind, LinkSettings};
+    use avatarm_scene::spec::{RobotLinkKind, RosControlController};
+    let spec = &scene.file.robot.link;
+    let intera = spec.kind == RobotLinkKind::Intera;
+    let master_uri = spec
+        .master_uri
+        .clone()
+        .or_else(|| std::env::var("ROS_MASTER_URI").ok())
+        .unwrap_or_else(|| "http://localhost:11311".into());
+    let sawyer = LinkSettings::sawyer(&master_uri);
+    // A topic given (or "" for none), else Intera's where the link is Intera's.
+    let topic = |given: &Option<String>, intera_topic: Option<String>| match given {
+        Some(t) if t.is_empty() => None,
+        Some(t) => Some(t.clone()),
+        None if intera => intera_topic,
+        None => None,
+    };
+    let names = setup.model.dof_names();
+    let arm_joints: Vec<String> = if spec.arm_joints.is_empty() {
+        setup.arm.iter().map(|&i| names[i].to_owned()).collect()
+    } else {
+        spec.arm_joints.clone()
+    };
+    let command_topic =
+        topic(&spec.command_topic, Some(sawyer.command_topic.clone())).ok_or_else(|| {
+            AppError::flag(
+                "robot.link.command_topic",
+                "a ros_control link needs its controller's command topic",
+            )
+        })?;
+    Ok(LinkSettings {
+        master_uri,
+        node_name: spec.node_name.clone(),
+        joint_states_topic: spec.joint_states_topic.clone(),
+        command_topic,
+        command: {
+            let joints = if spec.controller_joints.is_empty() {
+                arm_joints.clone()
+            } else {
+                spec.controller_joints.clone()
+            };
+            match (intera, spec.controller) {
+                (true, _) => CommandKind::InteraVelocity,
+                (false, RosControlController::Velocity) => CommandKind::GroupVelocity { joints },
+                (false, RosControlController::Position) => CommandKind::GroupPosition { joints },
+            }
+        },
+        arm_joints,
+        robot_state_topic: topic(&spec.robot_state_topic, sawyer.robot_state_topic.clone()),
+        command_timeout_topic: topic(
+            &spec.command_timeout_topic,
+            sawyer.command_timeout_topic.clone(),
+        ),
+        command_timeout_s: spec.command_timeout_s,
+        speed_ratio: topic(
+            &spec.speed_ratio_topic,
+            sawyer.speed_ratio.as_ref().map(|(t, _)| t.clone()),
+        )
+        .map(|t| (t, spec.speed_ratio)),
+        gripper: match (&spec.gripper_device, intera) {
+            (Some(d), _) if d.is_empty() => None,
+            (Some(d), _) => Some(avatarm_ros::GripperLink {
+                device: Some(d.clone()),
+                ..Default::default()
+            }),
+            (None, true) => Some(avatarm_ros::GripperLink::default()),
+            (None, false) => None,
+        },
+        joint_state_rate: spec
+            .joint_state_rate_hz
+            .map(|hz| ("/robot/joint_state_publish_rate".to_owned(), hz)),
+        stale_after_s: spec.stale_after_s,
+    })
+}
+
+#[cfg(feature = "ros")]
+pub(super) fn ros_arm(
+    scene: &Scene,
+    setup: &avatarm_scene::task::TrialSetup,
+    q0: &nalgebra::DVector<f64>,
+) -> Result<Box<dyn avatarm_core::sim::arm::RobotInterface>, AppError> {
+    let settings = link_settings(scene, setup)?;
+    let names = setup
+        .model
+        .dof_names()
+        .iter()
+        .map(|s| (*s).to_owned())
+        .collect();
+    let arm = avatarm_ros::RosArm::start(settings, names, q0.clone())
+        .map_err(|e| AppError::flag("--robot ros", e.to_string()))?;
+    Ok(Box::new(arm))
+}
+
+#[cfg(not(feature = "ros"))]
+pub(super) fn ros_arm(
+    _: &Scene,
+    _: &avatarm_scene::task::TrialSetup,
+    _: &nalgebra::DVector<f64>,
+) -> Result<Box<dyn avatarm_core::sim::arm::RobotInterface>, AppError> {
+    Err(AppError::flag(
+        "--robot ros",
+        "this avatarm was built without the ros feature; rebuild with `cargo build --features ros`",
+    ))
+}
+
+/// The simulated arm's start (the room shows it there from the first frame).
+pub(super) fn prepared_q0(teleop: &Teleop) -> Option<nalgebra::DVector<f64>> {
+    teleop
+        .robot()
+        .simulated()
+        .map(|r| r.true_positions().clone())
+}

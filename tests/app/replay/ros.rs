@@ -1,0 +1,167 @@
+//! The robot over ROS 1 (feature `ros`) against a real ROS master and the simulated Sawyer node
+//! (`avatarm_ros::testing`): the live preview commanding it, and the pouring trial through the link
+//! beside the embedded simulated arm.
+
+use std::process::Command;
+
+use avatarm_core::robot::PackagePath;
+use avatarm_core::teleop::mapping::MappingMode;
+use avatarm_mapping::pouring::{prepare, run_trial, run_trial_on_robot};
+use avatarm_ros::testing::{self as ros_support, FakeSawyer, Master, wait_alive};
+use avatarm_ros::{LinkSettings, RosArm};
+use avatarm_scene::Scene;
+
+use super::{out_dir, root, run_preview_with, scene};
+
+/// `avatarm run --robot ros`: the live pouring task commands a Sawyer over ROS 1 (a real master
+/// and the simulated Sawyer node of `avatarm_ros::testing`, its arm where the task starts).
+#[cfg(feature = "ros")]
+#[test]
+fn live_teleoperation_commands_a_sawyer_over_ros() {
+    let _serial = ros_support::serial();
+    let scene = scene("pouring");
+    let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
+        panic!("the pouring scene has a task");
+    };
+    let prepared = avatarm_mapping::pouring::prepare(task, setup).expect("grasp");
+    // The real arm left 0.05 rad off the task's start on its first joint: Avatarm moves it
+    // there before the hand drives it.
+    let start: Vec<String> = setup
+        .arm
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| (prepared.q0()[i] + if k == 0 { 0.05 } else { 0.0 }).to_string())
+        .collect();
+    let master = Master::start();
+    let sawyer = FakeSawyer::start_at(&master, 0.0, &start.join(","));
+    let out = out_dir("ros_live");
+    std::fs::create_dir_all(&out).unwrap();
+    let log = run_preview_with(
+        &[
+            "assets/scenes/pouring.toml",
+            "--robot",
+            "ros",
+            "--frames",
+            "90",
+        ],
+        &out,
+        &[("ROS_MASTER_URI", &master.uri)],
+    );
+    assert!(
+        log.contains("on the ROS robot at http://127.0.0.1"),
+        "{log}"
+    );
+    assert!(
+        log.contains("the arm is at the task's start after"),
+        "{log}"
+    );
+    // The run's last line says the link's state, and that a real object is not measured.
+    let line = log
+        .lines()
+        .find(|l| l.contains("teleop: "))
+        .unwrap_or_default();
+    eprintln!("{line}");
+    assert!(
+        line.contains("ROS link up, robot enabled, joint states")
+            && line.contains("gripper right_gripper")
+            && line.contains("real object not measured"),
+        "{line}"
+    );
+    let r = sawyer.report();
+    eprintln!("fake Sawyer after the live run: {r}");
+    assert!(r["commands"].as_u64().is_some_and(|n| n > 0), "{r}");
+    assert_eq!(r["bad"].as_u64(), Some(0), "{r}");
+    assert_eq!(r["timeout_s"].as_f64(), Some(0.2));
+    // Refused where it cannot work: a scene without a task.
+    let run = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["run", "assets/scenes/default.toml", "--robot", "ros"])
+        .current_dir(root())
+        .output()
+        .unwrap();
+    assert!(!run.status.success());
+    assert!(String::from_utf8_lossy(&run.stderr).contains("--robot ros"));
+}
+
+/// The paper's pouring task teleoperated through the ROS 1 link against the simulated Sawyer
+/// node (a real ROS master, Intera's topics), beside the same trial on the embedded simulated
+/// arm: the object error through ROS is reported as in the simulated room.
+#[test]
+fn the_pouring_task_runs_against_a_ros_sawyer_as_in_the_simulated_room() {
+    let path = root().join("assets/scenes/pouring.toml");
+    let scene = Scene::load(&path, &PackagePath::default()).expect("the pouring scene");
+    let (Some(task), Some(setup)) = (scene.file.task.clone(), scene.trial.clone()) else {
+        panic!("the pouring scene has a [task]");
+    };
+    let prepared = prepare(&task, &setup).expect("the arm reaches the bottle");
+    let q0 = prepared.q0().clone();
+    let _serial = ros_support::serial();
+    let master = Master::start();
+    let start: Vec<String> = (0..7).map(|i| q0[i].to_string()).collect();
+    let sawyer = FakeSawyer::start_at(&master, 512.25, &start.join(","));
+    let names: Vec<String> = setup
+        .model
+        .dof_names()
+        .iter()
+        .map(|s| (*s).to_owned())
+        .collect();
+    let mut arm =
+        RosArm::start(LinkSettings::sawyer(&master.uri), names, q0.clone()).expect("link");
+    wait_alive(&mut arm);
+
+    let ros = run_trial_on_robot(
+        &task,
+        &setup,
+        &prepared,
+        MappingMode::ClosedLoop,
+        0,
+        Box::new(arm),
+    )
+    .expect("trial over ROS");
+    let sim = run_trial(&task, &setup, MappingMode::ClosedLoop, 0).expect("simulated trial");
+    let r = sawyer.report();
+    eprintln!(
+        "pouring, closed loop, trial 0: over ROS {:.2} mm / roll {:.2} / pitch {:.2} / yaw {:.2} deg (lift {:.1} cm, grasp at {:?} s, max TCP {:.3} m/s); simulated arm {:.2} mm / {:.2} / {:.2} / {:.2} deg; the fake Sawyer took {} commands, latency median {} ms p95 {} ms",
+        ros.result.pos_rmse_m * 1e3,
+        ros.result.roll_rmse_deg,
+        ros.result.pitch_rmse_deg,
+        ros.result.yaw_rmse_deg,
+        ros.result.real_lift_m * 1e2,
+        ros.result.grasp_at_s,
+        ros.result.max_tcp_speed,
+        sim.result.pos_rmse_m * 1e3,
+        sim.result.roll_rmse_deg,
+        sim.result.pitch_rmse_deg,
+        sim.result.yaw_rmse_deg,
+        r["commands"],
+        r["latency_ms_median"],
+        r["latency_ms_p95"],
+    );
+    assert!(ros.result.grasp_at_s.is_some(), "{:?}", ros.result);
+    assert!(
+        ros.result.real_lift_m > 0.10,
+        "the ROS arm lifts: {:?}",
+        ros.result
+    );
+    assert!(ros.result.max_tcp_speed <= task.max_tcp_speed + 1e-9);
+    assert!(
+        ros.samples
+            .iter()
+            .all(|s| s.qdot.iter().all(|v| v.is_finite()))
+    );
+    // Within twice the simulated figure (a floor of 1 mm for a very good simulated trial).
+    let bound = (2.0 * sim.result.pos_rmse_m).max(0.001);
+    assert!(
+        ros.result.pos_rmse_m <= bound,
+        "{} vs {}",
+        ros.result.pos_rmse_m,
+        sim.result.pos_rmse_m
+    );
+    assert!(r["commands"].as_u64().is_some_and(|n| n > 500), "{r}");
+    assert_eq!(r["bad"].as_u64(), Some(0), "{r}");
+    // The gripper closed on the bottle and stays closed; sent when it changed, not each tick.
+    assert_eq!(r["gripper_m"].as_f64(), Some(0.0), "{r}");
+    assert!(
+        r["gripper_commands"].as_u64().is_some_and(|n| n <= 3),
+        "{r}"
+    );
+}
