@@ -23,6 +23,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
+use avatarm_core::shared_data::say_skipped;
+
 use crate::support::output;
 
 fn root() -> &'static Path {
@@ -34,16 +36,15 @@ fn runtime(test: &str) -> Option<PathBuf> {
     match std::env::var_os("XR_RUNTIME_JSON").map(PathBuf::from) {
         Some(p) if p.is_file() => Some(p),
         Some(p) => {
-            eprintln!(
-                "{test}: SKIPPED: XR_RUNTIME_JSON={} is not a file",
-                p.display()
-            );
+            let why = format!("XR_RUNTIME_JSON={} is not a file", p.display());
+            say_skipped(test, &why);
             None
         }
         None => {
-            eprintln!(
-                "{test}: SKIPPED: no OpenXR runtime (set XR_RUNTIME_JSON to a runtime's manifest, \
-                 e.g. Monado's null compositor; see the top of tests/realtime/xr.rs)"
+            say_skipped(
+                test,
+                &"no OpenXR runtime (set XR_RUNTIME_JSON to a runtime's manifest, e.g. Monado's \
+                  null compositor; see the top of tests/realtime/xr.rs)",
             );
             None
         }
@@ -160,9 +161,9 @@ impl RemoteDriver {
     fn drove(&self, test: &str, part: &str) -> bool {
         let connected = self.connected.load(Ordering::Relaxed);
         if !connected {
-            eprintln!(
-                "{test}: SKIPPED {part}: the runtime did not open Monado's remote driver, which \
-                 this test moves it with"
+            say_skipped(
+                &format!("{test} ({part})"),
+                &"the runtime did not open Monado's remote driver, which this test moves it with",
             );
         }
         connected
