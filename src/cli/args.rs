@@ -51,14 +51,14 @@ pub(crate) fn leap_mount(text: &str) -> Result<LeapMountKind, AppError> {
 pub(crate) fn mapping_mode(
     s: &str,
 ) -> Result<avatarm_core::teleop::mapping::MappingMode, AppError> {
-    match s {
-        "paper" => Ok(avatarm_core::teleop::mapping::MappingMode::Paper),
-        "closed_loop" => Ok(avatarm_core::teleop::mapping::MappingMode::ClosedLoop),
-        other => Err(AppError::Value {
-            text: other.to_owned(),
+    use avatarm_core::teleop::mapping::MappingMode;
+    [MappingMode::Paper, MappingMode::ClosedLoop]
+        .into_iter()
+        .find(|m| m.name() == s)
+        .ok_or_else(|| AppError::Value {
+            text: s.to_owned(),
             message: "expected paper or closed_loop".to_owned(),
-        }),
-    }
+        })
 }
 
 /// `assets/scenes/default.toml`, the scene `avatarm run` opens without one.

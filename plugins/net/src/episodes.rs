@@ -5,8 +5,12 @@
 
 use std::collections::BTreeMap;
 
-/// The most kinds an episode keeps by name (the others are counted as `other`).
+/// The most kinds an episode's log lines name (the others are counted as `other`).
 pub const MAX_KINDS: usize = 8;
+
+/// The most kinds [`RefusalEpisodes::by_kind`] keeps over a whole run (the others are counted
+/// as `other`), so a peer sending ever new reasons cannot grow the report without bound.
+pub const MAX_REPORT_KINDS: usize = 32;
 
 /// Refusals grouped into episodes ([`RefusalEpisodes::refused`], [`RefusalEpisodes::tick`]).
 #[derive(Debug, Clone)]
@@ -66,7 +70,7 @@ impl RefusalEpisodes {
     /// A refusal at `now_s` (s) for `reason`: the line to log when it starts an episode.
     pub fn refused(&mut self, now_s: f64, reason: &str) -> Option<String> {
         let kind = kind_of(reason);
-        let known = self.by_kind.len() < MAX_KINDS * 4 || self.by_kind.contains_key(&kind);
+        let known = self.by_kind.len() < MAX_REPORT_KINDS || self.by_kind.contains_key(&kind);
         *self
             .by_kind
             .entry(if known { kind.clone() } else { "other".into() })
@@ -192,6 +196,29 @@ mod tests {
         // A new refusal after the quiet time starts a new episode, said at once.
         assert!(e.refused(40.0, "not finite").is_some());
         assert_eq!(e.episodes(), 2);
+    }
+
+    /// A peer sending ever new reasons: the report keeps MAX_REPORT_KINDS by name and counts the
+    /// rest as `other`; every refusal is counted.
+    #[test]
+    fn the_kinds_kept_are_bounded() {
+        let mut e = RefusalEpisodes::new(2.0, 5.0);
+        let letters = |i: usize| {
+            format!(
+                "reason {}{}",
+                char::from(b'a' + (i / 26) as u8),
+                char::from(b'a' + (i % 26) as u8)
+            )
+        };
+        for i in 0..100 {
+            e.refused(0.01 * i as f64, &letters(i));
+        }
+        assert_eq!(e.by_kind().len(), MAX_REPORT_KINDS + 1);
+        assert_eq!(e.by_kind().values().sum::<u64>(), 100);
+        assert_eq!(
+            e.by_kind().get("other"),
+            Some(&(100 - MAX_REPORT_KINDS as u64))
+        );
     }
 
     #[test]

@@ -13,14 +13,14 @@ use crate::types::{
     CompressedFrame, HandPoses, HeadPose, ImageFormat, JointStates, LogLevel, ObjectTarget,
     Recording, RobotCommand, SafetyEvent, head_at,
 };
-use crate::{BASE_FRAME, CAMERA_FRAME, FORMAT_VERSION, HEAD_FRAME, WORLD_FRAME, topics};
-/// Makes the error of the message being read, from what is wrong with it.
-type Bad<'a> = &'a dyn Fn(String) -> RecordError;
-
 use crate::wire::{
     WireCalibration, WireCommand, WireHand, WireImage, WireJointState, WireLog, WireObjectTarget,
     WireTransform, object_target_fault, pose_of,
 };
+use crate::{BASE_FRAME, CAMERA_FRAME, FORMAT_VERSION, HEAD_FRAME, WORLD_FRAME, topics};
+
+/// Makes the error of the message being read, from what is wrong with it.
+type Bad<'a> = &'a dyn Fn(String) -> RecordError;
 
 impl Recording {
     /// Reads a recording. Messages are sorted by their stamps. Errors name the file and, for a

@@ -94,23 +94,9 @@ impl RosArm {
                 joints.len()
             )));
         }
-        let arm = settings
-            .arm_joints
-            .iter()
-            .map(|j| {
-                joints
-                    .iter()
-                    .position(|k| k == j)
-                    .ok_or_else(|| LinkError::UnknownJoint {
-                        joint: j.clone(),
-                        known: joints.join(", "),
-                    })
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        let command_index = match &settings.command {
-            CommandKind::InteraVelocity => arm.clone(),
-            CommandKind::GroupVelocity { joints: controller }
-            | CommandKind::GroupPosition { joints: controller } => controller
+        // Each named joint's index in the model's q order.
+        let indices = |names: &[String]| {
+            names
                 .iter()
                 .map(|j| {
                     joints
@@ -121,7 +107,13 @@ impl RosArm {
                             known: joints.join(", "),
                         })
                 })
-                .collect::<Result<Vec<_>, _>>()?,
+                .collect::<Result<Vec<_>, _>>()
+        };
+        let arm = indices(&settings.arm_joints)?;
+        let command_index = match &settings.command {
+            CommandKind::InteraVelocity => arm.clone(),
+            CommandKind::GroupVelocity { joints: controller }
+            | CommandKind::GroupPosition { joints: controller } => indices(controller)?,
         };
         let shared = Arc::new(Mutex::new(Shared {
             status: LinkStatus::default(),

@@ -352,18 +352,19 @@ fn load_with_mesh_loader(
         let loader = mesh_loader::Loader::default();
         match format {
             MeshFormat::Stl => match stl_kind(bytes) {
-                // Blank the header so the parser cannot mistake it for ASCII.
-                StlKind::Binary => {
+                // A header beginning with `solid` is blanked so the parser cannot mistake the
+                // file for ASCII.
+                StlKind::Binary if starts_with_solid(bytes) => {
                     let mut copy = bytes.to_vec();
                     copy[..80].fill(0);
                     loader.load_stl_from_slice(&copy, path)
                 }
+                StlKind::Binary => loader.load_stl_from_slice(bytes, path),
                 StlKind::Ascii { bare_solid: false } => loader.load_stl_from_slice(bytes, path),
                 // The parser wants `solid NAME`; the name is optional in the format.
                 StlKind::Ascii { bare_solid: true } => {
-                    let start = bytes.iter().take_while(|b| b.is_ascii_whitespace()).count();
                     let mut named = b"solid unnamed".to_vec();
-                    named.extend_from_slice(&bytes[start + b"solid".len()..]);
+                    named.extend_from_slice(after_solid(bytes).unwrap_or_default());
                     loader.load_stl_from_slice(&named, path)
                 }
                 StlKind::Neither => Err(std::io::Error::new(
@@ -648,6 +649,15 @@ enum StlKind {
     Neither,
 }
 
+/// What follows the keyword `solid` at the start of `bytes` (after white space), if it is there.
+fn after_solid(bytes: &[u8]) -> Option<&[u8]> {
+    bytes[bytes.iter().take_while(|b| b.is_ascii_whitespace()).count()..].strip_prefix(b"solid")
+}
+
+fn starts_with_solid(bytes: &[u8]) -> bool {
+    after_solid(bytes).is_some()
+}
+
 fn stl_kind(bytes: &[u8]) -> StlKind {
     let count = bytes
         .get(80..84)
@@ -656,8 +666,7 @@ fn stl_kind(bytes: &[u8]) -> StlKind {
     if count.is_some_and(|n| Some(bytes.len()) == n.checked_mul(50).map(|b| b + 84)) {
         return StlKind::Binary;
     }
-    let text = &bytes[bytes.iter().take_while(|b| b.is_ascii_whitespace()).count()..];
-    let Some(rest) = text.strip_prefix(b"solid") else {
+    let Some(rest) = after_solid(bytes) else {
         return StlKind::Neither;
     };
     match rest.first() {
