@@ -1,6 +1,6 @@
 //! The app's base, assembled from the plugins: [`build_app`] for a scene with what the front
-//! end on top needs of it ([`AppBase`]: the clock and window, the webcam, the room's ground
-//! truth), the app's own twin of the robot ([`AppTwin`]) and the scene as a resource
+//! end on top needs of it ([`AppBase`]: the clock and window, the camera's source, the room's
+//! ground truth), the app's own twin of the robot ([`AppTwin`]) and the scene as a resource
 //! ([`SceneResource`]). The front ends build on it and add their own plugin: the preview
 //! ([`crate::preview::build_app`]), the headless replay ([`crate::replay::build_app`]) and the
 //! robot site's video ([`crate::net::video::build_app`]). Nothing here knows them.
@@ -37,8 +37,9 @@ pub enum Runner {
     /// No window: one camera frame of simulated time per update, as fast as it renders (the
     /// replay).
     Replay,
-    /// No window, in real time: one update per camera frame at most (the robot site's video).
-    /// Bevy's log set-up is left out: the caller's stays.
+    /// No window, in real time (the robot site's video): one update per camera frame at most
+    /// for the simulated camera; a real camera's frames wake the app, an update as soon as one
+    /// arrives ([`avatarm_video::wake`]). Bevy's log set-up is left out: the caller's stays.
     RealTime,
     /// A window, through OpenXR's plugins when `xr` (falling back to the window without a
     /// runtime), with a fixed step (s) per update when given.
@@ -50,20 +51,53 @@ pub enum Runner {
     },
 }
 
+/// Where the camera's frames come from: the simulated room's camera, or a real camera source
+/// read on a thread of its own (docs/latency.md).
+#[derive(Debug, Clone, Default)]
+pub enum CameraSource {
+    /// The simulated room's camera (rendered, read back, delayed by its latency).
+    #[default]
+    Simulated,
+    /// A webcam by its index (feature `webcam`).
+    Webcam(u32),
+    /// A recording played as a live camera, frames released at their capture times.
+    Recording(avatarm_video::recorded::RecordedCameraConfig),
+}
+
+impl CameraSource {
+    /// Whether the simulated room renders the video.
+    pub fn is_simulated(&self) -> bool {
+        matches!(self, Self::Simulated)
+    }
+
+    /// The source's name, for messages.
+    pub fn name(&self) -> String {
+        match self {
+            Self::Simulated => "simulated camera".to_owned(),
+            Self::Webcam(i) => format!("webcam {i}"),
+            Self::Recording(r) => r.name.clone(),
+        }
+    }
+}
+
 /// What the app's base ([`AvatarmPlugins`]) takes from the front end built on top of it.
 #[derive(Debug, Clone)]
 pub struct AppBase {
     /// The clock and the window.
     pub runner: Runner,
-    /// The webcam's index where the camera is a webcam (nothing renders the simulated room's
-    /// video then).
-    pub webcam: Option<u32>,
+    /// Where the camera's frames come from (nothing renders the simulated room's video but
+    /// for [`CameraSource::Simulated`]).
+    pub camera: CameraSource,
     /// Render the room's ground truth (its robot-free view) even where no camera takes the
     /// empty room as its background: a replay scores against it.
     pub ground_truth: bool,
     /// The scene through the other cameras the front end may switch to (their backgrounds
     /// count for [`AppBase::empty_room_anywhere`]).
     pub other_cameras: Vec<Scene>,
+    /// Render the interaction layer (the virtual hand and the object twins in front of the
+    /// panel): the views need it; the robot site, which publishes the erased frames only, does
+    /// not.
+    pub interaction_layer: bool,
 }
 
 impl AppBase {
@@ -71,9 +105,10 @@ impl AppBase {
     pub fn new(runner: Runner) -> Self {
         Self {
             runner,
-            webcam: None,
+            camera: CameraSource::Simulated,
             ground_truth: false,
             other_cameras: Vec::new(),
+            interaction_layer: true,
         }
     }
 
@@ -127,10 +162,17 @@ pub fn build_app(scene: &Scene, base: &AppBase) -> Result<App, AppError> {
         Runner::RealTime => {
             // Real time (the clock is the wall's); one update per camera frame at most. The
             // site's own log set-up stays (the control loop logs before the app exists).
-            app.add_plugins((
-                headless_plugins().disable::<bevy::log::LogPlugin>(),
-                ScheduleRunnerPlugin::run_loop(frame_dt),
-            ));
+            app.add_plugins(headless_plugins().disable::<bevy::log::LogPlugin>());
+            if base.camera.is_simulated() {
+                app.add_plugins(ScheduleRunnerPlugin::run_loop(frame_dt));
+            } else {
+                // A real camera wakes the app with each frame: it is taken in the update right
+                // after it arrives, not at the next tick of a fixed schedule.
+                app.add_plugins(avatarm_video::wake::FrameDrivenRunnerPlugin {
+                    max_wait: frame_dt,
+                    min_period: Duration::from_millis(2),
+                });
+            }
         }
         Runner::Window { xr, fixed_step_s } => {
             check_display()?;
@@ -214,7 +256,7 @@ pub fn scene_occluders(scene: &Scene) -> Vec<(Mesh, Transform)> {
 
 /// Avatarm's base plugins for a scene, on top of Bevy's window or headless renderer
 /// ([`build_app`] adds those): the robot twin, image read-backs, the simulated room, the video
-/// (the simulated camera's or a webcam), the erase pipeline and the interaction layer, and the
+/// (the simulated camera's, a webcam or a recording played live), the erase pipeline and the interaction layer, and the
 /// background source. [`AvatarmSetupPlugin`] goes first: it inserts the scene's resources the
 /// others read, and orders [`AvatarmSystems`]. The front end's own plugin (the replay, the
 /// preview, the robot site's video) comes after.
@@ -227,7 +269,6 @@ pub struct AvatarmPlugins {
 
 impl PluginGroup for AvatarmPlugins {
     fn build(self) -> PluginGroupBuilder {
-        #[allow(unused_mut)] // changed with the feature `webcam`
         let mut group = PluginGroupBuilder::start::<Self>()
             .add(AvatarmSetupPlugin {
                 scene: self.scene.clone(),
@@ -242,18 +283,32 @@ impl PluginGroup for AvatarmPlugins {
             .add(ErasePlugin)
             .add(InteractionPlugin)
             .add(background::BackgroundSourcePlugin);
-        #[cfg(feature = "webcam")]
-        if let Some(index) = self.base.webcam {
-            let k = &self.scene.true_camera.intrinsics;
-            group = group.add(avatarm_video::webcam::WebcamPlugin(
-                avatarm_video::webcam::WebcamConfig {
-                    index,
-                    width: k.width,
-                    height: k.height,
-                    fps: self.scene.file.camera.fps.round().max(1.0) as u32,
-                    latency_s: self.scene.file.camera.frame_latency_s,
-                },
-            ));
+        if !self.base.interaction_layer {
+            group = group.disable::<InteractionPlugin>();
+        }
+        match &self.base.camera {
+            CameraSource::Simulated => {}
+            #[cfg(feature = "webcam")]
+            CameraSource::Webcam(index) => {
+                let k = &self.scene.true_camera.intrinsics;
+                group = group.add(avatarm_video::webcam::WebcamPlugin(
+                    avatarm_video::webcam::WebcamConfig {
+                        index: *index,
+                        width: k.width,
+                        height: k.height,
+                        fps: self.scene.file.camera.fps.round().max(1.0) as u32,
+                        latency_s: self.scene.file.camera.frame_latency_s,
+                    },
+                ));
+            }
+            // The command line refuses --webcam in a build without the feature.
+            #[cfg(not(feature = "webcam"))]
+            CameraSource::Webcam(_) => {}
+            CameraSource::Recording(config) => {
+                group = group.add(avatarm_video::recorded::RecordedCameraPlugin(
+                    config.clone(),
+                ));
+            }
         }
         group
     }
@@ -304,14 +359,11 @@ pub(crate) fn sim_head(scene: &Scene) -> Option<SimHead> {
     })
 }
 
-/// The live video's state for `scene`'s camera (the webcam `webcam`, else the simulated
-/// camera): stale after three frame periods (at least 0.2 s) plus the camera's latency.
-pub(crate) fn live_video(scene: &Scene, webcam: Option<u32>) -> LiveVideo {
+/// The live video's state for `scene`'s camera from `source`: stale after three frame periods
+/// (at least 0.2 s) plus the camera's latency.
+pub(crate) fn live_video(scene: &Scene, source: &CameraSource) -> LiveVideo {
     LiveVideo::new(
-        match webcam {
-            Some(i) => format!("webcam {i}"),
-            None => "simulated camera".to_owned(),
-        },
+        source.name(),
         (3.0 / scene.file.camera.fps).max(0.2) + scene.file.camera.frame_latency_s,
     )
 }
@@ -393,7 +445,6 @@ pub struct AvatarmSetupPlugin {
 impl Plugin for AvatarmSetupPlugin {
     fn build(&self, app: &mut App) {
         let (scene, base) = (&self.scene, &self.base);
-        let webcam = base.webcam;
         app.insert_resource(SceneResource(scene.clone()))
             .insert_resource(SimRoomConfig {
                 model: scene.model.clone(),
@@ -409,11 +460,11 @@ impl Plugin for AvatarmSetupPlugin {
                 // camera, or of one the preview can switch to).
                 ground_truth: base.ground_truth || base.empty_room_anywhere(scene),
                 twin: None,
-                video: webcam.is_none().then(|| sim_video(scene)),
+                video: base.camera.is_simulated().then(|| sim_video(scene)),
                 head: sim_head(scene),
                 external_drive: false,
             })
-            .insert_resource(live_video(scene, webcam))
+            .insert_resource(live_video(scene, &base.camera))
             .insert_resource(head_tracking(scene))
             .insert_resource(erase_config(scene))
             .insert_resource(interaction_config(scene))

@@ -200,8 +200,11 @@ fn code(
             width,
             height,
             capture_s: now,
+            arrived_s: now,
             erased_s: now,
             sent_s: now,
+            arrived_update: 0,
+            handed_update: 0,
             camera_pose: FrameHeader::pose_of(&nalgebra::Isometry3::identity()),
         };
         let started = Instant::now();

@@ -19,9 +19,20 @@ pub struct ServeArgs {
     /// one), each erased by an app of its own and published under its name.
     #[arg(long, value_name = "NAME", value_delimiter = ',')]
     view: Vec<String>,
-    /// The robot: sim (the simulated arm) or ros (the scene's [robot.link], ROS 1).
+    /// The robot: sim (the simulated arm) or ros (the scene's [robot.link], ROS 1). With
+    /// --camera-recording the robot is the recording's.
     #[arg(long, value_name = "ROBOT", value_parser = ["sim", "ros"], default_value = "sim")]
     robot: String,
+    /// Take the camera from webcam N (feature `webcam`) instead of the simulated room (one
+    /// camera: one --view).
+    #[arg(long, value_name = "N", conflicts_with = "camera_recording")]
+    webcam: Option<u32>,
+    /// Play a recording (MCAP: `avatarm replay --record`, `run --record`, `import`) as the
+    /// camera, each frame released at its capture time (in a loop), and its joint states as
+    /// the robot's: the real frame path without hardware (docs/latency.md). Commands to the
+    /// recording's robot are counted, not obeyed.
+    #[arg(long = "camera-recording", value_name = "FILE.mcap")]
+    camera_recording: Option<PathBuf>,
     /// Where to listen (tcp/HOST:PORT, udp/HOST:PORT or tls/HOST:PORT; default
     /// tcp/0.0.0.0:7447 unless --connect is given).
     #[arg(long, value_name = "ENDPOINT")]
@@ -64,6 +75,8 @@ pub struct ServeArgs {
     package_path: Vec<PathBuf>,
     #[command(flatten)]
     net: crate::net::NetArgs,
+    #[command(flatten)]
+    overrides: crate::cli::overrides::EraseOverrides,
 }
 
 impl ServeArgs {
@@ -72,6 +85,8 @@ impl ServeArgs {
         let Self {
             scene,
             robot,
+            webcam,
+            camera_recording,
             mut listen,
             connect,
             mode,
@@ -86,11 +101,28 @@ impl ServeArgs {
             package_path,
             net,
             view,
+            overrides,
         } = self;
+        if camera_recording.is_some() && robot == "ros" {
+            return Err(AppError::flag(
+                "--robot ros",
+                "with --camera-recording the robot is the recording's; leave --robot out",
+            ));
+        }
+        let camera = match (webcam, camera_recording) {
+            (Some(index), _) => crate::net::site_camera::SiteCamera::Webcam(index),
+            (None, Some(path)) => crate::net::site_camera::SiteCamera::Recording(path),
+            (None, None) => crate::net::site_camera::SiteCamera::Simulated,
+        };
         crate::net::init_log();
         let path = scene.unwrap_or_else(pouring_scene);
         let packages = packages(package_path);
-        let scene = Scene::load_view(&path, &packages, view.first().map(String::as_str))?;
+        let load = |view: Option<&str>| -> Result<Scene, AppError> {
+            let mut scene = Scene::load_view(&path, &packages, view)?;
+            overrides.apply(&mut scene)?;
+            Ok(scene)
+        };
+        let scene = load(view.first().map(String::as_str))?;
         // Every camera of the scene unless named.
         let more: Vec<String> = if view.is_empty() {
             scene.cameras.iter().skip(1).cloned().collect()
@@ -99,7 +131,7 @@ impl ServeArgs {
         };
         let more_views = more
             .iter()
-            .map(|name| Scene::load_view(&path, &packages, Some(name)))
+            .map(|name| load(Some(name)))
             .collect::<Result<Vec<_>, _>>()?;
         let encoder = crate::net::encoder_settings(
             &codec,
@@ -128,6 +160,7 @@ impl ServeArgs {
             video: video.unwrap_or(true),
             target_timeout_s: target_timeout,
             encoder,
+            camera,
         };
         let r = crate::net::serve::serve(&options)?;
         println!("{}", crate::net::serve::summary(&r));

@@ -71,8 +71,9 @@ pub struct JoinOptions {
     pub head: Option<HeadSource>,
 }
 
-/// Latency of the erased video by stage (ms, robot clock): capture → erased → sent →
-/// received → decoded.
+/// Latency of the erased video by stage (ms, robot clock): captured → arrived in the robot
+/// site's app → erased (read back) → sent → received → decoded; and the robot site's app
+/// updates each frame waited between arriving and being handed to the encoder.
 #[derive(Debug, Clone, Serialize, Default)]
 pub struct VideoLatency {
     /// Frames received.
@@ -102,6 +103,20 @@ pub struct VideoLatency {
     pub mbit_s: f64,
     /// Capture → erased (read back).
     pub erase_ms: Spread,
+    /// Capture → arrived in the robot site's app (the camera's driver, the player or the
+    /// simulated camera's latency and read-back).
+    pub arrive_ms: Spread,
+    /// Arrived → erased and read back (the robot site's app).
+    pub app_ms: Spread,
+    /// Frames by the robot site's app updates they waited between arriving and being handed
+    /// to the encoder: `[0]` handed over in the update they arrived in, `[1]` in the next, ...,
+    /// the last entry counting those that waited that long or longer.
+    pub waited_updates: Vec<u64>,
+    /// The most updates a frame waited.
+    pub waited_updates_max: u64,
+    /// Frames whose robot-site stamps are out of the stages' order (captured, arrived, erased,
+    /// sent): a clock or stamping fault at the robot site; 0.
+    pub stamps_out_of_order: u64,
     /// Erased → coded and sent.
     pub encode_ms: Spread,
     /// Sent → received (the network).
@@ -115,6 +130,46 @@ pub struct VideoLatency {
     pub camera_turned_deg: f64,
     /// The largest translation (mm).
     pub camera_moved_mm: f64,
+}
+
+/// [`VideoLatency::waited_updates`]' entries: 0 to 7 updates, then 8 or more.
+const WAITED_UPDATES_KEPT: usize = 9;
+
+/// The shown frames' stages (ms), for [`VideoLatency`].
+#[derive(Default)]
+struct Stages {
+    erase: Vec<f64>,
+    arrive: Vec<f64>,
+    in_app: Vec<f64>,
+    encode: Vec<f64>,
+    network: Vec<f64>,
+    decode: Vec<f64>,
+    total: Vec<f64>,
+}
+
+impl Stages {
+    /// A shown frame's stages (its header's stamps, received (s, robot clock), decoding here)
+    /// into `video`'s counts.
+    fn note(&mut self, video: &mut VideoLatency, h: &FrameHeader, received: f64, decode_ms: f64) {
+        video.shown += 1;
+        if !(h.capture_s <= h.arrived_s && h.arrived_s <= h.erased_s && h.erased_s <= h.sent_s) {
+            video.stamps_out_of_order += 1;
+        }
+        self.erase.push((h.erased_s - h.capture_s) * 1e3);
+        self.arrive.push((h.arrived_s - h.capture_s) * 1e3);
+        self.in_app.push((h.erased_s - h.arrived_s) * 1e3);
+        let waited = h.handed_update.saturating_sub(h.arrived_update);
+        let bucket = (waited as usize).min(WAITED_UPDATES_KEPT - 1);
+        if video.waited_updates.len() <= bucket {
+            video.waited_updates.resize(bucket + 1, 0);
+        }
+        video.waited_updates[bucket] += 1;
+        video.waited_updates_max = video.waited_updates_max.max(waited);
+        self.encode.push((h.sent_s - h.erased_s) * 1e3);
+        self.network.push((received - h.sent_s) * 1e3);
+        self.decode.push(decode_ms);
+        self.total.push((received - h.capture_s) * 1e3 + decode_ms);
+    }
 }
 
 /// The operator's (or observer's) report (`--report`).
@@ -188,11 +243,7 @@ struct Collect {
     /// The camera the window shows.
     window_camera: Option<String>,
     cameras: std::collections::BTreeMap<String, CameraView>,
-    erase: Vec<f64>,
-    encode: Vec<f64>,
-    network: Vec<f64>,
-    decode: Vec<f64>,
-    total: Vec<f64>,
+    stages: Stages,
     joint_age: Vec<f64>,
     recorder: Option<JoinRecorder>,
     /// Sends the head of this site's camera on a head.
@@ -344,12 +395,7 @@ impl Collect {
                         let object = object_at(&self.objects, h.capture_s);
                         view.put_frame(width, height, rgba, h.world_from_camera(), object);
                     }
-                    r.video.shown += 1;
-                    self.erase.push((h.erased_s - h.capture_s) * 1e3);
-                    self.encode.push((h.sent_s - h.erased_s) * 1e3);
-                    self.network.push((received - h.sent_s) * 1e3);
-                    self.decode.push(decode_ms);
-                    self.total.push((received - h.capture_s) * 1e3 + decode_ms);
+                    self.stages.note(&mut r.video, &h, received, decode_ms);
                 }
                 Ok(avatarm_net::codec::Decoded::NeedKeyframe { reason }) => {
                     r.video.waiting_for_keyframe += 1;
@@ -419,8 +465,8 @@ impl Collect {
             },
             r.video.lost,
             r.video.keyframe_requests,
-            last(&self.total),
-            last(&self.network),
+            last(&self.stages.total),
+            last(&self.stages.network),
             r.joint_states,
             last(&self.joint_age),
             if self.stopping { "STOPPING" } else { "running" },
@@ -432,11 +478,13 @@ impl Collect {
         r.duration_s = duration_s;
         r.video.fps = r.video.frames as f64 / duration_s.max(1e-9);
         r.video.mbit_s = r.video.bytes as f64 * 8.0 / 1e6 / duration_s.max(1e-9);
-        r.video.erase_ms = Spread::of(&self.erase);
-        r.video.encode_ms = Spread::of(&self.encode);
-        r.video.network_ms = Spread::of(&self.network);
-        r.video.decode_ms = Spread::of(&self.decode);
-        r.video.total_ms = Spread::of(&self.total);
+        r.video.erase_ms = Spread::of(&self.stages.erase);
+        r.video.arrive_ms = Spread::of(&self.stages.arrive);
+        r.video.app_ms = Spread::of(&self.stages.in_app);
+        r.video.encode_ms = Spread::of(&self.stages.encode);
+        r.video.network_ms = Spread::of(&self.stages.network);
+        r.video.decode_ms = Spread::of(&self.stages.decode);
+        r.video.total_ms = Spread::of(&self.stages.total);
         r.joint_state_age_ms = Spread::of(&self.joint_age);
         r.recording = self.recorder.take().map(JoinRecorder::finish);
         r.head = self.head.take().map(|h| h.report);

@@ -5,10 +5,13 @@
 //! - [`serve`]: the robot site's control loop and report.
 //! - [`join`]: the operator's hand, physics twin and targets; the observer.
 //! - [`video`]: the robot site's erased video, coded and published.
+//! - [`site_camera`]: where the robot site's camera comes from (simulated, a webcam, a
+//!   recording played live).
 //! - [`window`]: the operator's or observer's window (`join --window`).
 
 pub mod join;
 pub mod serve;
+pub mod site_camera;
 pub mod video;
 pub mod window;
 

@@ -26,6 +26,9 @@ use avatarm_net::msg::{JointStatesMsg, PROTOCOL_VERSION, RobotStatusMsg};
 use bevy::log::{info, warn};
 
 use super::video::ArmUpdate;
+
+mod camera_video;
+pub use camera_video::{CameraVideo, PlayerReport};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use serde::Serialize;
 
@@ -142,43 +145,6 @@ pub struct ServeReport {
     pub video_skipped: u64,
     /// Each camera's video (the totals above are their sums).
     pub video_cameras: Vec<CameraVideo>,
-}
-
-/// One camera's video at the robot site (`ServeReport::video_cameras`).
-#[derive(Debug, Clone, Serialize, Default)]
-pub struct CameraVideo {
-    /// The camera's name on the network.
-    pub camera: String,
-    /// Erased frames published.
-    pub frames: u64,
-    /// Of them, keyframes.
-    pub keyframes: u64,
-    /// H.264 IDR frames forced by viewers' requests.
-    pub forced_keyframes: u64,
-    /// Frames the encoder refused.
-    pub encode_errors: u64,
-    /// Frames H.264's rate control skipped.
-    pub skipped: u64,
-    /// A camera on a head: its wearer's head poses taken from the network.
-    pub head_poses: u64,
-    /// Head poses refused (each run of refusals logged once).
-    pub head_refused: u64,
-}
-
-impl CameraVideo {
-    /// Reads `camera`'s counters.
-    fn of(camera: String, counters: &super::video::VideoCounters) -> Self {
-        Self {
-            camera,
-            frames: counters.published.load(Ordering::Relaxed),
-            keyframes: counters.keyframes.load(Ordering::Relaxed),
-            forced_keyframes: counters.forced_keyframes.load(Ordering::Relaxed),
-            encode_errors: counters.encode_errors.load(Ordering::Relaxed),
-            skipped: counters.skipped.load(Ordering::Relaxed),
-            head_poses: counters.head_poses.load(Ordering::Relaxed),
-            head_refused: counters.head_refused.load(Ordering::Relaxed),
-        }
-    }
 }
 
 /// The robot site's control loop, built before it runs.
@@ -641,6 +607,8 @@ pub struct ServeOptions {
     pub target_timeout_s: f64,
     /// How the video is coded.
     pub encoder: avatarm_net::codec::EncoderSettings,
+    /// Where the camera comes from (a recording's robot replaces `robot`).
+    pub camera: super::site_camera::SiteCamera,
 }
 
 /// Sets the flag when dropped.
@@ -711,7 +679,14 @@ pub fn robot_info(
     reason = "the robot site set up in its order (network, control loop thread, one app per camera) and torn down whatever ends first"
 )]
 pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
-    let scene = &options.scene;
+    let mut scene = options.scene.clone();
+    let views_served = if options.video {
+        1 + options.more_views.len()
+    } else {
+        1
+    };
+    let opened = super::site_camera::open(&options.camera, &mut scene, views_served)?;
+    let scene = &scene;
     if !(options.target_timeout_s.is_finite() && (0.0..=10.0).contains(&options.target_timeout_s))
         || options.target_timeout_s == 0.0
     {
@@ -734,8 +709,13 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
         .encoder
         .validate()
         .map_err(|e| crate::AppError::flag("the video encoder", e.to_string()))?;
+    let link = match (opened.arm, options.robot) {
+        (Some(arm), _) => crate::teleop::TrialLink::Given(Box::new(arm)),
+        (None, crate::teleop::RobotChoice::Sim) => crate::teleop::TrialLink::Simulated,
+        (None, crate::teleop::RobotChoice::Ros) => crate::teleop::TrialLink::Ros,
+    };
     let (mut parts, mode) =
-        crate::teleop::trial_parts(scene, options.robot, options.mode, 0, "avatarm serve")?;
+        crate::teleop::trial_parts_on(scene, link, options.mode, 0, "avatarm serve")?;
     parts
         .teleop
         .set_watchdog_timeout(options.target_timeout_s)
@@ -803,6 +783,7 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
                 encoder: view_encoder(&options.encoder, view)?,
                 counters: Arc::default(),
                 head: None,
+                source: opened.source.clone(),
             };
             let mut view = (*view).clone();
             if let Some(head) = view.head.as_mut() {
@@ -823,7 +804,7 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
         }
         let counters: Vec<_> = apps
             .iter()
-            .map(|(_, v)| (v.camera.clone(), v.counters.clone()))
+            .map(|(_, v)| (v.camera.clone(), v.counters.clone(), v.source.clone()))
             .collect();
         let loop_stop = stop.clone();
         let handle = std::thread::Builder::new()
@@ -884,7 +865,7 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
         others.into_iter().collect::<Result<Vec<()>, _>>()?;
         report.video_cameras = counters
             .iter()
-            .map(|(camera, c)| CameraVideo::of(camera.clone(), c))
+            .map(|(camera, c, source)| CameraVideo::of(camera.clone(), c, source))
             .collect();
         let sum = |f: fn(&CameraVideo) -> u64| report.video_cameras.iter().map(f).sum::<u64>();
         report.video_frames = sum(|c| c.frames);

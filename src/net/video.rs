@@ -1,9 +1,13 @@
 //! The robot site's erased video (`avatarm serve`, video on): the app runs headless in real
 //! time; the simulated room's arm (and the app's twin behind the mask) follow the control
 //! loop's joint states ([`ArmUpdate`]), the real object where the arm carries
-//! it. Each erased frame is read back once, coded (JPEG, or H.264 with IDR frames on time and
-//! on a viewer's request; [`avatarm_net::codec`]) on a thread of its own and published with
-//! its stage stamps (capture, erased, sent; the site's clock).
+//! it. The camera is the simulated room's, a webcam or a recording played live
+//! ([`crate::app::CameraSource`]). Each erased frame is read back in the render world right after
+//! its frame (`avatarm_twin::readback::direct`), coded (JPEG, or H.264
+//! with IDR frames on time and on a viewer's request; [`avatarm_net::codec`]) on a thread of
+//! its own and published with its stage stamps (captured, arrived in the app, erased and read
+//! back, sent; the site's clock) and the app's updates it arrived and was handed to the encoder
+//! in.
 //!
 //! The read-back is the one the live path gets for the network, as `--record` gets one for
 //! the disk.
@@ -20,7 +24,8 @@ use avatarm_scene::Scene;
 use avatarm_scene::prop::find_prop;
 use avatarm_sim::{SimPropPart, SimRobotState, SimRoomConfig};
 use avatarm_twin::JointStateMessage;
-use avatarm_twin::readback::{ImageRead, read_image_once};
+use avatarm_twin::camera::{RenderSettled, add_render_settled};
+use avatarm_twin::readback::direct::{DirectRead, DirectReadQueue, DirectReadbackPlugin};
 use bevy::prelude::*;
 use nalgebra::Isometry3;
 
@@ -48,7 +53,25 @@ pub struct VideoCounters {
     /// Of those received, refused (malformed, not finite, another camera's) or not newer than
     /// the last taken.
     pub head_refused: AtomicU64,
+    /// Frames handed to the encoder more than one app update after they arrived.
+    pub handed_late: AtomicU64,
+    /// Frames not published because the erase was not ready for them: drawn while a pipeline
+    /// compiled (the app's first frames), or before the twin behind the mask had a joint state.
+    pub unready: AtomicU64,
+    /// The most app updates a frame waited between arriving and being handed over.
+    pub waited_updates_max: AtomicU64,
+    /// The main world's time per update (ms, `First` to the end of `Last`: the systems, not the
+    /// render world's extraction and rendering), the last [`UPDATE_TIMES_KEPT`].
+    pub update_ms: Mutex<std::collections::VecDeque<f64>>,
+    /// Updates run.
+    pub updates: AtomicU64,
+    /// The app's GPU spans (each camera's render, each erase pass; where the device times
+    /// them), for the report.
+    pub gpu_times: Mutex<Option<avatarm_erase::GpuTimes>>,
 }
+
+/// How many updates' times [`VideoCounters::update_ms`] keeps.
+pub const UPDATE_TIMES_KEPT: usize = 100_000;
 
 /// What the video side needs: the loop's updates, the publisher, the site's clock, and the
 /// flag that ends the app.
@@ -72,6 +95,8 @@ pub struct ServeVideoOptions {
     /// which the scene's live head ([`avatarm_core::vision::head::LiveHead`]) takes; until the
     /// first arrives, the scene's simulated head moves the camera.
     pub head: Option<Arc<avatarm_net::HeadReceiver>>,
+    /// Where the camera's frames come from.
+    pub source: crate::app::CameraSource,
 }
 
 impl std::fmt::Debug for ServeVideoOptions {
@@ -98,7 +123,12 @@ pub struct ServeVideoPlugin(pub ServeVideoOptions);
 /// Builds the robot site's app for one camera of `scene`: the app's base without a window, in
 /// real time ([`crate::app::build_app`]), then [`ServeVideoPlugin`].
 pub fn build_app(scene: &Scene, options: ServeVideoOptions) -> Result<App, crate::AppError> {
-    let base = crate::app::AppBase::new(crate::app::Runner::RealTime);
+    let base = crate::app::AppBase {
+        camera: options.source.clone(),
+        // The site publishes the erased frames; each viewer draws its own interaction layer.
+        interaction_layer: false,
+        ..crate::app::AppBase::new(crate::app::Runner::RealTime)
+    };
     let mut app = crate::app::build_app(scene, &base)?;
     app.add_plugins(ServeVideoPlugin(options));
     Ok(app)
@@ -116,6 +146,12 @@ struct ServeVideo {
     head_refusing: bool,
     /// The site's clock minus the app's (s) the head's poses were last stamped with.
     head_clock: Option<f64>,
+    /// The frames published lately: (index, arrival (s, app clock), the update it arrived in).
+    arrivals: std::collections::VecDeque<(u64, f64, u32)>,
+    /// The main world's update now (its frame count), for the render thread.
+    update: Arc<AtomicU64>,
+    /// When this update began.
+    update_started: Option<std::time::Instant>,
 }
 
 /// A frame read back, to be coded.
@@ -149,6 +185,13 @@ impl Plugin for ServeVideoPlugin {
         if let Some(mut room) = app.world_mut().get_resource_mut::<SimRoomConfig>() {
             room.external_drive = true;
         }
+        add_render_settled(app);
+        if let (Some(times), Ok(mut slot)) = (
+            app.world().get_resource::<avatarm_erase::GpuTimes>(),
+            self.0.counters.gpu_times.lock(),
+        ) {
+            *slot = Some(times.clone());
+        }
         app.insert_resource(ServeVideo {
             options,
             encoder: tx,
@@ -157,13 +200,22 @@ impl Plugin for ServeVideoPlugin {
             world_from_camera,
             head_refusing: false,
             head_clock: None,
+            arrivals: std::collections::VecDeque::new(),
+            update: Arc::default(),
+            update_started: None,
         })
+        .add_plugins(DirectReadbackPlugin)
+        .add_systems(First, count_update)
+        .add_systems(Last, time_update)
         .add_systems(
             Update,
             (
                 (take_remote_head, mirror_loop).chain(),
+                note_arrival.after(avatarm_video::VideoSystems::Publish),
                 // The frame erased in this update, with the camera it was drawn from.
-                publish_erased.after(avatarm_erase::EraseSystems::Prepare),
+                publish_erased
+                    .after(avatarm_erase::EraseSystems::Prepare)
+                    .after(note_arrival),
                 stop_when_done,
             ),
         );
@@ -296,22 +348,44 @@ fn take_remote_head(
     }
 }
 
-/// Each newly erased frame, read back and handed to the encoder.
+/// How many published frames' arrivals are kept for their stamps.
+const ARRIVALS_KEPT: usize = 32;
+
+/// The frame published in this update: its index, its arrival and this update's number.
+fn note_arrival(
+    mut video: ResMut<ServeVideo>,
+    live: Res<avatarm_video::LiveVideo>,
+    frames: Res<bevy::diagnostic::FrameCount>,
+) {
+    if let Some(f) = live.frame.as_ref().filter(|_| live.fresh) {
+        if video.arrivals.len() == ARRIVALS_KEPT {
+            video.arrivals.pop_front();
+        }
+        video.arrivals.push_back((f.index, f.arrival_s, frames.0));
+    }
+}
+
+/// Each newly erased frame, read back and handed to the encoder; its header stamped with when
+/// it arrived and the updates it arrived and was handed over in.
+#[allow(clippy::too_many_arguments)] // a Bevy system: each argument is a parameter it reads
 fn publish_erased(
-    mut commands: Commands,
+    mut reads: ResMut<DirectReadQueue>,
     mut video: ResMut<ServeVideo>,
     time: Res<Time>,
     real: Res<Time<Real>>,
     state: Res<EraseState>,
     targets: Option<Res<EraseTargets>>,
+    frames: Res<bevy::diagnostic::FrameCount>,
+    settled: Option<Res<RenderSettled>>,
 ) {
-    let (Some(targets), Some((t_s, index, _))) = (
+    let (Some(targets), Some((t_s, index, _)), Some(settled)) = (
         targets,
         state
             .current
             .as_ref()
             .filter(|c| c.dirty)
             .and_then(|c| c.frame.clone()),
+        settled,
     ) else {
         return;
     };
@@ -319,36 +393,105 @@ fn publish_erased(
         return;
     }
     video.last_index = Some(index);
+    let counters = video.options.counters.clone();
+    // The twin behind the mask has no joint state yet: its mask would be the scene's start
+    // pose, not the robot's.
+    if state.mask_stamp_s.is_none() {
+        counters.unready.fetch_add(1, Ordering::Relaxed);
+        return;
+    }
+    let render_frame = RenderSettled::this_update_frame(&frames);
+    let settled = settled.clone();
     let clock = video.options.clock;
-    let capture_s = t_s + site_minus_app(&clock, &time, &real);
+    let site_minus_app = site_minus_app(&clock, &time, &real);
+    let capture_s = t_s + site_minus_app;
+    // A frame whose arrival is no longer kept (it cannot be: the erase draws the newest)
+    // counts as arrived now.
+    let (arrived_s, arrived_update) = video
+        .arrivals
+        .iter()
+        .rev()
+        .find(|a| a.0 == index)
+        .map_or((time.elapsed_secs_f64(), frames.0), |a| (a.1, a.2));
+    let arrived_s = arrived_s + site_minus_app;
     // The camera this frame's mask was drawn from (a camera on a head moves).
     let camera_pose = FrameHeader::pose_of(&state.camera_pose.unwrap_or(video.world_from_camera));
     let camera = video.options.camera.clone();
     let codec = video.options.encoder.codec.name();
     let tx = video.encoder.clone();
-    read_image_once(&mut commands, targets.composite.clone()).observe(
-        move |read: On<ImageRead>| {
-            let header = FrameHeader {
-                v: PROTOCOL_VERSION,
-                camera: camera.clone(),
-                index,
-                codec: codec.into(),
-                seq: 0,
-                keyframe: false,
-                stream: 0,
-                width: read.width,
-                height: read.height,
-                capture_s,
-                erased_s: clock.now_s(),
-                sent_s: f64::NAN,
-                camera_pose,
-            };
-            let _ = tx.send(Coded {
-                header,
-                rgba: read.data.clone(),
-            });
-        },
-    );
+    let update = video.update.clone();
+    let deliver = move |read: Result<avatarm_twin::readback::direct::ImageBytes, _>| {
+        // Drawn while a pipeline compiled: a pass or a mesh may be missing (a black frame, or
+        // the robot not erased). Noted before the read-back runs (the render graph's end).
+        if !settled.completed(render_frame) {
+            counters.unready.fetch_add(1, Ordering::Relaxed);
+            return;
+        }
+        let read = match read {
+            Ok(r) => r,
+            Err(e) => {
+                counters.encode_errors.fetch_add(1, Ordering::Relaxed);
+                warn!("robot site video: frame {index}: {e}");
+                return;
+            }
+        };
+        let header = FrameHeader {
+            v: PROTOCOL_VERSION,
+            camera: camera.clone(),
+            index,
+            codec: codec.into(),
+            seq: 0,
+            keyframe: false,
+            stream: 0,
+            width: read.width,
+            height: read.height,
+            capture_s,
+            arrived_s,
+            erased_s: clock.now_s(),
+            arrived_update: u64::from(arrived_update),
+            // The update the main world is in while the render thread hands it over.
+            handed_update: update.load(Ordering::Relaxed),
+            sent_s: f64::NAN,
+            camera_pose,
+        };
+        let waited = header.handed_update.saturating_sub(header.arrived_update);
+        counters
+            .waited_updates_max
+            .fetch_max(waited, Ordering::Relaxed);
+        if waited > 1 {
+            counters.handed_late.fetch_add(1, Ordering::Relaxed);
+        }
+        let _ = tx.send(Coded {
+            header,
+            rgba: read.data,
+        });
+    };
+    reads.0.push(DirectRead {
+        image: targets.composite.clone(),
+        deliver: Box::new(deliver),
+    });
+}
+
+/// The main world's update number (its frame count) for the render thread's stamps, and when
+/// the update began.
+fn count_update(mut video: ResMut<ServeVideo>, frames: Res<bevy::diagnostic::FrameCount>) {
+    video.update.store(u64::from(frames.0), Ordering::Relaxed);
+    video.update_started = Some(std::time::Instant::now());
+}
+
+/// The main world's time in this update, counted.
+fn time_update(video: Res<ServeVideo>) {
+    let Some(started) = video.update_started else {
+        return;
+    };
+    let counters = &video.options.counters;
+    counters.updates.fetch_add(1, Ordering::Relaxed);
+    if let Ok(mut times) = counters.update_ms.lock() {
+        if times.len() == UPDATE_TIMES_KEPT {
+            times.pop_front();
+        }
+        times.push_back(started.elapsed().as_secs_f64() * 1e3);
+    }
 }
 
 fn stop_when_done(video: Res<ServeVideo>, mut exit: MessageWriter<AppExit>) {

@@ -92,7 +92,10 @@ pub fn build_app(scene: &avatarm_scene::Scene, options: &PreviewOptions) -> Resu
         })
         .transpose()?;
     let base = AppBase {
-        webcam: options.webcam,
+        camera: options.webcam.map_or(
+            crate::app::CameraSource::Simulated,
+            crate::app::CameraSource::Webcam,
+        ),
         other_cameras: options.cameras.clone(),
         ..AppBase::new(Runner::Window {
             xr: options.xr,

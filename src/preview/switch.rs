@@ -163,7 +163,7 @@ pub fn switch_camera(world: &mut World, index: usize) -> Result<(), SwitchError>
     let now_s = world
         .get_resource::<Time<Fixed>>()
         .map_or(0.0, Time::elapsed_secs_f64);
-    let mut live = live_video(&scene, None);
+    let mut live = live_video(&scene, &crate::app::CameraSource::Simulated);
     // Stale counts from the switch, not from the run's start.
     live.last_publish_s = Some(now_s);
     world.insert_resource(live);

@@ -217,6 +217,32 @@ pub fn trial_parts(
     trial: u32,
     flag: &str,
 ) -> Result<(TrialParts, MappingMode), AppError> {
+    let link = match robot {
+        RobotChoice::Sim => TrialLink::Simulated,
+        RobotChoice::Ros => TrialLink::Ros,
+    };
+    trial_parts_on(scene, link, mode, trial, flag)
+}
+
+/// The robot behind a live trial ([`trial_parts_on`]).
+pub enum TrialLink {
+    /// The simulated arm.
+    Simulated,
+    /// The scene's ROS link (a real arm: it approaches the grasp's start first).
+    Ros,
+    /// A robot given as it is (a recording's: [`avatarm_core::sim::recorded::RecordedArm`]),
+    /// which does not approach.
+    Given(Box<dyn avatarm_core::sim::arm::RobotInterface>),
+}
+
+/// [`trial_parts`] on the robot `link`.
+pub fn trial_parts_on(
+    scene: &Scene,
+    link: TrialLink,
+    mode: Option<MappingMode>,
+    trial: u32,
+    flag: &str,
+) -> Result<(TrialParts, MappingMode), AppError> {
     let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
         return Err(AppError::flag(
             flag,
@@ -236,12 +262,14 @@ pub fn trial_parts(
             .copied()
             .unwrap_or(MappingMode::ClosedLoop),
     };
-    let link = match robot {
-        RobotChoice::Sim => None,
-        RobotChoice::Ros => Some(ros_arm(scene, setup, prepared.q0())?),
+    let approach = matches!(link, TrialLink::Ros);
+    let link = match link {
+        TrialLink::Simulated => None,
+        TrialLink::Ros => Some(ros_arm(scene, setup, prepared.q0())?),
+        TrialLink::Given(arm) => Some(arm),
     };
     let mut parts = TrialParts::on_robot(task, setup, &prepared, mode, trial, link)?;
-    if robot == RobotChoice::Ros {
+    if approach {
         // A real arm starts wherever it was left: it moves to the grasp's start first, at
         // the link's speed ratio, before the hand drives it.
         parts.teleop.approach(avatarm_mapping::Approach {

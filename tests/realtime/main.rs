@@ -1,5 +1,6 @@
 //! The app's real-time integration tests, in a binary of their own: two sites as processes
-//! through the impairment relay ([`network`]) and XR against a real OpenXR runtime ([`xr`]).
+//! through the impairment relay ([`network`]), the real frame path from a recorded camera and
+//! its stage stamps ([`latency`]), and XR against a real OpenXR runtime ([`xr`]).
 //! Their processes run on the wall clock, so they run one at a time and apart from the
 //! replays (cargo runs test binaries one after another).
 
@@ -10,6 +11,7 @@
 )]
 mod support;
 
+mod latency;
 mod network;
 mod xr;
 

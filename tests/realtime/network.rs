@@ -11,7 +11,7 @@ use serde_json::Value;
 
 use crate::serial;
 
-fn out_dir(name: &str) -> PathBuf {
+pub(crate) fn out_dir(name: &str) -> PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
         .join("network")
         .join(name);
@@ -20,7 +20,7 @@ fn out_dir(name: &str) -> PathBuf {
     dir
 }
 
-fn free_port() -> u16 {
+pub(crate) fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
         .and_then(|l| l.local_addr())
         .map(|a| a.port())
@@ -28,7 +28,7 @@ fn free_port() -> u16 {
 }
 
 /// The scene both sites run unless a test says otherwise.
-const POURING: &str = "assets/scenes/pouring.toml";
+pub(crate) const POURING: &str = "assets/scenes/pouring.toml";
 
 /// `avatarm serve` of the pouring scene on 127.0.0.1:`port`, logging into `dir`.
 fn serve(dir: &Path, port: u16, duration_s: f64, extra: &[&str]) -> Child {
@@ -36,7 +36,13 @@ fn serve(dir: &Path, port: u16, duration_s: f64, extra: &[&str]) -> Child {
 }
 
 /// `avatarm serve SCENE` on 127.0.0.1:`port`, logging into `dir`.
-fn serve_scene(dir: &Path, scene: &str, port: u16, duration_s: f64, extra: &[&str]) -> Child {
+pub(crate) fn serve_scene(
+    dir: &Path,
+    scene: &str,
+    port: u16,
+    duration_s: f64,
+    extra: &[&str],
+) -> Child {
     let log = std::fs::File::create(dir.join("serve.log")).expect("the test's set-up");
     Command::new(env!("CARGO_BIN_EXE_avatarm"))
         .args(["serve", scene, "--listen"])
@@ -56,7 +62,7 @@ fn join(dir: &Path, name: &str, port: u16, extra: &[&str]) -> Child {
 }
 
 /// `avatarm join --scene SCENE` to 127.0.0.1:`port`.
-fn join_scene(dir: &Path, name: &str, scene: &str, port: u16, extra: &[&str]) -> Child {
+pub(crate) fn join_scene(dir: &Path, name: &str, scene: &str, port: u16, extra: &[&str]) -> Child {
     let log = std::fs::File::create(dir.join(format!("{name}.log"))).expect("the test's set-up");
     Command::new(env!("CARGO_BIN_EXE_avatarm"))
         .arg("join")
@@ -87,7 +93,7 @@ fn wait_for_join(dir: &Path, name: &str, seconds: u64) {
     }
 }
 
-fn finish(mut child: Child, dir: &Path, name: &str) -> Value {
+pub(crate) fn finish(mut child: Child, dir: &Path, name: &str) -> Value {
     let status = child.wait().expect("the test's set-up");
     let log = std::fs::read_to_string(dir.join(format!("{name}.log"))).unwrap_or_default();
     assert!(status.success(), "{name} failed:\n{log}");
@@ -96,7 +102,7 @@ fn finish(mut child: Child, dir: &Path, name: &str) -> Value {
     serde_json::from_str(&text).expect("the test's set-up")
 }
 
-fn f(v: &Value, path: &str) -> f64 {
+pub(crate) fn f(v: &Value, path: &str) -> f64 {
     path.split('.')
         .fold(v, |v, k| &v[k])
         .as_f64()

@@ -304,4 +304,13 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+    /// A recorded timeline that cannot be played: empty, stamps not finite or not increasing,
+    /// samples of different sizes.
+    #[error("{what}: {message}")]
+    BadTimeline {
+        /// Which timeline (the recording and the stream).
+        what: String,
+        /// What is wrong, naming the sample.
+        message: String,
+    },
 }

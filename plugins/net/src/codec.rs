@@ -457,8 +457,11 @@ mod tests {
             width: 160,
             height: 120,
             capture_s: 0.0,
+            arrived_s: 0.0,
             erased_s: 0.0,
             sent_s: 0.0,
+            arrived_update: 0,
+            handed_update: 0,
             camera_pose: FrameHeader::pose_of(&nalgebra::Isometry3::identity()),
         }
     }

@@ -57,7 +57,7 @@ pub const MAX_AHEAD_S: f64 = 0.5;
 
 /// The protocol's version: a peer with another is refused with both versions named. Raised
 /// on every change of a message's fields or meaning.
-pub const PROTOCOL_VERSION: u32 = 4;
+pub const PROTOCOL_VERSION: u32 = 5;
 
 /// Largest operator target accepted (bytes): one is ~400.
 pub const MAX_TARGET_BYTES: usize = 4096;
@@ -286,10 +286,17 @@ pub struct FrameHeader {
     pub height: u32,
     /// Stage stamps (s, robot clock): captured by the camera.
     pub capture_s: f64,
+    /// Arrived in the robot site's app (taken from the camera's driver, player or renderer).
+    pub arrived_s: f64,
     /// Erased (the composite read back).
     pub erased_s: f64,
     /// Coded and handed to the network.
     pub sent_s: f64,
+    /// The robot site's app update (its frame count) the frame arrived in.
+    pub arrived_update: u64,
+    /// The update its erased image was read back in and handed to the encoder: a frame that
+    /// waited no longer than it must has `handed_update - arrived_update` at most 1.
+    pub handed_update: u64,
     /// The camera's pose the frame's mask was drawn from (`world_from_camera`, the scene's
     /// world, OpenCV optical axes): position (m) then unit quaternion `[x, y, z, w]`. A camera
     /// on a head moves, and a viewer places the hand and the twins in front of the frame from
@@ -317,7 +324,7 @@ impl FrameHeader {
             && self.stream <= MAX_SEQ
             && (1..=8192).contains(&self.width)
             && (1..=8192).contains(&self.height)
-            && [self.capture_s, self.erased_s, self.sent_s]
+            && [self.capture_s, self.arrived_s, self.erased_s, self.sent_s]
                 .iter()
                 .all(|v| v.is_finite())
             && self.camera.len() <= 64;
@@ -668,8 +675,11 @@ mod tests {
             width: 640,
             height: 480,
             capture_s: 1.0,
+            arrived_s: 1.005,
             erased_s: 1.01,
             sent_s: 1.02,
+            arrived_update: 40,
+            handed_update: 41,
             camera_pose: FrameHeader::pose_of(&Isometry3::from_parts(
                 Translation3::new(1.85, 0.1, 1.3),
                 UnitQuaternion::from_euler_angles(-2.0, 0.1, 1.6),

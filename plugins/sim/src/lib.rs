@@ -403,6 +403,13 @@ pub fn spawn_camera_views(
     commands
         .entity(real)
         .insert((DepthPrepass, RoomView, CameraBound));
+    if config.video.is_none() {
+        // The camera is a real one (a webcam, a recording): nothing renders the room's view.
+        commands
+            .entity(real)
+            .entry::<Camera>()
+            .and_modify(|mut camera| camera.is_active = false);
+    }
     let (mut no_robot, mut silhouette_image) = (None, None);
     if config.ground_truth {
         let image = images.add(target_image(k.width, k.height));

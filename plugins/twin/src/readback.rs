@@ -6,6 +6,11 @@
 //! image in that frame sees the previous frame's content, and an image whose camera does not
 //! render that frame becomes black. [`read_image_once`] copies the image itself after the
 //! frame's cameras instead (Bevy's [`Readback`]), for exactly one frame.
+//!
+//! [`direct`]: the same read back in the render world right after its frame, handed over on the
+//! render thread (the robot site's video: no update lost on the way to the encoder).
+
+pub mod direct;
 
 use bevy::image::TextureFormatPixelInfo;
 use bevy::prelude::*;
@@ -133,7 +138,7 @@ fn read_image(data: &[u8], image: Option<&Image>) -> Result<(u32, u32, usize, Ve
 
 /// Rows of `width * pixel` bytes out of a copy whose rows are aligned to 256 bytes (wgpu's
 /// `COPY_BYTES_PER_ROW_ALIGNMENT`); `None` when `data` is too short.
-fn unpad_rows(data: &[u8], width: u32, height: u32, pixel: usize) -> Option<Vec<u8>> {
+pub(crate) fn unpad_rows(data: &[u8], width: u32, height: u32, pixel: usize) -> Option<Vec<u8>> {
     let row = width as usize * pixel;
     let stride = row.div_ceil(256) * 256;
     let height = height as usize;

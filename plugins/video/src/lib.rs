@@ -7,9 +7,12 @@
 //! and one warning is logged per stall.
 //!
 //! Sources: the simulated camera (in `avatarm_sim`), [`folder::FolderSource`] (recorded frames
-//! with a timestamps file) and, with the `webcam` feature, a webcam through `nokhwa`.
+//! with a timestamps file), [`recorded::RecordedCameraPlugin`] (a recording played as a live
+//! camera, in real time) and, with the `webcam` feature, a webcam through `nokhwa`. The last two
+//! read on a thread of their own ([`threaded`]).
 //!
-//! Modules: [`folder`], [`pixels`], `webcam` (feature `webcam`), [`error`].
+//! Modules: [`folder`], [`pixels`], [`recorded`], [`threaded`], [`wake`] (an app woken by its
+//! camera's frames), `webcam` (feature `webcam`), [`error`].
 //!
 //! A camera that moves with a head (Alice's headset camera) also has a pose stream: the head's
 //! tracked poses arrive as [`HeadPoseMessage`]s and are kept in [`HeadTracking`], whose
@@ -21,6 +24,9 @@
 pub mod error;
 pub mod folder;
 pub mod pixels;
+pub mod recorded;
+pub mod threaded;
+pub mod wake;
 #[cfg(feature = "webcam")]
 pub mod webcam;
 

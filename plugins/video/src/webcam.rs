@@ -5,8 +5,7 @@
 //! the frames into the [`VideoInbox`]. No device, or a device that stops: one clear error, the
 //! app keeps running on the last frame (marked stale by [`crate::VideoPlugin`]).
 
-use std::sync::Mutex;
-use std::sync::mpsc::{Receiver, TryRecvError, channel};
+use std::sync::mpsc::{Sender, channel};
 use std::time::{Duration, Instant};
 
 use bevy::prelude::*;
@@ -16,7 +15,8 @@ use nokhwa::utils::{
 };
 
 use crate::pixels::{PixelFormat, to_rgba};
-use crate::{VideoFrame, VideoInbox, VideoSystems, app_clock};
+use crate::threaded::{SourceEvent, add_threaded_source, frame_wake};
+use crate::wake::FrameWake;
 
 /// Which webcam, and what to ask it for.
 #[derive(Debug, Clone)]
@@ -35,47 +35,24 @@ pub struct WebcamConfig {
     pub latency_s: f64,
 }
 
-enum Event {
-    Opened(String),
-    Frame {
-        index: u64,
-        at: Instant,
-        width: u32,
-        height: u32,
-        rgba: Vec<u8>,
-    },
-    Failed(String),
-}
-
 /// Reads a webcam on a thread; see the module docs.
 pub struct WebcamPlugin(pub WebcamConfig);
-
-#[derive(Resource)]
-struct Webcam {
-    config: WebcamConfig,
-    events: Mutex<Receiver<Event>>,
-    failed: bool,
-}
 
 impl Plugin for WebcamPlugin {
     fn build(&self, app: &mut App) {
         let (tx, rx) = channel();
         let config = self.0.clone();
+        let wake = frame_wake(app);
         let spawned = std::thread::Builder::new()
             .name(format!("webcam {}", config.index))
-            .spawn(move || capture(&config, &tx));
+            .spawn(move || capture(&config, &tx, &wake));
         if let Err(e) = spawned {
             error!(
                 "webcam {}: cannot start the capture thread: {e}",
                 self.0.index
             );
         }
-        app.insert_resource(Webcam {
-            config: self.0.clone(),
-            events: Mutex::new(rx),
-            failed: false,
-        })
-        .add_systems(Update, receive.in_set(VideoSystems::Receive));
+        add_threaded_source(app, format!("webcam {}", self.0.index), rx);
     }
 }
 
@@ -92,7 +69,7 @@ fn frame_format(f: FrameFormat) -> PixelFormat {
 
 /// The capture thread: open, stream, convert, send; ends on the first error or when the app
 /// is gone.
-fn capture(config: &WebcamConfig, tx: &std::sync::mpsc::Sender<Event>) {
+fn capture(config: &WebcamConfig, tx: &Sender<SourceEvent>, wake: &FrameWake) {
     let requested =
         RequestedFormat::new::<RgbFormat>(RequestedFormatType::Closest(CameraFormat::new(
             Resolution::new(config.width, config.height),
@@ -102,7 +79,7 @@ fn capture(config: &WebcamConfig, tx: &std::sync::mpsc::Sender<Event>) {
     let mut camera = match nokhwa::Camera::new(CameraIndex::Index(config.index), requested) {
         Ok(c) => c,
         Err(e) => {
-            let _ = tx.send(Event::Failed(format!(
+            let _ = tx.send(SourceEvent::Failed(format!(
                 "cannot open webcam {}: {e} (is a camera connected and readable, e.g. /dev/video{} on Linux?)",
                 config.index, config.index
             )));
@@ -110,14 +87,14 @@ fn capture(config: &WebcamConfig, tx: &std::sync::mpsc::Sender<Event>) {
         }
     };
     if let Err(e) = camera.open_stream() {
-        let _ = tx.send(Event::Failed(format!(
+        let _ = tx.send(SourceEvent::Failed(format!(
             "webcam {}: cannot start streaming: {e}",
             config.index
         )));
         return;
     }
     let format = camera.camera_format();
-    let _ = tx.send(Event::Opened(format!(
+    let _ = tx.send(SourceEvent::Opened(format!(
         "{} ({} {}x{} @ {} fps)",
         camera.info().human_name(),
         format.format(),
@@ -129,14 +106,17 @@ fn capture(config: &WebcamConfig, tx: &std::sync::mpsc::Sender<Event>) {
         let buffer = match camera.frame() {
             Ok(b) => b,
             Err(e) => {
-                let _ = tx.send(Event::Failed(format!(
+                let _ = tx.send(SourceEvent::Failed(format!(
                     "webcam {}: frame {index}: {e}",
                     config.index
                 )));
                 return;
             }
         };
-        let at = Instant::now();
+        // Read from the driver now; exposed its latency before.
+        let captured = Instant::now()
+            .checked_sub(Duration::from_secs_f64(config.latency_s.max(0.0)))
+            .unwrap_or_else(Instant::now);
         let res = buffer.resolution();
         let (width, height) = (res.width(), res.height());
         let event = match to_rgba(
@@ -145,74 +125,20 @@ fn capture(config: &WebcamConfig, tx: &std::sync::mpsc::Sender<Event>) {
             height,
             buffer.buffer(),
         ) {
-            Ok(rgba) => Event::Frame {
+            Ok(rgba) => SourceEvent::Frame {
                 index,
-                at,
+                captured,
                 width,
                 height,
                 rgba,
             },
-            Err(e) => Event::Failed(format!("webcam {}: frame {index}: {e}", config.index)),
+            Err(e) => SourceEvent::Failed(format!("webcam {}: frame {index}: {e}", config.index)),
         };
-        let stop = matches!(event, Event::Failed(_));
+        let stop = matches!(event, SourceEvent::Failed(_));
         if tx.send(event).is_err() || stop {
             let _ = camera.stop_stream();
             return;
         }
-    }
-}
-
-fn receive(mut webcam: ResMut<Webcam>, mut inbox: ResMut<VideoInbox>, time: Res<Time<Fixed>>) {
-    let now_app = app_clock(&time);
-    let now = Instant::now();
-    let mut events = Vec::new();
-    if let Ok(rx) = webcam.events.lock() {
-        loop {
-            match rx.try_recv() {
-                Ok(e) => events.push(e),
-                Err(TryRecvError::Empty) => break,
-                Err(TryRecvError::Disconnected) => {
-                    if !webcam.failed {
-                        events.push(Event::Failed(format!(
-                            "webcam {}: the capture thread stopped",
-                            webcam.config.index
-                        )));
-                    }
-                    break;
-                }
-            }
-        }
-    }
-    for event in events {
-        match event {
-            Event::Opened(what) => info!("webcam {}: streaming from {what}", webcam.config.index),
-            Event::Failed(message) => {
-                if !webcam.failed {
-                    error!("{message}; the app keeps running without a camera feed");
-                }
-                webcam.failed = true;
-            }
-            Event::Frame {
-                index,
-                at,
-                width,
-                height,
-                rgba,
-            } => {
-                let age = now.saturating_duration_since(at)
-                    + Duration::from_secs_f64(webcam.config.latency_s.max(0.0));
-                let frame = VideoFrame {
-                    index,
-                    capture_s: now_app - age.as_secs_f64(),
-                    arrival_s: now_app,
-                    width,
-                    height,
-                    rgba: std::sync::Arc::new(rgba),
-                };
-                if let Err(e) = inbox.push(frame) {
-                    warn!("webcam {}: {e}", webcam.config.index);
-                }
-            }
-        }
+        wake.notify();
     }
 }

@@ -11,10 +11,14 @@
 //! A command with NaN/inf values or the wrong length is refused and the robot keeps its last
 //! good command.
 //!
+//! [`recorded`] plays a recording's robot (and the timeline its camera shares) as the live
+//! hardware.
+//!
 //! [`arm`] puts the simulated robot behind [`arm::RobotInterface`], the trait every robot
 //! backend implements (ROS links included), with a gripper that carries the real object.
 
 pub mod arm;
+pub mod recorded;
 
 use std::collections::VecDeque;
 

@@ -1,0 +1,167 @@
+//! Reading an image back in the render world, right after the frame that drew it, and handing
+//! its bytes straight to whoever waits for them (a video encoder's thread), with no trip
+//! through the main world.
+//!
+//! Bevy's [`bevy::render::gpu_readback::Readback`] (and [`super::read_image_once`] on it) maps
+//! the copy after the frame, notices the mapping at a later frame's poll and triggers the main
+//! world at a later extraction: a frame erased in update N reaches the main world in update N+3
+//! (measured at the robot site, docs/latency.md). Here the copy is submitted after the frame's
+//! own commands, the render thread waits for it (`PollType::Wait`: the GPU's time for the frame
+//! and the copy, which the frame needs anyway) and calls the request's `deliver` on the render
+//! thread: the frame is in the encoder's hands in the update it was drawn in (the next one's
+//! with Bevy's pipelined rendering, whose render of update N runs beside update N+1).
+
+use bevy::image::TextureFormatPixelInfo;
+use bevy::prelude::*;
+use bevy::render::render_asset::RenderAssets;
+use bevy::render::render_resource::{
+    BufferDescriptor, BufferUsages, CommandEncoderDescriptor, MapMode, PollType,
+    TexelCopyBufferInfo, TexelCopyBufferLayout,
+};
+use bevy::render::renderer::{RenderDevice, RenderQueue};
+use bevy::render::texture::GpuImage;
+use bevy::render::{ExtractSchedule, MainWorld, Render, RenderApp, RenderSystems};
+
+use crate::TwinError;
+
+/// An image's bytes, rows packed (no alignment padding), in its texture's format.
+#[derive(Debug, Clone)]
+pub struct ImageBytes {
+    /// Width (px).
+    pub width: u32,
+    /// Height (px).
+    pub height: u32,
+    /// Bytes per pixel of the texture's format (4 for RGBA8).
+    pub bytes_per_pixel: usize,
+    /// `width * height * bytes_per_pixel` bytes, top row first.
+    pub data: Vec<u8>,
+}
+
+/// What a [`DirectRead`] hands its bytes (or why there are none) to, on the render thread.
+pub type Deliver = Box<dyn FnOnce(Result<ImageBytes, TwinError>) + Send + Sync>;
+
+/// A request to read `image` back as this update's frame draws it.
+pub struct DirectRead {
+    /// The image.
+    pub image: Handle<Image>,
+    /// Called once on the render thread with its bytes; it should be quick (send them on).
+    pub deliver: Deliver,
+}
+
+/// The main world's requests of this update ([`DirectRead`]); taken at the extraction.
+#[derive(Resource, Default)]
+pub struct DirectReadQueue(pub Vec<DirectRead>);
+
+/// The requests extracted with this frame (render world).
+#[derive(Resource, Default)]
+struct ExtractedReads(Vec<DirectRead>);
+
+/// Serves [`DirectReadQueue`]: each request is read back after its frame and delivered on the
+/// render thread.
+#[derive(Default)]
+pub struct DirectReadbackPlugin;
+
+impl Plugin for DirectReadbackPlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<DirectReadQueue>();
+        if let Some(render) = app.get_sub_app_mut(RenderApp) {
+            render
+                .init_resource::<ExtractedReads>()
+                .add_systems(ExtractSchedule, take_requests)
+                .add_systems(Render, read_back.in_set(RenderSystems::Cleanup));
+        }
+    }
+}
+
+fn take_requests(mut main: ResMut<MainWorld>, mut extracted: ResMut<ExtractedReads>) {
+    if let Some(mut queue) = main.get_resource_mut::<DirectReadQueue>() {
+        extracted.0.append(&mut queue.0);
+    }
+}
+
+/// After the frame's commands: one copy per request, one submission, one wait, each delivered.
+fn read_back(
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+    images: Res<RenderAssets<GpuImage>>,
+    mut extracted: ResMut<ExtractedReads>,
+) {
+    if extracted.0.is_empty() {
+        return;
+    }
+    let bad = |message: String| TwinError::Readback { message };
+    let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor {
+        label: Some("avatarm direct readback"),
+    });
+    let mut copies = Vec::new();
+    for request in extracted.0.drain(..) {
+        let Some(gpu) = images.get(&request.image) else {
+            (request.deliver)(Err(bad("the image is not on the GPU yet".into())));
+            continue;
+        };
+        let descriptor = &gpu.texture_descriptor;
+        let Ok(pixel) = descriptor.format.pixel_size() else {
+            (request.deliver)(Err(bad(format!(
+                "format {:?} has no fixed pixel size",
+                descriptor.format
+            ))));
+            continue;
+        };
+        let size = descriptor.size;
+        let stride = (size.width as usize * pixel).div_ceil(256) * 256;
+        let buffer = device.create_buffer(&BufferDescriptor {
+            label: Some("avatarm direct readback"),
+            size: (stride * size.height as usize) as u64,
+            usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        encoder.copy_texture_to_buffer(
+            gpu.texture.as_image_copy(),
+            TexelCopyBufferInfo {
+                buffer: &buffer,
+                layout: TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(stride as u32),
+                    rows_per_image: None,
+                },
+            },
+            size,
+        );
+        copies.push((request, buffer, size, pixel));
+    }
+    if copies.is_empty() {
+        return;
+    }
+    queue.submit([encoder.finish()]);
+    let mapped: Vec<_> = copies
+        .iter()
+        .map(|(_, buffer, _, _)| {
+            let (tx, rx) = std::sync::mpsc::channel();
+            buffer.slice(..).map_async(MapMode::Read, move |r| {
+                let _ = tx.send(r);
+            });
+            rx
+        })
+        .collect();
+    let waited = device.poll(PollType::wait_indefinitely());
+    for ((request, buffer, size, pixel), rx) in copies.into_iter().zip(mapped) {
+        let result = match (&waited, rx.try_recv()) {
+            (Err(e), _) => Err(bad(format!("waiting for the GPU: {e}"))),
+            (Ok(_), Ok(Ok(()))) => {
+                let data = buffer.slice(..).get_mapped_range().to_vec();
+                buffer.unmap();
+                super::unpad_rows(&data, size.width, size.height, pixel)
+                    .map(|data| ImageBytes {
+                        width: size.width,
+                        height: size.height,
+                        bytes_per_pixel: pixel,
+                        data,
+                    })
+                    .ok_or_else(|| bad(format!("{} bytes do not hold the image", data.len())))
+            }
+            (Ok(_), Ok(Err(e))) => Err(bad(format!("mapping the copy: {e}"))),
+            (Ok(_), Err(_)) => Err(bad("the copy was not mapped after the wait".into())),
+        };
+        (request.deliver)(result);
+    }
+}
