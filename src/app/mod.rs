@@ -463,6 +463,7 @@ impl Plugin for AvatarmSetupPlugin {
                 video: base.camera.is_simulated().then(|| sim_video(scene)),
                 head: sim_head(scene),
                 external_drive: false,
+                room_view: true,
             })
             .insert_resource(live_video(scene, &base.camera))
             .insert_resource(head_tracking(scene))

@@ -67,6 +67,8 @@ pub struct VideoPoint {
     pub height: u32,
     /// `jpeg` or `h264`.
     pub codec: String,
+    /// The encoder (`jpeg-encoder (SIMD)`, `image`, `openh264`).
+    pub encoder: String,
     /// JPEG quality, or the H.264 target (Mbit/s).
     pub setting: f64,
     /// Frames coded.
@@ -87,9 +89,9 @@ pub struct VideoPoint {
     pub psnr_db: f64,
     /// The worst frame's PSNR (dB).
     pub psnr_min_db: f64,
-    /// Bit rate over JPEG quality 85's at this size.
+    /// Bit rate over JPEG quality 85's (the `image` crate's encoder, the baseline) at this size.
     pub rate_ratio: f64,
-    /// Median encode time over JPEG quality 85's at this size.
+    /// Median encode time over that baseline's at this size.
     pub encode_ratio: f64,
 }
 
@@ -248,6 +250,10 @@ fn code(
         width,
         height,
         codec: settings.codec.name().into(),
+        encoder: match settings.codec {
+            Codec::Jpeg => settings.jpeg_encoder.name().into(),
+            Codec::H264 => "openh264".into(),
+        },
         setting: match settings.codec {
             Codec::Jpeg => f64::from(settings.jpeg_quality),
             Codec::H264 => f64::from(settings.bitrate_bps) / 1e6,
@@ -264,6 +270,56 @@ fn code(
         rate_ratio: f64::NAN,
         encode_ratio: f64::NAN,
     })
+}
+
+/// The sweep's encoder settings, the baseline first: JPEG at 85 through the `image` crate's
+/// encoder; then the SIMD encoder at 85 and the other qualities, then H.264 at each target.
+/// Errors name the flag whose value is out of range.
+fn sweep_settings(sweep: &VideoSweep) -> Result<Vec<EncoderSettings>, AppError> {
+    // The baseline is what coded the robot site's video before the SIMD encoder.
+    let mut settings = vec![
+        EncoderSettings {
+            codec: Codec::Jpeg,
+            jpeg_quality: 85,
+            jpeg_encoder: avatarm_net::codec::JpegEncoder::Image,
+            ..EncoderSettings::default()
+        },
+        EncoderSettings {
+            codec: Codec::Jpeg,
+            jpeg_quality: 85,
+            ..EncoderSettings::default()
+        },
+    ];
+    settings.extend(
+        sweep
+            .jpeg_qualities
+            .iter()
+            .filter(|&&q| q != 85)
+            .map(|&q| EncoderSettings {
+                codec: Codec::Jpeg,
+                jpeg_quality: q,
+                ..EncoderSettings::default()
+            }),
+    );
+    for &m in &sweep.h264_mbit_s {
+        if !(m.is_finite() && (0.01..=200.0).contains(&m)) {
+            return Err(AppError::flag(
+                "--h264",
+                format!("{m} Mbit/s must be 0.01..=200"),
+            ));
+        }
+        settings.push(EncoderSettings {
+            codec: Codec::H264,
+            bitrate_bps: (m * 1e6).round() as u32,
+            ..EncoderSettings::default()
+        });
+    }
+    for s in &mut settings {
+        s.fps = sweep.fps as f32;
+        s.keyframe_interval_s = sweep.keyframe_interval_s;
+        s.validate()?;
+    }
+    Ok(settings)
 }
 
 /// Runs the sweep on each named source of frames, writes `video_codecs.csv` and the chart
@@ -297,40 +353,7 @@ pub fn run_video(
             ));
         }
     }
-    let mut settings = vec![EncoderSettings {
-        codec: Codec::Jpeg,
-        jpeg_quality: 85,
-        ..EncoderSettings::default()
-    }];
-    settings.extend(
-        sweep
-            .jpeg_qualities
-            .iter()
-            .filter(|&&q| q != 85)
-            .map(|&q| EncoderSettings {
-                codec: Codec::Jpeg,
-                jpeg_quality: q,
-                ..EncoderSettings::default()
-            }),
-    );
-    for &m in &sweep.h264_mbit_s {
-        if !(m.is_finite() && (0.01..=200.0).contains(&m)) {
-            return Err(AppError::flag(
-                "--h264",
-                format!("{m} Mbit/s must be 0.01..=200"),
-            ));
-        }
-        settings.push(EncoderSettings {
-            codec: Codec::H264,
-            bitrate_bps: (m * 1e6).round() as u32,
-            ..EncoderSettings::default()
-        });
-    }
-    for s in &mut settings {
-        s.fps = sweep.fps as f32;
-        s.keyframe_interval_s = sweep.keyframe_interval_s;
-        s.validate()?;
-    }
+    let settings = sweep_settings(sweep)?;
     std::fs::create_dir_all(out).map_err(|e| AppError::write(out, e))?;
     let bar = crate::progress::bar(
         (sources.len() * sweep.sizes.len() * settings.len()) as u64,
@@ -362,15 +385,17 @@ pub fn run_video(
     let csv = out.join("video_codecs.csv");
     write_table(
         &csv,
-        "source,width,height,codec,setting,frames,skipped,mbit_s,keyframe_kb,delta_kb,encode_ms_median,\
-encode_ms_p95,decode_ms_median,decode_ms_p95,psnr_db,psnr_min_db,rate_vs_jpeg85,encode_vs_jpeg85",
+        "source,width,height,codec,encoder,setting,frames,skipped,mbit_s,keyframe_kb,delta_kb,\
+encode_ms_median,encode_ms_p95,decode_ms_median,decode_ms_p95,psnr_db,psnr_min_db,rate_vs_jpeg85,\
+encode_vs_jpeg85",
         points.iter().map(|p| {
             format!(
-                "{},{},{},{},{},{},{},{:.3},{:.2},{:.2},{:.2},{:.2},{:.2},{:.2},{:.2},{:.2},{:.3},{:.3}",
+                "{},{},{},{},{},{},{},{},{:.3},{:.2},{:.2},{:.2},{:.2},{:.2},{:.2},{:.2},{:.2},{:.3},{:.3}",
                 p.source,
                 p.width,
                 p.height,
                 p.codec,
+                p.encoder,
                 p.setting,
                 p.frames,
                 p.skipped,
@@ -448,17 +473,18 @@ impl Chart for VideoChart<'_> {
                 &format!("{w}x{h}: bit rate (Mbit/s)"),
                 "PSNR after coding (dB)",
             )?;
-            let mut series: Vec<(&str, &str)> = Vec::new();
+            let mut series: Vec<(&str, &str, &str)> = Vec::new();
             for p in &here {
-                if !series.contains(&(p.source.as_str(), p.codec.as_str())) {
-                    series.push((p.source.as_str(), p.codec.as_str()));
+                let key = (p.source.as_str(), p.codec.as_str(), p.encoder.as_str());
+                if !series.contains(&key) {
+                    series.push(key);
                 }
             }
-            for (i, &(source, codec)) in series.iter().enumerate() {
+            for (i, &(source, codec, encoder)) in series.iter().enumerate() {
                 let colour = Palette99::pick(i).to_rgba();
                 let mut pts: Vec<&&VideoPoint> = here
                     .iter()
-                    .filter(|p| p.codec == codec && p.source == source)
+                    .filter(|p| p.codec == codec && p.source == source && p.encoder == encoder)
                     .collect();
                 pts.sort_by(|a, b| a.mbit_s.total_cmp(&b.mbit_s));
                 chart
@@ -468,7 +494,7 @@ impl Chart for VideoChart<'_> {
                     ))
                     .map_err(err)?
                     .label(if codec == "jpeg" {
-                        format!("{source} frames, JPEG (quality)")
+                        format!("{source} frames, JPEG (quality), {encoder}")
                     } else {
                         format!("{source} frames, H.264 (target Mbit/s)")
                     })
@@ -532,9 +558,18 @@ mod tests {
             ..VideoSweep::default()
         };
         let out = run_video(&[("test".into(), frames())], &sweep, &dir).unwrap();
-        assert_eq!(out.points.len(), 3);
+        // The image crate's JPEG at 85 (the baseline), the SIMD encoder's at 85 and 50, H.264.
+        assert_eq!(out.points.len(), 4);
         assert_eq!(out.points[0].setting, 85.0);
+        assert_eq!(out.points[0].encoder, "image");
         assert_eq!(out.points[0].rate_ratio, 1.0);
+        assert_eq!(out.points[1].encoder, "jpeg-encoder (SIMD)");
+        // The same quality from either encoder: about the same bits.
+        assert!(
+            (0.5..2.0).contains(&out.points[1].rate_ratio),
+            "{:?}",
+            out.points[1]
+        );
         assert!(
             out.points
                 .iter()
@@ -543,9 +578,9 @@ mod tests {
             out.points
         );
         // Lower JPEG quality, fewer bits.
-        assert!(out.points[1].mbit_s < out.points[0].mbit_s);
+        assert!(out.points[2].mbit_s < out.points[1].mbit_s);
         let csv = std::fs::read_to_string(&out.csv).unwrap();
-        assert_eq!(csv.lines().count(), 4);
+        assert_eq!(csv.lines().count(), 5);
         assert!(out.png.is_file() && out.svg.is_file());
         let bad = VideoSweep {
             sizes: vec![(63, 48)],

@@ -124,6 +124,7 @@ pub fn encoder_settings(
     let settings = avatarm_net::codec::EncoderSettings {
         codec,
         jpeg_quality,
+        jpeg_encoder: avatarm_net::codec::JpegEncoder::default(),
         bitrate_bps: (bitrate_mbit_s * 1e6).round() as u32,
         fps: fps.clamp(1.0, 240.0) as f32,
         keyframe_interval_s,

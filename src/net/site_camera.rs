@@ -151,23 +151,18 @@ fn open_recording(path: &Path, scene: &Scene) -> Result<OpenedCamera, AppError> 
     let stamps: Vec<f64> = frames.iter().map(|f| f.stamp_s).collect();
     let playback = Playback::new(&format!("{name}: camera frames"), Instant::now(), &stamps)
         .map_err(|e| bad(e.to_string()))?;
-    let states: Vec<JointState> = joints
-        .into_iter()
-        .map(|(stamp_ns, q)| JointState {
-            stamp_s: stamp_ns as f64 * 1e-9,
-            velocities: nalgebra::DVector::zeros(0),
-            positions: q,
-        })
-        .collect();
+    let states = lap_of_joints(joints, &playback, &name)?;
     // The joints on the frames' timeline: each frame meets the joints it was recorded with.
     let arm = RecordedArm::new(
         format!("recording {}", file_name(path)),
         states,
         Playback::with_lap(
+            &name,
             playback_start(&playback),
             playback.first_s(),
             playback.lap_s(),
-        ),
+        )
+        .map_err(|e| bad(e.to_string()))?,
     )
     .map_err(|e| bad(e.to_string()))?;
     info!(
@@ -189,6 +184,52 @@ fn open_recording(path: &Path, scene: &Scene) -> Result<OpenedCamera, AppError> 
     })
 }
 
+/// The recording's joint states that fall in one lap of the frames' playback (from the first
+/// frame's capture to a frame period after the last's): the lap repeats, and a state outside
+/// it would be released out of order. States of one stamp (a message per group of joints)
+/// are one state, the last. Errors: no state in the lap.
+fn lap_of_joints(
+    joints: Vec<(u64, nalgebra::DVector<f64>)>,
+    playback: &Playback,
+    name: &str,
+) -> Result<Vec<JointState>, AppError> {
+    let (first, end) = (playback.first_s(), playback.first_s() + playback.lap_s());
+    let total = joints.len();
+    let mut states: Vec<JointState> = Vec::with_capacity(total);
+    for (stamp_ns, q) in joints {
+        let stamp_s = stamp_ns as f64 * 1e-9;
+        if !(first..end).contains(&stamp_s) {
+            continue;
+        }
+        let state = JointState {
+            stamp_s,
+            velocities: nalgebra::DVector::zeros(0),
+            positions: q,
+        };
+        match states.last_mut() {
+            Some(last) if last.stamp_s == stamp_s => *last = state,
+            // Out of order (a recording's are not): left out.
+            Some(last) if last.stamp_s > stamp_s => {}
+            _ => states.push(state),
+        }
+    }
+    if states.is_empty() {
+        return Err(AppError::recording(
+            name.to_owned(),
+            format!(
+                "none of its {total} joint states falls between its first and last camera frames"
+            ),
+        ));
+    }
+    if states.len() < total {
+        info!(
+            "{name}: {} of {total} joint states played (those between the first and last camera frames, one per stamp)",
+            states.len()
+        );
+    }
+    Ok(states)
+}
+
 /// When a playback's first sample is released.
 fn playback_start(playback: &Playback) -> Instant {
     playback.release(playback.first_s(), 0)
@@ -199,4 +240,40 @@ fn file_name(path: &Path) -> String {
         || path.display().to_string(),
         |n| n.to_string_lossy().into_owned(),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Joints outside the frames' lap are left out (they would be released out of order in a
+    /// loop), one state per stamp is kept (the last), and a recording whose joints all fall
+    /// outside is refused naming it.
+    #[test]
+    fn the_joints_played_are_one_lap_of_the_frames_one_per_stamp() {
+        let start = Instant::now();
+        // Frames at 10.0, 10.1, 10.2 s: a lap of 0.3 s from 10.0.
+        let playback = Playback::new("frames", start, &[10.0, 10.1, 10.2]).expect("valid");
+        let q = |v: f64| nalgebra::DVector::from_element(2, v);
+        let ns = |s: f64| (s * 1e9).round() as u64;
+        let joints = vec![
+            (ns(9.9), q(0.0)),
+            (ns(10.0), q(1.0)),
+            (ns(10.05), q(2.0)),
+            (ns(10.05), q(3.0)),
+            (ns(10.25), q(4.0)),
+            (ns(10.35), q(5.0)),
+        ];
+        let states = lap_of_joints(joints, &playback, "rec.mcap").expect("states");
+        let kept: Vec<f64> = states.iter().map(|s| s.positions[0]).collect();
+        assert_eq!(kept, [1.0, 3.0, 4.0]);
+        let e = lap_of_joints(vec![(ns(20.0), q(0.0))], &playback, "rec.mcap")
+            .expect_err("none in the lap");
+        assert!(e.to_string().contains("rec.mcap"), "{e}");
+        // The arm takes them as they are.
+        let lap = Playback::with_lap("joints", start, 10.0, playback.lap_s()).expect("valid");
+        assert!(RecordedArm::new("rec", states, lap).is_ok());
+        assert!(Playback::with_lap("joints", start, f64::NAN, 0.3).is_err());
+        assert!(Playback::with_lap("joints", start, 0.0, 0.0).is_err());
+    }
 }

@@ -184,6 +184,8 @@ impl Plugin for ServeVideoPlugin {
             });
         if let Some(mut room) = app.world_mut().get_resource_mut::<SimRoomConfig>() {
             room.external_drive = true;
+            // The video is the camera's: a real camera's frames, or the simulated one's.
+            room.room_view = false;
         }
         add_render_settled(app);
         if let (Some(times), Ok(mut slot)) = (
@@ -468,6 +470,7 @@ fn publish_erased(
     };
     reads.0.push(DirectRead {
         image: targets.composite.clone(),
+        frame: render_frame,
         deliver: Box::new(deliver),
     });
 }

@@ -24,6 +24,27 @@ use openh264::{OpenH264API, Timestamp};
 use crate::NetError;
 use crate::msg::{Codec, FrameHeader};
 
+/// A JPEG encoder: the same format and quality scale, not the same speed (`avatarm bench
+/// video` measures both; docs/latency.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum JpegEncoder {
+    /// `jpeg-encoder`, with its SIMD paths (AVX2, chosen at run time where the CPU has it).
+    #[default]
+    Simd,
+    /// The `image` crate's encoder (scalar): the baseline it was measured against.
+    Image,
+}
+
+impl JpegEncoder {
+    /// Its name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Simd => "jpeg-encoder (SIMD)",
+            Self::Image => "image",
+        }
+    }
+}
+
 /// How the robot site codes its video.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EncoderSettings {
@@ -31,6 +52,8 @@ pub struct EncoderSettings {
     pub codec: Codec,
     /// JPEG quality (1..=100).
     pub jpeg_quality: u8,
+    /// Which JPEG encoder codes the frames.
+    pub jpeg_encoder: JpegEncoder,
     /// H.264 target bit rate (bit/s; OpenH264's bit-rate mode).
     pub bitrate_bps: u32,
     /// The frame rate the H.264 rate control plans for (Hz): the camera's.
@@ -45,6 +68,7 @@ impl Default for EncoderSettings {
         Self {
             codec: Codec::Jpeg,
             jpeg_quality: 85,
+            jpeg_encoder: JpegEncoder::Simd,
             bitrate_bps: 2_000_000,
             fps: 30.0,
             keyframe_interval_s: 2.0,
@@ -153,6 +177,43 @@ fn check_image(codec: Codec, rgba: &[u8], width: u32, height: u32) -> Result<(),
     Ok(())
 }
 
+/// One RGBA8 frame (checked: `width * height * 4` bytes) as a baseline JPEG at `quality`.
+fn encode_jpeg(
+    encoder: JpegEncoder,
+    quality: u8,
+    rgba: &[u8],
+    width: u32,
+    height: u32,
+) -> Result<Vec<u8>, NetError> {
+    let mut bytes = Vec::new();
+    match encoder {
+        JpegEncoder::Simd => {
+            let (Ok(w), Ok(h)) = (u16::try_from(width), u16::try_from(height)) else {
+                return Err(codec_error(
+                    "jpeg encoder",
+                    format!("{width}x{height} is larger than JPEG's 65535x65535"),
+                ));
+            };
+            let mut jpeg = jpeg_encoder::Encoder::new(&mut bytes, quality);
+            // Full-resolution colour (4:4:4), as the `image` crate's encoder codes it: the
+            // same picture for the same quality, faster (`avatarm bench video`).
+            jpeg.set_sampling_factor(jpeg_encoder::SamplingFactor::R_4_4_4);
+            jpeg.encode(rgba, w, h, jpeg_encoder::ColorType::Rgba)
+                .map_err(|e| codec_error("jpeg encoder", e))?;
+        }
+        JpegEncoder::Image => {
+            let rgb: Vec<u8> = rgba
+                .chunks_exact(4)
+                .flat_map(|p| [p[0], p[1], p[2]])
+                .collect();
+            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, quality)
+                .write_image(&rgb, width, height, image::ExtendedColorType::Rgb8)
+                .map_err(|e| codec_error("jpeg encoder", e))?;
+        }
+    }
+    Ok(bytes)
+}
+
 impl VideoEncoder {
     /// An encoder with these settings. Errors name the setting, or OpenH264's refusal.
     pub fn new(settings: EncoderSettings) -> Result<Self, NetError> {
@@ -215,20 +276,16 @@ impl VideoEncoder {
     ) -> Result<Option<EncodedFrame>, NetError> {
         check_image(self.settings.codec, rgba, width, height)?;
         let (bytes, keyframe) = match &mut self.kind {
-            EncoderKind::Jpeg => {
-                let rgb: Vec<u8> = rgba
-                    .chunks_exact(4)
-                    .flat_map(|p| [p[0], p[1], p[2]])
-                    .collect();
-                let mut bytes = Vec::new();
-                image::codecs::jpeg::JpegEncoder::new_with_quality(
-                    &mut bytes,
+            EncoderKind::Jpeg => (
+                encode_jpeg(
+                    self.settings.jpeg_encoder,
                     self.settings.jpeg_quality,
-                )
-                .write_image(&rgb, width, height, image::ExtendedColorType::Rgb8)
-                .map_err(|e| codec_error("jpeg encoder", e))?;
-                (bytes, true)
-            }
+                    rgba,
+                    width,
+                    height,
+                )?,
+                true,
+            ),
             EncoderKind::H264(encoder) => {
                 let due = self
                     .last_keyframe_s
@@ -443,6 +500,30 @@ mod tests {
             }
         }
         rgba
+    }
+
+    /// Both JPEG encoders code the same picture to within JPEG's loss at quality 85, and both
+    /// decode with the viewer's decoder.
+    #[test]
+    fn both_jpeg_encoders_give_the_picture_back() {
+        let rgba = picture(160, 120, 3);
+        let sizes: Vec<usize> = [JpegEncoder::Simd, JpegEncoder::Image]
+            .into_iter()
+            .map(|encoder| {
+                let bytes = encode_jpeg(encoder, 85, &rgba, 160, 120).expect("coded");
+                let back = image::load_from_memory(&bytes).expect("decoded").to_rgba8();
+                assert_eq!(back.dimensions(), (160, 120));
+                let psnr = psnr_rgba(&rgba, back.as_raw()).expect("same size");
+                assert!(psnr > 30.0, "{}: {psnr} dB", encoder.name());
+                bytes.len()
+            })
+            .collect();
+        assert!(
+            sizes[0] < 2 * sizes[1] && sizes[1] < 2 * sizes[0],
+            "{sizes:?}"
+        );
+        let e = encode_jpeg(JpegEncoder::Simd, 85, &[0; 4], 70_000, 1).expect_err("too wide");
+        assert!(e.to_string().contains("65535"), "{e}");
     }
 
     fn header(codec: Codec, f: &EncodedFrame, index: u64) -> FrameHeader {

@@ -100,6 +100,10 @@ pub struct SimRoomConfig {
     /// writes it into [`SimRobotState`] and delivers its joint states): the room neither
     /// commands, steps nor reads out the robot, it renders it.
     pub external_drive: bool,
+    /// Render the real camera's view of the room even without simulated [`video`](Self::video)
+    /// (a preview shows it on its panel); off at the robot site, where a real camera's frames
+    /// are the video and nothing shows the room.
+    pub room_view: bool,
 }
 
 /// One rendered part of a prop (the room's view and its silhouette view): moving a prop
@@ -403,8 +407,8 @@ pub fn spawn_camera_views(
     commands
         .entity(real)
         .insert((DepthPrepass, RoomView, CameraBound));
-    if config.video.is_none() {
-        // The camera is a real one (a webcam, a recording): nothing renders the room's view.
+    if config.video.is_none() && !config.room_view {
+        // The camera is a real one (a webcam, a recording) and nothing shows the room's view.
         commands
             .entity(real)
             .entry::<Camera>()

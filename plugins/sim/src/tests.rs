@@ -67,6 +67,7 @@ fn config(ground_truth: bool) -> SimRoomConfig {
         twin: None,
         video: None,
         external_drive: false,
+        room_view: true,
         model,
     }
 }

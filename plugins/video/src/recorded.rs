@@ -3,11 +3,12 @@
 //! JPEG) and hands it to the app as a webcam's would be ([`crate::threaded`]). The frame's
 //! capture instant is its release: what a camera with no transport delay would give. A player
 //! that falls behind (decoding slower than the camera's rate) skips to the newest due frame,
-//! as a camera's driver drops the frames nobody read.
+//! and a frame the app has not taken two frames later is dropped, as a camera's driver drops
+//! the frames nobody read.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::mpsc::{Sender, channel};
+use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
 use std::time::Instant;
 
 use avatarm_core::sim::recorded::{Playback, PlaybackCursor};
@@ -30,7 +31,7 @@ pub struct CodedFrame {
 pub struct PlayerCounters {
     /// Frames decoded and handed to the app.
     pub played: AtomicU64,
-    /// Frames skipped because the player fell behind.
+    /// Frames skipped: the player fell behind, or the app had not taken the two before.
     pub skipped: AtomicU64,
     /// Laps completed.
     pub laps: AtomicU64,
@@ -65,7 +66,9 @@ impl Drop for PlayerStop {
 
 impl Plugin for RecordedCameraPlugin {
     fn build(&self, app: &mut App) {
-        let (tx, rx) = channel();
+        // Two frames in flight at most: a frame nobody took is dropped, as a camera's driver
+        // drops it, rather than queued behind the app.
+        let (tx, rx) = sync_channel(2);
         let config = self.0.clone();
         let stop = Arc::new(AtomicBool::new(false));
         let thread_stop = stop.clone();
@@ -84,12 +87,12 @@ impl Plugin for RecordedCameraPlugin {
 /// The player's thread: wait for the next frame's release, decode the newest due, send.
 fn play(
     config: &RecordedCameraConfig,
-    tx: &Sender<SourceEvent>,
+    tx: &SyncSender<SourceEvent>,
     stop: &AtomicBool,
     wake: &FrameWake,
 ) {
     let stamps: Vec<f64> = config.frames.iter().map(|f| f.stamp_s).collect();
-    let _ = tx.send(SourceEvent::Opened(format!(
+    let _ = tx.try_send(SourceEvent::Opened(format!(
         "a recording: {} frames over {:.1} s, played in a loop",
         stamps.len(),
         config.playback.lap_s()
@@ -98,7 +101,7 @@ fn play(
     let mut index = 0u64;
     while !stop.load(Ordering::Relaxed) {
         let Some(next) = config.playback.next_release(&stamps, cursor) else {
-            let _ = tx.send(SourceEvent::Failed(format!(
+            let _ = tx.try_send(SourceEvent::Failed(format!(
                 "{}: the recording has no frames",
                 config.name
             )));
@@ -135,13 +138,22 @@ fn play(
                 config.name, frame.stamp_s
             )),
         };
-        let failed = matches!(event, SourceEvent::Failed(_));
-        if tx.send(event).is_err() || failed {
+        if matches!(event, SourceEvent::Failed(_)) {
+            // The last word: waits for room.
+            let _ = tx.send(event);
             return;
         }
-        wake.notify();
+        match tx.try_send(event) {
+            Ok(()) => {
+                wake.notify();
+                config.counters.played.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(TrySendError::Full(_)) => {
+                config.counters.skipped.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(TrySendError::Disconnected(_)) => return,
+        }
         index += 1;
-        config.counters.played.fetch_add(1, Ordering::Relaxed);
     }
 }
 
@@ -203,7 +215,7 @@ mod tests {
             data: vec![1u8, 2, 3].into(),
         }]
         .into();
-        let (tx, rx) = channel();
+        let (tx, rx) = sync_channel(4);
         let config = RecordedCameraConfig {
             name: "bad.mcap".into(),
             frames: bad,

@@ -43,8 +43,8 @@ impl FrameWake {
 /// floods does not spin the app). Inserts a [`FrameWake`] for the sources to ring.
 #[derive(Debug, Clone, Copy)]
 pub struct FrameDrivenRunnerPlugin {
-    /// The longest time between two updates (s): the camera's frame period keeps the app
-    /// running at its rate when frames stop.
+    /// The longest time between two updates: the camera's frame period keeps the app running
+    /// at its rate when frames stop.
     pub max_wait: Duration,
     /// The shortest time from one update's start to the next's.
     pub min_period: Duration,

@@ -83,24 +83,35 @@ impl Playback {
         } else {
             1.0 / 30.0
         };
-        Ok(Self::with_lap(start, first_s, span + gap_s))
+        Self::with_lap(what, start, first_s, span + gap_s)
     }
 
     /// Plays from `start` a timeline that begins at `first_s` and repeats every `lap_s` (s):
     /// for several timelines of one recording played together (its frames and its joints), the
-    /// frames' playback is the one both take.
-    pub fn with_lap(start: Instant, first_s: f64, lap_s: f64) -> Self {
-        Self {
+    /// frames' playback is the one both take. Errors ([`Error::BadTimeline`], naming `what`):
+    /// a first stamp that is not finite, a lap that is not finite or not above 1 ms.
+    pub fn with_lap(what: &str, start: Instant, first_s: f64, lap_s: f64) -> Result<Self, Error> {
+        if !(first_s.is_finite() && lap_s.is_finite() && lap_s > 1e-3) {
+            return Err(Error::BadTimeline {
+                what: what.to_owned(),
+                message: format!("a timeline from {first_s} s in laps of {lap_s} s"),
+            });
+        }
+        Ok(Self {
             start,
             first_s,
-            lap_s: lap_s.max(1e-3),
-        }
+            lap_s,
+        })
     }
 
-    /// The instant the sample stamped `stamp_s` is released in lap `lap`.
+    /// The instant the sample stamped `stamp_s` is released in lap `lap` (a stamp before the
+    /// first: at the start; one too far ahead for the clock: as far as it goes).
     pub fn release(&self, stamp_s: f64, lap: u64) -> Instant {
         let offset = (stamp_s - self.first_s) + lap as f64 * self.lap_s;
-        self.start + Duration::from_secs_f64(offset.max(0.0))
+        Duration::try_from_secs_f64(offset.max(0.0))
+            .ok()
+            .and_then(|d| self.start.checked_add(d))
+            .unwrap_or_else(|| self.start + Duration::from_secs(u64::from(u32::MAX)))
     }
 
     /// A lap's length (s).
@@ -169,8 +180,9 @@ pub struct RecordedArm {
 impl RecordedArm {
     /// The arm of a recording named `name` (for messages) whose joint states are `states`
     /// (stamps in the recording's seconds, increasing; every vector of one length), played by
-    /// `playback`. Errors ([`Error::BadTimeline`]): no state, stamps that do not increase,
-    /// vectors of other lengths or values not finite.
+    /// `playback`. States without velocities get them by finite differences (the erase's
+    /// latency compensation extrapolates with them). Errors ([`Error::BadTimeline`]): no state,
+    /// stamps that do not increase, vectors of other lengths or values not finite.
     pub fn new(
         name: impl Into<String>,
         states: Vec<JointState>,
@@ -184,28 +196,44 @@ impl RecordedArm {
         if let Some((i, s)) = states.iter().enumerate().find(|(_, s)| {
             s.positions.len() != dof
                 || (!s.velocities.is_empty() && s.velocities.len() != dof)
-                || s.positions.iter().any(|v| !v.is_finite())
+                || s.positions
+                    .iter()
+                    .chain(&s.velocities)
+                    .any(|v| !v.is_finite())
         }) {
             return Err(Error::BadTimeline {
                 what,
                 message: format!(
-                    "state {i} at {} s: {} positions and {} velocities, or a position not finite; the first has {dof} positions",
+                    "state {i} at {} s: {} positions and {} velocities, or a value not finite; the first has {dof} positions",
                     s.stamp_s,
                     s.positions.len(),
                     s.velocities.len()
                 ),
             });
         }
+        // Central differences inside, one-sided at the ends (stamps increase: no division by 0).
+        let velocity = |i: usize| {
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(states.len() - 1));
+            if a == b {
+                DVector::zeros(dof)
+            } else {
+                (&states[b].positions - &states[a].positions)
+                    / (states[b].stamp_s - states[a].stamp_s)
+            }
+        };
+        let filled: Vec<DVector<f64>> = (0..states.len())
+            .map(|i| {
+                if states[i].velocities.is_empty() {
+                    velocity(i)
+                } else {
+                    states[i].velocities.clone()
+                }
+            })
+            .collect();
         let states: Arc<[JointState]> = states
             .into_iter()
-            .map(|s| JointState {
-                velocities: if s.velocities.is_empty() {
-                    DVector::zeros(dof)
-                } else {
-                    s.velocities
-                },
-                ..s
-            })
+            .zip(filled)
+            .map(|(s, velocities)| JointState { velocities, ..s })
             .collect();
         Ok(Self {
             name,
@@ -357,7 +385,8 @@ mod tests {
         let got = arm.receive();
         assert_eq!(got.len(), 3, "{got:?}");
         assert!((got[1].positions[0] - 0.2).abs() < 1e-12);
-        assert_eq!(got[1].velocities.len(), 2);
+        // Velocities by central differences: 0.1 rad in 10 ms.
+        assert!((got[1].velocities[0] - 10.0).abs() < 1e-9, "{got:?}");
         // Sample 1 was released 10 ms after the start; the clock read 100 s about 25 ms after.
         let d = got[1].stamp_s - got[0].stamp_s;
         assert!((d - 0.01).abs() < 1e-6, "{d}");

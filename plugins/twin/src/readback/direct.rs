@@ -11,6 +11,9 @@
 //! thread: the frame is in the encoder's hands in the update it was drawn in (the next one's
 //! with Bevy's pipelined rendering, whose render of update N runs beside update N+1).
 
+use std::time::Duration;
+
+use bevy::diagnostic::FrameCount;
 use bevy::image::TextureFormatPixelInfo;
 use bevy::prelude::*;
 use bevy::render::render_asset::RenderAssets;
@@ -44,6 +47,11 @@ pub type Deliver = Box<dyn FnOnce(Result<ImageBytes, TwinError>) + Send + Sync>;
 pub struct DirectRead {
     /// The image.
     pub image: Handle<Image>,
+    /// The frame it is for: [`RenderSettled::this_update_frame`] of the update that asks. A
+    /// request rendered in another frame (a renderer that skipped frames) is refused.
+    ///
+    /// [`RenderSettled::this_update_frame`]: crate::camera::RenderSettled::this_update_frame
+    pub frame: u32,
     /// Called once on the render thread with its bytes; it should be quick (send them on).
     pub deliver: Deliver,
 }
@@ -69,7 +77,22 @@ impl Plugin for DirectReadbackPlugin {
                 .init_resource::<ExtractedReads>()
                 .add_systems(ExtractSchedule, take_requests)
                 .add_systems(Render, read_back.in_set(RenderSystems::Cleanup));
+        } else {
+            // Nothing renders: each request is refused in the next update.
+            app.add_systems(First, refuse_unrendered);
         }
+    }
+}
+
+/// The longest the render thread waits for a frame's copy before the request is refused (a
+/// stalled GPU must not hang the app).
+pub const MAX_WAIT: Duration = Duration::from_secs(1);
+
+fn refuse_unrendered(mut queue: ResMut<DirectReadQueue>) {
+    for request in queue.0.drain(..) {
+        (request.deliver)(Err(TwinError::Readback {
+            message: "nothing renders in this app".into(),
+        }));
     }
 }
 
@@ -84,6 +107,7 @@ fn read_back(
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
     images: Res<RenderAssets<GpuImage>>,
+    frame: Option<Res<FrameCount>>,
     mut extracted: ResMut<ExtractedReads>,
 ) {
     if extracted.0.is_empty() {
@@ -94,7 +118,16 @@ fn read_back(
         label: Some("avatarm direct readback"),
     });
     let mut copies = Vec::new();
+    let rendering = frame.map(|f| f.0);
     for request in extracted.0.drain(..) {
+        if rendering.is_some_and(|f| f != request.frame) {
+            (request.deliver)(Err(bad(format!(
+                "asked in frame {}, rendered in frame {}",
+                request.frame,
+                rendering.unwrap_or_default()
+            ))));
+            continue;
+        }
         let Some(gpu) = images.get(&request.image) else {
             (request.deliver)(Err(bad("the image is not on the GPU yet".into())));
             continue;
@@ -108,6 +141,13 @@ fn read_back(
             continue;
         };
         let size = descriptor.size;
+        if size.width == 0 || size.height == 0 || size.depth_or_array_layers != 1 {
+            (request.deliver)(Err(bad(format!(
+                "a {}x{}x{} texture is not one image",
+                size.width, size.height, size.depth_or_array_layers
+            ))));
+            continue;
+        }
         let stride = (size.width as usize * pixel).div_ceil(256) * 256;
         let buffer = device.create_buffer(&BufferDescriptor {
             label: Some("avatarm direct readback"),
@@ -132,7 +172,7 @@ fn read_back(
     if copies.is_empty() {
         return;
     }
-    queue.submit([encoder.finish()]);
+    let submission = queue.submit([encoder.finish()]);
     let mapped: Vec<_> = copies
         .iter()
         .map(|(_, buffer, _, _)| {
@@ -143,7 +183,10 @@ fn read_back(
             rx
         })
         .collect();
-    let waited = device.poll(PollType::wait_indefinitely());
+    let waited = device.poll(PollType::Wait {
+        submission_index: Some(submission),
+        timeout: Some(MAX_WAIT),
+    });
     for ((request, buffer, size, pixel), rx) in copies.into_iter().zip(mapped) {
         let result = match (&waited, rx.try_recv()) {
             (Err(e), _) => Err(bad(format!("waiting for the GPU: {e}"))),

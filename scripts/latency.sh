@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# The real frame path's latency by stage (docs/latency.md): a second of the pouring scene
+# recorded by the replay, played as the robot site's camera (`serve --camera-recording`), an
+# operator and an observer through `avatarm relay` at each one-way delay; the observer's and
+# the site's reports give each stage. Needs a built avatarm (target/debug/avatarm, or the binary
+# AVATARM names; headless NVIDIA needs `. scripts/gpu_env.sh DIR` first). SIZE=WxH records and
+# serves at another camera size (e.g. 1920x1080); DELAYS lists the one-way delays in ms (default
+# "0 25"); SECONDS_WATCHED how long the observer watches (default 15). Output: out/latency_WxH/.
+set -euo pipefail
+A=$(realpath "${AVATARM:-$(dirname "$0")/../target/debug/avatarm}")
+cd "$(dirname "$0")/.."
+[ -x "$A" ] || { echo "error: no avatarm binary at $A (cargo build)" >&2; exit 1; }
+size=${SIZE:-640x480}
+watched=${SECONDS_WATCHED:-15}
+O=out/latency_$size; rm -rf "$O"; mkdir -p "$O"
+S=$O/scene.toml
+# The pouring scene, a second long, its robot by absolute path.
+sed -e "s#\.\./robots/#$PWD/assets/robots/#" -e '0,/^duration_s = 2.0/s//duration_s = 1.0/' \
+  assets/scenes/pouring.toml > "$S"
+sizes=(); [ "$size" = 640x480 ] || sizes=(--camera-size "$size")
+"$A" replay "$S" "${sizes[@]}" --record $O/session.mcap --out $O/replay > $O/replay.log 2>&1
+port=7700
+for d in ${DELAYS:-0 25}; do
+  port=$((port+3))
+  "$A" serve "$S" "${sizes[@]}" --insecure-lan --listen tcp/127.0.0.1:$port \
+    --camera-recording $O/session.mcap --background $O/replay/background.png \
+    --duration $((watched + 20)) --report $O/serve_$d.json 2>$O/serve_$d.log &
+  sp=$!
+  "$A" relay --to 127.0.0.1:$port --delay-ms $d --duration $((watched + 25)) > $O/relay_$d.txt &
+  sleep 1
+  rp=$(sed -n 's#^tcp/127.0.0.1:\([0-9]*\) .*#\1#p' $O/relay_$d.txt)
+  "$A" join tcp/127.0.0.1:$rp --scene "$S" --watch --duration $watched --wait 30 \
+    --report $O/watch_$d.json 2>$O/watch_$d.log
+  wait $sp
+  python3 -c "
+import json
+v = json.load(open('$O/watch_$d.json'))['video']
+c = json.load(open('$O/serve_$d.json'))['video_cameras'][0]
+print('$size, $d ms:', ', '.join('%s %.1f/%.1f' % (k[:-3], v[k]['median'], v[k]['p95'])
+      for k in ['arrive_ms', 'app_ms', 'encode_ms', 'network_ms', 'decode_ms', 'total_ms']),
+      'ms; %.1f fps shown, waited %s, main world %.1f ms/update, gpu %s' % (v['fps'],
+      v['waited_updates'], c['update_ms']['median'],
+      {k: round(s['median'], 1) for k, s in c['gpu_ms'].items()}))"
+done
