@@ -42,8 +42,12 @@ pub struct RunArgs {
     #[arg(long = "package-path", value_name = "DIR")]
     package_path: Vec<PathBuf>,
     /// Take the camera feed from webcam N (feature `webcam`) instead of the simulated room.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", conflicts_with = "camera_recording")]
     webcam: Option<u32>,
+    /// Play a recording (MCAP) as the camera, each frame at its capture time, in a loop, and
+    /// its joint states as the robot's (the live task's robot with a hand; docs/latency.md).
+    #[arg(long = "camera-recording", value_name = "FILE.mcap")]
+    camera_recording: Option<PathBuf>,
     /// With a scene that has a [task]: teleoperate it live with this hand: scripted (the
     /// task's trial, default), desktop (keys and mouse), xr (OpenXR hand tracking, with
     /// --xr), leap (feature `leap`), a recorded FILE.hand.jsonl, or none.
@@ -78,6 +82,7 @@ impl RunArgs {
             press,
             package_path,
             webcam,
+            camera_recording,
             hand,
             leap_mount,
             robot,
@@ -142,10 +147,13 @@ impl RunArgs {
             );
             scene.file.background = BackgroundSpec::None;
         }
+        // A recording played as the camera: its frames and its robot.
+        let recorded = recorded_session(camera_recording.as_deref(), &robot, &mut scene)?;
         // The C key switches between the scene's cameras in place; a recording and a
         // webcam hold one camera.
         let no_switch = match (&record, webcam) {
             _ if scene.cameras.len() < 2 => None,
+            _ if recorded.is_some() => Some("the recorded camera is the one camera".to_owned()),
             (Some(_), _) => Some(format!(
                 "a recording holds one camera; start again with --view {}",
                 scene.cameras[(scene.camera_index + 1) % scene.cameras.len()]
@@ -191,6 +199,7 @@ impl RunArgs {
                 .map(|ms| ms / 1e3)
                 .or_else(|| frames.map(|_| 0.5 / scene.file.camera.fps)),
             webcam,
+            recorded,
             hand,
             robot,
             cameras,
@@ -207,4 +216,41 @@ impl RunArgs {
         }
         Ok(())
     }
+}
+
+/// `--camera-recording`'s recording opened for `scene` (its camera and its robot; `scene`'s
+/// simulated empty room dropped as its background). Errors: `--robot ros` with it, a recording
+/// that cannot be played ([`crate::net::site_camera::open`]).
+fn recorded_session(
+    path: Option<&std::path::Path>,
+    robot: &str,
+    scene: &mut Scene,
+) -> Result<Option<crate::net::site_camera::RecordedSession>, AppError> {
+    let Some(path) = path else {
+        return Ok(None);
+    };
+    if robot == "ros" {
+        return Err(AppError::flag(
+            "--robot ros",
+            "with --camera-recording the robot is the recording's; leave --robot out",
+        ));
+    }
+    if scene.file.background == BackgroundSpec::EmptyRoom {
+        // Said here: the app's log is not set up yet.
+        eprintln!(
+            "--camera-recording: the simulated empty room is no background for a recording; \
+             give one with --background PATH (or press B with the robot out of view)"
+        );
+    }
+    let opened = crate::net::site_camera::open(
+        &crate::net::site_camera::SiteCamera::Recording(path.to_owned()),
+        scene,
+        1,
+    )?;
+    Ok(match (opened.source, opened.arm) {
+        (crate::app::CameraSource::Recording(camera), Some(arm)) => {
+            Some(crate::net::site_camera::RecordedSession { camera, arm })
+        }
+        _ => None,
+    })
 }

@@ -29,6 +29,15 @@ pub enum SiteCamera {
     Recording(PathBuf),
 }
 
+/// A recording played live: its camera and its robot (`run --camera-recording`).
+#[derive(Debug, Clone)]
+pub struct RecordedSession {
+    /// The camera.
+    pub camera: avatarm_video::recorded::RecordedCameraConfig,
+    /// The robot.
+    pub arm: RecordedArm,
+}
+
 /// The camera opened: its source for the video app and, for a recording, the robot it plays.
 pub(crate) struct OpenedCamera {
     /// The video app's source.

@@ -11,6 +11,7 @@
 pub mod budget;
 pub mod keys;
 pub mod live_scores;
+pub mod recorded;
 pub mod switch;
 #[cfg(feature = "xr")]
 pub mod xr;
@@ -54,6 +55,8 @@ pub struct PreviewOptions {
     /// Take the camera feed from this webcam instead of the simulated room's camera (needs
     /// the `webcam` feature).
     pub webcam: Option<u32>,
+    /// A recording played as the camera, its robot as the robot (`--camera-recording`).
+    pub recorded: Option<crate::net::site_camera::RecordedSession>,
     /// Run the scene's `[task]` live with this hand ([`crate::teleop`]).
     pub hand: Option<avatarm_scene::hand::HandChoice>,
     /// The robot the live task commands: the simulated arm or the scene's ROS link.
@@ -84,7 +87,11 @@ pub fn build_app(scene: &avatarm_scene::Scene, options: &PreviewOptions) -> Resu
         .hand
         .as_ref()
         .map(|choice| {
-            crate::teleop::LiveTeleop::prepare(scene, choice, options.robot).map_err(|e| {
+            let link = match &options.recorded {
+                Some(r) => crate::teleop::TrialLink::Given(Box::new(r.arm.clone())),
+                None => crate::teleop::TrialLink::of(options.robot),
+            };
+            crate::teleop::LiveTeleop::prepare_on(scene, choice, link).map_err(|e| {
                 AppError::Teleop {
                     source: Box::new(e),
                 }
@@ -92,10 +99,11 @@ pub fn build_app(scene: &avatarm_scene::Scene, options: &PreviewOptions) -> Resu
         })
         .transpose()?;
     let base = AppBase {
-        camera: options.webcam.map_or(
-            crate::app::CameraSource::Simulated,
-            crate::app::CameraSource::Webcam,
-        ),
+        camera: match (&options.recorded, options.webcam) {
+            (Some(r), _) => crate::app::CameraSource::Recording(r.camera.clone()),
+            (None, Some(index)) => crate::app::CameraSource::Webcam(index),
+            (None, None) => crate::app::CameraSource::Simulated,
+        },
         other_cameras: options.cameras.clone(),
         ..AppBase::new(Runner::Window {
             xr: options.xr,
@@ -107,7 +115,7 @@ pub fn build_app(scene: &avatarm_scene::Scene, options: &PreviewOptions) -> Resu
     if options.xr {
         app.add_plugins(xr::XrViewPlugin);
     }
-    if options.webcam.is_none() && base.empty_room_anywhere(scene) {
+    if base.camera.is_simulated() && base.empty_room_anywhere(scene) {
         // The room renders its ground truth anyway (the empty room is H); two scored frames a
         // second.
         let every = (scene.file.camera.fps / 2.0).round().max(1.0) as u64;
@@ -120,8 +128,12 @@ pub fn build_app(scene: &avatarm_scene::Scene, options: &PreviewOptions) -> Resu
         }));
     }
     app.add_plugins(PreviewPlugin(options.clone()));
-    if let Some(live) = live {
-        live.install(&mut app)?;
+    match (live, &options.recorded) {
+        (Some(live), _) => live.install(&mut app)?,
+        (None, Some(r)) => {
+            app.add_plugins(recorded::RecordedRobotPlugin(r.arm.clone()));
+        }
+        (None, None) => {}
     }
     Ok(app)
 }

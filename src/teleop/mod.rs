@@ -110,7 +110,17 @@ impl LiveTeleop {
         choice: &HandChoice,
         robot: RobotChoice,
     ) -> Result<Self, AppError> {
-        let (parts, mode) = trial_parts(scene, robot, None, 0, "--hand")?;
+        Self::prepare_on(scene, choice, TrialLink::of(robot))
+    }
+
+    /// [`LiveTeleop::prepare`] on the robot `link` (a recording's robot: `run
+    /// --camera-recording`).
+    pub fn prepare_on(
+        scene: &Scene,
+        choice: &HandChoice,
+        link: TrialLink,
+    ) -> Result<Self, AppError> {
+        let (parts, mode) = trial_parts_on(scene, link, None, 0, "--hand")?;
         let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
             return Err(AppError::flag("--hand", "the scene has no [task]"));
         };
@@ -217,11 +227,7 @@ pub fn trial_parts(
     trial: u32,
     flag: &str,
 ) -> Result<(TrialParts, MappingMode), AppError> {
-    let link = match robot {
-        RobotChoice::Sim => TrialLink::Simulated,
-        RobotChoice::Ros => TrialLink::Ros,
-    };
-    trial_parts_on(scene, link, mode, trial, flag)
+    trial_parts_on(scene, TrialLink::of(robot), mode, trial, flag)
 }
 
 /// The robot behind a live trial ([`trial_parts_on`]).
@@ -233,6 +239,16 @@ pub enum TrialLink {
     /// A robot given as it is (a recording's: [`avatarm_core::sim::recorded::RecordedArm`]),
     /// which does not approach.
     Given(Box<dyn avatarm_core::sim::arm::RobotInterface>),
+}
+
+impl TrialLink {
+    /// The link of a [`RobotChoice`].
+    pub fn of(robot: RobotChoice) -> Self {
+        match robot {
+            RobotChoice::Sim => Self::Simulated,
+            RobotChoice::Ros => Self::Ros,
+        }
+    }
 }
 
 /// [`trial_parts`] on the robot `link`.

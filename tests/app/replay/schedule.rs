@@ -17,6 +17,7 @@ fn the_apps_own_systems_run_in_a_defined_order() {
         xr: false,
         fixed_step_s: None,
         webcam: None,
+        recorded: None,
         hand: None,
         robot: avatarm::teleop::RobotChoice::Sim,
         cameras: Vec::new(),

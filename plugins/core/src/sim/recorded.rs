@@ -282,6 +282,17 @@ impl RobotInterface for RecordedArm {
         if self.clock.is_none() {
             return out;
         }
+        // A caller that fell behind by more than a lap (a slow start) skips the whole laps it
+        // missed: it gets the last lap's states, not a lap per call until it catches up.
+        if let Some(next) = self.playback.next_release(&self.stamps_s, self.cursor) {
+            let behind = now.saturating_duration_since(next).as_secs_f64();
+            let laps = (behind / self.playback.lap_s()).floor();
+            if laps >= 1.0 {
+                let skipped = laps as u64;
+                self.cursor.lap += skipped;
+                self.laps += skipped;
+            }
+        }
         while let Some(at) = self.playback.next_release(&self.stamps_s, self.cursor) {
             if at > now || out.len() >= self.states.len() {
                 break;
@@ -391,6 +402,17 @@ mod tests {
         let d = got[1].stamp_s - got[0].stamp_s;
         assert!((d - 0.01).abs() < 1e-6, "{d}");
         assert!(got[2].stamp_s <= 100.0 && got[0].stamp_s > 99.9, "{got:?}");
+        // A caller late by more than a lap (30 ms) gets only what was released in the last
+        // lap, stamped as released: at most a lap old.
+        std::thread::sleep(Duration::from_millis(75));
+        arm.advance(200.0);
+        let late = arm.receive();
+        assert!((1..=3).contains(&late.len()), "{late:?}");
+        assert!(
+            late.iter()
+                .all(|s| s.stamp_s > 200.0 - 0.031 && s.stamp_s <= 200.0),
+            "{late:?}"
+        );
         let ok = DVector::from_element(2, 0.1);
         arm.send(&ok).expect("a command is taken");
         let bad = DVector::from_vec(vec![0.0, f64::NAN]);
