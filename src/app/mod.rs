@@ -125,6 +125,28 @@ impl AppBase {
 #[derive(Resource, Debug, Clone, Copy)]
 pub struct AppTwin(pub Entity);
 
+impl AppTwin {
+    /// Sends `states` (the robot's, in `model`'s joint order) to the twin, each stamp less
+    /// `minus_s` (s; 0 for stamps already on the app's clock).
+    pub fn send<'a>(
+        &self,
+        writer: &mut MessageWriter<JointStateMessage>,
+        model: &avatarm_core::robot::RobotModel,
+        states: impl IntoIterator<Item = &'a avatarm_core::sim::JointState>,
+        minus_s: f64,
+    ) {
+        for s in states {
+            writer.write(JointStateMessage::full(
+                self.0,
+                model,
+                &s.positions,
+                &s.velocities,
+                s.stamp_s - minus_s,
+            ));
+        }
+    }
+}
+
 /// The scene being run.
 #[derive(Resource, Debug, Clone)]
 pub struct SceneResource(pub Scene);

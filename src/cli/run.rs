@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use avatarm_scene::Scene;
-use avatarm_scene::spec::{BackgroundSpec, LeapMountKind};
+use avatarm_scene::spec::LeapMountKind;
 use clap::Args;
 
 use crate::AppError;
@@ -90,11 +90,10 @@ impl RunArgs {
             overrides,
             view,
         } = self;
-        if webcam.is_some() && !cfg!(feature = "webcam") {
+        if camera_recording.is_some() && robot == "ros" {
             return Err(AppError::flag(
-                "--webcam",
-                "this avatarm was built without the webcam feature; rebuild with `cargo \
-                 build --features webcam`",
+                "--robot ros",
+                "with --camera-recording the robot is the recording's; leave --robot out",
             ));
         }
         let path = scene.unwrap_or_else(default_scene);
@@ -130,36 +129,28 @@ impl RunArgs {
             let _ = (xr, scene);
         };
         ride(&mut scene);
-        if webcam.is_some() && scene.head.is_some() {
-            return Err(AppError::flag(
-                "--webcam",
-                format!(
-                    "the scene '{}' has a camera on a head, whose poses only the simulated \
-                     head gives yet; use a scene with a fixed camera",
-                    scene.file.name
-                ),
-            ));
+        // A webcam or a recording as the camera (a recording's robot as the robot).
+        let opened = crate::net::site_camera::open(
+            &crate::net::site_camera::SiteCamera::of(webcam, camera_recording),
+            &mut scene,
+            1,
+        )?;
+        for note in &opened.notes {
+            // Said here: the app's log is not set up yet.
+            eprintln!("{note}");
         }
-        if webcam.is_some() && scene.file.background == BackgroundSpec::EmptyRoom {
-            eprintln!(
-                "webcam: the simulated empty room is no background for it; press B with the \
-                 robot out of view to capture one (or pass --background PATH)"
-            );
-            scene.file.background = BackgroundSpec::None;
-        }
-        // A recording played as the camera: its frames and its robot.
-        let recorded = recorded_session(camera_recording.as_deref(), &robot, &mut scene)?;
-        // The C key switches between the scene's cameras in place; a recording and a
-        // webcam hold one camera.
-        let no_switch = match (&record, webcam) {
+        // The C key switches between the scene's cameras in place; a session recording and
+        // a real camera hold one camera.
+        let no_switch = match &record {
             _ if scene.cameras.len() < 2 => None,
-            _ if recorded.is_some() => Some("the recorded camera is the one camera".to_owned()),
-            (Some(_), _) => Some(format!(
+            _ if !opened.source.is_simulated() => {
+                Some(format!("the {} is the one camera", opened.source.name()))
+            }
+            Some(_) => Some(format!(
                 "a recording holds one camera; start again with --view {}",
                 scene.cameras[(scene.camera_index + 1) % scene.cameras.len()]
             )),
-            (None, Some(_)) => Some("the webcam is the one camera".to_owned()),
-            (None, None) => None,
+            None => None,
         };
         let cameras = if no_switch.is_none() && scene.cameras.len() > 1 {
             let names = scene.cameras.clone();
@@ -198,8 +189,8 @@ impl RunArgs {
             fixed_step_s: step_ms
                 .map(|ms| ms / 1e3)
                 .or_else(|| frames.map(|_| 0.5 / scene.file.camera.fps)),
-            webcam,
-            recorded,
+            camera: opened.source,
+            recorded_arm: opened.arm,
             hand,
             robot,
             cameras,
@@ -216,41 +207,4 @@ impl RunArgs {
         }
         Ok(())
     }
-}
-
-/// `--camera-recording`'s recording opened for `scene` (its camera and its robot; `scene`'s
-/// simulated empty room dropped as its background). Errors: `--robot ros` with it, a recording
-/// that cannot be played ([`crate::net::site_camera::open`]).
-fn recorded_session(
-    path: Option<&std::path::Path>,
-    robot: &str,
-    scene: &mut Scene,
-) -> Result<Option<crate::net::site_camera::RecordedSession>, AppError> {
-    let Some(path) = path else {
-        return Ok(None);
-    };
-    if robot == "ros" {
-        return Err(AppError::flag(
-            "--robot ros",
-            "with --camera-recording the robot is the recording's; leave --robot out",
-        ));
-    }
-    if scene.file.background == BackgroundSpec::EmptyRoom {
-        // Said here: the app's log is not set up yet.
-        eprintln!(
-            "--camera-recording: the simulated empty room is no background for a recording; \
-             give one with --background PATH (or press B with the robot out of view)"
-        );
-    }
-    let opened = crate::net::site_camera::open(
-        &crate::net::site_camera::SiteCamera::Recording(path.to_owned()),
-        scene,
-        1,
-    )?;
-    Ok(match (opened.source, opened.arm) {
-        (crate::app::CameraSource::Recording(camera), Some(arm)) => {
-            Some(crate::net::site_camera::RecordedSession { camera, arm })
-        }
-        _ => None,
-    })
 }

@@ -109,11 +109,7 @@ impl ServeArgs {
                 "with --camera-recording the robot is the recording's; leave --robot out",
             ));
         }
-        let camera = match (webcam, camera_recording) {
-            (Some(index), _) => crate::net::site_camera::SiteCamera::Webcam(index),
-            (None, Some(path)) => crate::net::site_camera::SiteCamera::Recording(path),
-            (None, None) => crate::net::site_camera::SiteCamera::Simulated,
-        };
+        let camera = crate::net::site_camera::SiteCamera::of(webcam, camera_recording);
         crate::net::init_log();
         let path = scene.unwrap_or_else(pouring_scene);
         let packages = packages(package_path);

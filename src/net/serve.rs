@@ -686,6 +686,9 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
         1
     };
     let opened = super::site_camera::open(&options.camera, &mut scene, views_served)?;
+    for note in &opened.notes {
+        info!("{note}");
+    }
     let scene = &scene;
     if !(options.target_timeout_s.is_finite() && (0.0..=10.0).contains(&options.target_timeout_s))
         || options.target_timeout_s == 0.0

@@ -12,12 +12,11 @@ use avatarm_core::sim::recorded::{Playback, RecordedArm};
 use avatarm_scene::Scene;
 use avatarm_scene::spec::BackgroundSpec;
 use avatarm_video::recorded::{CodedFrame, PlayerCounters, RecordedCameraConfig};
-use bevy::log::{info, warn};
 
 use crate::AppError;
 use crate::app::CameraSource;
 
-/// Where the robot site's camera comes from.
+/// Where the camera comes from (`serve` and `run`: `--webcam N`, `--camera-recording FILE`).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub enum SiteCamera {
     /// The simulated room's camera.
@@ -29,29 +28,36 @@ pub enum SiteCamera {
     Recording(PathBuf),
 }
 
-/// A recording played live: its camera and its robot (`run --camera-recording`).
-#[derive(Debug, Clone)]
-pub struct RecordedSession {
-    /// The camera.
-    pub camera: avatarm_video::recorded::RecordedCameraConfig,
-    /// The robot.
-    pub arm: RecordedArm,
+impl SiteCamera {
+    /// The camera the command line names (clap keeps the two flags apart).
+    pub fn of(webcam: Option<u32>, recording: Option<PathBuf>) -> Self {
+        match (webcam, recording) {
+            (Some(index), _) => Self::Webcam(index),
+            (None, Some(path)) => Self::Recording(path),
+            (None, None) => Self::Simulated,
+        }
+    }
 }
 
 /// The camera opened: its source for the video app and, for a recording, the robot it plays.
-pub(crate) struct OpenedCamera {
+#[derive(Debug)]
+pub struct OpenedCamera {
     /// The video app's source.
-    pub(crate) source: CameraSource,
+    pub source: CameraSource,
     /// The recording's robot.
-    pub(crate) arm: Option<RecordedArm>,
+    pub arm: Option<RecordedArm>,
+    /// What the user should know (the simulated empty room dropped as the background; a
+    /// recording's camera that is not the scene's, joints it never names, what is played),
+    /// for the caller to say: its log may not be set up yet.
+    pub notes: Vec<String>,
 }
 
-/// Opens `camera` for `scene` (served with `views` cameras in all; `scene` may be changed:
+/// Opens `camera` for `scene` (seen through `views` cameras in all; `scene` may be changed:
 /// the simulated empty room is no background for a real camera). Errors: a real camera with
 /// more than one view or a camera on a head, a webcam in a build without the feature, a
 /// recording that cannot be read or played (no frames, frames of another size than the
 /// scene's camera, joints the robot does not have).
-pub(crate) fn open(
+pub fn open(
     camera: &SiteCamera,
     scene: &mut Scene,
     views: usize,
@@ -61,6 +67,7 @@ pub(crate) fn open(
             return Ok(OpenedCamera {
                 source: CameraSource::Simulated,
                 arm: None,
+                notes: Vec::new(),
             });
         }
         SiteCamera::Webcam(_) => "--webcam",
@@ -70,7 +77,7 @@ pub(crate) fn open(
         return Err(AppError::flag(
             flag,
             format!(
-                "a real camera is one camera: serve one --view of the scene '{}'",
+                "a real camera is one camera: one --view of the scene '{}'",
                 scene.file.name
             ),
         ));
@@ -79,18 +86,19 @@ pub(crate) fn open(
         return Err(AppError::flag(
             flag,
             format!(
-                "the camera '{}' rides on a head, whose poses only the simulated head gives yet; serve a fixed camera",
+                "the camera '{}' rides on a head, whose poses only the simulated head gives yet; use a scene with a fixed camera",
                 scene.camera_name()
             ),
         ));
     }
+    let mut notes = Vec::new();
     if scene.file.background == BackgroundSpec::EmptyRoom {
-        warn!(
-            "{flag}: the simulated empty room is no background for a real camera; the erase has none until the scene's [background] gives a photograph of the empty room (source = \"file\")"
-        );
         scene.file.background = BackgroundSpec::None;
+        notes.push(format!(
+            "{flag}: the simulated empty room is no background for a real camera; give a photograph of the empty room with --background PATH (or the scene's [background]), or press B in the preview with the robot out of view"
+        ));
     }
-    match camera {
+    let (source, arm) = match camera {
         SiteCamera::Simulated => unreachable!("returned above"),
         SiteCamera::Webcam(index) => {
             if !cfg!(feature = "webcam") {
@@ -99,17 +107,22 @@ pub(crate) fn open(
                     "this avatarm was built without the webcam feature; rebuild with `cargo build --features webcam`",
                 ));
             }
-            Ok(OpenedCamera {
-                source: CameraSource::Webcam(*index),
-                arm: None,
-            })
+            (CameraSource::Webcam(*index), None)
         }
-        SiteCamera::Recording(path) => open_recording(path, scene),
-    }
+        SiteCamera::Recording(path) => {
+            let (camera, arm) = open_recording(path, scene, &mut notes)?;
+            (CameraSource::Recording(camera), Some(arm))
+        }
+    };
+    Ok(OpenedCamera { source, arm, notes })
 }
 
-/// A recording's frames and joints, played from now.
-fn open_recording(path: &Path, scene: &Scene) -> Result<OpenedCamera, AppError> {
+/// A recording's frames and joints, played from now; what the user should know into `notes`.
+fn open_recording(
+    path: &Path,
+    scene: &Scene,
+    notes: &mut Vec<String>,
+) -> Result<(RecordedCameraConfig, RecordedArm), AppError> {
     let name = path.display().to_string();
     let bad = |message: String| AppError::recording(name.clone(), message);
     let recording = avatarm_record::Recording::open(path)?;
@@ -138,17 +151,15 @@ fn open_recording(path: &Path, scene: &Scene) -> Result<OpenedCamera, AppError> 
         let theirs = [c.k[0], c.k[4], c.k[2], c.k[5]];
         let ours = [k.fx, k.fy, k.cx, k.cy];
         if theirs.iter().zip(&ours).any(|(a, b)| (a - b).abs() > 0.5) {
-            warn!(
+            notes.push(format!(
                 "{name}: the recording's camera (fx fy cx cy {theirs:?} px) is not the scene's ({ours:?} px); the scene's is used"
-            );
+            ));
         }
     }
-    let mut notes = Vec::new();
+    let mut joint_notes = Vec::new();
     let joints =
-        crate::replay::recording::joint_vectors(&recording, &scene.model, &name, &mut notes)?;
-    for note in notes {
-        warn!("{name}: {note}");
-    }
+        crate::replay::recording::joint_vectors(&recording, &scene.model, &name, &mut joint_notes)?;
+    notes.extend(joint_notes.into_iter().map(|n| format!("{name}: {n}")));
     let frames: Arc<[CodedFrame]> = recording
         .frames
         .iter()
@@ -160,7 +171,7 @@ fn open_recording(path: &Path, scene: &Scene) -> Result<OpenedCamera, AppError> 
     let stamps: Vec<f64> = frames.iter().map(|f| f.stamp_s).collect();
     let playback = Playback::new(&format!("{name}: camera frames"), Instant::now(), &stamps)
         .map_err(|e| bad(e.to_string()))?;
-    let states = lap_of_joints(joints, &playback, &name)?;
+    let states = lap_of_joints(joints, &playback, &name, notes)?;
     // The joints on the frames' timeline: each frame meets the joints it was recorded with.
     let arm = RecordedArm::new(
         format!("recording {}", file_name(path)),
@@ -174,23 +185,21 @@ fn open_recording(path: &Path, scene: &Scene) -> Result<OpenedCamera, AppError> 
         .map_err(|e| bad(e.to_string()))?,
     )
     .map_err(|e| bad(e.to_string()))?;
-    info!(
+    notes.push(format!(
         "camera: {name}, {} frames of {}x{} over {:.1} s, played in a loop; the robot is the recording's ({} joint states; commands are not obeyed)",
         frames.len(),
         size.0,
         size.1,
         playback.lap_s(),
         recording.joint_states.len()
-    );
-    Ok(OpenedCamera {
-        source: CameraSource::Recording(RecordedCameraConfig {
-            name: file_name(path),
-            frames,
-            playback,
-            counters: Arc::new(PlayerCounters::default()),
-        }),
-        arm: Some(arm),
-    })
+    ));
+    let camera = RecordedCameraConfig {
+        name: file_name(path),
+        frames,
+        playback,
+        counters: Arc::new(PlayerCounters::default()),
+    };
+    Ok((camera, arm))
 }
 
 /// The recording's joint states that fall in one lap of the frames' playback (from the first
@@ -201,6 +210,7 @@ fn lap_of_joints(
     joints: Vec<(u64, nalgebra::DVector<f64>)>,
     playback: &Playback,
     name: &str,
+    notes: &mut Vec<String>,
 ) -> Result<Vec<JointState>, AppError> {
     let (first, end) = (playback.first_s(), playback.first_s() + playback.lap_s());
     let total = joints.len();
@@ -231,10 +241,10 @@ fn lap_of_joints(
         ));
     }
     if states.len() < total {
-        info!(
+        notes.push(format!(
             "{name}: {} of {total} joint states played (those between the first and last camera frames, one per stamp)",
             states.len()
-        );
+        ));
     }
     Ok(states)
 }
@@ -273,10 +283,12 @@ mod tests {
             (ns(10.25), q(4.0)),
             (ns(10.35), q(5.0)),
         ];
-        let states = lap_of_joints(joints, &playback, "rec.mcap").expect("states");
+        let mut notes = Vec::new();
+        let states = lap_of_joints(joints, &playback, "rec.mcap", &mut notes).expect("states");
+        assert!(notes.iter().any(|n| n.contains("3 of 6")), "{notes:?}");
         let kept: Vec<f64> = states.iter().map(|s| s.positions[0]).collect();
         assert_eq!(kept, [1.0, 3.0, 4.0]);
-        let e = lap_of_joints(vec![(ns(20.0), q(0.0))], &playback, "rec.mcap")
+        let e = lap_of_joints(vec![(ns(20.0), q(0.0))], &playback, "rec.mcap", &mut notes)
             .expect_err("none in the lap");
         assert!(e.to_string().contains("rec.mcap"), "{e}");
         // The arm takes them as they are.

@@ -267,15 +267,12 @@ fn mirror_loop(
         .0
         .place_at(&last.state.positions, last.state.stamp_s - site_minus_app);
     if let Some(twin) = twin {
-        for u in &updates {
-            states.write(JointStateMessage::full(
-                twin.0,
-                &room.model,
-                &u.state.positions,
-                &u.state.velocities,
-                u.state.stamp_s - site_minus_app,
-            ));
-        }
+        twin.send(
+            &mut states,
+            &room.model,
+            updates.iter().map(|u| &u.state),
+            site_minus_app,
+        );
     }
     if let (Some(centre), Some((prop, centre_to_base))) = (last.object, video.carried) {
         crate::teleop::place_prop(&mut parts, prop, &(centre * centre_to_base));

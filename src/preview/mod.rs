@@ -52,11 +52,11 @@ pub struct PreviewOptions {
     /// wall clock: scripted runs use half a camera frame, a display twice as fast as the
     /// camera, as a headset's is.
     pub fixed_step_s: Option<f64>,
-    /// Take the camera feed from this webcam instead of the simulated room's camera (needs
-    /// the `webcam` feature).
-    pub webcam: Option<u32>,
-    /// A recording played as the camera, its robot as the robot (`--camera-recording`).
-    pub recorded: Option<crate::net::site_camera::RecordedSession>,
+    /// Where the camera's frames come from (`--webcam`, `--camera-recording`;
+    /// [`crate::net::site_camera::open`]).
+    pub camera: crate::app::CameraSource,
+    /// A recording played as the camera: its robot, the robot (`--camera-recording`).
+    pub recorded_arm: Option<avatarm_core::sim::recorded::RecordedArm>,
     /// Run the scene's `[task]` live with this hand ([`crate::teleop`]).
     pub hand: Option<avatarm_scene::hand::HandChoice>,
     /// The robot the live task commands: the simulated arm or the scene's ROS link.
@@ -87,8 +87,8 @@ pub fn build_app(scene: &avatarm_scene::Scene, options: &PreviewOptions) -> Resu
         .hand
         .as_ref()
         .map(|choice| {
-            let link = match &options.recorded {
-                Some(r) => crate::teleop::TrialLink::Given(Box::new(r.arm.clone())),
+            let link = match &options.recorded_arm {
+                Some(arm) => crate::teleop::TrialLink::Given(Box::new(arm.clone())),
                 None => crate::teleop::TrialLink::of(options.robot),
             };
             crate::teleop::LiveTeleop::prepare_on(scene, choice, link).map_err(|e| {
@@ -99,11 +99,7 @@ pub fn build_app(scene: &avatarm_scene::Scene, options: &PreviewOptions) -> Resu
         })
         .transpose()?;
     let base = AppBase {
-        camera: match (&options.recorded, options.webcam) {
-            (Some(r), _) => crate::app::CameraSource::Recording(r.camera.clone()),
-            (None, Some(index)) => crate::app::CameraSource::Webcam(index),
-            (None, None) => crate::app::CameraSource::Simulated,
-        },
+        camera: options.camera.clone(),
         other_cameras: options.cameras.clone(),
         ..AppBase::new(Runner::Window {
             xr: options.xr,
@@ -128,10 +124,10 @@ pub fn build_app(scene: &avatarm_scene::Scene, options: &PreviewOptions) -> Resu
         }));
     }
     app.add_plugins(PreviewPlugin(options.clone()));
-    match (live, &options.recorded) {
+    match (live, &options.recorded_arm) {
         (Some(live), _) => live.install(&mut app)?,
-        (None, Some(r)) => {
-            app.add_plugins(recorded::RecordedRobotPlugin(r.arm.clone()));
+        (None, Some(arm)) => {
+            app.add_plugins(recorded::RecordedRobotPlugin(arm.clone()));
         }
         (None, None) => {}
     }

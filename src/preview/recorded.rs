@@ -45,14 +45,6 @@ fn drive_twin(
     let Some(last) = released.last() else { return };
     robot.0.place_at(&last.positions, last.stamp_s);
     if let Some(twin) = twin {
-        for s in &released {
-            states.write(JointStateMessage::full(
-                twin.0,
-                &room.model,
-                &s.positions,
-                &s.velocities,
-                s.stamp_s,
-            ));
-        }
+        twin.send(&mut states, &room.model, &released, 0.0);
     }
 }

@@ -355,15 +355,7 @@ fn mirror_room(
         robot.0.place_at(&s.positions, s.stamp_s);
     }
     if let Some(twin) = twin {
-        for s in teleop.received() {
-            states.write(JointStateMessage::full(
-                twin.0,
-                &room.model,
-                &s.positions,
-                &s.velocities,
-                s.stamp_s,
-            ));
-        }
+        twin.send(&mut states, &room.model, teleop.received(), 0.0);
     }
     if let Some(centre) = arm.true_object_pose() {
         place_prop(&mut parts, live.prop, &(centre * live.centre_to_base));

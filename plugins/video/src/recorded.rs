@@ -14,7 +14,7 @@ use std::time::Instant;
 use avatarm_core::sim::recorded::{Playback, PlaybackCursor};
 use bevy::prelude::*;
 
-use crate::threaded::{SourceEvent, add_threaded_source, frame_wake};
+use crate::threaded::{SourceEvent, add_threaded_source};
 use crate::wake::FrameWake;
 
 /// One coded frame of a recording.
@@ -72,7 +72,7 @@ impl Plugin for RecordedCameraPlugin {
         let config = self.0.clone();
         let stop = Arc::new(AtomicBool::new(false));
         let thread_stop = stop.clone();
-        let wake = frame_wake(app);
+        let wake = FrameWake::of(app);
         let spawned = std::thread::Builder::new()
             .name("recorded camera".into())
             .spawn(move || play(&config, &tx, &thread_stop, &wake));

@@ -10,7 +10,6 @@ use std::time::{Duration, Instant};
 
 use bevy::prelude::*;
 
-use crate::wake::FrameWake;
 use crate::{VideoFrame, VideoInbox, VideoSystems, app_clock};
 
 /// What a camera's thread tells the app.
@@ -41,14 +40,6 @@ struct ThreadedSource {
     name: String,
     events: Mutex<Receiver<SourceEvent>>,
     failed: bool,
-}
-
-/// The [`FrameWake`] a source's thread rings after each frame it sends (the app's, inserted
-/// if there is none yet).
-pub fn frame_wake(app: &mut App) -> FrameWake {
-    app.world_mut()
-        .get_resource_or_insert_with(FrameWake::default)
-        .clone()
 }
 
 /// Adds the system that takes `events` (the thread of the source named `name`) into the

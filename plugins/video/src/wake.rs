@@ -15,6 +15,14 @@ use bevy::prelude::*;
 pub struct FrameWake(Arc<(Mutex<u64>, Condvar)>);
 
 impl FrameWake {
+    /// The app's (inserted if there is none yet): the one its sources ring and its runner
+    /// waits on.
+    pub fn of(app: &mut App) -> Self {
+        app.world_mut()
+            .get_resource_or_insert_with(FrameWake::default)
+            .clone()
+    }
+
     /// A frame was sent.
     pub fn notify(&self) {
         let (count, ready) = &*self.0;
@@ -52,10 +60,7 @@ pub struct FrameDrivenRunnerPlugin {
 
 impl Plugin for FrameDrivenRunnerPlugin {
     fn build(&self, app: &mut App) {
-        let wake = app
-            .world_mut()
-            .get_resource_or_insert_with(FrameWake::default)
-            .clone();
+        let wake = FrameWake::of(app);
         let Self {
             max_wait,
             min_period,

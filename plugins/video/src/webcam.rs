@@ -15,7 +15,7 @@ use nokhwa::utils::{
 };
 
 use crate::pixels::{PixelFormat, to_rgba};
-use crate::threaded::{SourceEvent, add_threaded_source, frame_wake};
+use crate::threaded::{SourceEvent, add_threaded_source};
 use crate::wake::FrameWake;
 
 /// Which webcam, and what to ask it for.
@@ -42,7 +42,7 @@ impl Plugin for WebcamPlugin {
     fn build(&self, app: &mut App) {
         let (tx, rx) = channel();
         let config = self.0.clone();
-        let wake = frame_wake(app);
+        let wake = FrameWake::of(app);
         let spawned = std::thread::Builder::new()
             .name(format!("webcam {}", config.index))
             .spawn(move || capture(&config, &tx, &wake));

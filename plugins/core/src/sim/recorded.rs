@@ -52,31 +52,52 @@ pub struct Due {
     pub skipped: u64,
 }
 
+/// The first and last of `stamps_s` (s), checked: not empty, finite and increasing. Errors
+/// ([`Error::BadTimeline`]) name `what` and the stamp.
+fn check_stamps(what: &str, stamps_s: &[f64]) -> Result<(f64, f64), Error> {
+    let bad = |message: String| Error::BadTimeline {
+        what: what.to_owned(),
+        message,
+    };
+    let (Some(&first_s), Some(&last_s)) = (stamps_s.first(), stamps_s.last()) else {
+        return Err(bad("the timeline is empty".into()));
+    };
+    if !first_s.is_finite() {
+        return Err(bad(format!("stamp 0 ({first_s} s) is not finite")));
+    }
+    for (i, pair) in stamps_s.windows(2).enumerate() {
+        if !(pair[1].is_finite() && pair[1] > pair[0]) {
+            return Err(bad(format!(
+                "stamp {} ({} s) does not follow stamp {i} ({} s)",
+                i + 1,
+                pair[1],
+                pair[0]
+            )));
+        }
+    }
+    Ok((first_s, last_s))
+}
+
+impl PlaybackCursor {
+    /// Moves past the current sample of a timeline of `len` samples; `true` when that starts a
+    /// new lap.
+    fn step(&mut self, len: usize) -> bool {
+        self.next += 1;
+        let wrapped = self.next >= len;
+        if wrapped {
+            self.next = 0;
+            self.lap += 1;
+        }
+        wrapped
+    }
+}
+
 impl Playback {
     /// Plays the timeline `what` (named in errors) whose stamps are `stamps_s` (s,
     /// increasing) from `start`. Errors ([`Error::BadTimeline`]): an empty timeline, a stamp
     /// that is not finite or does not increase (naming its index).
     pub fn new(what: &str, start: Instant, stamps_s: &[f64]) -> Result<Self, Error> {
-        let bad = |message: String| Error::BadTimeline {
-            what: what.to_owned(),
-            message,
-        };
-        let (Some(&first_s), Some(&last_s)) = (stamps_s.first(), stamps_s.last()) else {
-            return Err(bad("the timeline is empty".into()));
-        };
-        for (i, pair) in stamps_s.windows(2).enumerate() {
-            if !(pair[0].is_finite() && pair[1].is_finite() && pair[1] > pair[0]) {
-                return Err(bad(format!(
-                    "stamp {} ({} s) does not follow stamp {i} ({} s)",
-                    i + 1,
-                    pair[1],
-                    pair[0]
-                )));
-            }
-        }
-        if !first_s.is_finite() {
-            return Err(bad(format!("stamp 0 ({first_s} s) is not finite")));
-        }
+        let (first_s, last_s) = check_stamps(what, stamps_s)?;
         let span = last_s - first_s;
         let gap_s = if stamps_s.len() > 1 {
             span / (stamps_s.len() - 1) as f64
@@ -143,11 +164,7 @@ impl Playback {
                 at,
                 skipped: 0,
             });
-            cursor.next += 1;
-            if cursor.next == stamps_s.len() {
-                cursor.next = 0;
-                cursor.lap += 1;
-            }
+            cursor.step(stamps_s.len());
         }
         found.map(|d| Due { skipped, ..d })
     }
@@ -191,7 +208,7 @@ impl RecordedArm {
         let name = name.into();
         let what = format!("{name}: joint states");
         let stamps_s: Vec<f64> = states.iter().map(|s| s.stamp_s).collect();
-        Playback::new(&what, playback.start, &stamps_s)?;
+        check_stamps(&what, &stamps_s)?;
         let dof = states[0].positions.len();
         if let Some((i, s)) = states.iter().enumerate().find(|(_, s)| {
             s.positions.len() != dof
@@ -303,10 +320,7 @@ impl RobotInterface for RecordedArm {
                 stamp_s,
                 ..self.states[i].clone()
             });
-            self.cursor.next += 1;
-            if self.cursor.next == self.states.len() {
-                self.cursor.next = 0;
-                self.cursor.lap += 1;
+            if self.cursor.step(self.states.len()) {
                 self.laps += 1;
             }
         }

@@ -18,7 +18,7 @@ use bevy::image::TextureFormatPixelInfo;
 use bevy::prelude::*;
 use bevy::render::render_asset::RenderAssets;
 use bevy::render::render_resource::{
-    BufferDescriptor, BufferUsages, CommandEncoderDescriptor, MapMode, PollType,
+    Buffer, BufferDescriptor, BufferUsages, CommandEncoderDescriptor, MapMode, PollType,
     TexelCopyBufferInfo, TexelCopyBufferLayout,
 };
 use bevy::render::renderer::{RenderDevice, RenderQueue};
@@ -64,6 +64,13 @@ pub struct DirectReadQueue(pub Vec<DirectRead>);
 #[derive(Resource, Default)]
 struct ExtractedReads(Vec<DirectRead>);
 
+/// Copy buffers unmapped after use, for the next frames of the same size (render world).
+#[derive(Resource, Default)]
+struct SpareBuffers(Vec<Buffer>);
+
+/// Spare buffers kept at most.
+const SPARE_BUFFERS: usize = 4;
+
 /// Serves [`DirectReadQueue`]: each request is read back after its frame and delivered on the
 /// render thread.
 #[derive(Default)]
@@ -75,6 +82,7 @@ impl Plugin for DirectReadbackPlugin {
         if let Some(render) = app.get_sub_app_mut(RenderApp) {
             render
                 .init_resource::<ExtractedReads>()
+                .init_resource::<SpareBuffers>()
                 .add_systems(ExtractSchedule, take_requests)
                 .add_systems(Render, read_back.in_set(RenderSystems::Cleanup));
         } else {
@@ -109,6 +117,7 @@ fn read_back(
     images: Res<RenderAssets<GpuImage>>,
     frame: Option<Res<FrameCount>>,
     mut extracted: ResMut<ExtractedReads>,
+    mut spare: ResMut<SpareBuffers>,
 ) {
     if extracted.0.is_empty() {
         return;
@@ -149,12 +158,16 @@ fn read_back(
             continue;
         }
         let stride = (size.width as usize * pixel).div_ceil(256) * 256;
-        let buffer = device.create_buffer(&BufferDescriptor {
-            label: Some("avatarm direct readback"),
-            size: (stride * size.height as usize) as u64,
-            usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let bytes = (stride * size.height as usize) as u64;
+        let buffer = match spare.0.iter().position(|b| b.size() == bytes) {
+            Some(i) => spare.0.swap_remove(i),
+            None => device.create_buffer(&BufferDescriptor {
+                label: Some("avatarm direct readback"),
+                size: bytes,
+                usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+        };
         encoder.copy_texture_to_buffer(
             gpu.texture.as_image_copy(),
             TexelCopyBufferInfo {
@@ -191,16 +204,22 @@ fn read_back(
         let result = match (&waited, rx.try_recv()) {
             (Err(e), _) => Err(bad(format!("waiting for the GPU: {e}"))),
             (Ok(_), Ok(Ok(()))) => {
-                let data = buffer.slice(..).get_mapped_range().to_vec();
+                let mapped = buffer.slice(..).get_mapped_range();
+                let packed = super::unpad_rows(&mapped, size.width, size.height, pixel);
+                let len = mapped.len();
+                drop(mapped);
                 buffer.unmap();
-                super::unpad_rows(&data, size.width, size.height, pixel)
+                if spare.0.len() < SPARE_BUFFERS {
+                    spare.0.push(buffer);
+                }
+                packed
                     .map(|data| ImageBytes {
                         width: size.width,
                         height: size.height,
                         bytes_per_pixel: pixel,
                         data,
                     })
-                    .ok_or_else(|| bad(format!("{} bytes do not hold the image", data.len())))
+                    .ok_or_else(|| bad(format!("{len} bytes do not hold the image")))
             }
             (Ok(_), Ok(Err(e))) => Err(bad(format!("mapping the copy: {e}"))),
             (Ok(_), Err(_)) => Err(bad("the copy was not mapped after the wait".into())),
