@@ -5,14 +5,17 @@
 # the site's reports give each stage. Needs a built avatarm (target/debug/avatarm, or the binary
 # AVATARM names; headless NVIDIA needs `. scripts/gpu_env.sh DIR` first). SIZE=WxH records and
 # serves at another camera size (e.g. 1920x1080); DELAYS lists the one-way delays in ms (default
-# "0 25"); SECONDS_WATCHED how long the observer watches (default 15). Output: out/latency_WxH/.
+# "0 25"); SECONDS_WATCHED how long the observer watches (default 15); WINDOW=1 watches in
+# `join --window` under xvfb-run (the display stage: decoded -> presented, and glass to glass).
+# Output: out/latency_WxH/ (out/latency_WxH_window/ with WINDOW=1).
 set -euo pipefail
 A=$(realpath "${AVATARM:-$(dirname "$0")/../target/debug/avatarm}")
 cd "$(dirname "$0")/.."
 [ -x "$A" ] || { echo "error: no avatarm binary at $A (cargo build)" >&2; exit 1; }
 size=${SIZE:-640x480}
 watched=${SECONDS_WATCHED:-15}
-O=out/latency_$size; rm -rf "$O"; mkdir -p "$O"
+O=out/latency_$size; [ "${WINDOW:-0}" = 1 ] && O=${O}_window
+rm -rf "$O"; mkdir -p "$O"
 S=$O/scene.toml
 # The pouring scene, a second long, its robot by absolute path.
 sed -e "s#\.\./robots/#$PWD/assets/robots/#" -e '0,/^duration_s = 2.0/s//duration_s = 1.0/' \
@@ -29,12 +32,18 @@ for d in ${DELAYS:-0 25}; do
   "$A" relay --to 127.0.0.1:$port --delay-ms $d --duration $((watched + 25)) > $O/relay_$d.txt &
   sleep 1
   rp=$(sed -n 's#^tcp/127.0.0.1:\([0-9]*\) .*#\1#p' $O/relay_$d.txt)
-  "$A" join tcp/127.0.0.1:$rp --scene "$S" --watch --duration $watched --wait 30 \
+  win=(); pre=()
+  if [ "${WINDOW:-0}" = 1 ]; then win=(--window); pre=(xvfb-run -a -s "-screen 0 1280x720x24"); fi
+  "${pre[@]}" "$A" join tcp/127.0.0.1:$rp --scene "$S" --watch "${win[@]}" --duration $watched --wait 30 \
     --report $O/watch_$d.json 2>$O/watch_$d.log
   wait $sp
   python3 -c "
 import json
-v = json.load(open('$O/watch_$d.json'))['video']
+w = json.load(open('$O/watch_$d.json'))
+v = w['video']
+if w.get('window'):
+    print('$size, $d ms, window: decoded->presented %.1f/%.1f, capture->presented %.1f/%.1f ms'
+          % tuple(w['window'][k][s] for k in ['display_ms', 'glass_to_glass_ms'] for s in ['median', 'p95']))
 c = json.load(open('$O/serve_$d.json'))['video_cameras'][0]
 print('$size, $d ms:', ', '.join('%s %.1f/%.1f' % (k[:-3], v[k]['median'], v[k]['p95'])
       for k in ['arrive_ms', 'app_ms', 'encode_ms', 'network_ms', 'decode_ms', 'total_ms']),

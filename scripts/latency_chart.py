@@ -3,7 +3,8 @@
 
 Reads the observer reports `scripts/latency.sh` wrote (out/latency_WxH/watch_D.json) and writes
 an SVG of each setting's median stages (capture -> arrived -> read back -> coded and sent ->
-network -> decoded) and a CSV beside it. Usage: scripts/latency_chart.py [OUT.svg] (default
+network -> decoded, and -> presented where a window watched: out/latency_WxH_window/) and a CSV
+beside it. Usage: scripts/latency_chart.py [OUT.svg] (default
 out/latency_stages.svg). Python's standard library only.
 """
 import csv
@@ -19,21 +20,33 @@ STAGES = [
     ("encode_ms", "coded and sent", "#59a14f"),
     ("network_ms", "network", "#e15759"),
     ("decode_ms", "decoded", "#b07aa1"),
+    ("display_ms", "decoded → presented (window)", "#9c755f"),
 ]
 
 
 def settings():
     rows = []
     for path in sorted(glob.glob("out/latency_*/watch_*.json")):
-        m = re.match(r"out/latency_(\d+)x(\d+)/watch_(\d+)\.json", path)
+        m = re.match(r"out/latency_(\d+)x(\d+)(_window)?/watch_(\d+)\.json", path)
         if not m:
             continue
-        w, h, delay = (int(g) for g in m.groups())
+        w, h, window, delay = int(m[1]), int(m[2]), m[3], int(m[4])
         with open(path) as f:
-            video = json.load(f)["video"]
-        rows.append((w * h, delay, f"{w}x{h}, {delay} ms one-way", video))
-    rows.sort()
-    return [(label, video) for _, _, label, video in rows]
+            report = json.load(f)
+        video = dict(report["video"])
+        if window and report.get("window"):
+            # The display stage, where a window watched (its frames shown, decoded -> presented).
+            video["display_ms"] = report["window"]["display_ms"]
+            video["glass_ms"] = report["window"]["glass_to_glass_ms"]
+        label = f"{w}x{h}, {delay} ms one-way" + (", window" if window else "")
+        rows.append((w * h, bool(window), delay, label, video))
+    rows.sort(key=lambda r: r[:3])
+    return [(label, video) for _, _, _, label, video in rows]
+
+
+def med(v, key):
+    """A stage's median, 0 where the setting has no such stage (no window)."""
+    return v[key]["median"] if key in v else 0.0
 
 
 def main():
@@ -44,12 +57,15 @@ def main():
     os.makedirs(os.path.dirname(out) or ".", exist_ok=True)
     with open(os.path.splitext(out)[0] + ".csv", "w", newline="") as f:
         writer = csv.writer(f)
-        writer.writerow(["setting"] + [k for k, _, _ in STAGES] + ["total_ms", "fps"])
+        writer.writerow(["setting"] + [k for k, _, _ in STAGES]
+                        + ["total_ms", "capture_to_presented_ms", "fps"])
         for label, v in rows:
-            writer.writerow([label] + [f"{v[k]['median']:.1f}" for k, _, _ in STAGES]
-                            + [f"{v['total_ms']['median']:.1f}", f"{v['fps']:.1f}"])
-    left, bar, gap, width = 190, 28, 18, 560
-    longest = max(sum(v[k]["median"] for k, _, _ in STAGES) for _, v in rows)
+            writer.writerow([label] + [f"{med(v, k):.1f}" for k, _, _ in STAGES]
+                            + [f"{v['total_ms']['median']:.1f}",
+                               f"{med(v, 'glass_ms'):.1f}" if "glass_ms" in v else "",
+                               f"{v['fps']:.1f}"])
+    left, bar, gap, width = 230, 28, 18, 560
+    longest = max(sum(med(v, k) for k, _, _ in STAGES) for _, v in rows)
     scale = width / (longest * 1.08)
     height = 70 + len(rows) * (bar + gap) + 60
     svg = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{left + width + 140}" '
@@ -62,12 +78,15 @@ def main():
         svg.append(f'<text x="{left - 8}" y="{y + bar * 0.65}" text-anchor="end">{label}</text>')
         x = left
         for key, _, colour in STAGES:
-            w = v[key]["median"] * scale
+            w = med(v, key) * scale
             svg.append(f'<rect x="{x:.1f}" y="{y}" width="{w:.1f}" height="{bar}" '
                        f'fill="{colour}"/>')
             x += w
         total = v["total_ms"]["median"]
-        svg.append(f'<text x="{x + 6:.1f}" y="{y + bar * 0.65}">{total:.0f} ms '
+        shown = f"{total:.0f} ms decoded"
+        if "glass_ms" in v:
+            shown += f", {med(v, 'glass_ms'):.0f} ms presented"
+        svg.append(f'<text x="{x + 6:.1f}" y="{y + bar * 0.65}">{shown} '
                    f'({v["fps"]:.0f} fps)</text>')
         y += bar + gap
     x = 10

@@ -73,7 +73,9 @@ enum Command {
 
 /// Parses the command line and runs it; errors are printed and give exit code 1.
 pub fn main() -> ExitCode {
-    match run(Cli::parse()) {
+    let ran = run(Cli::parse());
+    crate::net::finish_trace();
+    match ran {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");

@@ -66,6 +66,10 @@ pub struct RunArgs {
     /// safety events (docs/real-footage.md).
     #[arg(long, value_name = "FILE.mcap")]
     record: Option<PathBuf>,
+    /// Sleep MS at the end of every app update: a renderer slowed on purpose, to check that the
+    /// robot's control loop keeps its rate whatever the render costs (docs/latency.md).
+    #[arg(long = "slow-update-ms", value_name = "MS", value_parser = clap::value_parser!(u64).range(1..=10_000))]
+    slow_update_ms: Option<u64>,
     #[command(flatten)]
     overrides: EraseOverrides,
 }
@@ -87,6 +91,7 @@ impl RunArgs {
             leap_mount,
             robot,
             record,
+            slow_update_ms,
             overrides,
             view,
         } = self;
@@ -196,6 +201,7 @@ impl RunArgs {
             cameras,
             no_switch,
             press,
+            slow_update: slow_update_ms.map(std::time::Duration::from_millis),
         };
         let mut app = crate::preview::build_app(&scene, &options)?;
         if let Some(path) = &record {

@@ -232,20 +232,16 @@ impl ControlLoop {
         let started = Instant::now();
         let mut tick: u64 = 0;
         let mut last_tick_at: Option<Instant> = None;
-        let mut next_due = started;
+        let mut ticker = avatarm_mapping::threaded::Ticker::new(self.period);
         // When the newest target arrived (s): its twist is fed forward only while it is this
         // fresh; an older one keeps only its pose, so a lost stream never drives the arm on at
         // the last velocity until the watchdog.
         let mut latest_arrival_s = f64::NEG_INFINITY;
-        let fresh_for_s = 3.0 * dt;
+        let fresh_for_s = avatarm_mapping::threaded::FRESH_PERIODS * dt;
         loop {
-            std::thread::sleep(next_due.saturating_duration_since(Instant::now()));
             // Late by more than a period (the machine stalled): the schedule restarts from now
             // rather than running the missed ticks back to back.
-            next_due += self.period;
-            if next_due < Instant::now() {
-                next_due = Instant::now() + self.period;
-            }
+            ticker.wait();
             tick += 1;
             if stop.load(Ordering::Relaxed) || duration.is_some_and(|d| started.elapsed() >= d) {
                 break;
@@ -329,12 +325,7 @@ impl ControlLoop {
             }
             let use_target = latest
                 .filter(|_| present && refused.is_none())
-                .map(|mut t| {
-                    if now - latest_arrival_s > fresh_for_s {
-                        t.target.object_twist = nalgebra::Vector6::zeros();
-                    }
-                    t
-                });
+                .map(|t| t.freshened(now - latest_arrival_s, fresh_for_s));
             if let Some(t) = &use_target {
                 ages.push((now - t.hand_stamp_s) * 1e3);
             }

@@ -152,6 +152,8 @@ struct ServeVideo {
     update: Arc<AtomicU64>,
     /// When this update began.
     update_started: Option<std::time::Instant>,
+    /// The site's clock minus the app's (s), this update's ([`note_site_clock`]).
+    site_minus_app: f64,
 }
 
 /// A frame read back, to be coded.
@@ -205,9 +207,14 @@ impl Plugin for ServeVideoPlugin {
             arrivals: std::collections::VecDeque::new(),
             update: Arc::default(),
             update_started: None,
+            site_minus_app: 0.0,
         })
         .add_plugins(DirectReadbackPlugin)
         .add_systems(First, count_update)
+        .add_systems(
+            RunFixedMainLoop,
+            note_site_clock.in_set(RunFixedMainLoopSystems::AfterFixedMainLoop),
+        )
         .add_systems(Last, time_update)
         .add_systems(
             Update,
@@ -232,16 +239,17 @@ fn carried_object(scene: &Scene) -> Option<(usize, Isometry3<f64>)> {
     Some((prop, setup.bottle_centre().inverse() * setup.bottle_base))
 }
 
-/// The site's clock minus the app's (s), for this update: the site's clock at the update's
-/// start (now, less the time since it began) against the app's elapsed time then. One value
-/// for every stamp converted in an update, so that they keep their order. It changes between
-/// updates when the app's clock falls behind the wall's (an update longer than Bevy's largest
-/// step).
-fn site_minus_app(clock: &SiteClock, time: &Time, real: &Time<Real>) -> f64 {
-    let since_update = real
-        .last_update()
-        .map_or(0.0, |t| t.elapsed().as_secs_f64());
-    clock.now_s() - since_update - time.elapsed_secs_f64()
+/// Once per update, right after its fixed steps: the site's clock minus the app's (s), the
+/// fixed clock as this update's live inputs are stamped with it (a camera's frames,
+/// `avatarm_video::threaded`). Bevy sets its clocks from the instant the render world's previous
+/// frame ended (pipelined rendering), 25-50 ms before an update's systems run on this machine;
+/// converting from that instant (as before) put the camera's frames that much earlier than the
+/// joint states on the site's clock, and the latencies measured from them that much longer. One
+/// value for every stamp converted in an update, so that they keep their order. It changes
+/// between updates when the app's clock falls behind the wall's (an update longer than Bevy's
+/// largest step).
+fn note_site_clock(mut video: ResMut<ServeVideo>, fixed: Res<Time<Fixed>>) {
+    video.site_minus_app = video.options.clock.now_s() - fixed.elapsed_secs_f64();
 }
 
 /// The loop's joint states into the room's arm and the app's twin (their stamps moved to the
@@ -249,15 +257,13 @@ fn site_minus_app(clock: &SiteClock, time: &Time, real: &Time<Real>) -> f64 {
 #[allow(clippy::too_many_arguments)] // a Bevy system: each argument is a parameter it reads
 fn mirror_loop(
     video: Res<ServeVideo>,
-    time: Res<Time>,
-    real: Res<Time<Real>>,
     twin: Option<Res<AppTwin>>,
     room: Res<SimRoomConfig>,
     mut robot: ResMut<SimRobotState>,
     mut states: MessageWriter<JointStateMessage>,
     mut parts: Query<(&SimPropPart, &mut Transform)>,
 ) {
-    let site_minus_app = site_minus_app(&video.options.clock, &time, &real);
+    let site_minus_app = video.site_minus_app;
     let updates: Vec<ArmUpdate> = match video.options.updates.lock() {
         Ok(rx) => rx.try_iter().collect(),
         Err(_) => return,
@@ -283,12 +289,7 @@ fn mirror_loop(
 /// their stamps moved from the site's clock to the app's. A refused one (malformed, stamped
 /// more than [`avatarm_net::msg::MAX_AHEAD_S`] ahead, not newer than the last) is counted and
 /// logged (one line until a pose is taken again); the head then holds its last pose.
-fn take_remote_head(
-    mut video: ResMut<ServeVideo>,
-    time: Res<Time>,
-    real: Res<Time<Real>>,
-    scene: Res<crate::SceneResource>,
-) {
+fn take_remote_head(mut video: ResMut<ServeVideo>, scene: Res<crate::SceneResource>) {
     let Some(receiver) = video.options.head.clone() else {
         return;
     };
@@ -299,7 +300,7 @@ fn take_remote_head(
     };
     // The poses taken before move with the app's clock, so that each keeps its moment on the
     // site's clock.
-    let site_minus_app = site_minus_app(&video.options.clock, &time, &real);
+    let site_minus_app = video.site_minus_app;
     if let Some(before) = video.head_clock.replace(site_minus_app) {
         live.shift(before - site_minus_app);
     }
@@ -370,8 +371,7 @@ fn note_arrival(
 fn publish_erased(
     mut reads: ResMut<DirectReadQueue>,
     mut video: ResMut<ServeVideo>,
-    time: Res<Time>,
-    real: Res<Time<Real>>,
+    fixed: Res<Time<Fixed>>,
     state: Res<EraseState>,
     targets: Option<Res<EraseTargets>>,
     frames: Res<bevy::diagnostic::FrameCount>,
@@ -402,7 +402,7 @@ fn publish_erased(
     let render_frame = RenderSettled::this_update_frame(&frames);
     let settled = settled.clone();
     let clock = video.options.clock;
-    let site_minus_app = site_minus_app(&clock, &time, &real);
+    let site_minus_app = video.site_minus_app;
     let capture_s = t_s + site_minus_app;
     // A frame whose arrival is no longer kept (it cannot be: the erase draws the newest)
     // counts as arrived now.
@@ -411,7 +411,7 @@ fn publish_erased(
         .iter()
         .rev()
         .find(|a| a.0 == index)
-        .map_or((time.elapsed_secs_f64(), frames.0), |a| (a.1, a.2));
+        .map_or((fixed.elapsed_secs_f64(), frames.0), |a| (a.1, a.2));
     let arrived_s = arrived_s + site_minus_app;
     // The camera this frame's mask was drawn from (a camera on a head moves).
     let camera_pose = FrameHeader::pose_of(&state.camera_pose.unwrap_or(video.world_from_camera));

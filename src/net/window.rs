@@ -20,11 +20,14 @@ use avatarm_erase::{EraseTargets, InteractionConfig, InteractionPlugin, Interact
 use avatarm_scene::Scene;
 use avatarm_twin::camera::rgba8_image;
 use bevy::prelude::*;
+use bevy::render::extract_resource::{ExtractResource, ExtractResourcePlugin};
 use bevy::render::render_resource::{Extent3d, TextureFormat, TextureUsages};
 use bevy::render::view::screenshot::{Screenshot, save_to_disk};
+use bevy::render::{Render, RenderApp, RenderSystems};
 use nalgebra::{Isometry3, Vector3};
 use serde::Serialize;
 
+use crate::preview::glass::GlassToGlass;
 use crate::teleop::{DesktopControls, DesktopHand, HandInteractionGizmos, HandViewGizmos};
 use crate::{AppError, SceneResource};
 use avatarm_core::stats::Spread;
@@ -60,9 +63,16 @@ pub struct WindowReport {
     pub fps: f64,
     /// Each rendered frame's time (ms, the window's clock).
     pub frame_ms: Spread,
-    /// Decoded → taken onto the panel by the window's update (ms): the display stage is this
-    /// plus the frame's render and the display's own latency.
+    /// Decoded → taken onto the panel by the window's update (ms).
     pub panel_wait_ms: Spread,
+    /// Decoded → presented (ms): the window's frame that first shows it handed to the display
+    /// (the render world's present, after [`bevy::render::RenderSystems::Render`]). The
+    /// display's own scan-out and response come after and are not measured.
+    pub display_ms: Spread,
+    /// Capture → presented (ms): glass to glass but the display's scan-out (the frame's
+    /// capture → decoded, on the robot site's clock as the session estimates it, plus
+    /// [`WindowReport::display_ms`]).
+    pub glass_to_glass_ms: Spread,
     /// The view was asked for in XR (`--xr`); whether a headset took it is in the log.
     pub xr: bool,
 }
@@ -74,6 +84,8 @@ pub struct ViewFrame {
     pub number: u64,
     /// When it was put here (decoded).
     pub decoded_at: Instant,
+    /// Its capture → decoded (ms; the robot site's clock as the session estimates it).
+    pub capture_to_decoded_ms: f64,
     /// Width (pixels).
     pub width: u32,
     /// Height (pixels).
@@ -141,7 +153,7 @@ impl ViewShared {
     }
 
     /// Puts a decoded frame up for the window (replacing one it has not drawn yet), seen from
-    /// `world_from_camera`.
+    /// `world_from_camera`, decoded `capture_to_decoded_ms` after its capture.
     pub fn put_frame(
         &self,
         width: u32,
@@ -149,12 +161,14 @@ impl ViewShared {
         rgba: Vec<u8>,
         world_from_camera: Isometry3<f64>,
         real_object: Option<Isometry3<f64>>,
+        capture_to_decoded_ms: f64,
     ) {
         let number = self.frames_in.fetch_add(1, Ordering::Relaxed) + 1;
         if let Ok(mut s) = self.state.lock() {
             s.frame = Some(ViewFrame {
                 number,
                 decoded_at: Instant::now(),
+                capture_to_decoded_ms,
                 width,
                 height,
                 rgba,
@@ -208,12 +222,26 @@ struct WindowRecord {
     report: WindowReport,
     frame_ms: Vec<f64>,
     panel_wait_ms: Vec<f64>,
+    display_ms: Vec<f64>,
     correction_mm: Vec<f64>,
 }
 
-/// The window's record, shared with the [`WindowHandle`].
+/// The frame the window put on the panel in this update, extracted to the render world, which
+/// stamps it when the window's frame that shows it is presented ([`stamp_presented`]).
+#[derive(Resource, Clone, Copy, Default, ExtractResource)]
+struct PanelFrame(Option<PanelTag>);
+
+#[derive(Clone, Copy)]
+struct PanelTag {
+    number: u64,
+    decoded_at: Instant,
+    capture_to_decoded_ms: f64,
+}
+
+/// The window's record and its frames' glass to glass, shared with the [`WindowHandle`] and the
+/// render world.
 #[derive(Resource, Clone, Default)]
-struct WindowOutcome(Arc<Mutex<WindowRecord>>);
+struct WindowOutcome(Arc<Mutex<WindowRecord>>, GlassToGlass);
 
 #[derive(Component)]
 struct StatusText;
@@ -270,6 +298,8 @@ pub fn build(
         })
         .insert_resource(Session(shared))
         .insert_resource(outcome.clone())
+        .init_resource::<PanelFrame>()
+        .add_plugins(ExtractResourcePlugin::<PanelFrame>::default())
         .insert_resource(WindowState {
             options: options.clone(),
             observer,
@@ -308,6 +338,11 @@ pub fn build(
     }
     // After the desktop hand is in: the keys' help shows with it.
     app.add_systems(Startup, spawn_ui);
+    if let Some(render) = app.get_sub_app_mut(RenderApp) {
+        render
+            .insert_resource(outcome.clone())
+            .add_systems(Render, stamp_presented.in_set(RenderSystems::Cleanup));
+    }
     Ok((app, WindowHandle(outcome)))
 }
 
@@ -321,6 +356,8 @@ impl WindowHandle {
         (record.report.frames > 0).then(|| WindowReport {
             frame_ms: Spread::of(&record.frame_ms),
             panel_wait_ms: Spread::of(&record.panel_wait_ms),
+            display_ms: Spread::of(&record.display_ms),
+            glass_to_glass_ms: self.0.1.spread(),
             anchor_correction_mm: Spread::of(&record.correction_mm),
             ..record.report.clone()
         })
@@ -399,7 +436,7 @@ fn show_view(mut commands: Commands, targets: Res<InteractionTargets>, scene: Re
 #[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn show_session(
     session: Res<Session>,
-    mut state: ResMut<WindowState>,
+    (mut state, mut panel): (ResMut<WindowState>, ResMut<PanelFrame>),
     outcome: Res<WindowOutcome>,
     mut images: ResMut<Assets<Image>>,
     mut config: ResMut<InteractionConfig>,
@@ -444,6 +481,11 @@ fn show_session(
             if let Ok(mut record) = outcome.0.lock() {
                 Spread::push(&mut record.panel_wait_ms, wait_ms);
             }
+            panel.0 = Some(PanelTag {
+                number: frame.number,
+                decoded_at: frame.decoded_at,
+                capture_to_decoded_ms: frame.capture_to_decoded_ms,
+            });
         }
     }
     // The operator's twin is drawn where her physics twin is (mapped to the real world); an
@@ -485,12 +527,35 @@ fn show_session(
         }
     }
     if !line.is_empty() {
+        // Glass to glass live: the newest presented frame's, and the median of the last ones.
+        let line = format!("{line}{}", outcome.1.line());
         for mut t in &mut text {
             if t.0 != line {
                 t.0.clone_from(&line);
             }
         }
     }
+}
+
+/// In the render world, after the present: the frame the window put on the panel in the
+/// update this render belongs to is on the display's way now (each frame stamped once).
+fn stamp_presented(
+    panel: Option<Res<PanelFrame>>,
+    outcome: Res<WindowOutcome>,
+    mut last: Local<u64>,
+) {
+    let Some(tag) = panel.and_then(|p| p.0) else {
+        return;
+    };
+    if tag.number <= *last {
+        return;
+    }
+    *last = tag.number;
+    let display_ms = tag.decoded_at.elapsed().as_secs_f64() * 1e3;
+    if let Ok(mut record) = outcome.0.lock() {
+        Spread::push(&mut record.display_ms, display_ms);
+    }
+    outcome.1.push(tag.capture_to_decoded_ms + display_ms);
 }
 
 fn drive_desktop_hand(
@@ -565,13 +630,14 @@ mod tests {
     fn the_view_holds_the_newest_frame_numbered() {
         let shared = ViewShared::new();
         let at = |x: f64| Isometry3::translation(x, 0.0, 1.0);
-        shared.put_frame(2, 1, vec![1; 8], at(1.0), None);
-        shared.put_frame(2, 1, vec![2; 8], at(2.0), Some(at(0.5)));
+        shared.put_frame(2, 1, vec![1; 8], at(1.0), None, 10.0);
+        shared.put_frame(2, 1, vec![2; 8], at(2.0), Some(at(0.5)), 20.0);
         let frame = shared.state.lock().unwrap().frame.take().unwrap();
         assert_eq!((frame.number, frame.rgba[0]), (2, 2));
         assert_eq!(frame.world_from_camera, at(2.0));
         assert_eq!(frame.real_object, Some(at(0.5)));
-        shared.put_frame(2, 1, vec![3; 8], at(3.0), None);
+        assert_eq!(frame.capture_to_decoded_ms, 20.0);
+        shared.put_frame(2, 1, vec![3; 8], at(3.0), None, 30.0);
         let frame = shared.state.lock().unwrap().frame.take().unwrap();
         assert_eq!(frame.number, 3);
     }

@@ -9,6 +9,7 @@
 //! ([`crate::preview::live_scores`]).
 
 pub mod budget;
+pub mod glass;
 pub mod keys;
 pub mod live_scores;
 pub mod recorded;
@@ -71,6 +72,9 @@ pub struct PreviewOptions {
     /// Keys pressed by script: `(frame, key)`, the key pressed at the start of that rendered
     /// frame (counted from 1) and released at the next (`--press`).
     pub press: Vec<(u32, KeyCode)>,
+    /// Each update sleeps this long at its end: a renderer slowed on purpose
+    /// (`--slow-update-ms`), to show that the robot's control keeps its rate.
+    pub slow_update: Option<std::time::Duration>,
 }
 
 /// The preview's cameras, panels and keys.
@@ -124,6 +128,17 @@ pub fn build_app(scene: &avatarm_scene::Scene, options: &PreviewOptions) -> Resu
         }));
     }
     app.add_plugins(PreviewPlugin(options.clone()));
+    if options.fixed_step_s.is_none() {
+        // On the wall clock only: glass to glass live (`glass`).
+        app.add_plugins(glass::GlassToGlassPlugin);
+    }
+    if let Some(pause) = options.slow_update {
+        info!(
+            "preview: each update slowed on purpose by {} ms (--slow-update-ms)",
+            pause.as_millis()
+        );
+        app.add_systems(Last, move || std::thread::sleep(pause));
+    }
     match (live, &options.recorded_arm) {
         (Some(live), _) => live.install(&mut app)?,
         (None, Some(arm)) => {
@@ -502,7 +517,7 @@ fn update_status(
         Res<LiveVideo>,
         Res<avatarm_erase::GpuTimes>,
     ),
-    live_dr: Option<Res<LiveDr>>,
+    (live_dr, glass): (Option<Res<LiveDr>>, Option<Res<glass::GlassToGlass>>),
     time: Res<Time<Real>>,
     teleop: LiveTeleopStatus,
     scene: Res<crate::app::SceneResource>,
@@ -536,9 +551,10 @@ fn update_status(
     };
     let teleop_line = teleop.line();
     let head = head_line(&scene.0, &erase_state);
+    let glass = glass.map_or_else(String::new, |g| g.line());
     for mut line in &mut text {
         **line = format!(
-            "{teleop_line}sim {t:6.2} s   frame {:5.1} ms   refused joint states {}{stale}\ncamera frame age {frame_age_ms:5.1} ms   joint state age {age_ms:5.1} ms{head}\nmask renders per camera frame {per_frame:.2}{gpu}\n{erasing}{scores}",
+            "{teleop_line}sim {t:6.2} s   frame {:5.1} ms   refused joint states {}{stale}\ncamera frame age {frame_age_ms:5.1} ms   joint state age {age_ms:5.1} ms{head}\nmask renders per camera frame {per_frame:.2}{gpu}{glass}\n{erasing}{scores}",
             time.delta_secs_f64() * 1e3,
             twin.rejected
         );

@@ -172,6 +172,20 @@ impl LiveTeleop {
             room.external_drive = true;
             room.q0 = prepared_q0(&parts.teleop).unwrap_or_else(|| room.q0.clone());
         }
+        // A robot outside the app (a ROS link, a recording's) is ticked on a thread of its own
+        // at the control rate, whatever the app's updates cost; the embedded simulated arm is
+        // part of the simulated room and keeps its clock (the app's fixed steps).
+        let teleop = if parts.teleop.robot().simulated().is_some() {
+            parts.teleop
+        } else {
+            let teleop = parts.teleop.on_control_thread(parts.period)?;
+            info!(
+                "live teleoperation: the {} is ticked on its own thread every {:.1} ms",
+                teleop.robot_name(),
+                parts.period.as_secs_f64() * 1e3
+            );
+            teleop
+        };
         app.add_plugins((
             RapierPhysicsPlugin::<NoUserData>::default().in_fixed_schedule(),
             HandPlugin,
@@ -188,7 +202,7 @@ impl LiveTeleop {
         })
         .insert_resource(hand)
         .insert_resource(parts.hand_drive)
-        .insert_resource(parts.teleop)
+        .insert_resource(teleop)
         .init_resource::<HandAnchor>()
         .init_gizmo_group::<HandViewGizmos>()
         .init_gizmo_group::<HandInteractionGizmos>()
@@ -538,8 +552,11 @@ pub fn summary(
         .status_line()
         .map_or_else(String::new, |l| format!("; {l}"));
     let anchor = anchor.map_or_else(String::new, HandAnchor::summary);
+    let thread = teleop
+        .thread_stats()
+        .map_or_else(String::new, |s| format!("; {}", s.line()));
     format!(
-        "teleop: {} ticks, {} grasps, {}, {object}, max TCP speed {:.3} m/s{anchor}{link}",
+        "teleop: {} ticks, {} grasps, {}, {object}, max TCP speed {:.3} m/s{anchor}{link}{thread}",
         teleop.status.ticks,
         held.grasps,
         holding(held),

@@ -233,4 +233,41 @@ fn the_preview_plays_a_recording_as_its_camera_and_erases_its_robot() {
         .expect("a mask with the robot in it");
     assert!(start_up <= 15, "{start_up} frames before the first mask");
     assert_erased(&session, &background, 5, start_up);
+    // On the wall clock (no --frames: Escape pressed by script ends it), each frame the erase
+    // takes is stamped again when the window's frame showing it is presented: glass to glass
+    // (but the display's scan-out), said at the exit.
+    let run = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1280x720x24"])
+        .arg(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["run", POURING, "--hand", "none", "--press", "45:Esc"])
+        .arg("--camera-recording")
+        .arg(&recording)
+        .arg("--background")
+        .arg(&background)
+        .env("XR_RUNTIME_JSON", dir.join("no_runtime.json"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("xvfb-run starts (scripts/setup.sh installs it)");
+    let log = format!(
+        "{}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(run.status.success(), "{log}");
+    let line = log
+        .lines()
+        .find(|l| l.contains("glass to glass (capture -> presented) median"))
+        .unwrap_or_else(|| panic!("no glass to glass line:\n{log}"));
+    // The number after a word of the line: "median X ms, p95 Y ms over N frames".
+    let after = |word: &str| -> f64 {
+        line.split_once(word)
+            .and_then(|(_, rest)| rest.split_whitespace().next())
+            .and_then(|w| w.trim_end_matches(',').parse().ok())
+            .unwrap_or_else(|| panic!("no number after '{word}' in: {line}"))
+    };
+    let (median, p95, frames) = (after(" median "), after(" p95 "), after(" over "));
+    eprintln!("the preview's glass to glass: median {median} ms, p95 {p95} ms, {frames} frames");
+    // Some frames presented, each after its capture.
+    assert!(frames >= 3.0, "{line}");
+    assert!(median > 0.0 && median <= p95, "{line}");
 }

@@ -609,6 +609,16 @@ fn the_operator_window_shows_the_received_video_with_the_hand_in_front() {
     ] {
         assert!(f(&j, key) > 0.0, "{key}: {j}");
     }
+    // Each frame put on the panel stamped once more when the window's frame showing it was
+    // presented (the render world, after the present; the last one may not be by the exit),
+    // and glass to glass for each.
+    let presented = f(&j, "window.display_ms.n");
+    assert!(
+        presented >= f(&j, "window.video_frames") - 1.0
+            && presented <= f(&j, "window.video_frames"),
+        "{j}"
+    );
+    assert_eq!(f(&j, "window.glass_to_glass_ms.n"), presented, "{j}");
     // `--record`: what the operator received, as a recording: every frame shown (one
     // camera), every joint state, the scene's camera, on the robot site's clock.
     let rec = avatarm_record::Recording::open(&dir.join("join.mcap")).expect("the recording");

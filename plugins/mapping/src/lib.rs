@@ -19,6 +19,7 @@
 
 pub mod error;
 pub mod pouring;
+pub mod threaded;
 
 use std::sync::Arc;
 
@@ -254,6 +255,15 @@ pub struct Teleop {
     pub record: bool,
     /// The recorded ticks.
     pub log: Vec<TeleopSample>,
+    /// The thread the robot side runs on ([`Teleop::on_control_thread`]); `None`: it runs in
+    /// [`Teleop::tick`] itself.
+    thread: Option<threaded::ControlThread>,
+    /// Ticks refused on this side while a control thread drives the robot (the operator's side
+    /// failed), and the last reason.
+    front_errors: (u64, Option<String>),
+    /// With a control thread: this tick is its update's last fixed step, when the thread's
+    /// results are taken back (set by the plugin's system; `true` for direct callers).
+    last_step: bool,
 }
 
 /// What the teleoperation loop is made of.
@@ -311,13 +321,53 @@ impl Teleop {
             status: TeleopStatus::default(),
             record: false,
             log: Vec::new(),
+            thread: None,
+            front_errors: (0, None),
+            last_step: true,
         })
+    }
+
+    /// Refuses to set `what` once the robot side runs on a thread ([`Teleop::on_control_thread`]):
+    /// set it before.
+    fn not_threaded(&self, what: &str) -> Result<(), MappingError> {
+        match self.thread {
+            Some(_) => Err(MappingError::Setup {
+                message: format!("{what} is set before the robot side moves to its thread"),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// A loop with `other`'s model, mapping and limiter settings around `robot`, nothing run
+    /// yet (the app's side of [`Teleop::on_control_thread`]).
+    fn with_robot_parts(other: &Self, robot: Box<dyn RobotInterface>) -> Self {
+        Self {
+            model: other.model.clone(),
+            base: other.base,
+            tcp: other.tcp,
+            arm: other.arm.clone(),
+            tcp_from_object: other.tcp_from_object,
+            v2r: other.v2r,
+            mapper: other.mapper.clone(),
+            limiter: other.limiter.clone(),
+            robot,
+            approach: None,
+            joints: other.joints.clone(),
+            received: Vec::new(),
+            status: other.status.clone(),
+            record: other.record,
+            log: Vec::new(),
+            thread: None,
+            front_errors: (0, None),
+            last_step: true,
+        }
     }
 
     /// Moves the arm to `approach`'s start before the hand drives it ([`Approach`]); the hand
     /// takes over on the tick the arm arrives. Errors when the start or the settings cannot
     /// work.
     pub fn approach(&mut self, approach: Approach) -> Result<(), MappingError> {
+        self.not_threaded("the move to the start")?;
         approach.validate(self.model.dof())?;
         self.approach = Some(ApproachRun {
             approach,
@@ -333,6 +383,7 @@ impl Teleop {
     /// older than `timeout_s` stop the robot. The robot site of a two-site session sets it above
     /// the network's delay. Errors for a timeout that is not > 0.
     pub fn set_watchdog_timeout(&mut self, timeout_s: f64) -> Result<(), MappingError> {
+        self.not_threaded("the watchdog's timeout")?;
         let settings = safety::SafetySettings {
             timeout_s,
             ..*self.limiter.settings()
@@ -440,6 +491,8 @@ fn teleop_tick(
         Some(f) => (Some(f.t_s), f.tracked),
         None => (None, false),
     };
+    // No further fixed step runs in this update once less than a step is left over.
+    teleop.last_step = time.overstep() < time.timestep();
     let twin_pose = twin
         .single()
         .map(avatarm_twin::transform_to_iso)
@@ -492,6 +545,18 @@ pub struct RemoteTarget {
     pub hand_tracked: bool,
 }
 
+impl RemoteTarget {
+    /// The target as a tick uses it `age_s` after it arrived: past `fresh_for_s` it keeps its
+    /// pose but loses its twist, so that a stream that stopped does not drive the arm on at its
+    /// last velocity until the watchdog stops it.
+    pub fn freshened(mut self, age_s: f64, fresh_for_s: f64) -> Self {
+        if age_s.is_nan() || age_s > fresh_for_s {
+            self.target.object_twist = nalgebra::Vector6::zeros();
+        }
+        self
+    }
+}
+
 impl Teleop {
     /// One control tick at `now_s` (s, the joint states' clock) of period `dt_s`: joint states
     /// from the robot, the operator's side from `source`, the robot's side
@@ -504,6 +569,11 @@ impl Teleop {
         reason = "one control tick's steps in their order (inputs, mapping, limiter, gripper, command), each reading the one before"
     )]
     pub fn tick(&mut self, now_s: f64, dt_s: f64, source: TickSource) {
+        if self.thread.is_some() {
+            let operator = self.operator_for_thread(now_s, &source);
+            self.front_tick(now_s, operator, self.last_step);
+            return;
+        }
         let started = std::time::Instant::now();
         let t = self;
         let now = now_s;
@@ -680,6 +750,44 @@ impl Teleop {
                 operator: operator.as_ref().ok().copied(),
             };
             t.log.push(sample);
+        }
+    }
+}
+
+impl Teleop {
+    /// The operator's side of a tick at `now_s` for the control thread: the hand's here
+    /// (without a hand frame its stamp is `-inf`, which the thread's watchdog takes as stale),
+    /// or the one received.
+    fn operator_for_thread(&self, now_s: f64, source: &TickSource) -> Result<RemoteTarget, String> {
+        match source {
+            TickSource::Local {
+                contacts,
+                contact_velocities,
+                twin_pose,
+                held,
+                hand_stamp_s,
+                hand_tracked,
+            } => {
+                let pose = twin_pose.clone()?;
+                let target = Mapper::operator_side(
+                    &OperatorInputs {
+                        contacts,
+                        contact_velocities,
+                        twin_pose: pose,
+                        held: *held,
+                        stamp_s: now_s,
+                    },
+                    &self.v2r,
+                )
+                .map_err(|e| e.to_string())?;
+                Ok(RemoteTarget {
+                    target,
+                    hand_stamp_s: hand_stamp_s.unwrap_or(f64::NEG_INFINITY),
+                    hand_tracked: *hand_tracked,
+                })
+            }
+            TickSource::Remote(Some(r)) => Ok(*r),
+            TickSource::Remote(None) => Err(String::new()),
         }
     }
 }

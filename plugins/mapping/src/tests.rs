@@ -726,3 +726,101 @@ fn an_arm_away_from_the_start_is_brought_there_first_within_the_limits() {
     assert_eq!(t.log.len(), approached + 50);
     assert!(!t.status.approaching);
 }
+
+/// On its own thread the robot side ticks at the control rate whatever the app's side does:
+/// with the app ticking every 150 ms, the arm still moves to the start on every 10 ms tick, and
+/// the joint states and the log come back to the app (on its clock, in order, even where the
+/// app's clock loses time against the wall's); dropping the app's side stops the thread.
+#[test]
+fn the_control_thread_ticks_the_robot_while_the_app_is_slow() {
+    use crate::pouring::{TrialParts, prepare, simulated_arm};
+    use crate::{Approach, TickSource};
+    use std::time::Duration;
+    let s = setup();
+    let task = PouringTask::default();
+    let prepared = prepare(&task, &s).expect("prepared");
+    let q0 = prepared.q0().clone();
+    let mut away = q0.clone();
+    away[0] += 0.3;
+    let mut parts = TrialParts::on_robot(
+        &task,
+        &s,
+        &prepared,
+        MappingMode::ClosedLoop,
+        0,
+        Some(Box::new(simulated_arm(&s, away))),
+    )
+    .expect("parts");
+    parts
+        .teleop
+        .approach(Approach::to(q0.clone()))
+        .expect("approach");
+    parts.teleop.record = true;
+    let mut front = parts
+        .teleop
+        .on_control_thread(Duration::from_millis(10))
+        .expect("the thread starts");
+    assert!(
+        front.robot().simulated().is_none(),
+        "the arm is the thread's"
+    );
+    let mut stamps = Vec::new();
+    let mut logged = 0;
+    for k in 0..6 {
+        std::thread::sleep(Duration::from_millis(150));
+        // The app's clock runs behind the wall's (a slow app): the offset is taken back.
+        front.tick(f64::from(k) * 0.01, 0.01, TickSource::Remote(None));
+        stamps.extend(front.received().iter().map(|j| j.stamp_s));
+        logged += front.log.len();
+        front.log.clear();
+    }
+    let ticks = front.status.ticks;
+    let stats = front.thread_stats().expect("on a thread");
+    eprintln!("{} ticks; {}", ticks, stats.line());
+    // About 90 ticks in 0.9 s; a third of that whatever the machine's load.
+    assert!(ticks >= 30, "{ticks} ticks");
+    assert!(
+        stamps.len() >= 30 && logged >= 30,
+        "{} states, {logged} logged",
+        stamps.len()
+    );
+    assert!(stamps.windows(2).all(|w| w[0] < w[1]), "{stamps:?}");
+    // Moved onto the app's clock: the newest state is near the app's last tick (0.05 s), not
+    // at the thread's 0.9 s.
+    let newest = *stamps.last().unwrap();
+    assert!((newest - 0.05).abs() < 0.1, "{newest}");
+    assert_eq!(stats.period_ms, 10.0);
+    assert!(stats.intervals_ms.n + 1 >= 30);
+    // An app whose clock follows the wall's (a constant offset from the thread's): the joint
+    // states come back at the thread's spacing (10 ms), the newest just before the app's now.
+    let wall = std::time::Instant::now();
+    let mut stamps = Vec::new();
+    let mut app_now = 0.0;
+    for _ in 0..6 {
+        std::thread::sleep(Duration::from_millis(50));
+        app_now = 100.0 + wall.elapsed().as_secs_f64();
+        front.tick(app_now, 0.01, TickSource::Remote(None));
+        stamps.extend(front.received().iter().map(|j| j.stamp_s));
+    }
+    let mut steps: Vec<f64> = stamps.windows(2).map(|w| (w[1] - w[0]) * 1e3).collect();
+    steps.sort_by(f64::total_cmp);
+    let step = steps[steps.len() / 2];
+    assert!(
+        (5.0..=20.0).contains(&step),
+        "median spacing {step} ms: {steps:?}"
+    );
+    let newest = *stamps.last().unwrap();
+    assert!(
+        newest <= app_now + 1e-3 && newest > app_now - 0.06,
+        "{newest} vs the app's {app_now}"
+    );
+    // Settings of the robot side are set before it moves to its thread.
+    assert!(front.approach(Approach::to(q0.clone())).is_err());
+    assert!(front.set_watchdog_timeout(0.2).is_err());
+    // The arm moved toward the start on the thread's ticks.
+    let q = front.joints().expect("a joint state").positions.clone();
+    assert!((q[0] - q0[0]).abs() < 0.29, "{} vs {}", q[0], q0[0]);
+    assert!(front.status.approaching || front.status.approach_s.is_some());
+    // Dropped: the thread stops and is joined (this returns).
+    drop(front);
+}

@@ -327,6 +327,11 @@ impl RobotInterface for RosArm {
                 self.settings.arm_joints[i], qdot[self.arm[i]]
             )));
         }
+        if self.last_state.is_none() && !self.moving && qdot.iter().all(|v| *v == 0.0) {
+            // Before the first joint state nothing was commanded: a stop has nothing to stop
+            // (a control loop that starts before the robot's stream does is not refused).
+            return Ok(());
+        }
         self.may_command()?;
         let mut values: Vec<f64> = self.command_index.iter().map(|&i| qdot[i]).collect();
         if let CommandKind::GroupPosition { .. } = self.settings.command {

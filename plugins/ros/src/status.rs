@@ -138,6 +138,9 @@ impl LinkStatus {
         if self.commands_refused > 0 {
             parts.push(format!("{} commands refused", self.commands_refused));
         }
+        if self.losses > 0 {
+            parts.push(format!("link lost {} times", self.losses));
+        }
         parts.join(", ")
     }
 }

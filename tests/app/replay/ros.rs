@@ -82,6 +82,79 @@ fn live_teleoperation_commands_a_sawyer_over_ros() {
     assert!(String::from_utf8_lossy(&run.stderr).contains("--robot ros"));
 }
 
+/// `avatarm run --robot ros` with the renderer slowed on purpose (every update 250 ms longer):
+/// the robot's control loop keeps its own rate on its own thread. The Sawyer node receives the
+/// commands evenly spaced at the control period (10 ms), not one per update, and the link is
+/// never judged lost although the app reads the joint states only four times a second or less.
+/// (`--frames` steps the app's clock by a fixed 1/60 s per update, far behind the wall's: the
+/// robot's commands and link are on the wall's, which is what is checked.)
+#[cfg(feature = "ros")]
+#[test]
+fn a_slow_renderer_does_not_slow_the_robots_control() {
+    let _serial = ros_support::serial();
+    let scene = scene("pouring");
+    let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
+        panic!("the pouring scene has a task");
+    };
+    let prepared = avatarm_mapping::pouring::prepare(task, setup).expect("grasp");
+    // 0.3 rad off on the first joint: seconds of moving to the start, a steady stream of
+    // commands that no hand data gates.
+    let start: Vec<String> = setup
+        .arm
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| (prepared.q0()[i] + if k == 0 { 0.3 } else { 0.0 }).to_string())
+        .collect();
+    let master = Master::start();
+    let sawyer = FakeSawyer::start_at(&master, 0.0, &start.join(","));
+    let out = out_dir("ros_slow_render");
+    std::fs::create_dir_all(&out).unwrap();
+    let log = run_preview_with(
+        &[
+            "assets/scenes/pouring.toml",
+            "--robot",
+            "ros",
+            "--frames",
+            "30",
+            "--slow-update-ms",
+            "250",
+        ],
+        &out,
+        &[("ROS_MASTER_URI", &master.uri)],
+    );
+    let r = sawyer.report();
+    eprintln!("fake Sawyer after a slowed run: {r}");
+    let line = log
+        .lines()
+        .find(|l| l.contains("teleop: "))
+        .unwrap_or_default();
+    eprintln!("{line}");
+    assert!(
+        log.contains("ticked on its own thread every 10.0 ms"),
+        "{log}"
+    );
+    assert!(
+        !log.contains("the link is down") && !line.contains("link lost"),
+        "a false link loss:\n{log}"
+    );
+    assert!(
+        line.contains("ROS link up") && line.contains("control thread: a tick every"),
+        "{line}"
+    );
+    // One command per update would be 250 ms or more apart; a burst of the missed fixed steps
+    // would be microseconds apart.
+    let gaps = r["command_gaps"].as_u64().unwrap_or(0);
+    let median = r["command_gap_ms_median"].as_f64().unwrap_or(f64::NAN);
+    let p95 = r["command_gap_ms_p95"].as_f64().unwrap_or(f64::NAN);
+    assert!(gaps >= 200, "{gaps} commands in a stream: {r}");
+    assert!(
+        (6.0..=16.0).contains(&median),
+        "median gap {median} ms: {r}"
+    );
+    assert!(p95 <= 40.0, "p95 gap {p95} ms: {r}");
+    assert_eq!(r["bad"].as_u64(), Some(0), "{r}");
+}
+
 /// The paper's pouring task teleoperated through the ROS 1 link against the simulated Sawyer
 /// node (a real ROS master, Intera's topics), beside the same trial on the embedded simulated
 /// arm: the object error through ROS is reported as in the simulated room.

@@ -23,6 +23,7 @@ fn the_apps_own_systems_run_in_a_defined_order() {
         cameras: Vec::new(),
         no_switch: None,
         press: vec![(1, bevy::input::keyboard::KeyCode::KeyV)],
+        slow_update: None,
     };
     app.add_plugins((
         avatarm::preview::PreviewPlugin(preview),

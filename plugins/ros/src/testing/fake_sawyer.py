@@ -122,6 +122,9 @@ def main():
         "ignored_max_speed": 0.0,
         "bad": 0,
         "latency_ms": [],
+        # Intervals between consecutive joint commands (ms), gaps of a second or more (a new
+        # stream) left out: a command stream's evenness.
+        "gaps_ms": [],
         "holds": 0,
         "gripper_m": None,
         "gripper_target_m": 0.041667,
@@ -131,6 +134,13 @@ def main():
         "target": None,
         "md5": types["JointCommand"]._md5sum,
     }
+
+    def note_gap(now):
+        # Under the lock.
+        last = state["last_command"]
+        if last is not None and now - last < 1.0:
+            state["gaps_ms"].append((now - last) * 1e3)
+            del state["gaps_ms"][:-20000]
 
     def on_command(m):
         now = time.time()
@@ -151,6 +161,7 @@ def main():
                 return
             for n, v in vel.items():
                 state["velocity"][n] = v
+            note_gap(now)
             state["last_command"] = now
             state["commands"] += 1
             stamp = m.header.stamp.to_sec()
@@ -193,6 +204,7 @@ def main():
                     state["velocity"][n] = v
             else:
                 state["target"] = dict(zip(controller, data))
+            note_gap(now)
             state["last_command"] = now
             state["commands"] += 1
 
@@ -257,6 +269,7 @@ def main():
     def report():
         with lock:
             lat = state["latency_ms"]
+            gaps = sorted(state["gaps_ms"])
             line = {
                 "t": time.time(),
                 "md5": state["md5"],
@@ -275,6 +288,11 @@ def main():
                 "rate_hz": state["rate_hz"],
                 "latency_ms_median": statistics.median(lat) if lat else None,
                 "latency_ms_p95": sorted(lat)[int(0.95 * (len(lat) - 1))] if lat else None,
+                "command_gaps": len(gaps),
+                "command_gap_ms_median": gaps[len(gaps) // 2] if gaps else None,
+                "command_gap_ms_p95": gaps[int(0.95 * (len(gaps) - 1))] if gaps else None,
+                "command_gap_ms_max": gaps[-1] if gaps else None,
+                "command_gaps_over_50ms": sum(1 for g in gaps if g > 50.0),
                 "q": [q[n] for n in sorted(LIMITS)],
                 "target": None if state["target"] is None else [state["target"][n] for n in sorted(LIMITS)],
                 "velocity": [state["velocity"][n] for n in sorted(LIMITS)],

@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# A Chrome trace of the robot site's updates (Bevy's spans: every system, schedule and render
+# step) and where its milliseconds go (docs/latency.md, "Profile"). Needs an avatarm built with
+# the trace feature: `cargo build --features trace`, the binary in AVATARM (default
+# target/debug/avatarm). SOURCE=recorded (default: a second of the pouring scene recorded by the
+# replay, served as a live camera) or sim (the simulated room's camera); SECONDS_WATCHED (default
+# 12) with one `join --watch` on loopback. Output: out/profile_SOURCE/ (trace.json, which
+# chrome://tracing or ui.perfetto.dev opens, and summary.txt).
+set -euo pipefail
+A=$(realpath "${AVATARM:-$(dirname "$0")/../target/debug/avatarm}")
+cd "$(dirname "$0")/.."
+[ -x "$A" ] || { echo "error: no avatarm binary at $A (cargo build --features trace)" >&2; exit 1; }
+source=${SOURCE:-recorded}
+watched=${SECONDS_WATCHED:-12}
+O=out/profile_$source; rm -rf "$O"; mkdir -p "$O"
+S=$O/scene.toml
+sed -e "s#\.\./robots/#$PWD/assets/robots/#" -e '0,/^duration_s = 2.0/s//duration_s = 1.0/' \
+  assets/scenes/pouring.toml > "$S"
+camera=()
+if [ "$source" = recorded ]; then
+  "$A" replay "$S" --record $O/session.mcap --out $O/replay > $O/replay.log 2>&1
+  camera=(--camera-recording $O/session.mcap --background $O/replay/background.png)
+fi
+port=7790
+AVATARM_TRACE_CHROME=$O/trace.json "$A" serve "$S" --insecure-lan --listen tcp/127.0.0.1:$port \
+  "${camera[@]}" --duration $((watched + 8)) --report $O/serve.json 2>$O/serve.log &
+sp=$!
+sleep 1
+"$A" join tcp/127.0.0.1:$port --scene "$S" --watch --duration $watched --wait 30 \
+  --report $O/watch.json 2>$O/watch.log
+wait $sp
+python3 scripts/profile_summary.py $O/trace.json --top 25 | tee $O/summary.txt
