@@ -20,14 +20,12 @@ use avatarm_erase::{EraseTargets, InteractionConfig, InteractionPlugin, Interact
 use avatarm_scene::Scene;
 use avatarm_twin::camera::rgba8_image;
 use bevy::prelude::*;
-use bevy::render::extract_resource::{ExtractResource, ExtractResourcePlugin};
 use bevy::render::render_resource::{Extent3d, TextureFormat, TextureUsages};
 use bevy::render::view::screenshot::{Screenshot, save_to_disk};
-use bevy::render::{Render, RenderApp, RenderSystems};
 use nalgebra::{Isometry3, Vector3};
 use serde::Serialize;
 
-use crate::preview::glass::GlassToGlass;
+use crate::preview::glass::{GlassToGlass, GlassToGlassPlugin, Taken, TakenFrame};
 use crate::teleop::{DesktopControls, DesktopHand, HandInteractionGizmos, HandViewGizmos};
 use crate::{AppError, SceneResource};
 use avatarm_core::stats::Spread;
@@ -222,25 +220,12 @@ struct WindowRecord {
     report: WindowReport,
     frame_ms: Vec<f64>,
     panel_wait_ms: Vec<f64>,
-    display_ms: Vec<f64>,
     correction_mm: Vec<f64>,
 }
 
-/// The frame the window put on the panel in this update, extracted to the render world, which
-/// stamps it when the window's frame that shows it is presented ([`stamp_presented`]).
-#[derive(Resource, Clone, Copy, Default, ExtractResource)]
-struct PanelFrame(Option<PanelTag>);
-
-#[derive(Clone, Copy)]
-struct PanelTag {
-    number: u64,
-    decoded_at: Instant,
-    capture_to_decoded_ms: f64,
-}
-
-/// The window's record and its frames' glass to glass, shared with the [`WindowHandle`] and the
-/// render world.
-#[derive(Resource, Clone, Default)]
+/// The window's record and its frames' display stage (stamped at the present,
+/// [`GlassToGlassPlugin`]), shared with the [`WindowHandle`].
+#[derive(Resource, Clone)]
 struct WindowOutcome(Arc<Mutex<WindowRecord>>, GlassToGlass);
 
 #[derive(Component)]
@@ -277,7 +262,11 @@ pub fn build(
         .disable::<bevy::log::LogPlugin>();
     let mut app = App::new();
     crate::app::add_window_plugins(&mut app, plugins, options.xr);
-    let outcome = WindowOutcome::default();
+    app.add_plugins(GlassToGlassPlugin);
+    let outcome = WindowOutcome(
+        Arc::default(),
+        app.world().resource::<GlassToGlass>().clone(),
+    );
     let k = &scene.believed_camera.intrinsics;
     let video = app
         .world_mut()
@@ -298,8 +287,6 @@ pub fn build(
         })
         .insert_resource(Session(shared))
         .insert_resource(outcome.clone())
-        .init_resource::<PanelFrame>()
-        .add_plugins(ExtractResourcePlugin::<PanelFrame>::default())
         .insert_resource(WindowState {
             options: options.clone(),
             observer,
@@ -338,11 +325,6 @@ pub fn build(
     }
     // After the desktop hand is in: the keys' help shows with it.
     app.add_systems(Startup, spawn_ui);
-    if let Some(render) = app.get_sub_app_mut(RenderApp) {
-        render
-            .insert_resource(outcome.clone())
-            .add_systems(Render, stamp_presented.in_set(RenderSystems::Cleanup));
-    }
     Ok((app, WindowHandle(outcome)))
 }
 
@@ -356,7 +338,7 @@ impl WindowHandle {
         (record.report.frames > 0).then(|| WindowReport {
             frame_ms: Spread::of(&record.frame_ms),
             panel_wait_ms: Spread::of(&record.panel_wait_ms),
-            display_ms: Spread::of(&record.display_ms),
+            display_ms: self.0.1.display_spread(),
             glass_to_glass_ms: self.0.1.spread(),
             anchor_correction_mm: Spread::of(&record.correction_mm),
             ..record.report.clone()
@@ -436,7 +418,7 @@ fn show_view(mut commands: Commands, targets: Res<InteractionTargets>, scene: Re
 #[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn show_session(
     session: Res<Session>,
-    (mut state, mut panel): (ResMut<WindowState>, ResMut<PanelFrame>),
+    (mut state, mut panel): (ResMut<WindowState>, ResMut<TakenFrame>),
     outcome: Res<WindowOutcome>,
     mut images: ResMut<Assets<Image>>,
     mut config: ResMut<InteractionConfig>,
@@ -481,10 +463,11 @@ fn show_session(
             if let Ok(mut record) = outcome.0.lock() {
                 Spread::push(&mut record.panel_wait_ms, wait_ms);
             }
-            panel.0 = Some(PanelTag {
+            // Its age when decoded: the display stage counts from there.
+            panel.0 = Some(Taken {
                 number: frame.number,
-                decoded_at: frame.decoded_at,
-                capture_to_decoded_ms: frame.capture_to_decoded_ms,
+                at: frame.decoded_at,
+                age_ms: frame.capture_to_decoded_ms,
             });
         }
     }
@@ -535,27 +518,6 @@ fn show_session(
             }
         }
     }
-}
-
-/// In the render world, after the present: the frame the window put on the panel in the
-/// update this render belongs to is on the display's way now (each frame stamped once).
-fn stamp_presented(
-    panel: Option<Res<PanelFrame>>,
-    outcome: Res<WindowOutcome>,
-    mut last: Local<u64>,
-) {
-    let Some(tag) = panel.and_then(|p| p.0) else {
-        return;
-    };
-    if tag.number <= *last {
-        return;
-    }
-    *last = tag.number;
-    let display_ms = tag.decoded_at.elapsed().as_secs_f64() * 1e3;
-    if let Ok(mut record) = outcome.0.lock() {
-        Spread::push(&mut record.display_ms, display_ms);
-    }
-    outcome.1.push(tag.capture_to_decoded_ms + display_ms);
 }
 
 fn drive_desktop_hand(

@@ -20,29 +20,38 @@ use bevy::render::{Render, RenderApp, RenderSystems};
 /// How many recent frames the live median is over.
 const RECENT: usize = 30;
 
-/// Capture → presented of the frames shown so far (ms), shared with the render world.
+/// The frames presented so far, shared with the render world: capture → presented (ms) and
+/// taken → presented (ms; taken: put before the view by the update that shows it).
 #[derive(Resource, Clone, Default)]
-pub struct GlassToGlass(Arc<Mutex<Vec<f64>>>);
+pub struct GlassToGlass(Arc<Mutex<Series>>);
+
+#[derive(Default)]
+struct Series {
+    glass_ms: Vec<f64>,
+    display_ms: Vec<f64>,
+}
 
 impl GlassToGlass {
-    /// The newest frame's and the median of the last [`RECENT`] (ms), once one was presented.
+    fn series(&self) -> std::sync::MutexGuard<'_, Series> {
+        self.0.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// The newest frame's capture → presented and the median of the last [`RECENT`] (ms), once
+    /// one was presented.
     pub fn recent(&self) -> Option<(f64, f64)> {
-        let all = self.0.lock().unwrap_or_else(PoisonError::into_inner);
-        let recent = &all[all.len().saturating_sub(RECENT)..];
+        let s = self.series();
+        let recent = &s.glass_ms[s.glass_ms.len().saturating_sub(RECENT)..];
         Some((*recent.last()?, Spread::of(recent).median))
     }
 
-    /// Adds a frame's capture → presented (ms).
-    pub fn push(&self, ms: f64) {
-        Spread::push(
-            &mut self.0.lock().unwrap_or_else(PoisonError::into_inner),
-            ms,
-        );
+    /// Capture → presented of all of them (ms).
+    pub fn spread(&self) -> Spread {
+        Spread::of(&self.series().glass_ms)
     }
 
-    /// All of them (ms).
-    pub fn spread(&self) -> Spread {
-        Spread::of(&self.0.lock().unwrap_or_else(PoisonError::into_inner))
+    /// Taken → presented of all of them (ms).
+    pub fn display_spread(&self) -> Spread {
+        Spread::of(&self.series().display_ms)
     }
 
     /// The status line's words, empty before the first presented frame.
@@ -53,21 +62,25 @@ impl GlassToGlass {
     }
 }
 
-/// The camera frame the erase took in this update, extracted to the render world.
+/// The frame put before the view in this update, extracted to the render world, which stamps
+/// it when the window's frame that shows it is presented (each frame once).
 #[derive(Resource, Clone, Copy, Default, ExtractResource)]
-struct TakenFrame(Option<Taken>);
+pub struct TakenFrame(pub Option<Taken>);
 
-#[derive(Clone, Copy)]
-struct Taken {
-    /// The erase's frame count when it took it.
-    number: u64,
-    /// When (wall clock).
-    at: Instant,
-    /// Its age then (ms): the fixed clock now less its capture stamp.
-    age_ms: f64,
+/// A frame put before the view.
+#[derive(Debug, Clone, Copy)]
+pub struct Taken {
+    /// Counts the frames taken (a frame is stamped once, by its number).
+    pub number: u64,
+    /// When it was taken (wall clock).
+    pub at: Instant,
+    /// Its age then (ms): capture → taken.
+    pub age_ms: f64,
 }
 
-/// Stamps the frames the erase takes and their present; [`GlassToGlass`] holds the result.
+/// The present stamp: [`TakenFrame`] extracted to the render world, and [`GlassToGlass`] filled
+/// after each present. Whoever shows the frames sets [`TakenFrame`] (the preview's erase,
+/// [`PreviewGlassPlugin`]; the operator's window).
 pub struct GlassToGlassPlugin;
 
 impl Plugin for GlassToGlassPlugin {
@@ -75,14 +88,23 @@ impl Plugin for GlassToGlassPlugin {
         let record = GlassToGlass::default();
         app.insert_resource(record.clone())
             .init_resource::<TakenFrame>()
-            .add_plugins(ExtractResourcePlugin::<TakenFrame>::default())
-            .add_systems(Update, note_taken.after(EraseSystems::Prepare))
-            .add_systems(Last, say_at_exit);
+            .add_plugins(ExtractResourcePlugin::<TakenFrame>::default());
         if let Some(render) = app.get_sub_app_mut(RenderApp) {
             render
                 .insert_resource(record)
                 .add_systems(Render, stamp_presented.in_set(RenderSystems::Cleanup));
         }
+    }
+}
+
+/// The preview's glass to glass: the frames its erase takes, and a line at exit.
+pub struct PreviewGlassPlugin;
+
+impl Plugin for PreviewGlassPlugin {
+    fn build(&self, app: &mut App) {
+        app.add_plugins(GlassToGlassPlugin)
+            .add_systems(Update, note_taken.after(EraseSystems::Prepare))
+            .add_systems(Last, say_at_exit);
     }
 }
 
@@ -117,7 +139,10 @@ fn stamp_presented(
         return;
     }
     *last = t.number;
-    record.push(t.age_ms + t.at.elapsed().as_secs_f64() * 1e3);
+    let display_ms = t.at.elapsed().as_secs_f64() * 1e3;
+    let mut s = record.series();
+    Spread::push(&mut s.display_ms, display_ms);
+    Spread::push(&mut s.glass_ms, t.age_ms + display_ms);
 }
 
 /// One line when the app exits (Escape, the window closed): the frames' glass to glass.

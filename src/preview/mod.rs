@@ -130,7 +130,7 @@ pub fn build_app(scene: &avatarm_scene::Scene, options: &PreviewOptions) -> Resu
     app.add_plugins(PreviewPlugin(options.clone()));
     if options.fixed_step_s.is_none() {
         // On the wall clock only: glass to glass live (`glass`).
-        app.add_plugins(glass::GlassToGlassPlugin);
+        app.add_plugins(glass::PreviewGlassPlugin);
     }
     if let Some(pause) = options.slow_update {
         info!(

@@ -6,6 +6,7 @@ use std::process::Command;
 
 use crate::network::{POURING, f, finish, free_port, join_scene, out_dir, serve_scene};
 use crate::serial;
+use crate::support::output;
 
 /// A second of the pouring scene recorded by the replay (its frames, the joints at each
 /// capture, the camera), as `dir/session.mcap`.
@@ -183,6 +184,28 @@ fn assert_erased(path: &Path, background: &Path, min_frames: usize, start_up: us
     }
 }
 
+/// `avatarm run` of the pouring scene under xvfb-run with `recording` as its camera and
+/// `background` as H, no live task, and `args`; its log, once it exited successfully.
+fn preview_on_recording(dir: &Path, recording: &Path, background: &Path, args: &[&str]) -> String {
+    let run = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1280x720x24"])
+        .arg(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["run", POURING, "--hand", "none"])
+        .arg("--camera-recording")
+        .arg(recording)
+        .arg("--background")
+        .arg(background)
+        .args(args)
+        // No OpenXR runtime, even where a developer has one installed.
+        .env("XR_RUNTIME_JSON", dir.join("no_runtime.json"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("xvfb-run starts (scripts/setup.sh installs it)");
+    let log = output::printed(&run);
+    assert!(run.status.success(), "{log}");
+    log
+}
+
 /// `avatarm run --camera-recording`: the preview plays the recording as its camera and its
 /// robot as the twin's (no live task: `--hand none`), and erases it; `--record` keeps what it
 /// showed.
@@ -193,27 +216,12 @@ fn the_preview_plays_a_recording_as_its_camera_and_erases_its_robot() {
     let recording = record_a_second(&dir);
     let session = dir.join("preview.mcap");
     let background = dir.join("replay/background.png");
-    let run = Command::new("xvfb-run")
-        .args(["-a", "-s", "-screen 0 1280x720x24"])
-        .arg(env!("CARGO_BIN_EXE_avatarm"))
-        .args(["run", POURING, "--hand", "none", "--frames", "90"])
-        .arg("--camera-recording")
-        .arg(&recording)
-        .arg("--background")
-        .arg(&background)
-        .arg("--record")
-        .arg(&session)
-        // No OpenXR runtime, even where a developer has one installed.
-        .env("XR_RUNTIME_JSON", dir.join("no_runtime.json"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("xvfb-run starts (scripts/setup.sh installs it)");
-    let log = format!(
-        "{}{}",
-        String::from_utf8_lossy(&run.stdout),
-        String::from_utf8_lossy(&run.stderr)
+    let log = preview_on_recording(
+        &dir,
+        &recording,
+        &background,
+        &["--frames", "90", "--record", &session.to_string_lossy()],
     );
-    assert!(run.status.success(), "{log}");
     assert!(log.contains("played in a loop"), "{log}");
     // The preview compiles its pipelines while the first frames arrive (the robot site waits
     // for them; the preview does not yet): its first frames are black, then drawn before the
@@ -236,24 +244,7 @@ fn the_preview_plays_a_recording_as_its_camera_and_erases_its_robot() {
     // On the wall clock (no --frames: Escape pressed by script ends it), each frame the erase
     // takes is stamped again when the window's frame showing it is presented: glass to glass
     // (but the display's scan-out), said at the exit.
-    let run = Command::new("xvfb-run")
-        .args(["-a", "-s", "-screen 0 1280x720x24"])
-        .arg(env!("CARGO_BIN_EXE_avatarm"))
-        .args(["run", POURING, "--hand", "none", "--press", "45:Esc"])
-        .arg("--camera-recording")
-        .arg(&recording)
-        .arg("--background")
-        .arg(&background)
-        .env("XR_RUNTIME_JSON", dir.join("no_runtime.json"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("xvfb-run starts (scripts/setup.sh installs it)");
-    let log = format!(
-        "{}{}",
-        String::from_utf8_lossy(&run.stdout),
-        String::from_utf8_lossy(&run.stderr)
-    );
-    assert!(run.status.success(), "{log}");
+    let log = preview_on_recording(&dir, &recording, &background, &["--press", "45:Esc"]);
     let line = log
         .lines()
         .find(|l| l.contains("glass to glass (capture -> presented) median"))

@@ -564,10 +564,6 @@ impl Teleop {
     /// in [`Teleop::status`] and recorded in [`Teleop::log`] when [`Teleop::record`]. Every
     /// failure becomes a stop of the robot (a non-finite command the limiter ramps to zero),
     /// counted, never a panic.
-    #[expect(
-        clippy::too_many_lines,
-        reason = "one control tick's steps in their order (inputs, mapping, limiter, gripper, command), each reading the one before"
-    )]
     pub fn tick(&mut self, now_s: f64, dt_s: f64, source: TickSource) {
         if self.thread.is_some() {
             let operator = self.operator_for_thread(now_s, &source);
@@ -603,39 +599,7 @@ impl Teleop {
             .map(|s| s.positions.iter().copied().collect())
             .unwrap_or_else(|| vec![f64::NAN; n]);
         // The operator's side: here, or received.
-        let (operator, hand_stamp, hand_tracked): (Result<OperatorTarget, String>, _, _) =
-            match &source {
-                TickSource::Local {
-                    contacts,
-                    contact_velocities,
-                    twin_pose,
-                    held,
-                    hand_stamp_s,
-                    hand_tracked,
-                } => (
-                    twin_pose.clone().and_then(|pose| {
-                        Mapper::operator_side(
-                            &OperatorInputs {
-                                contacts,
-                                contact_velocities,
-                                twin_pose: pose,
-                                held: *held,
-                                stamp_s: now,
-                            },
-                            &t.v2r,
-                        )
-                        .map_err(|e| e.to_string())
-                    }),
-                    *hand_stamp_s,
-                    *hand_tracked,
-                ),
-                TickSource::Remote(Some(r)) => (Ok(r.target), Some(r.hand_stamp_s), r.hand_tracked),
-                TickSource::Remote(None) => (
-                    Err("no valid target from the operator".to_string()),
-                    None,
-                    false,
-                ),
-            };
+        let (operator, hand_stamp, hand_tracked) = operator_of(&source, now, &t.v2r);
         let side = RobotSide {
             model: &t.model,
             base: t.base,
@@ -754,22 +718,24 @@ impl Teleop {
     }
 }
 
-impl Teleop {
-    /// The operator's side of a tick at `now_s` for the control thread: the hand's here
-    /// (without a hand frame its stamp is `-inf`, which the thread's watchdog takes as stale),
-    /// or the one received.
-    fn operator_for_thread(&self, now_s: f64, source: &TickSource) -> Result<RemoteTarget, String> {
-        match source {
-            TickSource::Local {
-                contacts,
-                contact_velocities,
-                twin_pose,
-                held,
-                hand_stamp_s,
-                hand_tracked,
-            } => {
-                let pose = twin_pose.clone()?;
-                let target = Mapper::operator_side(
+/// A tick's operator side at `now_s` from `source` (the hand's here, through `v2r`, or the
+/// one received), with the hand frame's stamp and whether the hand is tracked.
+fn operator_of(
+    source: &TickSource,
+    now_s: f64,
+    v2r: &VirtualToReal,
+) -> (Result<OperatorTarget, String>, Option<f64>, bool) {
+    match source {
+        TickSource::Local {
+            contacts,
+            contact_velocities,
+            twin_pose,
+            held,
+            hand_stamp_s,
+            hand_tracked,
+        } => (
+            twin_pose.clone().and_then(|pose| {
+                Mapper::operator_side(
                     &OperatorInputs {
                         contacts,
                         contact_velocities,
@@ -777,18 +743,36 @@ impl Teleop {
                         held: *held,
                         stamp_s: now_s,
                     },
-                    &self.v2r,
+                    v2r,
                 )
-                .map_err(|e| e.to_string())?;
-                Ok(RemoteTarget {
-                    target,
-                    hand_stamp_s: hand_stamp_s.unwrap_or(f64::NEG_INFINITY),
-                    hand_tracked: *hand_tracked,
-                })
-            }
-            TickSource::Remote(Some(r)) => Ok(*r),
-            TickSource::Remote(None) => Err(String::new()),
+                .map_err(|e| e.to_string())
+            }),
+            *hand_stamp_s,
+            *hand_tracked,
+        ),
+        TickSource::Remote(Some(r)) => (Ok(r.target), Some(r.hand_stamp_s), r.hand_tracked),
+        TickSource::Remote(None) => (
+            Err("no valid target from the operator".to_string()),
+            None,
+            false,
+        ),
+    }
+}
+
+impl Teleop {
+    /// The operator's side of a tick at `now_s` for the control thread ([`operator_of`]):
+    /// without a hand frame its stamp is `-inf`, which the thread's watchdog takes as stale; an
+    /// empty error is no target received (nothing to refuse).
+    fn operator_for_thread(&self, now_s: f64, source: &TickSource) -> Result<RemoteTarget, String> {
+        if matches!(source, TickSource::Remote(None)) {
+            return Err(String::new());
         }
+        let (target, hand_stamp_s, hand_tracked) = operator_of(source, now_s, &self.v2r);
+        Ok(RemoteTarget {
+            target: target?,
+            hand_stamp_s: hand_stamp_s.unwrap_or(f64::NEG_INFINITY),
+            hand_tracked,
+        })
     }
 }
 

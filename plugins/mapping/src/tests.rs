@@ -621,29 +621,39 @@ fn a_real_leap_grab_takes_the_bottle_twin_by_its_neck_and_lets_go() {
     assert!(lowest > floor - 0.003, "{lowest} vs {floor}");
 }
 
-#[test]
-fn an_arm_away_from_the_start_is_brought_there_first_within_the_limits() {
+/// The task's trial on a simulated arm left away from the task's start by `off` (joint index,
+/// rad), in closed loop; and that start.
+fn parts_off_the_start(
+    s: &TrialSetup,
+    task: &PouringTask,
+    off: &[(usize, f64)],
+) -> (crate::pouring::TrialParts, DVector<f64>) {
     use crate::pouring::{TrialParts, prepare, simulated_arm};
-    use crate::{Approach, MappingPlugin, Teleop};
-    let s = setup();
-    let task = PouringTask::default();
-    let prepared = prepare(&task, &s).expect("prepared");
+    let prepared = prepare(task, s).expect("prepared");
     let q0 = prepared.q0().clone();
-    // Where a real arm might have been left: 0.4, 0.3 and 0.2 rad off on three joints.
     let mut away = q0.clone();
-    away[0] += 0.4;
-    away[3] -= 0.3;
-    away[5] += 0.2;
-    let arm = simulated_arm(&s, away);
-    let mut parts = TrialParts::on_robot(
-        &task,
-        &s,
+    for &(i, d) in off {
+        away[i] += d;
+    }
+    let arm = simulated_arm(s, away);
+    let parts = TrialParts::on_robot(
+        task,
+        s,
         &prepared,
         MappingMode::ClosedLoop,
         0,
         Some(Box::new(arm)),
     )
     .expect("parts");
+    (parts, q0)
+}
+
+#[test]
+fn an_arm_away_from_the_start_is_brought_there_first_within_the_limits() {
+    use crate::{Approach, MappingPlugin, Teleop};
+    let (s, task) = (setup(), PouringTask::default());
+    // Where a real arm might have been left: 0.4, 0.3 and 0.2 rad off on three joints.
+    let (mut parts, q0) = parts_off_the_start(&s, &task, &[(0, 0.4), (3, -0.3), (5, 0.2)]);
     let approach = Approach::to(q0.clone());
     parts.teleop.approach(approach.clone()).expect("approach");
     // A start that cannot work is refused and the one set stays.
@@ -733,24 +743,10 @@ fn an_arm_away_from_the_start_is_brought_there_first_within_the_limits() {
 /// app's clock loses time against the wall's); dropping the app's side stops the thread.
 #[test]
 fn the_control_thread_ticks_the_robot_while_the_app_is_slow() {
-    use crate::pouring::{TrialParts, prepare, simulated_arm};
     use crate::{Approach, TickSource};
     use std::time::Duration;
-    let s = setup();
-    let task = PouringTask::default();
-    let prepared = prepare(&task, &s).expect("prepared");
-    let q0 = prepared.q0().clone();
-    let mut away = q0.clone();
-    away[0] += 0.3;
-    let mut parts = TrialParts::on_robot(
-        &task,
-        &s,
-        &prepared,
-        MappingMode::ClosedLoop,
-        0,
-        Some(Box::new(simulated_arm(&s, away))),
-    )
-    .expect("parts");
+    let (s, task) = (setup(), PouringTask::default());
+    let (mut parts, q0) = parts_off_the_start(&s, &task, &[(0, 0.3)]);
     parts
         .teleop
         .approach(Approach::to(q0.clone()))

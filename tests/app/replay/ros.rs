@@ -13,27 +13,35 @@ use avatarm_scene::Scene;
 
 use super::{out_dir, root, run_preview_with, scene};
 
+/// A ROS master and the simulated Sawyer node with its arm at the pouring task's start but
+/// `off_rad` on its first joint.
+#[cfg(feature = "ros")]
+fn sawyer_off_the_start(off_rad: f64) -> (Master, FakeSawyer) {
+    let scene = scene("pouring");
+    let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
+        panic!("the pouring scene has a task");
+    };
+    let prepared = avatarm_mapping::pouring::prepare(task, setup).expect("grasp");
+    let start: Vec<String> = setup
+        .arm
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| (prepared.q0()[i] + if k == 0 { off_rad } else { 0.0 }).to_string())
+        .collect();
+    let master = Master::start();
+    let sawyer = FakeSawyer::start_at(&master, 0.0, &start.join(","));
+    (master, sawyer)
+}
+
 /// `avatarm run --robot ros`: the live pouring task commands a Sawyer over ROS 1 (a real master
 /// and the simulated Sawyer node of `avatarm_ros::testing`, its arm where the task starts).
 #[cfg(feature = "ros")]
 #[test]
 fn live_teleoperation_commands_a_sawyer_over_ros() {
     let _serial = ros_support::serial();
-    let scene = scene("pouring");
-    let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
-        panic!("the pouring scene has a task");
-    };
-    let prepared = avatarm_mapping::pouring::prepare(task, setup).expect("grasp");
     // The real arm left 0.05 rad off the task's start on its first joint: Avatarm moves it
     // there before the hand drives it.
-    let start: Vec<String> = setup
-        .arm
-        .iter()
-        .enumerate()
-        .map(|(k, &i)| (prepared.q0()[i] + if k == 0 { 0.05 } else { 0.0 }).to_string())
-        .collect();
-    let master = Master::start();
-    let sawyer = FakeSawyer::start_at(&master, 0.0, &start.join(","));
+    let (master, sawyer) = sawyer_off_the_start(0.05);
     let out = out_dir("ros_live");
     std::fs::create_dir_all(&out).unwrap();
     let log = run_preview_with(
@@ -92,21 +100,9 @@ fn live_teleoperation_commands_a_sawyer_over_ros() {
 #[test]
 fn a_slow_renderer_does_not_slow_the_robots_control() {
     let _serial = ros_support::serial();
-    let scene = scene("pouring");
-    let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
-        panic!("the pouring scene has a task");
-    };
-    let prepared = avatarm_mapping::pouring::prepare(task, setup).expect("grasp");
     // 0.3 rad off on the first joint: seconds of moving to the start, a steady stream of
     // commands that no hand data gates.
-    let start: Vec<String> = setup
-        .arm
-        .iter()
-        .enumerate()
-        .map(|(k, &i)| (prepared.q0()[i] + if k == 0 { 0.3 } else { 0.0 }).to_string())
-        .collect();
-    let master = Master::start();
-    let sawyer = FakeSawyer::start_at(&master, 0.0, &start.join(","));
+    let (master, sawyer) = sawyer_off_the_start(0.3);
     let out = out_dir("ros_slow_render");
     std::fs::create_dir_all(&out).unwrap();
     let log = run_preview_with(
