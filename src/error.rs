@@ -23,9 +23,9 @@ pub enum AppError {
     /// A camera file (intrinsics, distortion, pose) that could not be used.
     #[error(transparent)]
     CameraFile(Box<avatarm_record::CameraFileError>),
-    /// Footage or a bag that could not be imported.
+    /// Footage or a bag that could not be imported, or a recording that could not be calibrated.
     #[error(transparent)]
-    Import(Box<avatarm_import::ImportError>),
+    Footage(Box<avatarm_footage::FootageError>),
     /// A two-site session that could not be set up or was refused.
     #[error(transparent)]
     Net(Box<avatarm_net::NetError>),
@@ -191,9 +191,9 @@ impl AppError {
 /// Result with [`AppError`].
 pub type Result<T, E = AppError> = std::result::Result<T, E>;
 
-impl From<avatarm_import::ImportError> for AppError {
-    fn from(e: avatarm_import::ImportError) -> Self {
-        Self::Import(Box::new(e))
+impl From<avatarm_footage::FootageError> for AppError {
+    fn from(e: avatarm_footage::FootageError) -> Self {
+        Self::Footage(Box::new(e))
     }
 }
 

@@ -23,7 +23,6 @@
 
 pub mod app;
 pub mod bench;
-pub mod calibrate;
 pub mod cli;
 pub mod error;
 pub mod import;

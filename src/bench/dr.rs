@@ -10,6 +10,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use serde::Serialize;
 
+use super::EraseFigures;
 use super::chart::{
     Chart, axes, drawing_error, front_line, legend, padded, pareto_front, point_labels,
     register_font, save_chart, write_table,
@@ -196,38 +197,31 @@ pub fn run_dr(scene: &Scene, sweep: &DrSweep, out: &Path) -> Result<DrOutputs, A
             source: Box::new(source),
         };
         let report = replay::run(&run, options).map_err(in_setting)?;
-        let num = |path: &str| -> Result<f64, AppError> {
-            path.split('.')
-                .fold(&report, |v, k| &v[k])
-                .as_f64()
-                .ok_or_else(|| {
-                    in_setting(AppError::command(
-                        "bench dr",
-                        format!("the report has no {path}"),
-                    ))
-                })
-        };
-        let on_gpu = report["timing_ms"]["source"] == "gpu";
+        let figures = EraseFigures::of(&report, "bench dr").map_err(in_setting)?;
+        let on_gpu = report.timing_ms.source == "gpu";
+        let median = |times, what| EraseFigures::median(times, what, "bench dr");
+        let gpu = |times, what| on_gpu.then(|| median(times, what)).transpose();
+        let cpu = &report.timing_ms.cpu_reference;
         points.push(DrPoint {
             label: label.clone(),
             resolution_scale: s,
             dilate_px: d,
             feather_px: f,
             latency_compensation: l,
-            frame_ms_median: num("timing_ms.frame.median")?,
-            frame_ms_p95: num("timing_ms.frame.p95")?,
+            frame_ms_median: figures.frame_ms.median,
+            frame_ms_p95: figures.frame_ms.p95,
             frame_cost_ratio: 1.0,
-            gpu_mask_ms: on_gpu.then(|| num("timing_ms.mask.median")).transpose()?,
-            gpu_composite_ms: on_gpu
-                .then(|| num("timing_ms.composite.median"))
-                .transpose()?,
-            cpu_mask_ms: num("timing_ms.cpu_reference.mask.median")?,
-            cpu_composite_ms: num("timing_ms.cpu_reference.composite.median")?,
-            iou_mean: num("mask.iou_mean")?,
-            leak_pct_mean: num("mask.leak_pct_mean")?,
-            leak_pct_max: num("mask.leak_pct_max")?,
-            overmask_pct_mean: num("mask.overmask_pct_mean")?,
-            psnr_db_mean: num("dr.psnr_robot_db_mean")?,
+            gpu_mask_ms: gpu(report.timing_ms.mask, "timing_ms.mask").map_err(in_setting)?,
+            gpu_composite_ms: gpu(report.timing_ms.composite, "timing_ms.composite")
+                .map_err(in_setting)?,
+            cpu_mask_ms: median(cpu.mask, "timing_ms.cpu_reference.mask").map_err(in_setting)?,
+            cpu_composite_ms: median(cpu.composite, "timing_ms.cpu_reference.composite")
+                .map_err(in_setting)?,
+            iou_mean: figures.iou_mean,
+            leak_pct_mean: figures.leak_pct_mean,
+            leak_pct_max: figures.leak_pct_max,
+            overmask_pct_mean: figures.overmask_pct_mean,
+            psnr_db_mean: figures.psnr_db_mean,
             pareto_leak: false,
             pareto_psnr: false,
             pareto_leak_gpu: false,

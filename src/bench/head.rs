@@ -14,6 +14,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use serde::Serialize;
 
+use super::EraseFigures;
 use super::chart::{
     Chart, LogPanel, axes, drawing_error, legend, log_axes, padded, save_chart, write_table,
 };
@@ -242,41 +243,43 @@ pub fn run_head(scene: &Scene, sweep: &HeadSweep, out: &Path) -> Result<HeadOutp
         let mut options = ReplayOptions::new(dir);
         options.frames_every = u32::MAX;
         let report = replay::run(&run, options).map_err(in_setting)?;
-        let num = |path: &str| -> Result<f64, AppError> {
-            path.split('.')
-                .fold(&report, |v, k| &v[k])
-                .as_f64()
-                .ok_or_else(|| {
-                    in_setting(AppError::command(
-                        "bench head",
-                        format!("the report has no {path}"),
-                    ))
-                })
-        };
+        let figures = EraseFigures::of(&report, "bench head").map_err(in_setting)?;
+        let camera_error = report
+            .head
+            .as_ref()
+            .and_then(|h| h.mask_camera_error_deg)
+            .ok_or_else(|| {
+                in_setting(AppError::command(
+                    "bench head",
+                    "the report has no head.mask_camera_error_deg".to_owned(),
+                ))
+            })?;
         points.push(HeadPoint {
             speed_deg_s: speed,
             latency_ms,
             compensation,
             mount_error_deg: mount_error,
-            iou_mean: num("mask.iou_mean")?,
-            leak_pct_mean: num("mask.leak_pct_mean")?,
-            leak_pct_max: num("mask.leak_pct_max")?,
-            overmask_pct_mean: num("mask.overmask_pct_mean")?,
-            psnr_db_mean: num("dr.psnr_robot_db_mean")?,
-            camera_error_deg_median: num("head.mask_camera_error_deg.median")?,
-            camera_error_deg_p95: num("head.mask_camera_error_deg.p95")?,
-            frame_ms_median: num("timing_ms.frame.median")?,
+            iou_mean: figures.iou_mean,
+            leak_pct_mean: figures.leak_pct_mean,
+            leak_pct_max: figures.leak_pct_max,
+            overmask_pct_mean: figures.overmask_pct_mean,
+            psnr_db_mean: figures.psnr_db_mean,
+            camera_error_deg_median: camera_error.median,
+            camera_error_deg_p95: camera_error.p95,
+            frame_ms_median: figures.frame_ms.median,
             background_views,
-            psnr_by_photo_angle: report["head"]["psnr_by_angle_from_photo"]
-                .as_array()
-                .map(|rows| {
-                    rows.iter()
+            psnr_by_photo_angle: report
+                .head
+                .as_ref()
+                .map(|head| {
+                    head.psnr_by_angle_from_photo
+                        .iter()
                         .filter_map(|r| {
                             Some((
-                                r["angle_deg"][0].as_f64()?,
-                                r["angle_deg"][1].as_f64()?,
-                                r["frames"].as_u64()? as usize,
-                                r["psnr_robot_db_mean"].as_f64()?,
+                                r.angle_deg[0],
+                                r.angle_deg[1],
+                                r.frames,
+                                r.psnr_robot_db_mean?,
                             ))
                         })
                         .collect()

@@ -27,3 +27,54 @@ pub mod head;
 pub mod network;
 pub mod twin;
 pub mod video;
+
+use crate::AppError;
+use crate::replay::ReplayReport;
+
+/// The figures every replay-based bench charts, read from the replay's report: each one
+/// refused (naming it and the bench) when the replay did not measure it.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct EraseFigures {
+    /// Mean mask IoU against the true silhouette.
+    pub iou_mean: f64,
+    /// Mean leak (%).
+    pub leak_pct_mean: f64,
+    /// Largest leak of a frame (%).
+    pub leak_pct_max: f64,
+    /// Mean overmask (%).
+    pub overmask_pct_mean: f64,
+    /// Mean PSNR in the robot's region (dB).
+    pub psnr_db_mean: f64,
+    /// Wall time per app update (ms).
+    pub frame_ms: avatarm_core::stats::Spread,
+}
+
+impl EraseFigures {
+    /// The figures of `report`; `bench` names the bench in the error.
+    pub(crate) fn of(report: &ReplayReport, bench: &'static str) -> Result<Self, AppError> {
+        let need = |value: Option<f64>, what: &str| {
+            value.ok_or_else(|| AppError::command(bench, format!("the report has no {what}")))
+        };
+        Ok(Self {
+            iou_mean: need(report.mask.iou_mean, "mask.iou_mean")?,
+            leak_pct_mean: need(report.mask.leak_pct_mean, "mask.leak_pct_mean")?,
+            leak_pct_max: need(report.mask.leak_pct_max, "mask.leak_pct_max")?,
+            overmask_pct_mean: need(report.mask.overmask_pct_mean, "mask.overmask_pct_mean")?,
+            psnr_db_mean: need(report.dr.psnr_robot_db_mean, "dr.psnr_robot_db_mean")?,
+            frame_ms: report.timing_ms.frame.ok_or_else(|| {
+                AppError::command(bench, "the report has no timing_ms.frame".to_owned())
+            })?,
+        })
+    }
+
+    /// `times`' median, or the error naming `what` and the bench.
+    pub(crate) fn median(
+        times: crate::replay::report::Times,
+        what: &str,
+        bench: &'static str,
+    ) -> Result<f64, AppError> {
+        times
+            .map(|t| t.median)
+            .ok_or_else(|| AppError::command(bench, format!("the report has no {what}")))
+    }
+}

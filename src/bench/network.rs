@@ -157,7 +157,9 @@ fn run_cell(
         .teleop
         .set_watchdog_timeout(sweep.target_timeout_s)
         .map_err(|e| AppError::flag("--target-timeout", e.to_string()))?;
-    let info = crate::net::serve::robot_info(scene, &parts, sweep.target_timeout_s, vec![])?;
+    // No access control on the bench's loopback: no operators named.
+    let info =
+        crate::net::serve::robot_info(scene, &parts, sweep.target_timeout_s, vec![], Vec::new())?;
     let mut site = RobotSite::open(
         &config(Role::RobotSite, format!("{transport}/127.0.0.1:{port}")),
         &info,

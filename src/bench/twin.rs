@@ -18,6 +18,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use serde::Serialize;
 
+use super::EraseFigures;
 use super::chart::{
     Chart, axes, drawing_error, front_line, legend, padded, pareto_front, point_labels,
     register_font, save_chart, write_table,
@@ -312,33 +313,30 @@ pub fn run_twin(scene: &Scene, sweep: &TwinSweep, out: &Path) -> Result<TwinOutp
             source: Box::new(source),
         };
         let report = replay::run(&run, options).map_err(in_setting)?;
-        let num = |path: &str| -> Result<f64, AppError> {
-            path.split('.')
-                .fold(&report, |v, k| &v[k])
-                .as_f64()
-                .ok_or_else(|| {
-                    in_setting(AppError::command(
-                        "bench twin",
-                        format!("the report has no {path}"),
-                    ))
-                })
-        };
-        let on_gpu = report["timing_ms"]["source"] == "gpu";
+        let figures = EraseFigures::of(&report, "bench twin").map_err(in_setting)?;
+        let on_gpu = report.timing_ms.source == "gpu";
         let gpu_mask_twin_ms = on_gpu
-            .then(|| report["timing_ms"]["gpu_passes"]["mask twin"]["ms"]["median"].as_f64())
+            .then(|| {
+                report
+                    .timing_ms
+                    .gpu_passes
+                    .get("mask twin")
+                    .and_then(|p| p.ms)
+                    .map(|t| t.median)
+            })
             .flatten();
         let leaks = leak_by_dilation_in(&dir, sweep.max_dilate).map_err(in_setting)?;
         points.push(TwinPoint {
             label: v.label.clone(),
             triangles,
             gpu_mask_twin_ms,
-            frame_ms_median: num("timing_ms.frame.median")?,
+            frame_ms_median: figures.frame_ms.median,
             frame_cost_ratio: 1.0,
-            iou_mean: num("mask.iou_mean")?,
-            leak_pct_mean: num("mask.leak_pct_mean")?,
-            leak_pct_max: num("mask.leak_pct_max")?,
-            overmask_pct_mean: num("mask.overmask_pct_mean")?,
-            psnr_db_mean: num("dr.psnr_robot_db_mean")?,
+            iou_mean: figures.iou_mean,
+            leak_pct_mean: figures.leak_pct_mean,
+            leak_pct_max: figures.leak_pct_max,
+            overmask_pct_mean: figures.overmask_pct_mean,
+            psnr_db_mean: figures.psnr_db_mean,
             dilate_for_1pct: leaks.iter().position(|&l| l <= 1.0).map(|d| d as u32),
             pareto: false,
         });

@@ -150,7 +150,7 @@ impl CalibrateArgs {
                 ));
             }
         };
-        let report = crate::calibrate::run_calibrate(&crate::calibrate::CalibrateOptions {
+        let options = avatarm_footage::calibrate::CalibrateOptions {
             recording,
             urdf,
             packages: packages(package_path),
@@ -167,61 +167,53 @@ impl CalibrateArgs {
             background_threshold,
             edges,
             out: out.clone(),
-            progress: true,
-        })?;
-        for note in report["notes"].as_array().into_iter().flatten() {
-            eprintln!("note: {}", note.as_str().unwrap_or_default());
-        }
-        let iou = &report["iou"];
-        let f = |v: &serde_json::Value| {
-            v.as_f64()
-                .map_or("- (no reference mask)".to_owned(), |x| format!("{x:.3}"))
         };
+        let bar = crate::progress::bar(1, "calibrate", true);
+        let report = avatarm_footage::calibrate::run(&options, |done, total| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        })?;
+        bar.finish_and_clear();
+        for note in &report.notes {
+            eprintln!("note: {note}");
+        }
+        let iou = &report.iou;
+        let f =
+            |v: Option<f64>| v.map_or("- (no reference mask)".to_owned(), |x| format!("{x:.3}"));
         println!(
             "calibrated on {} frames in {:.1} s: IoU {} -> {} on the fit frames, {} -> {} held out; moved {:.2} deg, {:.1} mm from the rough pose; spread over starts {:.2} deg, {:.1} mm",
-            report["frames_fit"],
-            report["wall_time_s"].as_f64().unwrap_or(0.0),
-            f(&iou["fit_before"]),
-            f(&iou["fit_after"]),
-            f(&iou["held_out_before"]),
-            f(&iou["held_out_after"]),
-            report["change_from_rough"]["rotation_deg"]
-                .as_f64()
-                .unwrap_or(f64::NAN),
-            report["change_from_rough"]["translation_mm"]
-                .as_f64()
-                .unwrap_or(f64::NAN),
-            report["uncertainty"]["spread_deg"]
-                .as_f64()
-                .unwrap_or(f64::NAN),
-            report["uncertainty"]["spread_mm"]
-                .as_f64()
-                .unwrap_or(f64::NAN),
+            report.frames_fit,
+            report.wall_time_s,
+            f(iou.fit_before),
+            f(iou.fit_after),
+            f(iou.held_out_before),
+            f(iou.held_out_after),
+            report.change_from_rough.rotation_deg,
+            report.change_from_rough.translation_mm,
+            report.uncertainty.spread_deg,
+            report.uncertainty.spread_mm,
         );
         println!(
             "{}: {}; report: {}",
-            if report["head_from_camera"].is_object() {
+            if report.head_from_camera.is_some() {
                 "mount"
             } else {
                 "pose"
             },
-            report["outputs"]["pose"].as_str().unwrap_or_default(),
+            report.outputs.pose,
             out.join("report.json").display()
         );
-        if let Some(mount) = report["head_from_camera"].as_object() {
-            let v = |key: &str| {
-                mount[key]
-                    .as_array()
-                    .into_iter()
-                    .flatten()
-                    .map(|x| format!("{:.6}", x.as_f64().unwrap_or(f64::NAN)))
+        if let Some(mount) = &report.head_from_camera {
+            let v = |xs: &[f64; 3]| {
+                xs.iter()
+                    .map(|x| format!("{x:.6}"))
                     .collect::<Vec<_>>()
                     .join(", ")
             };
             println!(
                 "in the scene: [camera.head] mount = {{ xyz = [{}], rpy = [{}] }}",
-                v("translation"),
-                v("rpy")
+                v(&mount.translation),
+                v(&mount.rpy)
             );
         }
         Ok(())

@@ -1,5 +1,5 @@
 //! `avatarm import`: a real Leap Motion recording to a `.hand.jsonl`, or a folder of camera
-//! frames or a ROS 1 bag to a recording (MCAP, `avatarm_import`).
+//! frames or a ROS 1 bag to a recording (MCAP, `avatarm_footage`).
 
 use std::path::PathBuf;
 
@@ -98,7 +98,7 @@ impl ImportArgs {
                 .extension()
                 .is_some_and(|e| e.eq_ignore_ascii_case("bag")) =>
             {
-                let s = avatarm_import::bag::import_bag(&avatarm_import::bag::BagOptions {
+                let s = avatarm_footage::bag::import_bag(&avatarm_footage::bag::BagOptions {
                     bag: recording,
                     out: out.clone(),
                     image_topic,
@@ -141,8 +141,8 @@ impl ImportArgs {
                 fps,
                 ..
             } if recording.is_dir() => {
-                let summary = avatarm_import::footage::import_footage(
-                    &avatarm_import::footage::FootageOptions {
+                let summary = avatarm_footage::footage::import_footage(
+                    &avatarm_footage::footage::FootageOptions {
                         folder: recording,
                         out: out.clone(),
                         listing,

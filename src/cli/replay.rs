@@ -101,23 +101,17 @@ impl ReplayArgs {
                         progress: true,
                     },
                 )?;
-                let vs = &report["mask"]["vs_reference"];
+                let vs = &report.mask.vs_reference;
                 eprintln!(
                     "replayed {}: {} frames of '{}', mask covering {:.1} % of the frame; against {} reference masks: IoU {}, leak {} %; background: {}; report: {}",
-                    report["recording"].as_str().unwrap_or_default(),
-                    report["frames"],
-                    report["robot"].as_str().unwrap_or_default(),
-                    report["mask"]["coverage_pct_mean"]
-                        .as_f64()
-                        .unwrap_or(f64::NAN),
-                    vs["frames_scored"],
-                    vs["iou_mean"]
-                        .as_f64()
-                        .map_or("-".into(), |v| format!("{v:.3}")),
-                    vs["leak_pct_mean"]
-                        .as_f64()
-                        .map_or("-".into(), |v| format!("{v:.2}")),
-                    report["background"]["source"].as_str().unwrap_or("none"),
+                    report.recording,
+                    report.frames,
+                    report.robot,
+                    report.mask.coverage_pct_mean.unwrap_or(f64::NAN),
+                    vs.frames_scored,
+                    vs.iou_mean.map_or("-".into(), |v| format!("{v:.3}")),
+                    vs.leak_pct_mean.map_or("-".into(), |v| format!("{v:.2}")),
+                    report.background.source.as_deref().unwrap_or("none"),
                     out.join("report.json").display()
                 );
                 Ok(())
@@ -152,19 +146,22 @@ impl ReplayArgs {
                         scenes.push(other);
                     }
                     let report = crate::replay::run_views(&scenes, options)?;
-                    for camera in report["cameras"].as_array().into_iter().flatten() {
+                    for camera in &report.cameras {
                         eprintln!(
                             "camera '{}': {} frames, mask IoU {}, leak {} %, PSNR in the robot's region {} dB",
-                            camera["name"].as_str().unwrap_or_default(),
-                            camera["frames"],
-                            camera["mask"]["iou_mean"]
-                                .as_f64()
+                            camera.camera.name,
+                            camera.frames,
+                            camera
+                                .mask
+                                .iou_mean
                                 .map_or("-".into(), |v| format!("{v:.3}")),
-                            camera["mask"]["leak_pct_mean"]
-                                .as_f64()
+                            camera
+                                .mask
+                                .leak_pct_mean
                                 .map_or("-".into(), |v| format!("{v:.2}")),
-                            camera["dr"]["psnr_robot_db_mean"]
-                                .as_f64()
+                            camera
+                                .dr
+                                .psnr_robot_db_mean
                                 .map_or("-".into(), |v| format!("{v:.1}")),
                         );
                     }
@@ -180,10 +177,10 @@ impl ReplayArgs {
                 eprintln!(
                     "replayed '{}': {} frames, {:.2} s simulated in {:.2} s ({:.2} sim s per wall s); report: {}",
                     scene.file.name,
-                    report["frames"],
-                    report["sim_time_s"].as_f64().unwrap_or(0.0),
-                    report["wall_time_s"].as_f64().unwrap_or(0.0),
-                    report["sim_s_per_wall_s"].as_f64().unwrap_or(0.0),
+                    report.frames,
+                    report.sim_time_s,
+                    report.wall_time_s,
+                    report.sim_s_per_wall_s,
                     out.join("report.json").display()
                 );
                 Ok(())

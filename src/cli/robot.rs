@@ -1,5 +1,6 @@
 //! `avatarm robot`: print a robot description's tree, limits and link poses.
 
+use std::collections::BTreeMap;
 use std::fmt::Write;
 use std::path::PathBuf;
 
@@ -7,7 +8,7 @@ use avatarm_core::robot::mesh::load_shape_mesh;
 use avatarm_core::robot::{JointKind, LinkId, RobotModel, Shape};
 use clap::Args;
 use nalgebra::Isometry3;
-use serde_json::{Map, Value, json};
+use serde::{Deserialize, Serialize};
 
 use crate::AppError;
 use crate::cli::args::packages;
@@ -160,44 +161,92 @@ pub fn tree_text(model: &RobotModel, meshes: &[MeshLine]) -> String {
     out
 }
 
-/// `{"links": {name: {"translation", "rotation_xyzw"}}, ...}` at `q`, the root at the origin.
-pub fn poses_json(model: &RobotModel, q: &[f64]) -> Value {
+/// `avatarm robot --json`: the description's joints, a configuration, the mimic joints' positions
+/// there and every link's pose, the root at the origin. Read back with `serde_json::from_str`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RobotReport {
+    /// The description's name.
+    pub robot: String,
+    /// The joints that take a value, in q's order.
+    pub joints: Vec<String>,
+    /// The configuration (rad or m, by joint).
+    pub q: Vec<f64>,
+    /// Each mimic joint, by name.
+    pub mimic: BTreeMap<String, MimicReport>,
+    /// What the loader noted about the description.
+    pub notes: Vec<String>,
+    /// Each link's pose in the root's frame, by name.
+    pub links: BTreeMap<String, LinkPose>,
+}
+
+/// A mimic joint at the configuration: `position = multiplier * leader + offset` (URDF's
+/// `<mimic>`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MimicReport {
+    /// The joint it follows.
+    pub leader: String,
+    /// URDF's multiplier.
+    pub multiplier: f64,
+    /// URDF's offset (rad or m).
+    pub offset: f64,
+    /// Its position (rad or m).
+    pub position: f64,
+}
+
+/// A link's pose in the root's frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LinkPose {
+    /// Translation (m).
+    pub translation: [f64; 3],
+    /// Rotation as a unit quaternion (x, y, z, w).
+    pub rotation_xyzw: [f64; 4],
+}
+
+/// The [`RobotReport`] of `model` at `q`.
+pub fn robot_report(model: &RobotModel, q: &[f64]) -> RobotReport {
     let poses = model.forward_kinematics(&Isometry3::identity(), q);
-    let mut links = Map::new();
-    for (link, pose) in model.links.iter().zip(&poses) {
-        let t = pose.translation.vector;
-        let r = pose.rotation.coords; // [i, j, k, w]
-        links.insert(
-            link.name.clone(),
-            json!({
-                "translation": [t.x, t.y, t.z],
-                "rotation_xyzw": [r.x, r.y, r.z, r.w],
-            }),
-        );
-    }
+    let links = model
+        .links
+        .iter()
+        .zip(&poses)
+        .map(|(link, pose)| {
+            let t = pose.translation.vector;
+            let r = pose.rotation.coords; // [i, j, k, w]
+            (
+                link.name.clone(),
+                LinkPose {
+                    translation: [t.x, t.y, t.z],
+                    rotation_xyzw: [r.x, r.y, r.z, r.w],
+                },
+            )
+        })
+        .collect();
     let positions = model.joint_positions(q);
-    let mut mimic = Map::new();
-    for (j, position) in model.joints.iter().zip(&positions) {
-        if let Some(m) = &j.mimic {
-            mimic.insert(
+    let mimic = model
+        .joints
+        .iter()
+        .zip(&positions)
+        .filter_map(|(j, &position)| {
+            let m = j.mimic.as_ref()?;
+            Some((
                 j.name.clone(),
-                json!({
-                    "leader": model.joints[m.leader].name,
-                    "multiplier": m.multiplier,
-                    "offset": m.offset,
-                    "position": position,
-                }),
-            );
-        }
+                MimicReport {
+                    leader: model.joints[m.leader].name.clone(),
+                    multiplier: m.multiplier,
+                    offset: m.offset,
+                    position,
+                },
+            ))
+        })
+        .collect();
+    RobotReport {
+        robot: model.name.clone(),
+        joints: model.dof_names().into_iter().map(str::to_owned).collect(),
+        q: q.to_vec(),
+        mimic,
+        notes: model.notes.clone(),
+        links,
     }
-    json!({
-        "robot": model.name,
-        "joints": model.dof_names(),
-        "q": q,
-        "mimic": mimic,
-        "notes": model.notes,
-        "links": links,
-    })
 }
 
 /// The arguments of `avatarm robot`.
@@ -232,7 +281,7 @@ impl RobotArgs {
             .map_err(|e| AppError::flag("--q", e.to_string()))?;
         let q: Vec<f64> = q.iter().copied().collect();
         if json {
-            let text = serde_json::to_string_pretty(&poses_json(&model, &q))?;
+            let text = serde_json::to_string_pretty(&robot_report(&model, &q))?;
             println!("{text}");
         } else {
             print!("{}", tree_text(&model, &meshes));

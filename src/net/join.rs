@@ -26,7 +26,7 @@ use avatarm_scene::hand::HandChoice;
 use bevy::log::warn;
 use bevy::prelude::*;
 use nalgebra::Vector3;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::window::{ViewShared, WindowOptions, WindowReport};
 use crate::AppError;
@@ -43,7 +43,11 @@ pub use record::JoinRecording;
 
 mod latency;
 use latency::Stages;
+
+mod robot_site;
 pub use latency::VideoLatency;
+pub use robot_site::ROBOT_SITE_SILENT;
+use robot_site::may_command;
 
 /// How `avatarm join` runs.
 #[derive(Debug, Clone)]
@@ -76,7 +80,7 @@ pub struct JoinOptions {
 }
 
 /// The operator's (or observer's) report (`--report`).
-#[derive(Debug, Clone, Serialize, Default)]
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct JoinReport {
     /// Protocol version.
     pub protocol: u32,
@@ -86,7 +90,8 @@ pub struct JoinReport {
     pub scene: String,
     /// The robot backend.
     pub robot: String,
-    /// The clock offset (s, robot minus here) and the round trip it came from (ms).
+    /// The clock offset at the end (s, robot minus here; the newest estimate, after any
+    /// restart of the robot site) and the round trip it came from (ms).
     pub clock_offset_s: f64,
     /// The round trip (ms).
     pub clock_rtt_ms: f64,
@@ -118,6 +123,11 @@ pub struct JoinReport {
     pub recording: Option<JoinRecording>,
     /// The head this site sent for its camera on a head (`--xr`, `--head FILE.mcap`).
     pub head: Option<HeadReport>,
+    /// Times the robot site fell silent (no status or joint state for
+    /// [`ROBOT_SITE_SILENT`]): a cut link, or the robot site stopped.
+    pub robot_site_silences: u64,
+    /// Times the robot site restarted (its clock jumped: the offset was estimated again).
+    pub robot_site_restarts: u64,
 }
 
 /// The least time between two keyframe requests of one camera (s).
@@ -153,6 +163,10 @@ struct Collect {
     head: Option<HeadSender>,
     /// The real object's poses the robot site reported, `(stamp_s, pose)`, oldest first.
     objects: std::collections::VecDeque<(f64, nalgebra::Isometry3<f64>)>,
+    /// When the robot site was last heard (a status or a joint state).
+    last_word: Option<Instant>,
+    /// It has been silent for [`ROBOT_SITE_SILENT`] since (said once).
+    silent: bool,
 }
 
 /// How long the real object's reported poses are kept (s): longer than the video's latency
@@ -180,6 +194,8 @@ fn object_at(
 
 impl Collect {
     fn take(&mut self, site: &OperatorSite, inbox: OperatorInbox, robot_now: f64) {
+        let heard = !inbox.status.is_empty() || !inbox.joint_states.is_empty();
+        self.watch_robot_site(site, heard);
         if let Some(head) = &mut self.head {
             head.send(site, robot_now);
         }
@@ -507,6 +523,7 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
     };
     let mut site = OperatorSite::join(&options.net, Duration::from_secs_f64(options.wait_s))?;
     let info = site.info().clone();
+    may_command(options, &info)?;
     let ours = super::scene_fingerprint(&options.scene)?;
     if !options.watch && info.scene_hash != ours {
         return Err(AppError::flag(
@@ -581,6 +598,8 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
     report.protocol = PROTOCOL_VERSION;
     report.scene = info.scene.clone();
     report.robot = info.robot.clone();
+    // The newest estimate: a robot site that restarted has another clock than at the start.
+    let offset = site.offset();
     report.clock_offset_s = offset.offset_s;
     report.clock_rtt_ms = offset.rtt_s * 1e3;
     site.close();
@@ -877,10 +896,18 @@ pub fn summary(r: &JoinReport) -> String {
                 w.glass_to_glass_ms.median, w.glass_to_glass_ms.p95
             )
         });
+    let outages = if r.robot_site_silences + r.robot_site_restarts > 0 {
+        format!(
+            "; the robot site fell silent {} times and restarted {} times",
+            r.robot_site_silences, r.robot_site_restarts
+        )
+    } else {
+        String::new()
+    };
     format!(
         "{}: {:.1} s, {} targets sent, {} joint states, {} status ({} stopping), {} frames \
          ({:.1} fps, {:.2} Mbit/s, capture to decoded {:.0} ms median{presented}), clock offset \
-         {:+.2} ms (round trip {:.2} ms)",
+         {:+.2} ms (round trip {:.2} ms){outages}",
         r.role,
         r.duration_s,
         r.targets_sent,

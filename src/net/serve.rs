@@ -30,10 +30,10 @@ use super::video::ArmUpdate;
 mod camera_video;
 pub use camera_video::{CameraVideo, PlayerReport};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// One stop of the arm: when it began (s, site clock), why, and how long it lasted.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct StopEpisode {
     /// Start (s).
     pub t_s: f64,
@@ -44,7 +44,7 @@ pub struct StopEpisode {
 }
 
 /// An operator's liveliness token appearing or the last one going, as the robot site saw it.
-#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
 pub struct OperatorChange {
     /// When (s, site clock).
     pub t_s: f64,
@@ -58,7 +58,7 @@ pub const MAX_OPERATOR_CHANGES: usize = 1000;
 
 /// The paper's measure at the robot site: the real object against the twin's target of the
 /// same moment (the target stamped then, interpolated), from the grasp on.
-#[derive(Debug, Clone, Serialize, Default)]
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct TrialMeasure {
     /// When the gripper first closed (s, site clock).
     pub grasp_at_s: Option<f64>,
@@ -79,7 +79,7 @@ pub struct TrialMeasure {
 }
 
 /// The robot site's report (`--report`).
-#[derive(Debug, Clone, Serialize, Default)]
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct ServeReport {
     /// Protocol version.
     pub protocol: u32,
@@ -644,12 +644,14 @@ pub fn camera_key(scene: &avatarm_scene::Scene) -> String {
 }
 
 /// What the robot site says about itself: the scene and its fingerprint, the cameras, the
-/// control rate, the watchdog's timeout and the robot.
+/// control rate, the watchdog's timeout, the robot and who may command it (`operators`, the
+/// network configuration's).
 pub fn robot_info(
     scene: &avatarm_scene::Scene,
     parts: &avatarm_mapping::pouring::TrialParts,
     target_timeout_s: f64,
     cameras: Vec<String>,
+    operators: Vec<String>,
 ) -> Result<avatarm_net::msg::RobotInfo, crate::AppError> {
     Ok(avatarm_net::msg::RobotInfo {
         v: PROTOCOL_VERSION,
@@ -660,6 +662,7 @@ pub fn robot_info(
         control_rate_hz: 1.0 / parts.period.as_secs_f64(),
         target_timeout_s,
         robot: parts.teleop.robot_name().to_owned(),
+        operators,
     })
 }
 
@@ -735,7 +738,13 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
             format!("the camera '{twice}' is named twice"),
         ));
     }
-    let info = robot_info(scene, &parts, options.target_timeout_s, cameras.clone())?;
+    let info = robot_info(
+        scene,
+        &parts,
+        options.target_timeout_s,
+        cameras.clone(),
+        options.net.operators.clone(),
+    )?;
     let clock = avatarm_net::SiteClock::start();
     let mut site = RobotSite::open(&options.net, &info, clock)?;
     info!(

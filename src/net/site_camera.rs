@@ -135,7 +135,7 @@ fn open_recording(
         .frames
         .first()
         .ok_or_else(|| bad("the recording has no camera frames".into()))?;
-    let size = crate::replay::recording::decode(first, &name)?.dimensions();
+    let size = avatarm_footage::recording::decode(first, &name)?.dimensions();
     let k = &scene.believed_camera.intrinsics;
     if size != (k.width, k.height) {
         return Err(bad(format!(
@@ -157,8 +157,12 @@ fn open_recording(
         }
     }
     let mut joint_notes = Vec::new();
-    let joints =
-        crate::replay::recording::joint_vectors(&recording, &scene.model, &name, &mut joint_notes)?;
+    let joints = avatarm_footage::recording::joint_vectors(
+        &recording,
+        &scene.model,
+        &name,
+        &mut joint_notes,
+    )?;
     notes.extend(joint_notes.into_iter().map(|n| format!("{name}: {n}")));
     let frames: Arc<[CodedFrame]> = recording
         .frames

@@ -23,7 +23,7 @@ use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureFormat, TextureUsages};
 use bevy::render::view::screenshot::{Screenshot, save_to_disk};
 use nalgebra::{Isometry3, Vector3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::preview::glass::{GlassToGlass, GlassToGlassPlugin, Taken, TakenFrame};
 use crate::teleop::{DesktopControls, DesktopHand, HandInteractionGizmos, HandViewGizmos};
@@ -42,7 +42,7 @@ pub struct WindowOptions {
 }
 
 /// What the window did (in the join report).
-#[derive(Debug, Clone, Serialize, Default)]
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct WindowReport {
     /// Frames rendered.
     pub frames: u64,

@@ -39,7 +39,6 @@ use avatarm_video::LiveVideo;
 use bevy::prelude::*;
 use indicatif::ProgressBar;
 use serde::Serialize;
-use serde_json::json;
 
 use crate::score::{
     FrameImages, FramePart, FrameStore, TruthScores, frame_key, request_part, request_truth,
@@ -47,9 +46,14 @@ use crate::score::{
 };
 use crate::{AppError, AppTwin, AvatarmSystems, SceneResource};
 
-mod report;
+pub mod report;
+pub use report::{
+    DrReport, GpuVsCpu, MaskReport, ReplayCamera, ReplayOutputs, ReplayReport, ReplayRobot,
+    ViewsReport,
+};
 use report::{head_report, mean, stage_timings};
 pub(crate) use report::{lens_report, spread};
+pub use task::ObjectReport;
 
 mod record;
 use record::{RecordedFrame, png_bytes, write_recording};
@@ -65,7 +69,7 @@ pub struct ReplayOptions {
     /// Show a progress bar on stderr.
     pub progress: bool,
     /// Where the finished report (or the error) is left for the caller.
-    pub result: Arc<Mutex<Option<Result<serde_json::Value, AppError>>>>,
+    pub result: Arc<Mutex<Option<Result<ReplayReport, AppError>>>>,
     /// Also write the replay as a recording (MCAP): every scored frame as the camera gave it,
     /// the simulated robot's joints at its capture, the camera as the app believes it, the true
     /// silhouette as its reference mask, and Avatarm's erased frame and mask.
@@ -691,7 +695,7 @@ fn finish(
     app_twin: Entity,
     erase: &EraseState,
     gpu: &SpanTimes,
-) -> Result<serde_json::Value, AppError> {
+) -> Result<ReplayReport, AppError> {
     if !replay.errors.is_empty() {
         return Err(AppError::command("replay", replay.errors.join("; ")));
     }
@@ -709,90 +713,80 @@ fn finish(
         .iter()
         .filter(|f| f.mask.robot_px > 0)
         .collect();
-    let mask = json!({
-        "iou_mean": mean(with_robot.iter().map(|f| f.mask.iou)),
-        "iou_min": with_robot.iter().map(|f| f.mask.iou).reduce(f64::min),
-        "leak_pct_mean": mean(with_robot.iter().map(|f| f.mask.leak_pct)),
-        "leak_pct_max": with_robot.iter().map(|f| f.mask.leak_pct).reduce(f64::max),
-        "overmask_pct_mean": mean(with_robot.iter().map(|f| f.mask.overmask_pct)),
-        "frames_scored": replay.scores.len(),
-        "frames_with_robot": with_robot.len(),
-    });
+    let mask = MaskReport {
+        iou_mean: mean(with_robot.iter().map(|f| f.mask.iou)),
+        iou_min: with_robot.iter().map(|f| f.mask.iou).reduce(f64::min),
+        leak_pct_mean: mean(with_robot.iter().map(|f| f.mask.leak_pct)),
+        leak_pct_max: with_robot.iter().map(|f| f.mask.leak_pct).reduce(f64::max),
+        overmask_pct_mean: mean(with_robot.iter().map(|f| f.mask.overmask_pct)),
+        frames_scored: replay.scores.len(),
+        frames_with_robot: with_robot.len(),
+    };
     let psnrs: Vec<f64> = replay
         .scores
         .iter()
         .filter_map(|f| f.psnr_robot_db)
         .collect();
-    let dr_report = json!({
-        "psnr_robot_db_mean": mean(psnrs.iter().copied()),
-        "psnr_robot_db_min": psnrs.iter().copied().reduce(f64::min),
-    });
-    let gpu_cpu = json!({
-        "max_abs_diff": replay.scores.iter().map(|f| f.gpu_cpu_max_diff).max(),
-        "mask_mismatch_px_max": replay.scores.iter().map(|f| f.gpu_cpu_mask_mismatch_px).max(),
-    });
-    let timing = stage_timings(replay, gpu);
-    let report = json!({
-        "scene": s.file.name,
-        "scene_file": s.path.display().to_string(),
-        "seed": s.file.seed,
-        "frames": replay.frame,
-        "frames_shown": replay.published,
-        "frames_written": replay.records.len(),
-        "frames_every": replay.options.frames_every,
-        "sim_time_s": sim,
-        "wall_time_s": wall,
-        "sim_s_per_wall_s": if wall > 0.0 { sim / wall } else { 0.0 },
-        "camera": {
-            "name": s.camera_name(),
-            "width": k.width, "height": k.height,
-            "fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
-            "fps": s.file.camera.fps,
-            "frame_latency_s": s.file.camera.frame_latency_s,
-            "lens": lens_report(&s.lens, replay.lens.as_deref()),
+    let sim_robot = &s.file.robot.sim;
+    let report = ReplayReport {
+        scene: s.file.name.clone(),
+        scene_file: s.path.display().to_string(),
+        seed: s.file.seed,
+        frames: replay.frame,
+        frames_shown: replay.published,
+        frames_written: replay.records.len(),
+        frames_every: replay.options.frames_every,
+        sim_time_s: sim,
+        wall_time_s: wall,
+        sim_s_per_wall_s: if wall > 0.0 { sim / wall } else { 0.0 },
+        camera: ReplayCamera {
+            name: s.camera_name().to_owned(),
+            width: k.width,
+            height: k.height,
+            fx: k.fx,
+            fy: k.fy,
+            cx: k.cx,
+            cy: k.cy,
+            fps: s.file.camera.fps,
+            frame_latency_s: s.file.camera.frame_latency_s,
+            lens: lens_report(&s.lens, replay.lens.as_deref()),
         },
-        "robot": {
-            "name": s.model.name,
-            "dof": s.model.dof(),
-            "control_rate_hz": s.file.control_rate_hz,
-            "sim": {
-                "command_latency_s": s.file.robot.sim.command_latency_s,
-                "time_constant_s": s.file.robot.sim.time_constant_s,
-                "state_rate_hz": s.file.robot.sim.state_rate_hz,
-                "state_latency_s": s.file.robot.sim.state_latency_s,
-            },
-            "twin_states_rejected": twin.map_or(0, |t| t.rejected),
-            "twin_last_stamp_s": twin.and_then(|t| t.stamp_s),
+        robot: ReplayRobot {
+            name: s.model.name.clone(),
+            dof: s.model.dof(),
+            control_rate_hz: s.file.control_rate_hz,
+            sim: *sim_robot,
+            twin_states_rejected: twin.map_or(0, |t| t.rejected),
+            twin_last_stamp_s: twin.and_then(|t| t.stamp_s),
         },
-        "erase": s.file.erase,
-        "head": head_report(s, &replay.head_errors, &replay.scores, erase),
-        "background": erase.background_origin,
-        "mask": mask,
-        "dr": dr_report,
-        "gpu_vs_cpu": gpu_cpu,
-        "timing_ms": timing,
-        "outputs": {
-            "frames": "frame_NNNNN.png",
-            "erased": "erased_NNNNN.png",
-            "mask": "mask_NNNNN.png",
-            "ground_truth_no_robot": "gt_norobot_NNNNN.png",
-            "ground_truth_silhouette": "gt_silhouette_NNNNN.png",
-            "frame_list": "frames.json",
-            "timestamps": "timestamps.csv",
-            "background": "background.png",
+        erase: s.file.erase,
+        head: head_report(s, &replay.head_errors, &replay.scores, erase),
+        background: erase.background_origin.clone(),
+        mask,
+        dr: DrReport {
+            psnr_robot_db_mean: mean(psnrs.iter().copied()),
+            psnr_robot_db_min: psnrs.iter().copied().reduce(f64::min),
         },
-    });
-    let write = |name: &str, value: &serde_json::Value| {
-        let path = replay.options.out.join(name);
-        let text = serde_json::to_string_pretty(value)?;
-        std::fs::write(&path, text + "\n").map_err(|e| AppError::write(path, e))
+        gpu_vs_cpu: GpuVsCpu {
+            max_abs_diff: replay.scores.iter().map(|f| f.gpu_cpu_max_diff).max(),
+            mask_mismatch_px_max: replay
+                .scores
+                .iter()
+                .map(|f| f.gpu_cpu_mask_mismatch_px)
+                .max(),
+        },
+        timing_ms: stage_timings(replay, gpu),
+        outputs: ReplayOutputs::default(),
+        name: None,
+        out: None,
+        object: None,
     };
     let saved: Vec<&FrameRecord> = replay
         .records
         .iter()
         .filter(|r| r.score.is_some())
         .collect();
-    write("frames.json", &json!(saved))?;
+    write_json(&replay.options.out.join("frames.json"), &saved)?;
     let mut csv = String::from("file,capture_s\n");
     for r in &saved {
         csv.push_str(&format!("{},{}\n", r.file, r.t_s));
@@ -811,7 +805,7 @@ fn finish(
             .save(&path)
             .map_err(|source| AppError::write_image(path, source))?;
     }
-    write("report.json", &report)?;
+    write_json(&replay.options.out.join("report.json"), &report)?;
     Ok(report)
 }
 
@@ -829,14 +823,11 @@ pub fn build_app(scene: &avatarm_scene::Scene, options: ReplayOptions) -> Result
 }
 
 /// Runs a replay to the end and returns its report.
-pub fn run(
-    scene: &avatarm_scene::Scene,
-    options: ReplayOptions,
-) -> Result<serde_json::Value, AppError> {
+pub fn run(scene: &avatarm_scene::Scene, options: ReplayOptions) -> Result<ReplayReport, AppError> {
     let out = options.out.clone();
     let mut report = run_video(scene, options)?;
-    if let Some(object) = object_report(scene)? {
-        report["object"] = object;
+    report.object = object_report(scene)?;
+    if report.object.is_some() {
         write_report(&out, &report)?;
     }
     Ok(report)
@@ -851,7 +842,7 @@ pub fn run(
 pub fn run_views(
     scenes: &[avatarm_scene::Scene],
     options: ReplayOptions,
-) -> Result<serde_json::Value, AppError> {
+) -> Result<ViewsReport, AppError> {
     let Some(first) = scenes.first() else {
         return Err(AppError::command(
             "replay",
@@ -882,28 +873,27 @@ pub fn run_views(
         own.out = options.out.join(name);
         own.result = Arc::default();
         let mut report = run_video(scene, own)?;
-        report["name"] = json!(name);
-        report["out"] = json!(name);
+        report.name = Some(name.to_owned());
+        report.out = Some(name.to_owned());
         cameras.push(report);
     }
-    let mut report = json!({
-        "scene": first.file.name,
-        "scene_file": first.path.display().to_string(),
-        "seed": first.file.seed,
-        "cameras": cameras,
-        "note": "each camera replayed in turn over the same simulated run (the scene's seed); \
-                 cameras[i] is the report in cameras[i].out/report.json",
-    });
-    if let Some(object) = object_report(first)? {
-        report["object"] = object;
-    }
+    let report = ViewsReport {
+        scene: first.file.name.clone(),
+        scene_file: first.path.display().to_string(),
+        seed: first.file.seed,
+        cameras,
+        note: "each camera replayed in turn over the same simulated run (the scene's seed); \
+               cameras[i] is the report in cameras[i].out/report.json"
+            .into(),
+        object: object_report(first)?,
+    };
     write_report(&options.out, &report)?;
     Ok(report)
 }
 
 /// The task's trials, run headless (physics and mapping, no video) after the replay: the
 /// report's `object` section, `None` for a scene without a `[task]`.
-fn object_report(scene: &avatarm_scene::Scene) -> Result<Option<serde_json::Value>, AppError> {
+fn object_report(scene: &avatarm_scene::Scene) -> Result<Option<ObjectReport>, AppError> {
     match (&scene.file.task, &scene.trial) {
         (Some(task), Some(setup)) => Ok(Some(task::object_report(task, setup)?)),
         _ => Ok(None),
@@ -911,18 +901,22 @@ fn object_report(scene: &avatarm_scene::Scene) -> Result<Option<serde_json::Valu
 }
 
 /// Writes `report` to `out/report.json`.
-fn write_report(out: &Path, report: &serde_json::Value) -> Result<(), AppError> {
+fn write_report(out: &Path, report: &impl Serialize) -> Result<(), AppError> {
     std::fs::create_dir_all(out).map_err(|e| AppError::write(out.to_owned(), e))?;
-    let path = out.join("report.json");
-    let text = serde_json::to_string_pretty(report)?;
-    std::fs::write(&path, text + "\n").map_err(|e| AppError::write(path, e))
+    write_json(&out.join("report.json"), report)
+}
+
+/// Writes `value` to `path` as pretty JSON with a final newline.
+pub(crate) fn write_json(path: &Path, value: &impl Serialize) -> Result<(), AppError> {
+    let text = serde_json::to_string_pretty(value)?;
+    std::fs::write(path, text + "\n").map_err(|e| AppError::write(path, e))
 }
 
 /// One camera's replay, without the task: its report (also in `options.out/report.json`).
 fn run_video(
     scene: &avatarm_scene::Scene,
     options: ReplayOptions,
-) -> Result<serde_json::Value, AppError> {
+) -> Result<ReplayReport, AppError> {
     let slot = options.result.clone();
     let mut app = build_app(scene, options)?;
     let exit = app.run();

@@ -23,14 +23,14 @@ use std::time::{Duration, Instant};
 
 use avatarm_core::dr::{self, BackgroundEstimate, EraseSettings, FootageBackground, RgbaView};
 use avatarm_core::robot::{JointMap, PackagePath, RobotModel};
-use avatarm_core::vision::camera::{Intrinsics, PinholeCamera};
+use avatarm_core::vision::camera::PinholeCamera;
 use avatarm_core::vision::distortion::Distortion;
 use avatarm_core::vision::head::PoseHistory;
 use avatarm_erase::{
     EraseConfig, EraseLens, ErasePlugin, EraseState, EraseSystems, EraseTargets, GpuTimes,
     PASS_NAMES, SetBackground, UPLOAD_SPAN, ViewBackgroundConfig,
 };
-use avatarm_record::camera::{CameraCalibration, read_calibration, read_mount, read_pose};
+use avatarm_record::camera::{CameraCalibration, read_pose};
 use avatarm_record::{CompressedFrame, HeadPose, ImageFormat, Recording, RecordingWriter};
 use avatarm_twin::readback::{ImageRead, ImageReadbackPlugin, read_image_once};
 use avatarm_twin::{RobotTwin, RobotTwinPlugin, TwinDetail};
@@ -39,16 +39,22 @@ use bevy::app::ScheduleRunnerPlugin;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use nalgebra::{DVector, Isometry3};
-use serde_json::json;
 
 use crate::AppError;
 
 mod outputs;
-pub(crate) use outputs::overlay;
 use outputs::write_outputs;
 
-mod source;
-pub(crate) use source::{decode, interpolate, joint_vectors, recording_camera, recording_mount};
+pub mod report;
+pub use report::{
+    FrameVsReference, HeadMount, MountPose, RecordingBackground, RecordingCamera, RecordingErase,
+    RecordingMask, RecordingOutputs, RecordingReport, RecordingTimings, ViewFollowing, VsReference,
+};
+
+use avatarm_footage::overlay::overlay;
+use avatarm_footage::recording::{
+    decode, interpolate, joint_vectors, recording_camera, recording_mount,
+};
 
 /// What `avatarm replay --recording` is given.
 #[derive(Debug, Clone)]
@@ -91,7 +97,7 @@ const SETTLE_UPDATES: u32 = 4;
 const MAX_WAIT_UPDATES: u32 = 600;
 
 /// Replays the recording; returns the report (also written to `out/report.json`).
-pub fn run_recording(o: &RecordingOptions) -> Result<serde_json::Value, AppError> {
+pub fn run_recording(o: &RecordingOptions) -> Result<RecordingReport, AppError> {
     let started = Instant::now();
     let input = Input::load(o)?;
     std::fs::create_dir_all(&o.out).map_err(|source| AppError::Io {
@@ -767,23 +773,3 @@ enum Part {
 }
 
 use super::spread;
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn joints_are_interpolated_to_the_capture_time() {
-        let v = |x: f64| DVector::from_vec(vec![x, -x]);
-        let states = vec![(100, v(0.0)), (200, v(1.0)), (400, v(3.0))];
-        assert_eq!(interpolate(&states, 150), v(0.5));
-        assert_eq!(interpolate(&states, 300), v(2.0));
-        assert_eq!(
-            interpolate(&states, 50),
-            v(0.0),
-            "the first before the first"
-        );
-        assert_eq!(interpolate(&states, 900), v(3.0), "the last after the last");
-        assert_eq!(interpolate(&states, 200), v(1.0));
-    }
-}

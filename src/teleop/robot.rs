@@ -102,6 +102,16 @@ pub(super) fn ros_arm(
     q0: &nalgebra::DVector<f64>,
 ) -> Result<Box<dyn avatarm_core::sim::arm::RobotInterface>, AppError> {
     let settings = link_settings(scene, setup)?;
+    if matches!(
+        settings.command,
+        avatarm_ros::CommandKind::GroupVelocity { .. }
+    ) {
+        // Nothing on ROS stops it if this process dies (docs/network.md, "When the robot site
+        // dies"): said once, where the user reads what the link is.
+        bevy::log::warn!(
+            "ROS link: a ros_control velocity controller keeps its last command for ever; if this process dies (a crash, a kill, the power) the arm keeps that velocity until its own limits or an e-stop stop it. Prefer controller = \"position\" (it holds its last target) or a controller with a command timeout"
+        );
+    }
     let names = setup
         .model
         .dof_names()

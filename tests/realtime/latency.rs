@@ -4,7 +4,10 @@
 use std::path::Path;
 use std::process::Command;
 
-use crate::network::{POURING, f, finish, free_port, join_scene, out_dir, serve_scene};
+use avatarm::net::join::JoinReport;
+use avatarm::net::serve::ServeReport;
+
+use crate::network::{POURING, finish, free_port, join_scene, out_dir, serve_scene};
 use crate::serial;
 use crate::support::output;
 
@@ -89,56 +92,48 @@ fn a_recorded_camera_runs_the_real_frame_path_and_each_frame_carries_its_stages(
             watched.to_str().expect("a UTF-8 path"),
         ],
     );
-    let watch = finish(watcher, &dir, "watch");
-    let site = finish(robot, &dir, "serve");
-    assert_eq!(site["robot"], "recording session.mcap", "{site}");
-    let camera = &site["video_cameras"][0];
-    assert_eq!(camera["source"], "session.mcap", "{camera}");
+    let watch: JoinReport = finish(watcher, &dir, "watch");
+    let site: ServeReport = finish(robot, &dir, "serve");
+    assert_eq!(site.robot, "recording session.mcap", "{site:?}");
+    let camera = &site.video_cameras[0];
+    assert_eq!(camera.source, "session.mcap", "{camera:?}");
     // The player ran at the recording's rate (about 30 frames a second, a lap a second) for
     // the whole run, however slowly the app took them.
-    assert!(f(camera, "player.laps") >= 15.0, "{camera}");
-    assert!(f(camera, "player.played") >= 15.0 * 25.0, "{camera}");
-    assert!(f(camera, "frames") >= 10.0, "{camera}");
+    let player = camera.player.as_ref().expect("the player's report");
+    assert!(player.laps >= 15, "{camera:?}");
+    assert!(player.played >= 15 * 25, "{camera:?}");
+    assert!(camera.frames >= 10, "{camera:?}");
     // No frame waited more than one update between arriving and the encoder.
-    assert_eq!(f(camera, "handed_late"), 0.0, "{camera}");
-    assert!(f(camera, "waited_updates_max") <= 1.0, "{camera}");
-    assert!(f(camera, "update_ms.n") >= 10.0, "{camera}");
-    let video = &watch["video"];
-    assert!(f(video, "shown") >= 5.0, "{video}");
-    assert_eq!(f(video, "refused"), 0.0, "{video}");
-    assert!(f(video, "waited_updates_max") <= 1.0, "{video}");
-    let waits: Vec<f64> = video["waited_updates"]
-        .as_array()
-        .expect("a histogram")
-        .iter()
-        .map(|v| v.as_f64().expect("a count"))
-        .collect();
-    assert_eq!(waits.iter().sum::<f64>(), f(video, "shown"), "{video}");
+    assert_eq!(camera.handed_late, 0, "{camera:?}");
+    assert!(camera.waited_updates_max <= 1, "{camera:?}");
+    assert!(camera.update_ms.n >= 10, "{camera:?}");
+    let video = &watch.video;
+    assert!(video.shown >= 5, "{video:?}");
+    assert_eq!(video.refused, 0, "{video:?}");
+    assert!(video.waited_updates_max <= 1, "{video:?}");
+    assert_eq!(
+        video.waited_updates.iter().sum::<u64>(),
+        video.shown,
+        "{video:?}"
+    );
     // Each frame's stages in their order at the robot site, and every stage counted.
-    assert_eq!(f(video, "stamps_out_of_order"), 0.0, "{video}");
+    assert_eq!(video.stamps_out_of_order, 0, "{video:?}");
     let stages = [
-        "arrive_ms",
-        "app_ms",
-        "encode_ms",
-        "network_ms",
-        "decode_ms",
+        ("arrive_ms", video.arrive_ms),
+        ("app_ms", video.app_ms),
+        ("encode_ms", video.encode_ms),
+        ("network_ms", video.network_ms),
+        ("decode_ms", video.decode_ms),
     ];
-    for stage in stages {
-        assert_eq!(
-            f(video, &format!("{stage}.n")),
-            f(video, "shown"),
-            "{video}"
-        );
+    for (stage, times) in stages {
+        assert_eq!(times.n as u64, video.shown, "{stage}: {video:?}");
     }
     // The stages' medians add up to about the total's (medians do not add exactly).
-    let sum: f64 = stages
-        .iter()
-        .map(|s| f(video, &format!("{s}.median")))
-        .sum();
-    let total = f(video, "total_ms.median");
+    let sum: f64 = stages.iter().map(|(_, times)| times.median).sum();
+    let total = video.total_ms.median;
     assert!(
         total > 0.0 && sum > 0.5 * total && sum < 2.0 * total,
-        "{video}"
+        "{video:?}"
     );
     // The robot is gone from every frame the watcher received: each frame met the joints it
     // was recorded with (a frame masked at other joints keeps the arm's ghost).

@@ -6,8 +6,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use avatarm::net::join::JoinReport;
+use avatarm::net::serve::{ServeReport, StopEpisode};
 use avatarm_net::impair::{Impairment, Relay};
-use serde_json::Value;
+use serde::de::DeserializeOwned;
 
 use crate::serial;
 
@@ -93,24 +95,24 @@ fn wait_for_join(dir: &Path, name: &str, seconds: u64) {
     }
 }
 
-pub(crate) fn finish(mut child: Child, dir: &Path, name: &str) -> Value {
+/// Waits for the process `name` (its log `dir/name.log`) to succeed; its report
+/// (`dir/name.json`, a [`ServeReport`] or a [`JoinReport`]).
+pub(crate) fn finish<T: DeserializeOwned>(mut child: Child, dir: &Path, name: &str) -> T {
     let status = child.wait().expect("the test's set-up");
     let log = std::fs::read_to_string(dir.join(format!("{name}.log"))).unwrap_or_default();
     assert!(status.success(), "{name} failed:\n{log}");
-    let text =
-        std::fs::read_to_string(dir.join(format!("{name}.json"))).expect("the test's set-up");
-    serde_json::from_str(&text).expect("the test's set-up")
+    report(dir, name)
 }
 
-pub(crate) fn f(v: &Value, path: &str) -> f64 {
-    path.split('.')
-        .fold(v, |v, k| &v[k])
-        .as_f64()
-        .unwrap_or_else(|| panic!("{path} in {v}"))
+/// The report `dir/name.json`, read as its type.
+pub(crate) fn report<T: DeserializeOwned>(dir: &Path, name: &str) -> T {
+    let path = dir.join(format!("{name}.json"));
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}\n{text}", path.display()))
 }
 
 /// The robot site (video off) and the operator through a TCP relay of `delay_s` one way.
-fn pour_through(name: &str, delay_s: f64) -> (Value, Value) {
+fn pour_through(name: &str, delay_s: f64) -> (ServeReport, JoinReport) {
     let dir = out_dir(name);
     let port = free_port();
     let robot = serve(&dir, port, 14.0, &["--insecure-lan", "--video", "off"]);
@@ -127,8 +129,8 @@ fn pour_through(name: &str, delay_s: f64) -> (Value, Value) {
     )
     .expect("the test's set-up");
     let operator = join(&dir, "join", relay.local_addr().port(), &["--wait", "20"]);
-    let j = finish(operator, &dir, "join");
-    let s = finish(robot, &dir, "serve");
+    let j: JoinReport = finish(operator, &dir, "join");
+    let s: ServeReport = finish(robot, &dir, "serve");
     (s, j)
 }
 
@@ -139,14 +141,14 @@ fn two_sites_pour_through_the_network_and_delay_costs_accuracy() {
     let (s1, j1) = pour_through("pour_100ms", 0.1);
     for (s, j) in [(&s0, &j0), (&s1, &j1)] {
         // The whole trial crossed: a target per control tick, joint states back.
-        assert!(f(j, "targets_sent") >= 900.0, "{j}");
-        assert!(f(s, "targets_used") >= 850.0, "{s}");
-        assert!(f(j, "joint_states") >= 800.0, "{j}");
-        assert_eq!(f(s, "targets_refused"), 0.0, "{s}");
-        assert_eq!(f(s, "nan_commands"), 0.0, "{s}");
+        assert!(j.targets_sent >= 900, "{j:?}");
+        assert!(s.targets_used >= 850, "{s:?}");
+        assert!(j.joint_states >= 800, "{j:?}");
+        assert_eq!(s.targets_refused, 0, "{s:?}");
+        assert_eq!(s.nan_commands, 0, "{s:?}");
         // The real bottle was grasped and lifted through the network.
-        assert!(s["trial"]["grasp_at_s"].is_f64(), "{s}");
-        assert!(f(s, "trial.real_lift_m") > 0.05, "{s}");
+        assert!(s.trial.grasp_at_s.is_some(), "{s:?}");
+        assert!(s.trial.real_lift_m > 0.05, "{s:?}");
     }
     // The operator's twin is the one-process trial's, to the bit: both step the same world
     // (`TrialParts::hand_app`). Before they did, a resource more in one of them changed
@@ -165,18 +167,21 @@ fn two_sites_pour_through_the_network_and_delay_costs_accuracy() {
         .expect("the trial runs")
         .result;
     for j in [&j0, &j1] {
-        assert_eq!(f(j, "twin_lift_m"), one_process.twin_lift_m, "{j}");
+        assert_eq!(j.twin_lift_m, one_process.twin_lift_m, "{j:?}");
     }
     // The round trip shows the relay's 2 x 100 ms.
-    assert!(f(&j1, "clock_rtt_ms") >= 200.0, "{j1}");
-    assert!(f(&j0, "clock_rtt_ms") < 50.0, "{j0}");
+    assert!(j1.clock_rtt_ms >= 200.0, "{j1:?}");
+    assert!(j0.clock_rtt_ms < 50.0, "{j0:?}");
     // Delay costs accuracy: the real bottle lags its twin.
-    let (e0, e1) = (f(&s0, "trial.pos_rmse_m"), f(&s1, "trial.pos_rmse_m"));
+    let (e0, e1) = (
+        s0.trial.pos_rmse_m.expect("trial.pos_rmse_m"),
+        s1.trial.pos_rmse_m.expect("trial.pos_rmse_m"),
+    );
     assert!(e0 < 0.02, "no delay: {e0} m");
     assert!(e1 > e0, "100 ms: {e1} m against {e0} m");
     // The target ages as the delay says (median, ms).
-    assert!(f(&s1, "target_age_ms.median") >= 100.0, "{s1}");
-    assert!(f(&s0, "target_age_ms.median") < 30.0, "{s0}");
+    assert!(s1.target_age_ms.median >= 100.0, "{s1:?}");
+    assert!(s0.target_age_ms.median < 30.0, "{s0:?}");
 }
 
 #[test]
@@ -197,26 +202,26 @@ fn a_cut_link_stops_the_arm_and_the_session_resumes() {
     wait_joined(&dir);
     std::thread::sleep(Duration::from_secs(4));
     relay.cut_for(Duration::from_secs(2));
-    let j = finish(operator, &dir, "join");
-    let s = finish(robot, &dir, "serve");
+    let j: JoinReport = finish(operator, &dir, "join");
+    let s: ServeReport = finish(robot, &dir, "serve");
     // One stop for stale targets, about as long as the cut, ended by fresh targets.
-    let stops = s["stops"].as_array().expect("the test's set-up");
-    let cut: Vec<&Value> = stops
+    let cut: Vec<&StopEpisode> = s
+        .stops
         .iter()
-        .filter(|e| e["reason"].as_str().unwrap_or("").contains("stale"))
+        .filter(|e| e.reason.contains("stale"))
         .collect();
-    assert_eq!(cut.len(), 1, "{s}");
-    let length = f(cut[0], "length_s");
+    assert_eq!(cut.len(), 1, "{s:?}");
+    let length = cut[0].length_s.expect("length_s");
     assert!(
         (1.4..3.0).contains(&length),
-        "stopped {length} s for a 2 s cut: {s}"
+        "stopped {length} s for a 2 s cut: {s:?}"
     );
     // Neither process restarted: the operator joined once (and left at its end), and targets
     // flowed after the cut.
-    assert_eq!(f(&s, "operator_joins"), 1.0, "{s}");
-    assert!(f(&s, "targets_used") >= 850.0, "nothing lost: {s}");
-    assert!(f(&j, "targets_sent") >= 900.0, "{j}");
-    assert_eq!(f(&s, "nan_commands"), 0.0);
+    assert_eq!(s.operator_joins, 1, "{s:?}");
+    assert!(s.targets_used >= 850, "nothing lost: {s:?}");
+    assert!(j.targets_sent >= 900, "{j:?}");
+    assert_eq!(s.nan_commands, 0);
     // The relay held the cut's bytes without filling its queue: nothing pushed back.
     let held = relay
         .stats()
@@ -232,6 +237,56 @@ fn a_cut_link_stops_the_arm_and_the_session_resumes() {
     );
 }
 
+/// The robot site killed and started again on the same endpoint while the operator stays:
+/// the operator says once that the robot site fell silent, once that it is heard again, and
+/// once that it restarted (its clock jumped), estimates the offset again at once and commands
+/// the new robot site; its report counts the silence and the restart and gives the new clock's
+/// offset, not the first's.
+#[test]
+fn a_restarted_robot_site_is_said_and_its_new_clock_taken() {
+    let _serial = serial();
+    let dir = out_dir("restarted");
+    let port = free_port();
+    let mut first = serve(&dir, port, 60.0, &["--insecure-lan", "--video", "off"]);
+    let operator = join(&dir, "join", port, &["--wait", "20", "--duration", "30"]);
+    wait_joined(&dir);
+    std::thread::sleep(Duration::from_secs(3));
+    first.kill().expect("the test's set-up");
+    let _ = first.wait();
+    std::thread::sleep(Duration::from_secs(3));
+    let second = serve(&dir, port, 25.0, &["--insecure-lan", "--video", "off"]);
+    let j: JoinReport = finish(operator, &dir, "join");
+    let s: ServeReport = finish(second, &dir, "serve");
+    let log = std::fs::read_to_string(dir.join("join.log")).expect("the test's set-up");
+    eprintln!(
+        "{}",
+        log.lines()
+            .filter(|l| l.contains("robot site"))
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+    assert_eq!(j.robot_site_silences, 1, "{j:?}");
+    assert_eq!(j.robot_site_restarts, 1, "{j:?}");
+    for said in [
+        "no word from the robot site for 1.0 s",
+        "the robot site is heard again after",
+        "the robot site restarted (its clock jumped by -",
+    ] {
+        assert_eq!(log.matches(said).count(), 1, "{said}:\n{log}");
+    }
+    // The second robot site's clock started after the operator's: its offset is negative (the
+    // first's was positive), as the report now says.
+    assert!(j.clock_offset_s < 0.0, "{j:?}");
+    // And the operator commanded it: its targets were used (those stamped with the first
+    // clock's offset before the new estimate are refused, and counted).
+    eprintln!(
+        "restarted robot site: {} targets used, {} refused ({:?})",
+        s.targets_used, s.targets_refused, s.refusals_by_kind
+    );
+    assert!(s.targets_used >= 300, "{s:?}");
+    assert_eq!(s.nan_commands, 0, "{s:?}");
+}
+
 #[test]
 fn the_operator_killed_the_arm_stops_and_holds() {
     let _serial = serial();
@@ -243,19 +298,14 @@ fn the_operator_killed_the_arm_stops_and_holds() {
     std::thread::sleep(Duration::from_secs(3));
     operator.kill().expect("the test's set-up");
     let _ = operator.wait();
-    let s = finish(robot, &dir, "serve");
-    assert_eq!(f(&s, "operator_leaves"), 1.0, "{s}");
+    let s: ServeReport = finish(robot, &dir, "serve");
+    assert_eq!(s.operator_leaves, 1, "{s:?}");
     // The last stop is still on at the end: the arm holds.
-    let last = s["stops"]
-        .as_array()
-        .expect("the test's set-up")
-        .last()
-        .expect("the test's set-up")
-        .clone();
-    assert!(last["length_s"].is_null(), "{s}");
+    let last = s.stops.last().expect("a stop");
+    assert!(last.length_s.is_none(), "{s:?}");
     let log = std::fs::read_to_string(dir.join("serve.log")).expect("the test's set-up");
     assert!(log.contains("the operator left; stopping the arm"), "{log}");
-    assert_eq!(f(&s, "nan_commands"), 0.0);
+    assert_eq!(s.nan_commands, 0);
 }
 
 /// A certificate authority and the robot site's certificate for localhost and 127.0.0.1,
@@ -343,23 +393,44 @@ fn over_tls_only_the_authenticated_operator_moves_the_robot() {
         "no_ca",
         &["--credentials", &path("blair.txt"), "--wait", "3"],
     );
+    // Each refusal says what to check (Zenoh itself says only that it could not connect).
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(!out.status.success(), "joined without the CA");
-    let out = join_as("no_user", &["--tls-ca", &path("ca.pem"), "--wait", "3"]);
-    assert!(!out.status.success(), "joined without credentials");
-    // An observer's credentials playing an operator: it connects, its targets are denied.
-    let out = join_as(
-        "watcher",
-        &[
-            "--tls-ca",
-            &path("ca.pem"),
-            "--credentials",
-            &path("watcher.txt"),
-            "--duration",
-            "3",
-            "--wait",
-            "10",
-        ],
+    assert!(
+        err.contains("no --tls-ca") && err.contains("login of user 'blair'"),
+        "{err}"
     );
+    let out = join_as("no_user", &["--tls-ca", &path("ca.pem"), "--wait", "3"]);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "joined without credentials");
+    assert!(
+        err.contains("requires a login: give --credentials") && err.contains("ca.pem"),
+        "{err}"
+    );
+    // An observer's credentials playing an operator: refused at once, naming --watch (the
+    // access control would deny its targets anyway: avatarm_net's
+    // `only_the_dictionary_s_operator_can_command_the_robot`).
+    let watcher = [
+        "--tls-ca",
+        &path("ca.pem"),
+        "--credentials",
+        &path("watcher.txt"),
+        "--duration",
+        "3",
+        "--wait",
+        "10",
+    ];
+    let out = join_as("watcher", &watcher);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "an observer joined as an operator");
+    assert!(
+        err.contains("user 'watcher' may not command")
+            && err.contains("operators: blair")
+            && err.contains("--watch"),
+        "{err}"
+    );
+    // As an observer, it watches.
+    let out = join_as("watcher", &[&watcher[..], &["--watch"]].concat());
     assert!(
         out.status.success(),
         "{:?}: {}",
@@ -386,49 +457,43 @@ fn over_tls_only_the_authenticated_operator_moves_the_robot() {
         out.status,
         String::from_utf8_lossy(&out.stderr)
     );
-    let s = finish(robot, &dir, "serve");
-    let watcher: Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.join("watcher.json")).expect("the test's set-up"),
-    )
-    .expect("the test's set-up");
-    let blair: Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.join("blair.json")).expect("the test's set-up"),
-    )
-    .expect("the test's set-up");
-    assert!(f(&watcher, "targets_sent") > 250.0, "{watcher}");
-    assert!(f(&blair, "targets_sent") > 350.0, "{blair}");
+    let s: ServeReport = finish(robot, &dir, "serve");
+    let watcher: JoinReport = report(&dir, "watcher");
+    let blair: JoinReport = report(&dir, "blair");
+    assert_eq!(watcher.role, "observer", "{watcher:?}");
+    assert_eq!(watcher.targets_sent, 0, "{watcher:?}");
+    assert!(watcher.joint_states > 0, "{watcher:?}");
+    assert!(blair.targets_sent > 350, "{blair:?}");
     // Only the operator's targets reached the robot.
-    let used = f(&s, "targets_used");
-    assert!(used > 0.0 && used <= f(&blair, "targets_sent"), "{s}");
-    // An operator was present only inside Blair's window, never in the watcher's, which ended
-    // before hers began: every join the robot site saw (on its clock) lies between Blair's
+    let used = s.targets_used;
+    assert!(used > 0 && used <= blair.targets_sent, "{s:?}");
+    // An operator was present only inside Blair's window, never in the observer's, which
+    // ended before hers began: every join the robot site saw (on its clock) lies between Blair's
     // clock's zero, before which her token cannot exist, and her exit (her session's length,
     // plus 2 s for her start-up queries and the close). Zenoh 1.10's TLS link can drop and
     // reconnect under load (eclipse-zenoh/zenoh#2557; docs/network.md), each time a leave and
     // a join of the same operator, so joins are not asserted to be one.
-    let start = f(&blair, "clock_offset_s");
-    let end = start + f(&blair, "duration_s") + 2.0;
+    let start = blair.clock_offset_s;
+    let end = start + blair.duration_s + 2.0;
     assert!(
-        f(&watcher, "clock_offset_s") + f(&watcher, "duration_s") < start,
-        "the watcher's window overlaps Blair's: {watcher} {blair}"
+        watcher.clock_offset_s + watcher.duration_s < start,
+        "the watcher's window overlaps Blair's: {watcher:?} {blair:?}"
     );
-    let changes = s["operator_changes"]
-        .as_array()
-        .expect("the report's operator changes");
-    let joins = f(&s, "operator_joins");
-    assert!(joins >= 1.0, "{s}");
-    assert_eq!(f(&s, "operator_leaves"), joins, "she left at the end: {s}");
-    assert_eq!(changes.len() as f64, 2.0 * joins, "{s}");
+    let changes = &s.operator_changes;
+    let joins = s.operator_joins;
+    assert!(joins >= 1, "{s:?}");
+    assert_eq!(s.operator_leaves, joins, "she left at the end: {s:?}");
+    assert_eq!(changes.len() as u64, 2 * joins, "{s:?}");
     for (i, change) in changes.iter().enumerate() {
         assert_eq!(
-            change["present"].as_bool(),
-            Some(i % 2 == 0),
-            "joins and leaves alternate, a join first: {s}"
+            change.present,
+            i % 2 == 0,
+            "joins and leaves alternate, a join first: {s:?}"
         );
-        let t = f(change, "t_s");
+        let t = change.t_s;
         assert!(
             t >= start - 0.05 && t <= end,
-            "an operator came or went outside Blair's window [{start}, {end}]: {s}"
+            "an operator came or went outside Blair's window [{start}, {end}]: {s:?}"
         );
     }
 }
@@ -507,7 +572,7 @@ fn h264_video_survives_loss_and_a_late_observer_gets_a_keyframe_on_request() {
         .stderr(std::fs::File::create(dir.join("lossy.log")).expect("the test's set-up"))
         .spawn()
         .expect("the test's set-up");
-    let lossy = finish(lossy, &dir, "lossy");
+    let lossy: JoinReport = finish(lossy, &dir, "lossy");
     // A late observer: it joins mid-stream, so its first frame refers to frames it never had.
     // Not at once: the lossy observer's last keyframe request, answered a moment after it
     // left, could otherwise be the late one's first frame (seen once: 90 ms apart).
@@ -518,33 +583,28 @@ fn h264_video_survives_loss_and_a_late_observer_gets_a_keyframe_on_request() {
         port,
         &["--watch", "--duration", "8", "--wait", "30"],
     );
-    let late = finish(late, &dir, "late");
+    let late: JoinReport = finish(late, &dir, "late");
     let mut robot = robot;
     let _ = robot.kill();
     let _ = robot.wait();
     for (name, v) in [("lossy", &lossy), ("late", &late)] {
-        assert_eq!(v["video"]["codec"], "h264", "{name}: {v}");
-        assert_eq!(f(v, "video.refused"), 0.0, "{name}: {v}");
-        assert!(f(v, "video.shown") >= 5.0, "{name}: {v}");
+        assert_eq!(v.video.codec, "h264", "{name}: {v:?}");
+        assert_eq!(v.video.refused, 0, "{name}: {v:?}");
+        assert!(v.video.shown >= 5, "{name}: {v:?}");
     }
-    assert!(f(&late, "video.keyframe_requests") >= 1.0, "{late}");
-    assert!(f(&late, "video.waiting_for_keyframe") >= 1.0, "{late}");
+    assert!(late.video.keyframe_requests >= 1, "{late:?}");
+    assert!(late.video.waiting_for_keyframe >= 1, "{late:?}");
     // Each loss was asked for again, and keyframes came; every frame received was shown, or
     // waited for a keyframe, or was dropped as stale.
-    if f(&lossy, "video.lost") > 0.0 {
-        assert!(f(&lossy, "video.keyframe_requests") >= 1.0, "{lossy}");
-        assert!(f(&lossy, "video.keyframes") >= 1.0, "{lossy}");
+    if lossy.video.lost > 0 {
+        assert!(lossy.video.keyframe_requests >= 1, "{lossy:?}");
+        assert!(lossy.video.keyframes >= 1, "{lossy:?}");
     }
     for v in [&lossy, &late] {
-        let accounted = f(v, "video.shown")
-            + f(v, "video.waiting_for_keyframe")
-            + f(v, "video.stale")
-            + f(v, "video.refused");
-        assert_eq!(accounted, f(v, "video.frames"), "{v}");
-        assert!(
-            f(v, "video.waiting_for_keyframe") * 2.0 < f(v, "video.frames"),
-            "{v}"
-        );
+        let accounted =
+            v.video.shown + v.video.waiting_for_keyframe + v.video.stale + v.video.refused;
+        assert_eq!(accounted, v.video.frames, "{v:?}");
+        assert!(v.video.waiting_for_keyframe * 2 < v.video.frames, "{v:?}");
     }
 }
 
@@ -578,66 +638,55 @@ fn the_operator_window_shows_the_received_video_with_the_hand_in_front() {
         .stderr(std::fs::File::create(dir.join("join.log")).expect("the test's set-up"))
         .spawn()
         .expect("xvfb-run starts (scripts/setup.sh installs it)");
-    let j = finish(operator, &dir, "join");
+    let j: JoinReport = finish(operator, &dir, "join");
     let mut robot = robot;
     let _ = robot.kill();
     let _ = robot.wait();
-    assert_eq!(j["role"], "operator", "{j}");
-    assert!(f(&j, "targets_sent") >= 10.0, "{j}");
-    assert!(f(&j, "video.shown") >= 3.0, "{j}");
+    assert_eq!(j.role, "operator", "{j:?}");
+    assert!(j.targets_sent >= 10, "{j:?}");
+    assert!(j.video.shown >= 3, "{j:?}");
     // The window's own counts: every frame rendered, decoded frames uploaded to the panel,
     // the hand drawn around the twin in (nearly) every frame.
-    assert!(f(&j, "window.frames") >= 60.0, "{j}");
-    assert!(f(&j, "window.video_frames") >= 3.0, "{j}");
-    assert!(f(&j, "window.hand_frames") >= 50.0, "{j}");
+    let win = j.window.as_ref().expect("the window's report");
+    assert!(win.frames >= 60, "{win:?}");
+    assert!(win.video_frames >= 3, "{win:?}");
+    assert!(win.hand_frames >= 50, "{win:?}");
     // The display stage's figures: one wait per frame put on the panel, one time per rendered
     // frame after the first, both finite and positive.
-    assert_eq!(
-        f(&j, "window.panel_wait_ms.n"),
-        f(&j, "window.video_frames"),
-        "{j}"
-    );
-    assert_eq!(
-        f(&j, "window.frame_ms.n"),
-        f(&j, "window.frames") - 1.0,
-        "{j}"
-    );
-    for key in [
-        "window.panel_wait_ms.median",
-        "window.frame_ms.median",
-        "window.fps",
+    assert_eq!(win.panel_wait_ms.n as u64, win.video_frames, "{win:?}");
+    assert_eq!(win.frame_ms.n as u64, win.frames - 1, "{win:?}");
+    for (key, value) in [
+        ("panel_wait_ms", win.panel_wait_ms.median),
+        ("frame_ms", win.frame_ms.median),
+        ("fps", win.fps),
     ] {
-        assert!(f(&j, key) > 0.0, "{key}: {j}");
+        assert!(value > 0.0, "{key}: {win:?}");
     }
     // Each frame put on the panel stamped once more when the window's frame showing it was
     // presented (the render world, after the present; the last one may not be by the exit),
     // and glass to glass for each.
-    let presented = f(&j, "window.display_ms.n");
+    let presented = win.display_ms.n as u64;
     assert!(
-        presented >= f(&j, "window.video_frames") - 1.0
-            && presented <= f(&j, "window.video_frames"),
-        "{j}"
+        presented + 1 >= win.video_frames && presented <= win.video_frames,
+        "{win:?}"
     );
-    assert_eq!(f(&j, "window.glass_to_glass_ms.n"), presented, "{j}");
+    assert_eq!(win.glass_to_glass_ms.n as u64, presented, "{win:?}");
     // `--record`: what the operator received, as a recording: every frame shown (one
     // camera), every joint state, the scene's camera, on the robot site's clock.
     let rec = avatarm_record::Recording::open(&dir.join("join.mcap")).expect("the recording");
-    assert_eq!(f(&j, "recording.refused"), 0.0, "{j}");
-    assert_eq!(rec.erased.len() as f64, f(&j, "video.shown"), "{j}");
-    assert_eq!(
-        rec.erased.len() as f64,
-        f(&j, "recording.erased_frames"),
-        "{j}"
-    );
-    assert_eq!(rec.joint_states.len() as f64, f(&j, "joint_states"), "{j}");
+    let recorded = j.recording.as_ref().expect("the recording's report");
+    assert_eq!(recorded.refused, 0, "{j:?}");
+    assert_eq!(rec.erased.len() as u64, j.video.shown, "{j:?}");
+    assert_eq!(rec.erased.len() as u64, recorded.erased_frames, "{j:?}");
+    assert_eq!(rec.joint_states.len() as u64, j.joint_states, "{j:?}");
     // The operator's own hand, each frame once, tracked with its 26 joints.
     assert!(rec.hands.len() >= 50, "{} hand frames", rec.hands.len());
-    assert_eq!(rec.hands.len() as f64, f(&j, "recording.hands"), "{j}");
+    assert_eq!(rec.hands.len() as u64, recorded.hands, "{j:?}");
     assert!(rec.hands.windows(2).all(|w| w[0].stamp_ns < w[1].stamp_ns));
     assert!(rec.hands.iter().any(|h| h.tracked && h.poses.len() == 26));
     // Every target she sent, in order, on the robot's clock with the rest.
-    assert_eq!(rec.targets.len() as f64, f(&j, "targets_sent"), "{j}");
-    assert_eq!(rec.targets.len() as f64, f(&j, "recording.targets"), "{j}");
+    assert_eq!(rec.targets.len() as u64, j.targets_sent, "{j:?}");
+    assert_eq!(rec.targets.len() as u64, recorded.targets, "{j:?}");
     assert!(
         rec.targets
             .windows(2)
@@ -749,30 +798,32 @@ fn the_robot_site_serves_both_cameras_at_alice_s_head_each_frame_with_its_pose()
         join_scene(&dir, view, scene, port, &args)
     };
     let (alice, blair) = (watch("alice"), watch("blair"));
-    let alice = finish(alice, &dir, "alice");
-    let blair = finish(blair, &dir, "blair");
-    let site = finish(robot, &dir, "serve");
-    let cameras = &site["video_cameras"];
-    assert_eq!(cameras[0]["camera"], "blair", "{cameras}");
-    assert_eq!(cameras[1]["camera"], "alice", "{cameras}");
+    let alice: JoinReport = finish(alice, &dir, "alice");
+    let blair: JoinReport = finish(blair, &dir, "blair");
+    let site: ServeReport = finish(robot, &dir, "serve");
+    let cameras = &site.video_cameras;
+    assert_eq!(cameras[0].camera, "blair", "{cameras:?}");
+    assert_eq!(cameras[1].camera, "alice", "{cameras:?}");
     assert!(
-        f(&cameras[0], "frames") >= 10.0 && f(&cameras[1], "frames") >= 10.0,
-        "{cameras}"
+        cameras[0].frames >= 10 && cameras[1].frames >= 10,
+        "{cameras:?}"
     );
     // Alice's head went to the robot site, which drew her frames' masks from it.
-    assert!(f(&alice, "head.sent") >= 100.0, "{alice}");
-    assert!((f(&alice, "head.turned_deg") - 25.0).abs() < 0.5, "{alice}");
-    assert!(f(&cameras[1], "head_poses") >= 100.0, "{cameras}");
-    assert_eq!(f(&cameras[1], "head_refused"), 0.0, "{cameras}");
-    assert_eq!(f(&cameras[0], "head_poses"), 0.0, "{cameras}");
-    assert!(f(&alice, "video.shown") >= 5.0, "{alice}");
-    assert!(f(&alice, "video.camera_turned_deg") >= 10.0, "{alice}");
+    let sent = alice.head.as_ref().expect("Alice's head's report");
+    assert!(sent.sent >= 100, "{alice:?}");
+    assert!((sent.turned_deg - 25.0).abs() < 0.5, "{alice:?}");
+    assert!(cameras[1].head_poses >= 100, "{cameras:?}");
+    assert_eq!(cameras[1].head_refused, 0, "{cameras:?}");
+    assert_eq!(cameras[0].head_poses, 0, "{cameras:?}");
+    assert!(alice.video.shown >= 5, "{alice:?}");
+    assert!(alice.video.camera_turned_deg >= 10.0, "{alice:?}");
     // At most the head's turn and the scripted head's before the first pose arrived.
-    assert!(f(&alice, "video.camera_turned_deg") <= 30.0, "{alice}");
+    assert!(alice.video.camera_turned_deg <= 30.0, "{alice:?}");
     // Alice's recording keeps each frame's camera: a camera on a head, a pose at each
     // frame's capture.
     let rec = avatarm_record::Recording::open(&record).expect("the recording");
-    assert_eq!(f(&alice, "recording.refused"), 0.0, "{alice}");
+    let recorded = alice.recording.as_ref().expect("the recording's report");
+    assert_eq!(recorded.refused, 0, "{alice:?}");
     assert!(rec.camera_on_head() && rec.erased.len() >= 5);
     let axes: Vec<_> = rec
         .erased
@@ -787,15 +838,15 @@ fn the_robot_site_serves_both_cameras_at_alice_s_head_each_frame_with_its_pose()
         .iter()
         .map(|r| r.angle_to(&axes[0]))
         .fold(0.0, f64::max);
-    let received = f(&alice, "video.camera_turned_deg");
-    assert!(turned.to_degrees() >= 10.0, "{turned} rad, {alice}");
+    let received = alice.video.camera_turned_deg;
+    assert!(turned.to_degrees() >= 10.0, "{turned} rad, {alice:?}");
     assert!(
         turned.to_degrees() <= received + 0.01,
-        "{turned} rad, {alice}"
+        "{turned} rad, {alice:?}"
     );
-    assert!(f(&blair, "video.shown") >= 5.0, "{blair}");
-    assert!(f(&blair, "video.camera_moved_mm") < 1e-6, "{blair}");
-    assert!(f(&blair, "video.camera_turned_deg") < 1e-6, "{blair}");
+    assert!(blair.video.shown >= 5, "{blair:?}");
+    assert!(blair.video.camera_moved_mm < 1e-6, "{blair:?}");
+    assert!(blair.video.camera_turned_deg < 1e-6, "{blair:?}");
     // The site said it serves both.
     let log = std::fs::read_to_string(dir.join("serve.log")).expect("the robot site's log");
     assert!(log.contains("video of blair, alice"), "{log}");
@@ -869,18 +920,18 @@ fn alice_watching_sees_the_operator_s_hand_on_the_bottle_the_arm_carries() {
         port,
         &["--view", "alice", "--wait", "30"],
     );
-    let j = finish(operator, &dir, "join");
-    let w = finish(watcher, &dir, "watch");
+    let j: JoinReport = finish(operator, &dir, "join");
+    let w: JoinReport = finish(watcher, &dir, "watch");
     let mut robot = robot;
     let _ = robot.kill();
     let _ = robot.wait();
-    assert!(f(&j, "targets_sent") >= 100.0, "{j}");
-    let report = &w["window"];
-    assert!(f(&w, "window.anchored_hand_frames") >= 20.0, "{report}");
+    assert!(j.targets_sent >= 100, "{j:?}");
+    let report = w.window.as_ref().expect("the window's report");
+    assert!(report.anchored_hand_frames >= 20, "{report:?}");
     // The hand was moved from Blair's twin to the real bottle the frame shows: by centimetres
     // while the bottle moves (the video's age, the arm's lag), never by more than the desk
     // (one object, one frame of reference).
-    let moved = |k: &str| f(&w, &format!("window.anchor_correction_mm.{k}"));
-    assert!(moved("max") >= 10.0, "{report}");
-    assert!(moved("max") <= 500.0, "{report}");
+    let moved = report.anchor_correction_mm.max;
+    assert!(moved >= 10.0, "{report:?}");
+    assert!(moved <= 500.0, "{report:?}");
 }

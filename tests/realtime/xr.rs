@@ -23,6 +23,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
+use avatarm::net::join::JoinReport;
 use avatarm_core::shared_data::say_skipped;
 
 use crate::support::output;
@@ -392,12 +393,12 @@ fn the_operators_site_runs_in_xr_and_its_tracked_hand_sends_targets() {
         return;
     }
     assert!(n[2] >= 30.0, "{line}");
-    let report: serde_json::Value = serde_json::from_str(
+    let report: JoinReport = serde_json::from_str(
         &std::fs::read_to_string(&join_report).expect("the operator's report"),
     )
     .expect("JSON");
-    eprintln!("join report: targets_sent {}", report["targets_sent"]);
-    assert!(report["targets_sent"].as_f64() > Some(10.0), "{report}");
+    eprintln!("join report: targets_sent {}", report.targets_sent);
+    assert!(report.targets_sent > 10, "{report:?}");
 }
 
 /// Alice's headset at her own site (`join --watch --view alice --xr`, issue 22's two-site
@@ -454,18 +455,15 @@ fn alice_s_headset_sends_her_head_to_the_robot_site_which_erases_her_camera_at_i
     if !driver.drove(test, "the head") {
         return;
     }
-    let report: serde_json::Value =
+    let report: JoinReport =
         serde_json::from_str(&std::fs::read_to_string(&report).expect("Alice's report"))
             .expect("JSON");
-    eprintln!("head: {}, video: {}", report["head"], report["video"]);
-    assert_eq!(report["head"]["source"], "headset", "{report}");
-    assert!(report["head"]["sent"].as_f64() >= Some(30.0), "{report}");
+    eprintln!("head: {:?}, video: {:?}", report.head, report.video);
+    let head = report.head.as_ref().expect("the head's report");
+    assert_eq!(head.source, "headset", "{report:?}");
+    assert!(head.sent >= 30, "{report:?}");
     // The headset turned up to 20 degrees (the first pose may come after the turn began),
     // and the frames' cameras with it.
-    let turned = report["head"]["turned_deg"].as_f64().unwrap_or_default();
-    assert!((2.0..=20.5).contains(&turned), "{report}");
-    let frames = report["video"]["camera_turned_deg"]
-        .as_f64()
-        .unwrap_or_default();
-    assert!(frames >= 2.0, "{report}");
+    assert!((2.0..=20.5).contains(&head.turned_deg), "{report:?}");
+    assert!(report.video.camera_turned_deg >= 2.0, "{report:?}");
 }

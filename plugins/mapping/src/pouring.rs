@@ -24,7 +24,7 @@ pub use avatarm_scene::task::{PouringTask, TrialSetup};
 use bevy::prelude::*;
 use bevy_rapier3d::prelude::*;
 use nalgebra::{DVector, Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::{MappingError, Teleop, TeleopConfig, TeleopSample, TickSource};
 use avatarm_core::sim::arm::{CarriedObject, RobotInterface, SimArm};
@@ -96,7 +96,7 @@ pub fn grasp_configuration(
 }
 
 /// One trial's result.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrialResult {
     /// Trial index.
     pub trial: u32,
@@ -135,7 +135,7 @@ pub struct TrialResult {
 }
 
 /// Mean and standard deviation (sample, n − 1) over trials.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct MeanStd {
     /// Mean.
     pub mean: f64,
@@ -161,7 +161,7 @@ impl MeanStd {
 }
 
 /// One mode over all trials: the report's `object.<mode>`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ModeSummary {
     /// Position RMSE (m).
     pub pos_rmse_m: MeanStd,
@@ -198,7 +198,7 @@ impl ModeSummary {
 
 /// The paper's figures (ICRA 2023, 10 trials): position 0.0173 ± 0.0132 m, roll 1.81 ± 1.80°,
 /// pitch 2.08 ± 2.49°, yaw 3.99 ± 5.27°.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct PaperFigures {
     /// Position RMSE (m).
     pub pos_rmse_m: MeanStd,

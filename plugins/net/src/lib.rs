@@ -27,8 +27,8 @@ pub mod site;
 pub use config::{Credentials, NetConfig, Role, TlsFiles};
 pub use keys::Keys;
 pub use site::{
-    ClockSample, FrameSender, HeadReceiver, OperatorInbox, OperatorSite, ReceivedFrame, RobotInbox,
-    RobotSite, Router, SiteClock,
+    ClockSample, FrameSender, HeadReceiver, OperatorInbox, OperatorSite, RESTART_JUMP_S,
+    ReceivedFrame, RobotClock, RobotInbox, RobotSite, Router, SiteClock,
 };
 
 /// What can go wrong on the network; each names the message, setting or key.

@@ -56,8 +56,8 @@ impl std::fmt::Display for Codec {
 pub const MAX_AHEAD_S: f64 = 0.5;
 
 /// The protocol's version: a peer with another is refused with both versions named. Raised
-/// on every change of a message's fields or meaning.
-pub const PROTOCOL_VERSION: u32 = 5;
+/// on every change of a message's fields or meaning (6: [`RobotInfo::operators`]).
+pub const PROTOCOL_VERSION: u32 = 6;
 
 /// Largest operator target accepted (bytes): one is ~400.
 pub const MAX_TARGET_BYTES: usize = 4096;
@@ -258,6 +258,12 @@ pub struct RobotInfo {
     pub target_timeout_s: f64,
     /// The robot backend's name.
     pub robot: String,
+    /// The users the robot site takes targets from (its `--operator` list); empty: no access
+    /// control (anyone who reaches it may command). `join` refuses at once to command as a
+    /// user not among them, naming `--watch`; the access control refuses its targets anyway.
+    /// Absent in a version 5 message (read as empty, so that the version check names both).
+    #[serde(default)]
+    pub operators: Vec<String>,
 }
 
 /// A coded video frame's header (the sample's attachment; the payload is the coded image).

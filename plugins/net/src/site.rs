@@ -75,14 +75,46 @@ fn zerr(what: &str, e: impl std::fmt::Display) -> NetError {
 
 fn open(config: &NetConfig) -> Result<Session, NetError> {
     let z = config.zenoh()?;
-    let endpoints = if config.listen.is_empty() {
-        &config.connect
-    } else {
-        &config.listen
-    };
-    zenoh::open(z)
-        .wait()
-        .map_err(|e| zerr(&format!("opening the session on {endpoints:?}"), e))
+    if !config.listen.is_empty() {
+        let endpoints = &config.listen;
+        return zenoh::open(z)
+            .wait()
+            .map_err(|e| zerr(&format!("opening the session on {endpoints:?}"), e));
+    }
+    let endpoints = &config.connect;
+    zenoh::open(z).wait().map_err(|e| {
+        zerr(
+            &format!("connecting to {endpoints:?}"),
+            format!("{e}; {}", connect_causes(config)),
+        )
+    })
+}
+
+/// What may have refused a session that connects, for the user to check: Zenoh says only that
+/// it could not connect, the same for no listener, a refused login and a certificate it cannot
+/// check (and the robot site logs none of them).
+fn connect_causes(config: &NetConfig) -> String {
+    let mut causes = vec![
+        "nothing listens there (is `avatarm serve` or `avatarm router` running, on that endpoint?)"
+            .to_owned(),
+    ];
+    causes.push(match &config.credentials {
+        Some(c) => format!(
+            "the login of user '{}' was refused (a wrong password and an unknown user look alike from here)",
+            c.user
+        ),
+        None => "the robot site requires a login: give --credentials FILE (user:password)".into(),
+    });
+    if config.connect.iter().any(|e| e.starts_with("tls/")) {
+        causes.push(match config.tls.as_ref().and_then(|t| t.root_ca.as_ref()) {
+            Some(ca) => format!(
+                "the robot site's certificate is not signed by {}, or not for that host name",
+                ca.display()
+            ),
+            None => "no --tls-ca: the robot site's certificate was checked against the system's authorities only".into(),
+        });
+    }
+    format!("check that {}", causes.join("; or "))
 }
 
 fn publisher(
@@ -459,8 +491,8 @@ pub struct OperatorSite {
     keys: Keys,
     info: RobotInfo,
     local: SiteClock,
-    offset: Arc<std::sync::Mutex<ClockSample>>,
-    refresh: Arc<std::sync::atomic::AtomicBool>,
+    offset: Arc<std::sync::Mutex<RobotClock>>,
+    refresh: Refresh,
     target: Publisher<'static>,
     hand: Publisher<'static>,
     _token: Option<LivelinessToken>,
@@ -500,9 +532,11 @@ impl OperatorSite {
                 None => std::thread::sleep(Duration::from_millis(100)),
             }
         };
-        let offset = Arc::new(std::sync::Mutex::new(estimate_offset(
-            &session, &keys, &local, 9,
-        )?));
+        let offset = Arc::new(std::sync::Mutex::new(RobotClock {
+            sample: estimate_offset(&session, &keys, &local, 9)?,
+            restarts: 0,
+            last_jump_s: 0.0,
+        }));
         let operator = config.role == crate::Role::Operator;
         let token = if operator {
             Some(
@@ -552,7 +586,21 @@ impl OperatorSite {
     /// The clock offset's estimate (re-estimated every [`OFFSET_REFRESH`] on a thread of its
     /// own, so the operator's loop never waits for a round trip).
     pub fn offset(&self) -> ClockSample {
+        self.robot_clock().sample
+    }
+
+    /// The estimate with the robot site's restarts seen so far (its clock jumped).
+    pub fn robot_clock(&self) -> RobotClock {
         *self.offset.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Re-estimates the offset at the refresher's next look (within 0.1 s) instead of at the
+    /// next [`OFFSET_REFRESH`]: for a robot site heard again after a silence, which may have
+    /// restarted with a new clock.
+    pub fn refresh_offset_soon(&self) {
+        self.refresh
+            .soon
+            .store(true, std::sync::atomic::Ordering::Relaxed);
     }
 
     /// Now on the robot site's clock, as estimated (s).
@@ -677,6 +725,7 @@ impl OperatorSite {
     /// Leaves the session (the robot site sees the operator's token go).
     pub fn close(self) {
         self.refresh
+            .stop
             .store(true, std::sync::atomic::Ordering::Relaxed);
         let _ = self.session.close().wait();
     }
@@ -685,43 +734,83 @@ impl OperatorSite {
 impl Drop for OperatorSite {
     fn drop(&mut self) {
         self.refresh
+            .stop
             .store(true, std::sync::atomic::Ordering::Relaxed);
     }
+}
+
+/// The operator's view of the robot site's clock: the offset's estimate, and the robot
+/// site's restarts, seen as jumps of its clock (a restarted robot site starts its clock from
+/// zero).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RobotClock {
+    /// The newest estimate in use.
+    pub sample: ClockSample,
+    /// Jumps of the robot site's clock by more than [`RESTART_JUMP_S`] (plus the round trip):
+    /// restarts of the robot site.
+    pub restarts: u64,
+    /// The last jump (s, new offset minus the old).
+    pub last_jump_s: f64,
+}
+
+/// An offset that moves by more than this (s, beyond the estimate's round trip) is the robot
+/// site's clock started again: taken at once, whatever its round trip, and counted.
+pub const RESTART_JUMP_S: f64 = 1.0;
+
+/// The refresher's flags: `stop` ends it, `soon` makes it estimate at its next look.
+#[derive(Clone, Default)]
+struct Refresh {
+    stop: Arc<std::sync::atomic::AtomicBool>,
+    soon: Arc<std::sync::atomic::AtomicBool>,
 }
 
 /// How often the operator re-estimates the robot site's clock (clocks drift, paths change).
 pub const OFFSET_REFRESH: Duration = Duration::from_secs(5);
 
-/// Re-estimates the offset every [`OFFSET_REFRESH`] until the returned flag is set.
+/// Re-estimates the offset every [`OFFSET_REFRESH`] (or at once when asked to) until told
+/// to stop.
 fn refresher(
     session: &Session,
     keys: &Keys,
     local: SiteClock,
-    offset: Arc<std::sync::Mutex<ClockSample>>,
-) -> Arc<std::sync::atomic::AtomicBool> {
-    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let (session, keys, flag) = (session.clone(), keys.clone(), stop.clone());
+    offset: Arc<std::sync::Mutex<RobotClock>>,
+) -> Refresh {
+    let flags = Refresh::default();
+    let (session, keys, f) = (session.clone(), keys.clone(), flags.clone());
     let _ = std::thread::Builder::new()
         .name("clock offset".into())
         .spawn(move || {
             let mut last = Instant::now();
-            while !flag.load(std::sync::atomic::Ordering::Relaxed) {
+            while !f.stop.load(std::sync::atomic::Ordering::Relaxed) {
                 std::thread::sleep(Duration::from_millis(100));
-                if last.elapsed() < OFFSET_REFRESH {
+                let soon = f.soon.swap(false, std::sync::atomic::Ordering::Relaxed);
+                if last.elapsed() < OFFSET_REFRESH && !soon {
                     continue;
                 }
                 last = Instant::now();
                 if let Ok(o) = estimate_offset(&session, &keys, &local, 5) {
                     let mut current = offset.lock().unwrap_or_else(|e| e.into_inner());
-                    // A worse round trip gives a worse estimate (its queueing is one-sided):
-                    // kept only when close to the one in use.
-                    if o.rtt_s <= current.rtt_s * 1.5 + 0.002 {
-                        *current = o;
-                    }
+                    current.take(o);
                 }
             }
         });
-    stop
+    flags
+}
+
+impl RobotClock {
+    /// Takes a new estimate: at once when the robot site's clock jumped (a restart, counted),
+    /// else only when its round trip is close to the one in use (a worse round trip gives a
+    /// worse estimate: its queueing is one-sided).
+    fn take(&mut self, o: ClockSample) {
+        let jump = o.offset_s - self.sample.offset_s;
+        if jump.abs() > RESTART_JUMP_S + o.rtt_s {
+            self.restarts += 1;
+            self.last_jump_s = jump;
+            self.sample = o;
+        } else if o.rtt_s <= self.sample.rtt_s * 1.5 + 0.002 {
+            self.sample = o;
+        }
+    }
 }
 
 /// The first reply's payload to a query on `key`, or `None` within `timeout`.
@@ -787,5 +876,37 @@ impl Router {
         Ok(Self {
             _session: open(config)?,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(offset_s: f64, rtt_s: f64) -> ClockSample {
+        ClockSample { offset_s, rtt_s }
+    }
+
+    #[test]
+    fn a_restarted_robot_site_s_clock_is_taken_at_once_and_counted() {
+        let mut clock = RobotClock {
+            sample: sample(120.0, 0.001),
+            restarts: 0,
+            last_jump_s: 0.0,
+        };
+        // Drift with a round trip as good: taken.
+        clock.take(sample(120.002, 0.0012));
+        assert_eq!((clock.sample.offset_s, clock.restarts), (120.002, 0));
+        // A slow round trip: its estimate is worse, kept out.
+        clock.take(sample(120.3, 0.4));
+        assert_eq!(clock.sample.offset_s, 120.002);
+        // A jump no round trip explains (the robot site started its clock again 19 s ago),
+        // however slow the reply: taken and counted.
+        clock.take(sample(-19.0, 0.05));
+        assert_eq!((clock.sample.offset_s, clock.restarts), (-19.0, 1));
+        assert!((clock.last_jump_s + 139.002).abs() < 1e-9);
+        // A reply delayed by 3 s may be off by 1.5 s: not taken for a restart.
+        clock.take(sample(-17.8, 3.0));
+        assert_eq!((clock.sample.offset_s, clock.restarts), (-19.0, 1));
     }
 }

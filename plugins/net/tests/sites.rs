@@ -27,6 +27,7 @@ fn info(v: u32) -> RobotInfo {
         control_rate_hz: 100.0,
         target_timeout_s: 0.5,
         robot: "simulated arm".into(),
+        operators: vec!["blair".into()],
     }
 }
 

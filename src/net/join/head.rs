@@ -4,7 +4,7 @@
 use super::*;
 
 /// What this site sent of the head its viewed camera rides on.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct HeadReport {
     /// The camera.
     pub camera: String,

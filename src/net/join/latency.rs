@@ -2,12 +2,12 @@
 
 use avatarm_core::stats::Spread;
 use avatarm_net::msg::FrameHeader;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Latency of the erased video by stage (ms, robot clock): captured → arrived in the robot
 /// site's app → erased (read back) → sent → received → decoded; and the robot site's app
 /// updates each frame waited between arriving and being handed to the encoder.
-#[derive(Debug, Clone, Serialize, Default)]
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct VideoLatency {
     /// Frames received.
     pub frames: u64,

@@ -4,7 +4,7 @@
 use super::*;
 
 /// What `join --record` wrote.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct JoinRecording {
     /// The file.
     pub path: PathBuf,

@@ -4,10 +4,10 @@
 use std::sync::atomic::Ordering;
 
 use avatarm_core::stats::Spread;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// One camera's video at the robot site (`ServeReport::video_cameras`).
-#[derive(Debug, Clone, Serialize, Default)]
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct CameraVideo {
     /// The camera's name on the network.
     pub camera: String,
@@ -48,7 +48,7 @@ pub struct CameraVideo {
 }
 
 /// A recording's player at the robot site (`CameraVideo::player`).
-#[derive(Debug, Clone, Serialize, Default)]
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct PlayerReport {
     /// Frames decoded and handed to the app.
     pub played: u64,

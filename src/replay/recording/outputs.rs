@@ -2,74 +2,22 @@
 //! session as a recording, and the report.
 
 use super::*;
-
-/// The frame (RGBA8, `width` wide) with the mask tinted red over it, image `edges` (0/1 per
-/// pixel, as `avatarm calibrate --edges` fits to) in yellow, and the reference mask's outline
-/// in green on top: where the mask lands against where the robot is, by eye.
-pub(crate) fn overlay(
-    frame: &[u8],
-    mask: &[u8],
-    edges: Option<&[u8]>,
-    reference: Option<&[u8]>,
-    width: u32,
-) -> Vec<u8> {
-    let w = width as usize;
-    let mut out = frame.to_vec();
-    for (i, px) in out.chunks_exact_mut(4).enumerate() {
-        if edges.is_some_and(|e| e[i] > 0) {
-            px.copy_from_slice(&EDGE_COLOUR);
-        } else if mask[i] > 0 {
-            px[0] = ((u16::from(px[0]) + 255) / 2) as u8;
-            px[1] /= 2;
-            px[2] /= 2;
-        }
-    }
-    if let Some(r) = reference {
-        let h = r.len() / w;
-        for y in 0..h {
-            for x in 0..w {
-                let i = y * w + x;
-                let edge = r[i] > 0
-                    && [(0, -1), (0, 1), (-1, 0), (1, 0)].iter().any(|(dx, dy)| {
-                        let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-                        nx < 0
-                            || ny < 0
-                            || nx >= w as i64
-                            || ny >= h as i64
-                            || r[ny as usize * w + nx as usize] == 0
-                    });
-                if edge {
-                    out[i * 4..i * 4 + 4].copy_from_slice(&[40, 255, 40, 255]);
-                }
-            }
-        }
-    }
-    out
-}
-
-/// The colour [`overlay`] draws image edges in (RGBA8).
-pub(crate) const EDGE_COLOUR: [u8; 4] = [255, 220, 0, 255];
+use crate::replay::report::GpuVsCpu;
 
 pub(super) fn mean(v: &[f64]) -> Option<f64> {
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
-#[expect(
-    clippy::too_many_lines,
-    reason = "every frame's outputs and the report written in one pass over the frames"
-)]
-pub(super) fn write_outputs(
-    o: &RecordingOptions,
-    input: &Input,
-    outputs: &[FrameOutput],
-    background: &Option<(BackgroundEstimate, String)>,
-    times: &avatarm_erase::SpanTimes,
-    started: Instant,
-) -> Result<serde_json::Value, AppError> {
-    let (w, h) = input.size;
-    let out = &o.out;
-    let png = |name: String, img: image::DynamicImage| -> Result<Vec<u8>, AppError> {
-        let path = out.join(&name);
+/// Writes PNGs into the output folder and reads each back (for the erased recording).
+struct Images<'a> {
+    out: &'a Path,
+    size: (u32, u32),
+}
+
+impl Images<'_> {
+    /// Saves `img` as `name`; returns the file's bytes.
+    fn png(&self, name: &str, img: &image::DynamicImage) -> Result<Vec<u8>, AppError> {
+        let path = self.out.join(name);
         img.save(&path)
             .map_err(|source| AppError::write_image(&path, source))?;
         std::fs::read(&path).map_err(|source| AppError::Io {
@@ -77,8 +25,11 @@ pub(super) fn write_outputs(
             action: "read",
             source,
         })
-    };
-    let gray = |m: &[u8]| -> Result<image::DynamicImage, AppError> {
+    }
+
+    /// A 0/1 mask as a grey image (white where 1).
+    fn gray(&self, m: &[u8]) -> Result<image::DynamicImage, AppError> {
+        let (w, h) = self.size;
         image::GrayImage::from_raw(w, h, m.iter().map(|&v| v * 255).collect())
             .map(image::DynamicImage::ImageLuma8)
             .ok_or(AppError::ImageSize {
@@ -86,8 +37,11 @@ pub(super) fn write_outputs(
                 width: w,
                 height: h,
             })
-    };
-    let rgb = |rgba: &[u8]| -> Result<image::DynamicImage, AppError> {
+    }
+
+    /// An RGBA8 frame as an RGB image.
+    fn rgb(&self, rgba: &[u8]) -> Result<image::DynamicImage, AppError> {
+        let (w, h) = self.size;
         image::RgbaImage::from_raw(w, h, rgba.to_vec())
             .map(|i| image::DynamicImage::ImageRgb8(image::DynamicImage::ImageRgba8(i).to_rgb8()))
             .ok_or(AppError::ImageSize {
@@ -95,9 +49,65 @@ pub(super) fn write_outputs(
                 width: w,
                 height: h,
             })
+    }
+}
+
+/// What the pass over the frames found.
+#[derive(Default)]
+struct Tally {
+    /// Each frame's masked share (%).
+    coverage: Vec<f64>,
+    /// The largest GPU-vs-CPU difference of the composites (8-bit levels).
+    max_diff: u8,
+    /// The most pixels where the GPU and CPU masks differ in one frame.
+    mismatch: u64,
+    /// The frames with a reference mask, scored.
+    scored: Vec<FrameVsReference>,
+    /// Every pixel any frame's mask covered (0/1).
+    robot_union: Vec<u8>,
+}
+
+/// Writes each frame's mask, erased image and overlay, the erased session (`erased.mcap`), H
+/// where it came from the footage, and `report.json`; returns the report.
+pub(super) fn write_outputs(
+    o: &RecordingOptions,
+    input: &Input,
+    outputs: &[FrameOutput],
+    background: &Option<(BackgroundEstimate, String)>,
+    times: &avatarm_erase::SpanTimes,
+    started: Instant,
+) -> Result<RecordingReport, AppError> {
+    let images = Images {
+        out: &o.out,
+        size: input.size,
     };
-    let mcap_path = out.join("erased.mcap");
-    let mut mcap = RecordingWriter::create(&mcap_path)?;
+    let mcap_path = o.out.join("erased.mcap");
+    let tally = write_frames(o, input, outputs, &images, &mcap_path)?;
+    let background_report = background_report(o, input, outputs, background, &tally, &images)?;
+    let report = report(
+        o,
+        input,
+        tally,
+        background_report,
+        times,
+        &mcap_path,
+        started,
+    );
+    crate::replay::write_json(&o.out.join("report.json"), &report)?;
+    Ok(report)
+}
+
+/// The erased session as a recording: the recording's camera, head poses and joint states,
+/// then each frame with its erased image and mask, and the reference masks.
+fn write_frames(
+    o: &RecordingOptions,
+    input: &Input,
+    outputs: &[FrameOutput],
+    images: &Images,
+    mcap_path: &Path,
+) -> Result<Tally, AppError> {
+    let (w, h) = input.size;
+    let mut mcap = RecordingWriter::create(mcap_path)?;
     let first_stamp = input.frames.first().map_or(0, |f| f.stamp_ns);
     mcap.calibration(first_stamp, &input.calibration)?;
     match input.head_mount {
@@ -112,12 +122,10 @@ pub(super) fn write_outputs(
     for s in &input.recording.joint_states {
         mcap.joint_states(s)?;
     }
-    let settings = o.settings;
-    // The lens map the mask was drawn through (the same function as the pipeline's).
-    let lens = &input.lens_map;
-    let (mut coverage, mut max_diff, mut mismatch) = (Vec::new(), 0u8, 0u64);
-    let mut scored = Vec::new();
-    let mut robot_union = vec![0u8; (w * h) as usize];
+    let mut tally = Tally {
+        robot_union: vec![0u8; (w * h) as usize],
+        ..Tally::default()
+    };
     for (i, (frame, result)) in input.frames.iter().zip(outputs).enumerate() {
         let (Some(mask), Some(composite)) = (&result.mask, &result.composite) else {
             return Err(AppError::command(
@@ -125,64 +133,38 @@ pub(super) fn write_outputs(
                 format!("frame {i}: its mask or erased image never arrived"),
             ));
         };
-        coverage.push(100.0 * mask.iter().filter(|&&m| m > 0).count() as f64 / mask.len() as f64);
-        // The CPU reference on the same inputs.
-        if let (Some((rw, rh, raw)), Some((live, bg, photometric))) = (&result.raw, &result.inputs)
-        {
-            let raw = RgbaView::new("mask twin render", *rw, *rh, raw)?;
-            let cpu_mask = dr::threshold_mask(
-                &raw,
-                w,
-                h,
-                &settings.ranges,
-                settings.mask_radius(),
-                lens.0.as_deref(),
-            )?;
-            let alpha = dr::feather_alpha(&cpu_mask, w, h, settings.feather_px);
-            let black = vec![0u8; live.len()];
-            let alpha_h = if settings.enabled && bg.is_some() {
-                settings.alpha_h
-            } else {
-                0.0
-            };
-            let live_view = RgbaView::new("live frame", w, h, live)?;
-            let bg_view = RgbaView::new("background", w, h, bg.as_deref().unwrap_or(&black))?;
-            let cpu = dr::composite(&live_view, &bg_view, &alpha, alpha_h, photometric)?;
-            mismatch =
-                mismatch.max(mask.iter().zip(&cpu_mask).filter(|(a, b)| a != b).count() as u64);
-            let diff = composite
-                .chunks_exact(4)
-                .zip(cpu.chunks_exact(4))
-                .flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c])))
-                .max()
-                .unwrap_or(0);
-            max_diff = max_diff.max(diff);
+        tally
+            .coverage
+            .push(100.0 * mask.iter().filter(|&&m| m > 0).count() as f64 / mask.len() as f64);
+        if let Some((diff, mismatch)) = cpu_check(o.settings, input, result, mask, composite)? {
+            tally.max_diff = tally.max_diff.max(diff);
+            tally.mismatch = tally.mismatch.max(mismatch);
         }
-        let erased_region: Vec<u8> = dr::feather_alpha(mask, w, h, settings.feather_px)
+        let erased_region: Vec<u8> = dr::feather_alpha(mask, w, h, o.settings.feather_px)
             .iter()
             .map(|&a| u8::from(a >= 0.5))
             .collect();
-        for (u, &m) in robot_union.iter_mut().zip(mask) {
+        for (u, &m) in tally.robot_union.iter_mut().zip(mask) {
             *u |= m;
         }
         if let Some(truth) = &input.references[i]
             && let Some(s) = dr::mask_scores(&erased_region, truth)
         {
-            scored.push(json!({
-                "frame": i,
-                "stamp_ns": frame.stamp_ns,
-                "iou": s.iou,
-                "leak_pct": s.leak_pct,
-                "overmask_pct": s.overmask_pct,
-                "robot_px": s.robot_px,
-            }));
+            tally.scored.push(FrameVsReference {
+                frame: i,
+                stamp_ns: frame.stamp_ns,
+                iou: s.iou,
+                leak_pct: s.leak_pct,
+                overmask_pct: s.overmask_pct,
+                robot_px: s.robot_px,
+            });
         }
         if let Some(live) = result.inputs.as_ref().map(|x| &x.0) {
             let picture = overlay(live, mask, None, input.references[i].as_deref(), w);
-            png(format!("overlay_{i:05}.png"), rgb(&picture)?)?;
+            images.png(&format!("overlay_{i:05}.png"), &images.rgb(&picture)?)?;
         }
-        let erased_png = png(format!("erased_{i:05}.png"), rgb(composite)?)?;
-        let mask_png = png(format!("mask_{i:05}.png"), gray(mask)?)?;
+        let erased_png = images.png(&format!("erased_{i:05}.png"), &images.rgb(composite)?)?;
+        let mask_png = images.png(&format!("mask_{i:05}.png"), &images.gray(mask)?)?;
         mcap.frame(frame)?;
         mcap.erased(&CompressedFrame {
             stamp_ns: frame.stamp_ns,
@@ -199,21 +181,88 @@ pub(super) fn write_outputs(
         mcap.reference_mask(m)?;
     }
     mcap.finish()?;
-    let background_report = match background {
-        Some((estimate, origin)) => {
-            png("background.png".into(), rgb(&estimate.rgba)?)?;
-            png("background_seen.png".into(), gray(&estimate.seen)?)?;
-            json!({
-                "source": origin,
-                "margin_px": o.background_margin_px,
-                "robot_region_seen_pct": estimate.seen_fraction(&robot_union).map(|f| 100.0 * f),
-                "filled_pct_of_frame": 100.0 * estimate.filled_fraction(),
-                "note": "robot_region_seen_pct: of the pixels any frame's mask covered, the share whose background some frame showed; the rest was filled from the surroundings (background_seen.png: white where seen)",
-            })
-        }
-        None => json!({"source": o.background.as_ref().map(|p| p.display().to_string())}),
+    Ok(tally)
+}
+
+/// The CPU reference ([`avatarm_core::dr`]) on the inputs the GPU passes had: the largest
+/// difference of the composites (8-bit levels) and the pixels where the masks differ; `None`
+/// for a frame whose inputs were not kept.
+fn cpu_check(
+    settings: EraseSettings,
+    input: &Input,
+    result: &FrameOutput,
+    mask: &[u8],
+    composite: &[u8],
+) -> Result<Option<(u8, u64)>, AppError> {
+    let (Some((rw, rh, raw)), Some((live, bg, photometric))) = (&result.raw, &result.inputs) else {
+        return Ok(None);
     };
-    let mut background_report = background_report;
+    let (w, h) = input.size;
+    let raw = RgbaView::new("mask twin render", *rw, *rh, raw)?;
+    // The lens map the mask was drawn through (the same function as the pipeline's).
+    let cpu_mask = dr::threshold_mask(
+        &raw,
+        w,
+        h,
+        &settings.ranges,
+        settings.mask_radius(),
+        input.lens_map.0.as_deref(),
+    )?;
+    let alpha = dr::feather_alpha(&cpu_mask, w, h, settings.feather_px);
+    let black = vec![0u8; live.len()];
+    let alpha_h = if settings.enabled && bg.is_some() {
+        settings.alpha_h
+    } else {
+        0.0
+    };
+    let live_view = RgbaView::new("live frame", w, h, live)?;
+    let bg_view = RgbaView::new("background", w, h, bg.as_deref().unwrap_or(&black))?;
+    let cpu = dr::composite(&live_view, &bg_view, &alpha, alpha_h, photometric)?;
+    let mismatch = mask.iter().zip(&cpu_mask).filter(|(a, b)| a != b).count() as u64;
+    let diff = composite
+        .chunks_exact(4)
+        .zip(cpu.chunks_exact(4))
+        .flat_map(|(a, b)| (0..3).map(move |c| a[c].abs_diff(b[c])))
+        .max()
+        .unwrap_or(0);
+    Ok(Some((diff, mismatch)))
+}
+
+/// Where H came from; built from the footage, `background.png` and `background_seen.png`
+/// (white where some frame showed the pixel) are written; a view-following background's
+/// figures beside it.
+fn background_report(
+    o: &RecordingOptions,
+    input: &Input,
+    outputs: &[FrameOutput],
+    background: &Option<(BackgroundEstimate, String)>,
+    tally: &Tally,
+    images: &Images,
+) -> Result<RecordingBackground, AppError> {
+    let mut report = match background {
+        Some((estimate, origin)) => {
+            images.png("background.png", &images.rgb(&estimate.rgba)?)?;
+            images.png("background_seen.png", &images.gray(&estimate.seen)?)?;
+            RecordingBackground {
+                source: Some(origin.clone()),
+                margin_px: Some(o.background_margin_px),
+                robot_region_seen_pct: estimate
+                    .seen_fraction(&tally.robot_union)
+                    .map(|f| 100.0 * f),
+                filled_pct_of_frame: Some(100.0 * estimate.filled_fraction()),
+                note: Some("robot_region_seen_pct: of the pixels any frame's mask covered, the share whose background some frame showed; the rest was filled from the surroundings (background_seen.png: white where seen)".into()),
+                view_following: None,
+            }
+        }
+        None => RecordingBackground {
+            source: o.background.as_ref().map(|p| p.display().to_string()),
+            margin_px: None,
+            robot_region_seen_pct: None,
+            filled_pct_of_frame: None,
+            note: None,
+            view_following: None,
+        },
+    };
     if let Some(vb) = &input.view_background {
         let seen: Vec<f64> = outputs
             .iter()
@@ -224,18 +273,34 @@ pub(super) fn write_outputs(
             .filter_map(|f| f.view.and_then(|v| v.1))
             .map(f64::to_degrees)
             .collect();
-        background_report["view_following"] = json!({
-            "room": o.room.as_ref().map(|p| p.display().to_string()),
-            "proxy_rects": vb.proxy.rects.len(),
-            "max_views": vb.max_views,
-            "min_separation_deg": vb.min_separation_rad.to_degrees(),
-            "robot_region_seen_pct_mean": mean(&seen).map(|f| 100.0 * f),
-            "nearest_view_deg": spread(&nearest),
-            "note": "each frame's H: the kept views re-projected through the room's boxes where the robot may be, the frame itself elsewhere; robot_region_seen_pct_mean: of the robot's region, the share some view saw (the footage's median fills the rest)",
+        report.view_following = Some(ViewFollowing {
+            room: o.room.as_ref().map(|p| p.display().to_string()),
+            proxy_rects: vb.proxy.rects.len(),
+            max_views: vb.max_views,
+            min_separation_deg: vb.min_separation_rad.to_degrees(),
+            robot_region_seen_pct_mean: mean(&seen).map(|f| 100.0 * f),
+            nearest_view_deg: spread(&nearest),
+            note: "each frame's H: the kept views re-projected through the room's boxes where the robot may be, the frame itself elsewhere; robot_region_seen_pct_mean: of the robot's region, the share some view saw (the footage's median fills the rest)".into(),
         });
     }
-    let get = |key: &str| -> Vec<f64> { scored.iter().filter_map(|s| s[key].as_f64()).collect() };
-    let (iou, leak, over) = (get("iou"), get("leak_pct"), get("overmask_pct"));
+    Ok(report)
+}
+
+/// The report of a finished replay.
+fn report(
+    o: &RecordingOptions,
+    input: &Input,
+    tally: Tally,
+    background: RecordingBackground,
+    times: &avatarm_erase::SpanTimes,
+    mcap_path: &Path,
+    started: Instant,
+) -> RecordingReport {
+    let (w, h) = input.size;
+    let settings = o.settings;
+    let scored = tally.scored;
+    let get = |f: fn(&FrameVsReference) -> f64| -> Vec<f64> { scored.iter().map(f).collect() };
+    let (iou, leak, over) = (get(|s| s.iou), get(|s| s.leak_pct), get(|s| s.overmask_pct));
     let span = |name: &str| {
         spread(
             &times
@@ -244,49 +309,66 @@ pub(super) fn write_outputs(
                 .map_or_else(Vec::new, |s| s.ms.iter().copied().collect::<Vec<_>>()),
         )
     };
-    let gpu_passes: serde_json::Map<String, serde_json::Value> = PASS_NAMES
+    let gpu_passes = PASS_NAMES
         .iter()
         .filter(|n| times.spans.contains_key(**n))
         .map(|n| (n.to_string(), span(n)))
         .collect();
     let k = &input.camera.intrinsics;
-    let report = json!({
-        "recording": o.recording.display().to_string(),
-        "robot": input.model.name,
-        "frames": input.frames.len(),
-        "size": [w, h],
-        "camera": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
-                   "distortion_model": input.calibration.distortion_model.ros_name(),
-                   "lens": crate::replay::lens_report(&input.lens, lens.0.as_deref()),
-                   "head": input.head_mount.map(|m| {
-                       let q = m.rotation;
-                       json!({"head_poses": input.recording.head_poses.len(),
-                              "head_from_camera": {"translation": [m.translation.x, m.translation.y, m.translation.z],
-                                                   "quaternion_xyzw": [q.i, q.j, q.k, q.w]}})
-                   })},
-        "erase": {"dilate_px": settings.dilate_px, "feather_px": settings.feather_px,
-                  "resolution_scale": settings.resolution_scale, "photometric": settings.photometric},
-        "background": background_report,
-        "mask": {
-            "coverage_pct_mean": mean(&coverage),
-            "vs_reference": {
-                "frames_scored": scored.len(),
-                "iou_mean": mean(&iou),
-                "iou_min": iou.iter().copied().reduce(f64::min),
-                "leak_pct_mean": mean(&leak),
-                "overmask_pct_mean": mean(&over),
-                "per_frame": scored,
+    RecordingReport {
+        recording: o.recording.display().to_string(),
+        robot: input.model.name.clone(),
+        frames: input.frames.len(),
+        size: [w, h],
+        camera: RecordingCamera {
+            fx: k.fx,
+            fy: k.fy,
+            cx: k.cx,
+            cy: k.cy,
+            distortion_model: input.calibration.distortion_model.ros_name().to_owned(),
+            lens: crate::replay::lens_report(&input.lens, input.lens_map.0.as_deref()),
+            head: input.head_mount.map(|m| {
+                let (q, t) = (m.rotation, m.translation);
+                HeadMount {
+                    head_poses: input.recording.head_poses.len(),
+                    head_from_camera: MountPose {
+                        translation: [t.x, t.y, t.z],
+                        quaternion_xyzw: [q.i, q.j, q.k, q.w],
+                    },
+                }
+            }),
+        },
+        erase: RecordingErase {
+            dilate_px: settings.dilate_px,
+            feather_px: settings.feather_px,
+            resolution_scale: settings.resolution_scale,
+            photometric: settings.photometric,
+        },
+        background,
+        mask: RecordingMask {
+            coverage_pct_mean: mean(&tally.coverage),
+            vs_reference: VsReference {
+                frames_scored: scored.len(),
+                iou_mean: mean(&iou),
+                iou_min: iou.iter().copied().reduce(f64::min),
+                leak_pct_mean: mean(&leak),
+                overmask_pct_mean: mean(&over),
+                per_frame: scored,
             },
         },
-        "gpu_vs_cpu": {"max_abs_diff": max_diff, "mask_mismatch_px_max": mismatch},
-        "timing_ms": {"gpu_passes": gpu_passes, "upload": span(UPLOAD_SPAN),
-                      "source": times.unavailable.clone().unwrap_or_else(|| "gpu".into())},
-        "wall_time_s": started.elapsed().as_secs_f64(),
-        "notes": input.notes,
-        "outputs": {"mcap": mcap_path.display().to_string()},
-    });
-    let path = out.join("report.json");
-    let text = serde_json::to_string_pretty(&report)?;
-    std::fs::write(&path, text + "\n").map_err(|e| AppError::write(path, e))?;
-    Ok(report)
+        gpu_vs_cpu: GpuVsCpu {
+            max_abs_diff: Some(tally.max_diff),
+            mask_mismatch_px_max: Some(tally.mismatch),
+        },
+        timing_ms: RecordingTimings {
+            gpu_passes,
+            upload: span(UPLOAD_SPAN),
+            source: times.unavailable.clone().unwrap_or_else(|| "gpu".into()),
+        },
+        wall_time_s: started.elapsed().as_secs_f64(),
+        notes: input.notes.clone(),
+        outputs: RecordingOutputs {
+            mcap: mcap_path.display().to_string(),
+        },
+    }
 }

@@ -49,7 +49,7 @@ fn the_camera_calibrated_from_a_simulated_session_erases_the_robot() {
     ]);
     assert!(ok, "{log}");
     eprintln!("{}", log.lines().rev().nth(1).unwrap_or_default());
-    let rep = report(&fitted.join("report.json"));
+    let rep: CalibrateReport = report(&fitted.join("report.json"));
     let pose = avatarm_record::camera::read_pose(&fitted.join("camera_pose.yaml")).expect("pose");
     let off = truth.inverse() * pose;
     let (deg, mm) = (
@@ -57,10 +57,10 @@ fn the_camera_calibrated_from_a_simulated_session_erases_the_robot() {
         1e3 * off.translation.vector.norm(),
     );
     eprintln!("calibrated pose vs truth: {deg:.3} deg, {mm:.2} mm");
-    assert!(deg <= 0.2 && mm <= 2.0, "{deg} deg {mm} mm\n{rep}");
-    let iou = &rep["iou"];
-    assert!(iou["fit_before"].as_f64() < Some(0.8), "{iou}");
-    assert!(iou["fit_after"].as_f64() > Some(0.98), "{iou}");
+    assert!(deg <= 0.2 && mm <= 2.0, "{deg} deg {mm} mm\n{rep:?}");
+    let iou = &rep.iou;
+    assert!(iou.fit_before < Some(0.8), "{iou:?}");
+    assert!(iou.fit_after > Some(0.98), "{iou:?}");
     assert!(fitted.join("overlay_after_00000.png").is_file());
     assert!(fitted.join("overlay_before_00000.png").is_file());
     // The same from the frames alone, the silhouettes their difference from the empty room
@@ -81,9 +81,9 @@ fn the_camera_calibrated_from_a_simulated_session_erases_the_robot() {
         from_background.to_str().expect("utf-8"),
     ]);
     assert!(ok, "{log}");
-    let rep_bg = report(&from_background.join("report.json"));
-    let silhouettes = &rep_bg["silhouettes"];
-    assert_eq!(silhouettes["source"], "background difference");
+    let rep_bg: CalibrateReport = report(&from_background.join("report.json"));
+    let silhouettes = &rep_bg.silhouettes;
+    assert_eq!(silhouettes.source, "background difference");
     let pose_bg =
         avatarm_record::camera::read_pose(&from_background.join("camera_pose.yaml")).expect("pose");
     let off_bg = truth.inverse() * pose_bg;
@@ -92,16 +92,16 @@ fn the_camera_calibrated_from_a_simulated_session_erases_the_robot() {
         1e3 * off_bg.translation.vector.norm(),
     );
     eprintln!(
-        "from the background difference (IoU {} against the reference masks): {deg_bg:.3} deg, {mm_bg:.2} mm",
-        silhouettes["iou_vs_reference_mean"]
+        "from the background difference (IoU {:?} against the reference masks): {deg_bg:.3} deg, {mm_bg:.2} mm",
+        silhouettes.iou_vs_reference_mean
     );
     assert!(
-        silhouettes["iou_vs_reference_mean"].as_f64() > Some(0.95),
-        "{silhouettes}"
+        silhouettes.iou_vs_reference_mean > Some(0.95),
+        "{silhouettes:?}"
     );
     assert!(
         deg_bg <= 0.2 && mm_bg <= 2.0,
-        "{deg_bg} deg {mm_bg} mm\n{rep_bg}"
+        "{deg_bg} deg {mm_bg} mm\n{rep_bg:?}"
     );
     // The scene with the calibrated pose: no dilation, the robot erased.
     let replayed = out.join("replayed");
@@ -113,17 +113,13 @@ fn the_camera_calibrated_from_a_simulated_session_erases_the_robot() {
         replayed.to_str().expect("utf-8"),
     ]);
     assert!(ok, "{log}");
-    let before = report(&out.join("recorded/report.json"));
-    let after = report(&replayed.join("report.json"));
-    let leak = |r: &serde_json::Value| r["mask"]["leak_pct_mean"].as_f64().expect("leak");
+    let before: ReplayReport = report(&out.join("recorded/report.json"));
+    let after: ReplayReport = report(&replayed.join("report.json"));
+    let leak = |r: &ReplayReport| r.mask.leak_pct_mean.expect("leak");
     eprintln!("leak {:.2} % -> {:.3} %", leak(&before), leak(&after));
-    assert!(leak(&before) > 5.0, "{}", before["mask"]);
-    assert!(leak(&after) <= 1.0, "{}", after["mask"]);
-    assert!(
-        after["mask"]["leak_pct_max"].as_f64() <= Some(1.0),
-        "{}",
-        after["mask"]
-    );
+    assert!(leak(&before) > 5.0, "{:?}", before.mask);
+    assert!(leak(&after) <= 1.0, "{:?}", after.mask);
+    assert!(after.mask.leak_pct_max <= Some(1.0), "{:?}", after.mask);
 }
 
 /// Alice's headset camera: a session recorded with the believed mount 1.5 deg and 9 mm off
@@ -232,7 +228,7 @@ fn the_mount_of_a_camera_on_a_head_is_calibrated_from_its_recording() {
         let path = dir.join("camera_mount.yaml");
         let mount = avatarm_record::camera::read_mount(&path).expect("mount");
         let (angle, offset) = avatarm_core::vision::head::pose_error(&mount, &head.mount);
-        let rep = report(&dir.join("report.json"));
+        let rep: CalibrateReport = report(&dir.join("report.json"));
         (rep, path, angle.to_degrees(), 1e3 * offset)
     };
     // The scene replayed with a mount believed: the report's mask figures.
@@ -246,64 +242,59 @@ fn the_mount_of_a_camera_on_a_head_is_calibrated_from_its_recording() {
             dir.to_str().expect("utf-8"),
         ]);
         assert!(ok, "{log}");
-        report(&dir.join("report.json"))["mask"].clone()
+        report::<ReplayReport>(&dir.join("report.json")).mask
     };
-    let leak = |r: &serde_json::Value| r["leak_pct_mean"].as_f64().expect("leak");
+    let leak = |m: &MaskReport| m.leak_pct_mean.expect("leak");
     let (rep, mount_path, deg, mm) = fit_mount("calibrated", &[]);
     eprintln!("calibrated mount vs truth: {deg:.3} deg, {mm:.2} mm");
-    assert!(deg <= 0.3 && mm <= 6.0, "{deg} deg {mm} mm\n{rep}");
-    let iou = &rep["iou"];
-    assert!(iou["fit_before"].as_f64() < Some(0.8), "{iou}");
-    assert!(iou["fit_after"].as_f64() > Some(0.95), "{iou}");
+    assert!(deg <= 0.3 && mm <= 6.0, "{deg} deg {mm} mm\n{rep:?}");
+    let iou = &rep.iou;
+    assert!(iou.fit_before < Some(0.8), "{iou:?}");
+    assert!(iou.fit_after > Some(0.95), "{iou:?}");
     // The scene with the calibrated mount: no dilation, the robot erased.
     let mount_arg = mount_path.to_str().expect("utf-8");
-    let before = report(&out.join("recorded/report.json"))["mask"].clone();
+    let before = report::<ReplayReport>(&out.join("recorded/report.json")).mask;
     let after = with_mount("replayed", &mount_path);
     eprintln!(
         "scene: leak {:.2} % -> {:.3} %",
         leak(&before),
         leak(&after)
     );
-    assert!(leak(&before) > 5.0, "{before}");
-    assert!(leak(&after) <= 1.0, "{after}");
+    assert!(leak(&before) > 5.0, "{before:?}");
+    assert!(leak(&after) <= 1.0, "{after:?}");
     // With no silhouette at all: the frames' own edges (Canny's), the room's among them. The
     // reference masks only score it.
     let (rep, edges_mount, deg, mm) = fit_mount("calibrated_edges", &["--edges"]);
     assert!(
-        rep["silhouettes"]["source"]
-            .as_str()
-            .is_some_and(|s| s.starts_with("image edges")),
-        "{}",
-        rep["silhouettes"]
+        rep.silhouettes.source.starts_with("image edges"),
+        "{:?}",
+        rep.silhouettes
     );
     eprintln!("mount calibrated from edges vs truth: {deg:.3} deg, {mm:.2} mm");
     // Measured: 0.19 deg, 4.1 mm (from the silhouettes, 0.14 deg, 3.1 mm); 0.51 deg, 11.0 mm
     // on one machine when the best half-resolution end alone was refined at full resolution.
-    assert!(deg <= 0.4 && mm <= 8.0, "{deg} deg {mm} mm\n{rep}");
-    assert!(
-        rep["iou"]["fit_after"].as_f64() > Some(0.95),
-        "{}",
-        rep["iou"]
-    );
+    assert!(deg <= 0.4 && mm <= 8.0, "{deg} deg {mm} mm\n{rep:?}");
+    assert!(rep.iou.fit_after > Some(0.95), "{:?}", rep.iou);
     let from_edges = with_mount("replayed_edges", &edges_mount);
     eprintln!("scene, mount from edges: leak {:.3} %", leak(&from_edges));
     // Measured: 0.69 % (0.44 % from the silhouettes).
-    assert!(leak(&from_edges) <= 1.0, "{from_edges}");
+    assert!(leak(&from_edges) <= 1.0, "{from_edges:?}");
     // The recording's own replay follows the head: its masks at the recorded head poses
     // times the recorded mount, then the calibrated one.
     let footage =
         |name: &str, extra: &[&str]| replay_recording(&recording, urdf_arg, &out.join(name), extra);
     let as_recorded = footage("footage", &[]);
     let calibrated = footage("footage_calibrated", &["--believed-mount", mount_arg]);
-    let vs = |r: &serde_json::Value| r["mask"]["vs_reference"].clone();
+    let vs = |r: &RecordingReport| r.mask.vs_reference.leak_pct_mean.expect("leak");
     eprintln!(
         "recording: leak {:.2} % -> {:.3} %",
-        leak(&vs(&as_recorded)),
-        leak(&vs(&calibrated))
+        vs(&as_recorded),
+        vs(&calibrated)
     );
-    assert!(calibrated["camera"]["head"]["head_poses"].as_u64() >= Some(170));
-    assert!(leak(&vs(&as_recorded)) > 5.0, "{}", vs(&as_recorded));
-    assert!(leak(&vs(&calibrated)) <= 1.0, "{}", vs(&calibrated));
+    let head = calibrated.camera.head.as_ref().expect("a camera on a head");
+    assert!(head.head_poses >= 170);
+    assert!(vs(&as_recorded) > 5.0, "{:?}", as_recorded.mask);
+    assert!(vs(&calibrated) <= 1.0, "{:?}", calibrated.mask);
     // A fixed camera's scene has no mount to believe.
     let (ok, log) = replay(&[
         root()
@@ -356,38 +347,27 @@ fn a_recorded_lens_is_honoured_by_the_recording_s_replay() {
             dir.to_str().expect("utf-8"),
         ]);
         assert!(ok, "{log}");
-        report(&dir.join("report.json"))
+        report::<RecordingReport>(&dir.join("report.json"))
     };
     let honoured = run("honoured", "on");
     let ignored = run("ignored", "off");
-    let iou = |r: &serde_json::Value| r["mask"]["vs_reference"]["iou_mean"].as_f64().expect("iou");
+    let iou = |r: &RecordingReport| r.mask.vs_reference.iou_mean.expect("iou");
     eprintln!(
         "recorded barrel lens: IoU honoured {:.4}, ignored {:.4}",
         iou(&honoured),
         iou(&ignored)
     );
-    assert_eq!(
-        honoured["camera"]["lens"]["honoured"], true,
-        "{}",
-        honoured["camera"]
-    );
-    assert_eq!(ignored["camera"]["lens"]["honoured"], false);
-    assert_eq!(
-        honoured["gpu_vs_cpu"]["mask_mismatch_px_max"], 0,
-        "{}",
-        honoured["gpu_vs_cpu"]
-    );
-    assert!(honoured["gpu_vs_cpu"]["max_abs_diff"].as_u64() <= Some(1));
+    assert!(honoured.camera.lens.honoured, "{:?}", honoured.camera);
+    assert!(!ignored.camera.lens.honoured);
+    let gpu = &honoured.gpu_vs_cpu;
+    assert_eq!(gpu.mask_mismatch_px_max, Some(0), "{gpu:?}");
+    assert!(gpu.max_abs_diff <= Some(1), "{gpu:?}");
     // Measured: honoured IoU 0.954 with no leak (the 4.8 % overmask is the mounting plate the
     // desk hides: a recording has no occluders), ignored 0.899.
-    let leak = honoured["mask"]["vs_reference"]["leak_pct_mean"].as_f64();
-    assert!(leak <= Some(1.0), "{}", honoured["mask"]);
-    assert!(iou(&honoured) >= 0.94, "{}", honoured["mask"]);
-    assert!(
-        iou(&ignored) <= iou(&honoured) - 0.03,
-        "{}",
-        ignored["mask"]
-    );
+    let leak = honoured.mask.vs_reference.leak_pct_mean;
+    assert!(leak <= Some(1.0), "{:?}", honoured.mask);
+    assert!(iou(&honoured) >= 0.94, "{:?}", honoured.mask);
+    assert!(iou(&ignored) <= iou(&honoured) - 0.03, "{:?}", ignored.mask);
 }
 
 /// Alice's headset camera's recording replayed with its room (`replay --recording --room`):
@@ -452,27 +432,26 @@ fn a_head_camera_s_recording_replayed_with_its_room_has_a_background_that_follow
         "room_photo",
         &["--room", room_arg, "--background", photo_arg],
     );
-    let vf = &room["background"]["view_following"];
+    let vf = room
+        .background
+        .view_following
+        .as_ref()
+        .expect("the view-following background");
     assert_eq!(
-        vf["proxy_rects"].as_u64(),
-        Some(24),
-        "the desk, the wall, the floor and the book, six faces each: {vf}"
+        vf.proxy_rects, 24,
+        "the desk, the wall, the floor and the book, six faces each: {vf:?}"
     );
     for r in [&median, &photo_only] {
-        assert!(r["background"]["view_following"].is_null());
+        assert!(r.background.view_following.is_none());
     }
     assert!(
-        room["notes"].to_string().contains("follows the view"),
-        "{}",
-        room["notes"]
+        room.notes.iter().any(|n| n.contains("follows the view")),
+        "{:?}",
+        room.notes
     );
     // Each replay erases on the GPU what the CPU reference computes from the same H.
     for r in [&median, &room, &photo_only, &both] {
-        assert!(
-            r["gpu_vs_cpu"]["max_abs_diff"].as_u64() <= Some(2),
-            "{}",
-            r["gpu_vs_cpu"]
-        );
+        assert!(r.gpu_vs_cpu.max_abs_diff <= Some(2), "{:?}", r.gpu_vs_cpu);
     }
     // Against the truth, frame by frame, over the robot's true silhouette.
     let load = |path: PathBuf| image::open(&path).expect("an image").to_rgba8().into_raw();
@@ -505,9 +484,11 @@ fn a_head_camera_s_recording_replayed_with_its_room_has_a_background_that_follow
     }
     assert!(n >= 40, "{n} frames with the robot in view");
     let [median_db, room_db, photo_db, both_db] = sums.map(|s| s / n as f64);
-    let seen = |r: &serde_json::Value| {
-        r["background"]["view_following"]["robot_region_seen_pct_mean"]
-            .as_f64()
+    let seen = |r: &RecordingReport| {
+        r.background
+            .view_following
+            .as_ref()
+            .and_then(|v| v.robot_region_seen_pct_mean)
             .expect("the share seen")
     };
     let (seen_room, seen_both) = (seen(&room), seen(&both));
@@ -523,12 +504,8 @@ fn a_head_camera_s_recording_replayed_with_its_room_has_a_background_that_follow
     assert!(seen_both >= 95.0, "{seen_both}");
     // Every frame was offered before the erase: each looks within the kept views' separation
     // of one of them (measured: median 0.9, p95 2.0 deg of 4).
-    let nearest = &room["background"]["view_following"]["nearest_view_deg"];
-    assert!(
-        nearest["p95"].as_f64().expect("a p95")
-            <= vf["min_separation_deg"].as_f64().expect("the separation"),
-        "{nearest}"
-    );
+    let nearest = vf.nearest_view_deg.expect("the nearest views' angles");
+    assert!(nearest.p95 <= vf.min_separation_deg, "{nearest:?}");
     assert!(both_db >= photo_db + 5.0, "{both_db} vs {photo_db} dB");
     // A fixed camera has one H for every frame: --room is refused by name.
     let fixed = out.join("fixed");

@@ -10,6 +10,9 @@ mod panda;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use avatarm::replay::recording::RecordingReport;
+use avatarm::replay::{MaskReport, ReplayReport};
+use avatarm_footage::calibrate::CalibrateReport;
 use avatarm_record::{ImageFormat, Recording};
 
 use crate::support::output;
@@ -81,13 +84,15 @@ fn calibrate(args: &[&str]) -> (bool, String) {
     avatarm("calibrate", args)
 }
 
-fn report(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).expect("report")).expect("json")
+/// A report written by a command, read as its type.
+fn report<T: serde::de::DeserializeOwned>(path: &Path) -> T {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}\n{text}", path.display()))
 }
 
 /// Runs `avatarm replay --recording RECORDING --urdf URDF --out DIR EXTRA` and asserts it
 /// succeeds; its report.
-fn replay_recording(recording: &Path, urdf: &str, dir: &Path, extra: &[&str]) -> serde_json::Value {
+fn replay_recording(recording: &Path, urdf: &str, dir: &Path, extra: &[&str]) -> RecordingReport {
     let mut args = vec![
         "--recording",
         recording.to_str().expect("utf-8"),

@@ -168,31 +168,25 @@ fn the_real_panda_recording_replays_through_the_erase() {
     );
     assert!(ok, "{log}");
     eprintln!("{}", log.lines().last().unwrap_or_default());
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(result.join("report.json")).expect("report"))
-            .expect("json");
-    assert_eq!(report["frames"], 10);
-    assert_eq!(report["robot"], "panda");
-    let vs = &report["mask"]["vs_reference"];
-    assert_eq!(vs["frames_scored"], 10, "{vs}");
+    let report: RecordingReport = report(&result.join("report.json"));
+    assert_eq!(report.frames, 10);
+    assert_eq!(report.robot, "panda");
+    let vs = &report.mask.vs_reference;
+    assert_eq!(vs.frames_scored, 10, "{vs:?}");
     // Measured with the rough pose: IoU 0.18-0.30 per frame. The mask is the robot's, near
     // it: some overlap, not none and not all.
-    let iou = vs["iou_mean"].as_f64().expect("iou");
-    assert!(iou > 0.1 && iou < 0.9, "{vs}");
-    let coverage = report["mask"]["coverage_pct_mean"]
-        .as_f64()
-        .expect("coverage");
-    assert!(coverage > 2.0 && coverage < 40.0, "{report}");
+    let iou = vs.iou_mean.expect("iou");
+    assert!(iou > 0.1 && iou < 0.9, "{vs:?}");
+    let coverage = report.mask.coverage_pct_mean.expect("coverage");
+    assert!(coverage > 2.0 && coverage < 40.0, "{report:?}");
     // The GPU erased exactly what the CPU reference erases on the same inputs.
-    assert!(
-        report["gpu_vs_cpu"]["max_abs_diff"].as_u64() <= Some(1),
-        "{report}"
-    );
-    assert_eq!(report["gpu_vs_cpu"]["mask_mismatch_px_max"], 0);
-    let bg = &report["background"];
-    assert_eq!(bg["source"], "the footage");
-    let seen = bg["robot_region_seen_pct"].as_f64().expect("seen");
-    assert!((0.0..=100.0).contains(&seen), "{bg}");
+    let gpu = &report.gpu_vs_cpu;
+    assert!(gpu.max_abs_diff <= Some(1), "{gpu:?}");
+    assert_eq!(gpu.mask_mismatch_px_max, Some(0), "{gpu:?}");
+    let bg = &report.background;
+    assert_eq!(bg.source.as_deref(), Some("the footage"));
+    let seen = bg.robot_region_seen_pct.expect("seen");
+    assert!((0.0..=100.0).contains(&seen), "{bg:?}");
     for name in [
         "erased_00000.png",
         "mask_00009.png",
@@ -281,37 +275,30 @@ fn the_real_panda_camera_is_calibrated_from_its_own_frames() {
     );
     assert!(ok, "{log}");
     eprintln!("{}", log.lines().rev().nth(1).unwrap_or_default());
-    let rep = report(&fitted.join("report.json"));
-    let iou = &rep["iou"];
-    let v = |k: &str| iou[k].as_f64().expect(k);
+    let rep: CalibrateReport = report(&fitted.join("report.json"));
+    let iou = &rep.iou;
+    let v = |value: Option<f64>| value.expect("an IoU");
     // Measured: 0.234 -> 0.753 on the fit frames, 0.231 -> 0.655 held out.
-    assert!(v("fit_before") < 0.4 && v("held_out_before") < 0.4, "{iou}");
-    assert!(v("fit_after") > 0.65, "{iou}");
-    assert!(v("held_out_after") > v("held_out_before") + 0.25, "{iou}");
-    let frame = |i: usize| {
-        iou["per_frame"]
-            .as_array()
-            .expect("frames")
-            .iter()
-            .find(|f| f["frame"] == i)
-            .cloned()
-            .expect("frame")
-    };
+    assert!(
+        v(iou.fit_before) < 0.4 && v(iou.held_out_before) < 0.4,
+        "{iou:?}"
+    );
+    assert!(v(iou.fit_after) > 0.65, "{iou:?}");
+    assert!(
+        v(iou.held_out_after) > v(iou.held_out_before) + 0.25,
+        "{iou:?}"
+    );
+    let frame = |i: usize| iou.per_frame.iter().find(|f| f.frame == i).expect("frame");
     // Frames 0, 1 (fit) and 5 (held out) carry their own joints: there the silhouette lands
     // (measured 0.901, 0.958, 0.824).
     for (i, least) in [(0, 0.85), (1, 0.85), (5, 0.78)] {
         let f = frame(i);
-        assert!(f["iou_after"].as_f64() > Some(least), "{f}");
+        assert!(f.iou_after > Some(least), "{f:?}");
     }
-    assert_eq!(frame(7)["fit"], false);
+    assert!(!frame(7).fit);
     // The pairing check names the frames another frame's joints explain better (measured:
     // 2, 4, 6, 7, 9; frame 2's mask is frame 4's joints at IoU 0.81 against 0.58 its own).
-    let mispaired: Vec<u64> = rep["mispaired_frames"]
-        .as_array()
-        .expect("mispaired")
-        .iter()
-        .filter_map(|v| v.as_u64())
-        .collect();
+    let mispaired = &rep.mispaired_frames;
     assert!(
         mispaired.contains(&2) && mispaired.contains(&7),
         "{mispaired:?}"
@@ -321,11 +308,7 @@ fn the_real_panda_camera_is_calibrated_from_its_own_frames() {
         "{mispaired:?}"
     );
     assert!(log.contains("mispaired"), "{log}");
-    assert!(
-        rep["uncertainty"]["starts"]
-            .as_array()
-            .is_some_and(|s| s.len() == 3)
-    );
+    assert_eq!(rep.uncertainty.starts.len(), 3);
     for i in 0..10 {
         assert!(fitted.join(format!("overlay_after_{i:05}.png")).is_file());
     }
@@ -371,10 +354,12 @@ fn the_real_panda_camera_is_calibrated_from_its_own_frames() {
         ],
     );
     assert!(ok, "{log}");
-    let iou = report(&edged.join("report.json"))["iou"].clone();
-    let v = |k: &str| iou[k].as_f64().expect(k);
-    assert!(v("fit_before") < 0.65, "{iou}");
-    assert!(v("fit_after") > 0.72 && v("held_out_after") > 0.62, "{iou}");
+    let iou = report::<CalibrateReport>(&edged.join("report.json")).iou;
+    assert!(v(iou.fit_before) < 0.65, "{iou:?}");
+    assert!(
+        v(iou.fit_after) > 0.72 && v(iou.held_out_after) > 0.62,
+        "{iou:?}"
+    );
     // What the fit drew to, for tuning the thresholds: each frame's edge map, and the same
     // edges in yellow on its overlays; a fit to masks writes no edge map.
     let map = image::open(edged.join("edges_00005.png"))
@@ -417,11 +402,9 @@ fn the_real_panda_camera_is_calibrated_from_its_own_frames() {
         ],
     );
     assert!(ok, "{log}");
-    let after = report(&out.join("replay/report.json"));
-    let erase_iou = after["mask"]["vs_reference"]["iou_mean"]
-        .as_f64()
-        .expect("iou");
-    assert!(erase_iou > 0.65, "{}", after["mask"]);
+    let after: RecordingReport = report(&out.join("replay/report.json"));
+    let erase_iou = after.mask.vs_reference.iou_mean.expect("iou");
+    assert!(erase_iou > 0.65, "{:?}", after.mask);
     // Fitted on the two well-paired frames 0 and 1 (a list of frames), the third, 5, held out
     // (measured 0.852).
     let pair = out.join("pair");
@@ -430,17 +413,16 @@ fn the_real_panda_camera_is_calibrated_from_its_own_frames() {
         &["--fit", "0,1", "--out", pair.to_str().expect("utf-8")],
     );
     assert!(ok, "{log}");
-    let rep = report(&pair.join("report.json"));
-    let five = rep["iou"]["per_frame"]
-        .as_array()
-        .expect("frames")
+    let rep: CalibrateReport = report(&pair.join("report.json"));
+    let five = rep
+        .iou
+        .per_frame
         .iter()
-        .find(|f| f["frame"] == 5)
-        .cloned()
+        .find(|f| f.frame == 5)
         .expect("frame 5");
-    assert_eq!(five["fit"], false);
-    assert!(five["iou_after"].as_f64() > Some(0.8), "{five}");
-    assert_eq!(rep["frames_fit"], 2);
+    assert!(!five.fit);
+    assert!(five.iou_after > Some(0.8), "{five:?}");
+    assert_eq!(rep.frames_fit, 2);
     // Bad input is refused naming the flag.
     let (ok, log) = panda.run(
         "calibrate",

@@ -2,6 +2,7 @@
 //! the simulated room's truth, camera by camera.
 
 use super::*;
+use avatarm::replay::ViewsReport;
 
 /// Renders the default scene and checks that the robot appears in the camera frame exactly where
 /// forward kinematics and the pinhole model put it; also that the same seed gives the same frames.
@@ -16,16 +17,17 @@ fn replay_shows_the_robot_where_fk_and_the_camera_model_project_it() {
     let report = replay::run(&scene, options).expect("replay runs");
 
     // The report has what it promises.
-    assert_eq!(report["scene"], "default");
-    assert_eq!(report["seed"], 7);
-    assert_eq!(report["frames"], 63);
-    assert!(report["frames_written"].as_u64().unwrap() >= 2);
-    let sim = report["sim_time_s"].as_f64().unwrap();
+    assert_eq!(report.scene, "default");
+    assert_eq!(report.seed, 7);
+    assert_eq!(report.frames, 63);
+    assert!(report.frames_written >= 2);
+    let sim = report.sim_time_s;
     assert!((sim - 2.1).abs() < 0.05, "sim time {sim}");
-    assert!(report["wall_time_s"].as_f64().unwrap() > 0.0);
-    let on_disk: serde_json::Value =
+    assert!(report.wall_time_s > 0.0);
+    // The file holds the report the call returned, field for field.
+    let on_disk: ReplayReport =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
-    assert_eq!(on_disk["frames"], report["frames"]);
+    assert_eq!(on_disk, report);
     let frames: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("frames.json")).unwrap()).unwrap();
     let n = frames.as_array().unwrap().len();
@@ -168,9 +170,21 @@ fn the_real_sawyer_erases_like_the_default_scene() {
     scene.file.duration_s = 3.0;
     let r = run(&scene, "dr_sawyer_real");
     // Measured (llvmpipe): IoU 0.9993, leak 0.008 %, PSNR 46.2 dB; the default scene's bounds.
-    assert!(num(&r, "mask.iou_mean") >= 0.9967, "{}", r["mask"]);
-    assert!(num(&r, "mask.leak_pct_mean") <= 0.05, "{}", r["mask"]);
-    assert!(num(&r, "dr.psnr_robot_db_mean") >= 43.0, "{}", r["dr"]);
+    assert!(
+        some(r.mask.iou_mean, "mask.iou_mean") >= 0.9967,
+        "{:?}",
+        r.mask
+    );
+    assert!(
+        some(r.mask.leak_pct_mean, "mask.leak_pct_mean") <= 0.05,
+        "{:?}",
+        r.mask
+    );
+    assert!(
+        some(r.dr.psnr_robot_db_mean, "dr.psnr_robot_db_mean") >= 43.0,
+        "{:?}",
+        r.dr
+    );
 }
 
 #[test]
@@ -199,48 +213,58 @@ fn default_scene_erases_the_robot() {
     let r = run(&scene, "dr_default");
     // Measured (llvmpipe): IoU 0.9992, leak 0.007 %, PSNR 46.3 dB. Allowed: IoU down by
     // 0.0025, leak 7x, PSNR 3 dB lower.
-    assert!(num(&r, "mask.iou_mean") >= 0.9967, "{}", r["mask"]);
-    assert!(num(&r, "mask.leak_pct_mean") <= 0.05, "{}", r["mask"]);
-    assert!(num(&r, "dr.psnr_robot_db_mean") >= 43.0, "{}", r["dr"]);
-    for stage in ["mask", "composite", "frame"] {
-        assert!(num(&r, &format!("timing_ms.{stage}.median")) > 0.0);
+    assert!(
+        some(r.mask.iou_mean, "mask.iou_mean") >= 0.9967,
+        "{:?}",
+        r.mask
+    );
+    assert!(
+        some(r.mask.leak_pct_mean, "mask.leak_pct_mean") <= 0.05,
+        "{:?}",
+        r.mask
+    );
+    assert!(
+        some(r.dr.psnr_robot_db_mean, "dr.psnr_robot_db_mean") >= 43.0,
+        "{:?}",
+        r.dr
+    );
+    let timing = &r.timing_ms;
+    for (stage, times) in [
+        ("mask", timing.mask),
+        ("composite", timing.composite),
+        ("frame", timing.frame),
+    ] {
+        assert!(median(times, stage) > 0.0, "{stage}");
     }
     // The frame the GPU erased is the frame the CPU reference erased, exactly.
-    assert_eq!(
-        num(&r, "gpu_vs_cpu.max_abs_diff"),
-        0.0,
-        "{}",
-        r["gpu_vs_cpu"]
-    );
-    assert_eq!(num(&r, "gpu_vs_cpu.mask_mismatch_px_max"), 0.0);
+    assert_eq!(r.gpu_vs_cpu.max_abs_diff, Some(0), "{:?}", r.gpu_vs_cpu);
+    assert_eq!(r.gpu_vs_cpu.mask_mismatch_px_max, Some(0));
     // Each pass is timed on the GPU on nearly every camera frame, unless the device has no
     // timestamp queries (then the report says so and gives the CPU reference).
-    let source = r["timing_ms"]["source"].as_str().unwrap_or_default();
+    let source = timing.source.as_str();
     if !source.contains("no timestamp queries") {
-        assert_eq!(source, "gpu", "{}", r["timing_ms"]);
-        let frames = num(&r, "frames_shown");
+        assert_eq!(source, "gpu", "{timing:?}");
+        let frames = r.frames_shown as f64;
         // No dilation here: the mask twin's render, then one fused threshold + composite pass.
         for pass in ["mask twin", "composite"] {
-            let timed = r["timing_ms"]["gpu_passes"][pass]["renders_timed"]
-                .as_f64()
-                .unwrap_or_default();
+            let timed = timing
+                .gpu_passes
+                .get(pass)
+                .map_or(0.0, |p| p.renders_timed as f64);
             assert!(
                 timed >= 0.8 * frames,
                 "{pass}: {timed} of {frames} frames timed"
             );
-            assert!(r["timing_ms"]["gpu_passes"][pass]["ms"]["median"].as_f64() > Some(0.0));
+            assert!(median(timing.gpu_passes[pass].ms, pass) > 0.0);
         }
-        assert!(r["timing_ms"]["gpu_passes"]["dilate rows"].is_null());
-        assert!(num(&r, "timing_ms.erase.median") > 0.0);
-        assert!(num(&r, "timing_ms.upload.median") > 0.0);
+        assert!(!timing.gpu_passes.contains_key("dilate rows"));
+        assert!(median(r.timing_ms.erase, "timing_ms.erase") > 0.0);
+        assert!(median(r.timing_ms.upload, "timing_ms.upload") > 0.0);
         // The room's views are timed too; the robot-free one renders only when the room
         // changes (never, after the warm-up, in this scene).
-        let views = &r["timing_ms"]["gpu_views"];
-        assert!(views["real camera"]["renders_timed"].as_f64() >= Some(0.8 * frames));
-        assert_eq!(
-            views["ground truth: no robot"]["renders_timed"].as_f64(),
-            Some(0.0)
-        );
+        let views = &timing.gpu_views;
+        assert!(views["real camera"].renders_timed as f64 >= 0.8 * frames);
+        assert_eq!(views["ground truth: no robot"].renders_timed, 0);
     }
 }
 
@@ -270,8 +294,8 @@ fn latency_compensation_cuts_the_leak_at_full_speed() {
     // frame, so the threshold still reads the twin render of its own frame (GPU = CPU).
     let off = run(&scene, "dr_fast_off");
     let (leak_on, leak_off) = (
-        num(&on, "mask.leak_pct_mean"),
-        num(&off, "mask.leak_pct_mean"),
+        some(on.mask.leak_pct_mean, "mask.leak_pct_mean"),
+        some(off.mask.leak_pct_mean, "mask.leak_pct_mean"),
     );
     eprintln!("leak with compensation {leak_on:.3} %, without {leak_off:.3} %");
     // Measured: on 0.010 %, off 3.06 % (306x). Allowed: on up to 0.1 %, at least 20x less.
@@ -293,58 +317,67 @@ fn pose_compensation_keeps_a_moving_head_cameras_mask_on_the_robot() {
     scene.file.duration_s = 2.0;
     scene.file.erase.pose_compensation = true;
     let on = run(&scene, "head_on");
-    let head = &on["head"];
-    assert!(
-        (num(&on, "head.peak_speed_deg_s") - 30.0).abs() < 0.5,
-        "{head}"
-    );
-    assert!(num(&on, "head.frames") >= 50.0, "{head}");
+    let h = head(&on);
+    assert!((h.peak_speed_deg_s - 30.0).abs() < 0.5, "{h:?}");
+    assert!(h.frames >= 50, "{h:?}");
     scene.file.erase.pose_compensation = false;
     let off = run(&scene, "head_off");
     let (leak_on, leak_off) = (
-        num(&on, "mask.leak_pct_mean"),
-        num(&off, "mask.leak_pct_mean"),
+        some(on.mask.leak_pct_mean, "mask.leak_pct_mean"),
+        some(off.mask.leak_pct_mean, "mask.leak_pct_mean"),
     );
     let (err_on, err_off) = (
-        num(&on, "head.mask_camera_error_deg.median"),
-        num(&off, "head.mask_camera_error_deg.median"),
+        median(
+            head(&on).mask_camera_error_deg,
+            "head.mask_camera_error_deg",
+        ),
+        median(
+            head(&off).mask_camera_error_deg,
+            "head.mask_camera_error_deg",
+        ),
     );
     eprintln!(
         "head camera: leak {leak_on:.3} % compensated, {leak_off:.3} % not; camera error {err_on:.4} / {err_off:.4} deg; IoU {} / {}",
-        on["mask"]["iou_mean"], off["mask"]["iou_mean"]
+        some(on.mask.iou_mean, "iou"),
+        some(off.mask.iou_mean, "iou")
     );
     assert!(leak_on <= 1.0, "the goal: {leak_on}");
     assert!(leak_off >= 3.0 * leak_on, "on {leak_on} vs off {leak_off}");
     assert!(err_on < 0.1 && err_off > 0.3, "{err_on} / {err_off}");
-    assert!(num(&on, "mask.iou_mean") >= 0.97, "{}", on["mask"]);
+    assert!(
+        some(on.mask.iou_mean, "mask.iou_mean") >= 0.97,
+        "{:?}",
+        on.mask
+    );
     // Frames arrive 50 ms after capture (plus up to one update), tracking 20 ms: the newest
     // tracked pose is newer than the frame (measured: 73 ms).
-    let age = num(&on, "head.newest_tracked_pose_age_ms.median");
-    assert!((-90.0..=-50.0).contains(&age), "{head}");
+    let age = median(
+        head(&on).newest_tracked_pose_age_ms,
+        "head.newest_tracked_pose_age_ms",
+    );
+    assert!((-90.0..=-50.0).contains(&age), "{h:?}");
     // The background follows the view: the room behind the robot seen by some view almost
     // everywhere, and the erased region close to the truth (measured: 0.99, 30.0 dB; the
     // photograph as it is gives 22.4 dB in bench head).
-    let vb = &head["view_background"];
+    let vb = view_background(&on);
     assert!(
-        num(&on, "head.view_background.seen_share_of_robot_region") >= 0.95,
-        "{vb}"
+        some(vb.seen_share_of_robot_region, "seen share") >= 0.95,
+        "{vb:?}"
     );
-    assert!(num(&on, "head.view_background.views_kept") >= 2.0, "{vb}");
+    assert!(vb.views_kept >= 2, "{vb:?}");
     // The replay warms up before its first frame: no blank frame reaches the views (the live
     // preview's first one is black, and is refused: `a_blank_frame_is_not_a_view`).
-    assert_eq!(
-        num(&on, "head.view_background.blank_frames_refused"),
-        0.0,
-        "{vb}"
-    );
-    assert!(num(&on, "head.view_background.cpu_ms.median") > 0.0, "{vb}");
-    assert!(num(&on, "dr.psnr_robot_db_mean") >= 27.0, "{}", on["dr"]);
+    assert_eq!(vb.blank_frames_refused, 0, "{vb:?}");
     assert!(
-        head["psnr_by_angle_from_photo"]
-            .as_array()
-            .is_some_and(|b| !b.is_empty()),
-        "{head}"
+        median(vb.cpu_ms, "view background's CPU time") > 0.0,
+        "{vb:?}"
     );
+    assert!(
+        some(on.dr.psnr_robot_db_mean, "dr.psnr_robot_db_mean") >= 27.0,
+        "{:?}",
+        on.dr
+    );
+    assert!(!h.psnr_by_angle_from_photo.is_empty(), "{h:?}");
     // (A moving camera's recording: tests/app/footage/,
     // the_mount_of_a_camera_on_a_head_is_calibrated_from_its_recording.)
 }
@@ -369,42 +402,43 @@ fn each_camera_of_a_scene_is_erased_and_scored() {
     let mut options = ReplayOptions::new(out.clone());
     options.frames_every = 10;
     let report = replay::run_views(&scenes, options).expect("both cameras replay");
-    let cameras = report["cameras"].as_array().expect("cameras");
+    let cameras = &report.cameras;
     let names: Vec<&str> = cameras
         .iter()
-        .map(|c| c["name"].as_str().unwrap())
+        .map(|c| c.name.as_deref().expect("a camera's name"))
         .collect();
     assert_eq!(names, ["blair", "alice"]);
-    let on_disk: serde_json::Value = serde_json::from_str(
+    let on_disk: ViewsReport = serde_json::from_str(
         &std::fs::read_to_string(out.join("report.json")).expect("the combined report"),
     )
     .unwrap();
-    assert_eq!(on_disk["cameras"], report["cameras"]);
+    assert_eq!(&on_disk.cameras, cameras);
     for (camera, name) in cameras.iter().zip(names) {
-        let own: serde_json::Value = serde_json::from_str(
+        let own: ReplayReport = serde_json::from_str(
             &std::fs::read_to_string(out.join(name).join("report.json")).expect("its own report"),
         )
         .unwrap();
-        assert_eq!(own["mask"], camera["mask"], "{name}");
-        assert_eq!(camera["camera"]["name"], name);
+        assert_eq!(own.mask, camera.mask, "{name}");
+        assert_eq!(camera.camera.name, name);
         assert!(out.join(name).join("frames.json").is_file(), "{name}");
         eprintln!(
-            "{name}: mask {} dr {} head {}",
-            camera["mask"], camera["dr"], camera["head"]["mask_camera_error_deg"]
+            "{name}: mask {:?} dr {:?} head {:?}",
+            camera.mask,
+            camera.dr,
+            camera.head.as_ref().map(|h| h.mask_camera_error_deg)
         );
         // Both cameras watch the arm through the whole replay, each erased and timed.
-        assert!(num(camera, "mask.frames_with_robot") >= 40.0, "{name}");
-        assert!(num(camera, "timing_ms.frame.median") > 0.0, "{name}");
-        assert_eq!(
-            num(camera, "gpu_vs_cpu.mask_mismatch_px_max"),
-            0.0,
+        assert!(camera.mask.frames_with_robot >= 40, "{name}");
+        assert!(
+            median(camera.timing_ms.frame, "timing_ms.frame") > 0.0,
             "{name}"
         );
+        assert_eq!(camera.gpu_vs_cpu.mask_mismatch_px_max, Some(0), "{name}");
     }
     let (blair, alice) = (&cameras[0], &cameras[1]);
     // The same run of the robot, seen from two places: the saved frames' true joints agree.
-    assert_eq!(blair["sim_time_s"], alice["sim_time_s"]);
-    assert_eq!(blair["frames"], alice["frames"]);
+    assert_eq!(blair.sim_time_s, alice.sim_time_s);
+    assert_eq!(blair.frames, alice.frames);
     let joints = |name: &str| -> Vec<(u64, Vec<f64>)> {
         let frames: serde_json::Value = serde_json::from_str(
             &std::fs::read_to_string(out.join(name).join("frames.json")).expect("frames.json"),
@@ -433,21 +467,29 @@ fn each_camera_of_a_scene_is_erased_and_scored() {
     );
     // Blair's fixed camera: as the pouring scene's. Alice's head camera: pose-compensated,
     // under the 1 % leak goal, with a background that follows her view.
-    assert!(blair["head"].is_null(), "{}", blair["head"]);
-    assert!(num(blair, "mask.iou_mean") >= 0.99, "{}", blair["mask"]);
+    assert!(blair.head.is_none(), "{:?}", blair.head);
     assert!(
-        num(blair, "dr.psnr_robot_db_mean") >= 40.0,
-        "{}",
-        blair["dr"]
+        some(blair.mask.iou_mean, "mask.iou_mean") >= 0.99,
+        "{:?}",
+        blair.mask
     );
-    assert!(num(alice, "head.frames") >= 40.0, "{}", alice["head"]);
-    assert!(num(alice, "mask.leak_pct_mean") <= 1.0, "{}", alice["mask"]);
-    assert!(num(alice, "mask.iou_mean") >= 0.97, "{}", alice["mask"]);
     assert!(
-        num(alice, "head.view_background.views_kept") >= 1.0,
-        "{}",
-        alice["head"]
+        some(blair.dr.psnr_robot_db_mean, "dr.psnr_robot_db_mean") >= 40.0,
+        "{:?}",
+        blair.dr
     );
+    assert!(head(alice).frames >= 40, "{:?}", alice.head);
+    assert!(
+        some(alice.mask.leak_pct_mean, "mask.leak_pct_mean") <= 1.0,
+        "{:?}",
+        alice.mask
+    );
+    assert!(
+        some(alice.mask.iou_mean, "mask.iou_mean") >= 0.97,
+        "{:?}",
+        alice.mask
+    );
+    assert!(view_background(alice).views_kept >= 1, "{:?}", alice.head);
 
     // The command line: an unknown camera is refused naming the scene's cameras; a recording
     // holds one camera.
@@ -477,8 +519,8 @@ fn photometric_compensation_follows_exposure() {
     scene.file.erase.photometric = false;
     let off = run(&scene, "dr_exposure_off");
     let (p_on, p_off) = (
-        num(&on, "dr.psnr_robot_db_mean"),
-        num(&off, "dr.psnr_robot_db_mean"),
+        some(on.dr.psnr_robot_db_mean, "dr.psnr_robot_db_mean"),
+        some(off.dr.psnr_robot_db_mean, "dr.psnr_robot_db_mean"),
     );
     eprintln!("PSNR with photometric compensation {p_on:.2} dB, without {p_off:.2} dB");
     // Measured: on 46.3 dB, off 21.1 dB. Allowed: on 3 dB lower, a gain of at least 15 dB.
@@ -496,12 +538,12 @@ fn dilation_covers_calibration_error() {
     for dilate in [0u32, 4, 8, 12] {
         scene.file.erase.dilate_px = dilate;
         let r = run(&scene, &format!("dr_calib_{dilate}"));
-        let leak = num(&r, "mask.leak_pct_mean");
+        let leak = some(r.mask.leak_pct_mean, "mask.leak_pct_mean");
         table.push((
             dilate,
             leak,
-            num(&r, "mask.overmask_pct_mean"),
-            num(&r, "dr.psnr_robot_db_mean"),
+            some(r.mask.overmask_pct_mean, "mask.overmask_pct_mean"),
+            some(r.dr.psnr_robot_db_mean, "dr.psnr_robot_db_mean"),
         ));
         if leak <= 1.0 && restored.is_none() {
             restored = Some(dilate);
@@ -534,9 +576,9 @@ fn dilation_covers_calibration_error() {
     scene.file.erase.feather_px = 2;
     let r = run(&scene, "dr_calib_4_feather_2");
     assert!(
-        num(&r, "mask.leak_pct_mean") <= table[1].1 + 1e-9,
-        "{}",
-        r["mask"]
+        some(r.mask.leak_pct_mean, "mask.leak_pct_mean") <= table[1].1 + 1e-9,
+        "{:?}",
+        r.mask
     );
     for pass in [
         "mask twin",
@@ -546,13 +588,13 @@ fn dilation_covers_calibration_error() {
         "composite",
     ] {
         assert!(
-            r["timing_ms"]["gpu_passes"][pass]["renders_timed"].as_f64() > Some(0.0)
-                || !r["timing_ms"]["source"]
-                    .as_str()
-                    .unwrap_or_default()
-                    .eq("gpu"),
-            "{pass}: {}",
-            r["timing_ms"]
+            r.timing_ms
+                .gpu_passes
+                .get(pass)
+                .is_some_and(|p| p.renders_timed > 0)
+                || r.timing_ms.source != "gpu",
+            "{pass}: {:?}",
+            r.timing_ms
         );
     }
 }
@@ -585,14 +627,14 @@ fn a_distorted_lens_is_honoured_by_the_mask() {
     scene.file.duration_s = 1.5;
     let honoured = run(&scene, "dr_lens_honoured");
     // The frame the GPU erased through the lens is the CPU reference's, exactly.
-    assert_eq!(num(&honoured, "gpu_vs_cpu.max_abs_diff"), 0.0);
+    assert_eq!(honoured.gpu_vs_cpu.max_abs_diff, Some(0));
     scene.file.erase.resolution_scale = 0.5;
     let half = run(&scene, "dr_lens_half");
     scene.file.erase.resolution_scale = 1.0;
     scene.file.erase.lens_distortion = false;
     let ignored = run(&scene, "dr_lens_ignored");
-    let leak = |r: &serde_json::Value| num(r, "mask.leak_pct_mean");
-    let iou = |r: &serde_json::Value| num(r, "mask.iou_mean");
+    let leak = |r: &ReplayReport| some(r.mask.leak_pct_mean, "mask.leak_pct_mean");
+    let iou = |r: &ReplayReport| some(r.mask.iou_mean, "mask.iou_mean");
     eprintln!(
         "barrel lens: honoured leak {:.3} % IoU {:.4}; at half resolution leak {:.3} % IoU {:.4}; ignored leak {:.3} % IoU {:.4}",
         leak(&honoured),
@@ -602,27 +644,23 @@ fn a_distorted_lens_is_honoured_by_the_mask() {
         leak(&ignored),
         iou(&ignored)
     );
-    assert_eq!(honoured["camera"]["lens"]["honoured"], true);
-    assert_eq!(ignored["camera"]["lens"]["honoured"], false);
+    assert!(honoured.camera.lens.honoured);
+    assert!(!ignored.camera.lens.honoured);
     eprintln!(
-        "mask render through the lens: {}",
-        honoured["camera"]["lens"]["mask_render"]
+        "mask render through the lens: {:?}",
+        honoured.camera.lens.mask_render
     );
     // Measured (llvmpipe): honoured leak 0.003 %, IoU 0.9999; at half resolution 1.20 %,
     // 0.974; ignored 0.57 %, IoU 0.942 (overmask 5.6 %: this barrel draws the robot smaller
     // than a pinhole would).
-    assert!(leak(&honoured) <= 1.0, "{}", honoured["mask"]);
-    assert!(
-        iou(&ignored) <= iou(&honoured) - 0.03,
-        "{}",
-        ignored["mask"]
-    );
-    assert!(iou(&honoured) >= 0.99, "{}", honoured["mask"]);
-    assert!(leak(&half) <= 2.0, "{}", half["mask"]);
+    assert!(leak(&honoured) <= 1.0, "{:?}", honoured.mask);
+    assert!(iou(&ignored) <= iou(&honoured) - 0.03, "{:?}", ignored.mask);
+    assert!(iou(&honoured) >= 0.99, "{:?}", honoured.mask);
+    assert!(leak(&half) <= 2.0, "{:?}", half.mask);
     assert!(
         leak(&ignored) >= 3.0 * leak(&honoured).max(0.1),
-        "ignoring the lens must cost: {} vs {}",
-        ignored["mask"],
-        honoured["mask"]
+        "ignoring the lens must cost: {:?} vs {:?}",
+        ignored.mask,
+        honoured.mask
     );
 }

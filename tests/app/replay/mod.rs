@@ -14,6 +14,7 @@ use std::process::Command;
 
 use crate::support::{output, python_mcap};
 
+use avatarm::replay::report::{HeadReport, ReplayReport, Times, ViewBackgroundReport};
 use avatarm::replay::{self, ReplayOptions};
 use avatarm::scene::Scene;
 use avatarm_core::robot::{PackagePath, Shape};
@@ -129,36 +130,44 @@ fn scene(name: &str) -> Scene {
     .unwrap_or_else(|e| panic!("{name}: {e}"))
 }
 
-fn num(report: &serde_json::Value, path: &str) -> f64 {
-    path.split('.')
-        .fold(report, |v, k| &v[k])
-        .as_f64()
-        .unwrap_or_else(|| panic!("report has no number at {path}: {report}"))
+/// The figure a report must have; else the panic names it.
+fn some<T>(value: Option<T>, what: &str) -> T {
+    value.unwrap_or_else(|| panic!("the report has no {what}"))
 }
 
-fn run(scene: &Scene, name: &str) -> serde_json::Value {
+/// A series' median the report must have.
+fn median(times: Times, what: &str) -> f64 {
+    some(times, what).median
+}
+
+/// The head camera's section the report must have.
+fn head(report: &ReplayReport) -> &HeadReport {
+    some(report.head.as_ref(), "head")
+}
+
+/// The view-following background's section the report must have.
+fn view_background(report: &ReplayReport) -> &ViewBackgroundReport {
+    some(
+        head(report).view_background.as_ref(),
+        "head.view_background",
+    )
+}
+
+fn run(scene: &Scene, name: &str) -> ReplayReport {
     let mut options = ReplayOptions::new(out_dir(name));
     options.frames_every = 1000;
     let report = replay::run(scene, options).unwrap_or_else(|e| panic!("{name}: {e}"));
     eprintln!(
-        "{name}: mask {} dr {} gpu_vs_cpu {} timing {}",
-        report["mask"], report["dr"], report["gpu_vs_cpu"], report["timing_ms"]
+        "{name}: mask {:?} dr {:?} gpu_vs_cpu {:?} timing {:?}",
+        report.mask, report.dr, report.gpu_vs_cpu, report.timing_ms
     );
     // The GPU passes agree with the CPU reference on the same inputs.
+    let gpu = &report.gpu_vs_cpu;
     assert!(
-        num(&report, "gpu_vs_cpu.max_abs_diff") <= 1.0,
-        "{name}: {}",
-        report["gpu_vs_cpu"]
+        some(gpu.max_abs_diff, "gpu_vs_cpu.max_abs_diff") <= 1,
+        "{name}: {gpu:?}"
     );
-    assert_eq!(
-        num(&report, "gpu_vs_cpu.mask_mismatch_px_max"),
-        0.0,
-        "{name}"
-    );
-    assert!(
-        num(&report, "mask.frames_scored") >= 20.0,
-        "{name}: {}",
-        report["mask"]
-    );
+    assert_eq!(gpu.mask_mismatch_px_max, Some(0), "{name}");
+    assert!(report.mask.frames_scored >= 20, "{name}: {:?}", report.mask);
     report
 }

@@ -1,6 +1,7 @@
 //! `avatarm robot`: a description's tree, meshes and link poses, real descriptions included.
 
 use super::*;
+use avatarm::cli::robot::RobotReport;
 
 #[test]
 fn robot_command_prints_fk_poses_as_json() {
@@ -20,19 +21,20 @@ fn robot_command_prints_fk_poses_as_json() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let json: RobotReport = serde_json::from_slice(&out.stdout).unwrap();
     let model =
         avatarm_core::robot::RobotModel::from_urdf_file(&urdf, &PackagePath::default()).unwrap();
     let q = [0.1, -0.5, 0.2, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
     let poses = model.forward_kinematics(&Isometry3::identity(), &q);
-    let tip = &json["links"]["right_gripper_tip"];
+    let tip = &json.links["right_gripper_tip"];
     let t = poses[model.link_id("right_gripper_tip").unwrap()];
     for (i, v) in t.translation.vector.iter().enumerate() {
-        assert!((tip["translation"][i].as_f64().unwrap() - v).abs() < 1e-12);
+        assert!((tip.translation[i] - v).abs() < 1e-12);
     }
-    let w = tip["rotation_xyzw"][3].as_f64().unwrap();
+    let w = tip.rotation_xyzw[3];
     assert!((w.abs() - t.rotation.w.abs()).abs() < 1e-12);
-    assert_eq!(json["links"].as_object().unwrap().len(), model.links.len());
+    assert_eq!(json.links.len(), model.links.len());
+    assert_eq!(json.q, q[..json.q.len()]);
 
     // Named values, and the tree.
     let tree = Command::new(env!("CARGO_BIN_EXE_avatarm"))
@@ -112,11 +114,10 @@ fn robot_command_reads_real_descriptions() {
         &["--json", "--q", "right_gripper_l_finger_joint=0.01"],
     );
     assert!(ok, "{err}");
-    let json: serde_json::Value = serde_json::from_str(&json).unwrap();
-    assert_eq!(
-        json["mimic"]["right_gripper_r_finger_joint"]["position"].as_f64(),
-        Some(-0.01)
-    );
+    let json: RobotReport = serde_json::from_str(&json).unwrap();
+    let follower = &json.mimic["right_gripper_r_finger_joint"];
+    assert_eq!(follower.position, -0.01);
+    assert_eq!(follower.leader, "right_gripper_l_finger_joint");
     let panda = ros.join("example-robot-data/robots/panda_description/urdf/panda.urdf");
     let (ok, text, err) = robot(&panda, &[]);
     assert!(

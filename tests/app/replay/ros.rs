@@ -234,3 +234,108 @@ fn the_pouring_task_runs_against_a_ros_sawyer_as_in_the_simulated_room() {
         "{r}"
     );
 }
+
+/// The robot site killed mid-pour (SIGKILL: no goodbye, no last zero command): the Sawyer stops
+/// by itself within the command timeout Avatarm set on the link (Intera's
+/// `joint_command_timeout`, 0.2 s), and holds where it was. What keeps a real arm safe when the
+/// process that commands it dies, whatever killed it (docs/network.md, "When the robot site
+/// dies").
+#[cfg(feature = "ros")]
+#[test]
+fn a_killed_robot_site_leaves_the_sawyer_stopped_within_its_command_timeout() {
+    use std::process::Stdio;
+    use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+    let _serial = ros_support::serial();
+    let (master, sawyer) = sawyer_off_the_start(0.0);
+    let out = out_dir("ros_serve_killed");
+    std::fs::create_dir_all(&out).unwrap();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .unwrap();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let log = |name: &str| std::fs::File::create(out.join(format!("{name}.log"))).unwrap();
+    let mut serve = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["serve", "assets/scenes/pouring.toml", "--robot", "ros"])
+        .args(["--insecure-lan", "--video", "off", "--duration", "120"])
+        .args(["--listen", &endpoint])
+        .env("ROS_MASTER_URI", &master.uri)
+        .current_dir(root())
+        .stdout(Stdio::null())
+        .stderr(log("serve"))
+        .spawn()
+        .unwrap();
+    let mut join = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["join", &endpoint, "--scene", "assets/scenes/pouring.toml"])
+        .args(["--wait", "30"])
+        .current_dir(root())
+        .stdout(Stdio::null())
+        .stderr(log("join"))
+        .spawn()
+        .unwrap();
+    // The operator joins and its hand pours: wait until the arm moves under the robot site's
+    // commands from the operator's targets.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !std::fs::read_to_string(out.join("join.log"))
+        .unwrap_or_default()
+        .contains("joined")
+    {
+        assert!(Instant::now() < deadline, "the operator never joined");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_secs(2));
+    let now = || {
+        SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .expect("clock")
+            .as_secs_f64()
+    };
+    let fastest = |r: &serde_json::Value| {
+        r["velocity"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(serde_json::Value::as_f64)
+            .fold(0.0, |m: f64, v| m.max(v.abs()))
+    };
+    let moving = loop {
+        let r = sawyer.report();
+        if fastest(&r) > 0.02 {
+            break r;
+        }
+        let serve_log = std::fs::read_to_string(out.join("serve.log")).unwrap_or_default();
+        assert!(
+            Instant::now() < deadline,
+            "the arm never moved: {r}\n{serve_log}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let killed_at = now();
+    serve.kill().expect("SIGKILL");
+    let _ = serve.wait();
+    std::thread::sleep(Duration::from_secs(1));
+    let r = sawyer.report();
+    let _ = join.kill();
+    let _ = join.wait();
+    eprintln!("moving: {moving}\nafter the kill: {r}");
+    let f = |key: &str| r[key].as_f64().unwrap_or_else(|| panic!("no {key} in {r}"));
+    // Avatarm set the timeout (the node's own default is 0.5 s).
+    assert_eq!(f("timeout_s"), 0.2, "{r}");
+    // The commands ended with the process, the arm moving then; it held the timeout later
+    // (plus one of its 10 ms cycles).
+    let (last, held) = (f("last_command_at"), f("held_at"));
+    assert!(last <= killed_at + 0.05, "a command after the kill: {r}");
+    assert!(
+        held > last && held - last <= 0.2 + 0.03,
+        "held {:.0} ms after the last command",
+        (held - last) * 1e3
+    );
+    assert!(held - killed_at <= 0.2 + 0.05, "{r}");
+    assert!(f("speed_at_hold") > 0.0, "the arm was still already: {r}");
+    assert_eq!(fastest(&r), 0.0, "{r}");
+    eprintln!(
+        "robot site killed: the arm held {:.0} ms after the kill, {:.0} ms after the last command",
+        (held - killed_at) * 1e3,
+        (held - last) * 1e3
+    );
+}

@@ -126,6 +126,10 @@ def main():
         # stream) left out: a command stream's evenness.
         "gaps_ms": [],
         "holds": 0,
+        # When the arm last held for want of a fresh command (wall clock, s), and its fastest
+        # joint's speed (rad/s) the moment before.
+        "held_at": None,
+        "speed_at_hold": None,
         "gripper_m": None,
         "gripper_target_m": 0.041667,
         "gripper_at_m": 0.041667,
@@ -280,6 +284,9 @@ def main():
                 "ignored_max_speed": state["ignored_max_speed"],
                 "bad": state["bad"],
                 "holds": state["holds"],
+                "held_at": state["held_at"],
+                "speed_at_hold": state["speed_at_hold"],
+                "last_command_at": state["last_command"],
                 "timeout_s": state["timeout_s"],
                 "speed_ratio": state["speed_ratio"],
                 "gripper_m": state["gripper_m"],
@@ -326,6 +333,8 @@ def main():
             elif not fresh:
                 if not held:
                     state["holds"] += 1
+                    state["held_at"] = now
+                    state["speed_at_hold"] = max(abs(v) for v in state["velocity"].values())
                 held = True
                 state["velocity"] = {n: 0.0 for n in LIMITS}
             else:

@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 use avatarm_record::camera::{read_calibration, read_pose};
 use avatarm_record::{CompressedFrame, ImageFormat, JointStates, RecordingWriter};
 
-use crate::ImportError;
+use crate::FootageError;
 
 /// What `avatarm import FOLDER` does.
 #[derive(Debug, Clone)]
@@ -85,19 +85,19 @@ enum Joints {
     Ordered(Vec<f64>),
 }
 
-fn listing_error(at: &str, message: impl Into<String>) -> ImportError {
-    ImportError::input(at, message)
+fn listing_error(at: &str, message: impl Into<String>) -> FootageError {
+    FootageError::input(at, message)
 }
 
-fn read(path: &Path) -> Result<Vec<u8>, ImportError> {
-    std::fs::read(path).map_err(|source| ImportError::Io {
+fn read(path: &Path) -> Result<Vec<u8>, FootageError> {
+    std::fs::read(path).map_err(|source| FootageError::Io {
         path: path.to_owned(),
         action: "read",
         source,
     })
 }
 
-fn finite(at: &str, what: &str, text: &str) -> Result<f64, ImportError> {
+fn finite(at: &str, what: &str, text: &str) -> Result<f64, FootageError> {
     let v: f64 = text
         .trim()
         .parse()
@@ -108,7 +108,7 @@ fn finite(at: &str, what: &str, text: &str) -> Result<f64, ImportError> {
     Ok(v)
 }
 
-fn csv_entries(path: &Path) -> Result<Vec<Entry>, ImportError> {
+fn csv_entries(path: &Path) -> Result<Vec<Entry>, FootageError> {
     let dir = path.parent().unwrap_or(Path::new("."));
     let name = path.display().to_string();
     let mut reader = csv::ReaderBuilder::new()
@@ -147,7 +147,7 @@ fn csv_entries(path: &Path) -> Result<Vec<Entry>, ImportError> {
                     finite(&at, &format!("joint '{n}'"), cell(*i))?,
                 ))
             })
-            .collect::<Result<Vec<_>, ImportError>>()?;
+            .collect::<Result<Vec<_>, FootageError>>()?;
         out.push(Entry {
             file: dir.join(cell(file)),
             stamp_s: finite(&at, "stamp_s", cell(stamp))?,
@@ -183,7 +183,7 @@ struct JsonFrame {
     q: Option<Vec<f64>>,
 }
 
-fn json_entries(path: &Path) -> Result<(Vec<Entry>, Vec<String>), ImportError> {
+fn json_entries(path: &Path) -> Result<(Vec<Entry>, Vec<String>), FootageError> {
     let dir = path.parent().unwrap_or(Path::new("."));
     let name = path.display().to_string();
     let text = read(path)?;
@@ -219,10 +219,10 @@ fn json_entries(path: &Path) -> Result<(Vec<Entry>, Vec<String>), ImportError> {
     Ok((out, listing.joint_names))
 }
 
-fn easyhec_entries(folder: &Path, fps: f64) -> Result<Vec<Entry>, ImportError> {
+fn easyhec_entries(folder: &Path, fps: f64) -> Result<Vec<Entry>, FootageError> {
     let color = folder.join("color");
     let mut files: Vec<PathBuf> = std::fs::read_dir(&color)
-        .map_err(|source| ImportError::Io {
+        .map_err(|source| FootageError::Io {
             path: color.clone(),
             action: "read",
             source,
@@ -276,19 +276,19 @@ fn first_file(folder: &Path, names: &[&str]) -> Option<PathBuf> {
 /// An image file as it is: its bytes, their format and the image's size (px).
 type Encoded = (Vec<u8>, ImageFormat, (u32, u32));
 
-fn encoded(path: &Path, at: &str) -> Result<Encoded, ImportError> {
+fn encoded(path: &Path, at: &str) -> Result<Encoded, FootageError> {
     let data = read(path)?;
     let format = ImageFormat::of_bytes(&data)
         .ok_or_else(|| listing_error(at, format!("{}: not a PNG or JPEG image", path.display())))?;
     let size = image::ImageReader::new(std::io::Cursor::new(&data))
         .with_guessed_format()
-        .map_err(|source| ImportError::Io {
+        .map_err(|source| FootageError::Io {
             path: path.to_owned(),
             action: "read",
             source,
         })?
         .into_dimensions()
-        .map_err(|source| ImportError::Image {
+        .map_err(|source| FootageError::Image {
             path: path.to_owned(),
             action: "read",
             source,
@@ -305,9 +305,9 @@ fn encoded(path: &Path, at: &str) -> Result<Encoded, ImportError> {
     clippy::too_many_lines,
     reason = "the listing read, every entry checked and the recording written, in that order"
 )]
-pub fn import_footage(o: &FootageOptions) -> Result<FootageSummary, ImportError> {
+pub fn import_footage(o: &FootageOptions) -> Result<FootageSummary, FootageError> {
     if !(o.fps.is_finite() && o.fps > 0.0) {
-        return Err(ImportError::input(
+        return Err(FootageError::input(
             "--fps",
             format!("{}: must be > 0", o.fps),
         ));
@@ -330,7 +330,7 @@ pub fn import_footage(o: &FootageOptions) -> Result<FootageSummary, ImportError>
             ("EasyHeC", easyhec_entries(folder, o.fps)?, Vec::new())
         }
         None => {
-            return Err(ImportError::input(
+            return Err(FootageError::input(
                 "FOLDER",
                 format!(
                     "{}: no frames.csv or frames.json (nor --listing), and no color/ folder (EasyHeC's layout)",
@@ -340,7 +340,7 @@ pub fn import_footage(o: &FootageOptions) -> Result<FootageSummary, ImportError>
         }
     };
     if entries.is_empty() {
-        return Err(ImportError::input("FOLDER", "the listing has no frames"));
+        return Err(FootageError::input("FOLDER", "the listing has no frames"));
     }
     // Names for joints given in q order.
     let ordered_names: Vec<String> = if !listed_names.is_empty() {
@@ -374,7 +374,7 @@ pub fn import_footage(o: &FootageOptions) -> Result<FootageSummary, ImportError>
         .clone()
         .or_else(|| first_file(folder, &["camera_info.yaml", "camera.yaml", "K.txt"]))
         .ok_or_else(|| {
-            ImportError::input(
+            FootageError::input(
                 "--camera",
                 "no camera file in the folder (camera_info.yaml, camera.yaml, K.txt): give one (a ROS camera_info or OpenCV YAML, or a 3x3 K)",
             )

@@ -28,7 +28,7 @@ use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use rosbag::{ChunkRecord, IndexRecord, MessageRecord, RosBag};
 use serde::Deserialize;
 
-use crate::ImportError;
+use crate::FootageError;
 
 /// What `avatarm import FILE.bag` does.
 #[derive(Debug, Clone, Default)]
@@ -199,8 +199,8 @@ struct Connection {
 /// A transform on `/tf` or `/tf_static`: parent, child, stamp, `parent_from_child`.
 type Link = (String, String, u64, Isometry3<f64>);
 
-fn bag_error(bag: &Path, message: impl Into<String>) -> ImportError {
-    ImportError::input(bag.display().to_string(), message)
+fn bag_error(bag: &Path, message: impl Into<String>) -> FootageError {
+    FootageError::input(bag.display().to_string(), message)
 }
 
 fn stamp_ns(t: &Time, received_ns: u64) -> u64 {
@@ -380,15 +380,15 @@ fn pick<'a>(
     kinds: &[&str],
     flag: &str,
     required: bool,
-) -> Result<Option<&'a str>, ImportError> {
+) -> Result<Option<&'a str>, FootageError> {
     if let Some(t) = asked {
         return match topics.get(t) {
             Some(k) if kinds.contains(&k.as_str()) => Ok(Some(t)),
-            Some(k) => Err(ImportError::input(
+            Some(k) => Err(FootageError::input(
                 flag,
                 format!("{t} carries {k}, not {}", kinds.join(" or ")),
             )),
-            None => Err(ImportError::input(
+            None => Err(FootageError::input(
                 flag,
                 format!(
                     "{t} is not in {} (its topics: {})",
@@ -407,7 +407,7 @@ fn pick<'a>(
         [one] => Ok(Some(one)),
         [] if !required => Ok(None),
         [] => Err(bag_error(bag, format!("no {} topic", kinds.join(" or ")))),
-        several => Err(ImportError::input(
+        several => Err(FootageError::input(
             flag,
             format!(
                 "the bag has several {} topics ({}): say which",
@@ -428,7 +428,7 @@ fn pick<'a>(
     clippy::too_many_lines,
     reason = "one pass over the bag's chunks with a branch per message kind, then the recording written; a split by message kind is left for the next pass"
 )]
-pub fn import_bag(o: &BagOptions) -> Result<BagSummary, ImportError> {
+pub fn import_bag(o: &BagOptions) -> Result<BagSummary, FootageError> {
     let path = &o.bag;
     let bag = RosBag::new(path)
         .map_err(|e| bag_error(path, format!("not a ROS 1 bag (format 2.0), or one never closed (`rosbag reindex` repairs that): {e}")))?;
@@ -730,7 +730,7 @@ pub fn import_bag(o: &BagOptions) -> Result<BagSummary, ImportError> {
         (Some(file), _) => (Some(read_pose(file)?), format!("--pose {}", file.display())),
         (None, Some(base)) => {
             if camera_frame.is_empty() {
-                return Err(ImportError::input(
+                return Err(FootageError::input(
                     "--base-frame",
                     "the camera's frames have no frame_id to chain the pose to",
                 ));
@@ -743,7 +743,7 @@ pub fn import_bag(o: &BagOptions) -> Result<BagSummary, ImportError> {
                 } else {
                     format!("; left out as not finite or not unit: {}", bad_links.join("; "))
                 };
-                ImportError::input(
+                FootageError::input(
                     "--base-frame",
                     format!(
                         "/tf does not connect {base} to the camera's frame {camera_frame} (frames in /tf and /tf_static: {}){left_out}",

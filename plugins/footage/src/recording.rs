@@ -1,23 +1,34 @@
-//! What a recording gives the erase and the calibration: its camera (calibration and intrinsics), a
-//! head camera's mount, the joint vectors at each frame, decoded frames.
+//! What a recording gives the erase and the calibration, read the same way by `avatarm replay
+//! --recording`, `avatarm calibrate` and a robot site serving a recording: its camera
+//! (calibration checked against the frames, and the pinhole intrinsics of its K), a head
+//! camera's mount, the joint vectors in a description's order, the joints at any stamp and
+//! decoded frames. Each error names the recording (as given) or the flag at fault.
 
-use super::*;
+use std::path::Path;
+
+use avatarm_core::robot::RobotModel;
+use avatarm_core::vision::camera::Intrinsics;
+use avatarm_record::camera::{CameraCalibration, read_calibration, read_mount};
+use avatarm_record::{CompressedFrame, Recording};
+use nalgebra::{DVector, Isometry3};
+
+use crate::FootageError;
 
 /// A recording of a camera on a head: its mount (`head_from_camera`), from `mount_file` or
 /// else the recording's; `None` for a fixed camera. Errors: `pose_flag` (a fixed camera's pose
 /// given on the command line) for a camera on a head, `mount_flag` for a fixed camera, a
 /// camera on a head with no tracked head pose, or with no mount at all.
-pub(crate) fn recording_mount(
+pub fn recording_mount(
     recording: &Recording,
     mount_file: Option<&Path>,
     pose_flag: Option<&str>,
     mount_flag: &str,
     name: &str,
-) -> Result<Option<Isometry3<f64>>, AppError> {
-    let bad = |message: String| AppError::recording(name.to_owned(), message);
+) -> Result<Option<Isometry3<f64>>, FootageError> {
+    let bad = |message: String| FootageError::input(name, message);
     if !recording.camera_on_head() {
         return match mount_file {
-            Some(_) => Err(AppError::flag(
+            Some(_) => Err(FootageError::input(
                 mount_flag,
                 format!(
                     "{name}: the recording's camera is fixed, not on a head: give its pose with --pose"
@@ -27,7 +38,7 @@ pub(crate) fn recording_mount(
         };
     }
     if let Some(flag) = pose_flag {
-        return Err(AppError::flag(
+        return Err(FootageError::input(
             flag,
             format!(
                 "{name}: the camera rides on a head ({} tracked head poses): its pose is the head's times the mount; give the mount with {mount_flag} FILE (head_from_camera), or none for the recording's",
@@ -53,12 +64,12 @@ pub(crate) fn recording_mount(
 /// A recording's camera: its calibration (or `camera`, a camera file, instead) checked against
 /// the frames' size, and the pinhole intrinsics from its K. Errors: no frames, no calibration,
 /// a calibration for another image size.
-pub(crate) fn recording_camera(
+pub fn recording_camera(
     recording: &Recording,
     camera: Option<&Path>,
     name: &str,
-) -> Result<(CameraCalibration, Intrinsics), AppError> {
-    let bad = |message: String| AppError::recording(name.to_owned(), message);
+) -> Result<(CameraCalibration, Intrinsics), FootageError> {
+    let bad = |message: String| FootageError::input(name, message);
     let first = recording
         .frames
         .first()
@@ -91,15 +102,15 @@ pub(crate) fn recording_camera(
 /// The recording's joint states in the description's q order, by stamp. Errors name a joint
 /// the description does not have; joints the recording never names stay at 0 (said in the
 /// notes).
-pub(crate) fn joint_vectors(
+pub fn joint_vectors(
     recording: &Recording,
     model: &RobotModel,
     name: &str,
     notes: &mut Vec<String>,
-) -> Result<Vec<(u64, DVector<f64>)>, AppError> {
+) -> Result<Vec<(u64, DVector<f64>)>, FootageError> {
     if recording.joint_states.is_empty() {
-        return Err(AppError::recording(
-            name.to_owned(),
+        return Err(FootageError::input(
+            name,
             "the recording has no joint states",
         ));
     }
@@ -116,8 +127,8 @@ pub(crate) fn joint_vectors(
                 // A mimic joint follows its leader (ROS names it too).
                 Err(avatarm_core::Error::MimicJoint { .. }) => {}
                 Err(_) => {
-                    return Err(AppError::recording(
-                        name.to_owned(),
+                    return Err(FootageError::input(
+                        name,
                         format!(
                             "joint states at {} ns: joint '{joint}' is not in the description '{}'",
                             s.stamp_ns, model.name
@@ -146,7 +157,7 @@ pub(crate) fn joint_vectors(
 
 /// The joints at `stamp_ns`: linear between the two states around it, the first before the
 /// first, the last after the last.
-pub(crate) fn interpolate(states: &[(u64, DVector<f64>)], stamp_ns: u64) -> DVector<f64> {
+pub fn interpolate(states: &[(u64, DVector<f64>)], stamp_ns: u64) -> DVector<f64> {
     let i = states.partition_point(|s| s.0 <= stamp_ns);
     match (i.checked_sub(1).map(|j| &states[j]), states.get(i)) {
         (Some(a), Some(b)) if b.0 > a.0 => {
@@ -159,12 +170,14 @@ pub(crate) fn interpolate(states: &[(u64, DVector<f64>)], stamp_ns: u64) -> DVec
     }
 }
 
-pub(crate) fn decode(f: &CompressedFrame, name: &str) -> Result<image::RgbaImage, AppError> {
+/// The frame decoded to RGBA8. Errors: a frame its format's decoder refuses, naming the
+/// recording, the format and the stamp.
+pub fn decode(f: &CompressedFrame, name: &str) -> Result<image::RgbaImage, FootageError> {
     image::load_from_memory(&f.data)
         .map(|i| i.to_rgba8())
         .map_err(|e| {
-            AppError::recording(
-                name.to_owned(),
+            FootageError::input(
+                name,
                 format!(
                     "the {} image at {} ns cannot be decoded: {e}",
                     f.format.name(),
@@ -172,4 +185,24 @@ pub(crate) fn decode(f: &CompressedFrame, name: &str) -> Result<image::RgbaImage
                 ),
             )
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn joints_are_interpolated_to_the_capture_time() {
+        let v = |x: f64| DVector::from_vec(vec![x, -x]);
+        let states = vec![(100, v(0.0)), (200, v(1.0)), (400, v(3.0))];
+        assert_eq!(interpolate(&states, 150), v(0.5));
+        assert_eq!(interpolate(&states, 300), v(2.0));
+        assert_eq!(
+            interpolate(&states, 50),
+            v(0.0),
+            "the first before the first"
+        );
+        assert_eq!(interpolate(&states, 900), v(3.0), "the last after the last");
+        assert_eq!(interpolate(&states, 200), v(1.0));
+    }
 }
