@@ -125,8 +125,10 @@ pub struct JoinReport {
     pub head: Option<HeadReport>,
     /// Times the robot site fell silent (no status or joint state for
     /// [`ROBOT_SITE_SILENT`]): a cut link, or the robot site stopped.
+    #[serde(default)]
     pub robot_site_silences: u64,
-    /// Times the robot site restarted (its clock jumped: the offset was estimated again).
+    /// Times the robot site restarted (its clock jumped back: the offset was estimated again).
+    #[serde(default)]
     pub robot_site_restarts: u64,
 }
 
@@ -167,6 +169,8 @@ struct Collect {
     last_word: Option<Instant>,
     /// It has been silent for [`ROBOT_SITE_SILENT`] since (said once).
     silent: bool,
+    /// It restarted as another robot site: why the session ends.
+    changed_site: Option<String>,
 }
 
 /// How long the real object's reported poses are kept (s): longer than the video's latency
@@ -352,12 +356,6 @@ impl Collect {
     }
 
     /// The window closed: the session ends.
-    fn closed(&self) -> bool {
-        self.view
-            .as_ref()
-            .is_some_and(|v| v.closed.load(Ordering::Relaxed))
-    }
-
     /// Hands the window its status line.
     fn show_line(&self) {
         if let Some(view) = &self.view {
@@ -691,6 +689,9 @@ fn run_session(
                 started,
             )?;
         }
+    }
+    if let Some(message) = collect.changed_site.take() {
+        return Err(AppError::Session { message });
     }
     Ok(collect.finish(started.elapsed().as_secs_f64()))
 }

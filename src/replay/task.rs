@@ -107,7 +107,10 @@ mod tests {
                 ("pitch_rmse_deg", m.pitch_rmse_deg),
                 ("yaw_rmse_deg", m.yaw_rmse_deg),
             ] {
-                assert!(figure.mean.is_finite(), "{mode} {key}");
+                assert!(
+                    figure.mean.is_finite() && figure.std.is_finite(),
+                    "{mode} {key}"
+                );
             }
             assert_eq!(m.trials.len(), 2);
         }

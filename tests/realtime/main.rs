@@ -1,5 +1,6 @@
 //! The app's real-time integration tests, in a binary of their own: two sites as processes
-//! through the impairment relay ([`network`]), the real frame path from a recorded camera and
+//! through the impairment relay ([`network`]), over a secure link with access control
+//! ([`secure`]), the real frame path from a recorded camera and
 //! its stage stamps ([`latency`]), and XR against a real OpenXR runtime ([`xr`]).
 //! Their processes run on the wall clock, so they run one at a time and apart from the
 //! replays (cargo runs test binaries one after another).
@@ -13,6 +14,7 @@ mod support;
 
 mod latency;
 mod network;
+mod secure;
 mod xr;
 
 /// One test at a time: each runs real-time processes (the robot site's control loop, its

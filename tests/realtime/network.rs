@@ -254,7 +254,7 @@ fn a_restarted_robot_site_is_said_and_its_new_clock_taken() {
     first.kill().expect("the test's set-up");
     let _ = first.wait();
     std::thread::sleep(Duration::from_secs(3));
-    let second = serve(&dir, port, 25.0, &["--insecure-lan", "--video", "off"]);
+    let second = serve(&dir, port, 30.0, &["--insecure-lan", "--video", "off"]);
     let j: JoinReport = finish(operator, &dir, "join");
     let s: ServeReport = finish(second, &dir, "serve");
     let log = std::fs::read_to_string(dir.join("join.log")).expect("the test's set-up");
@@ -265,14 +265,19 @@ fn a_restarted_robot_site_is_said_and_its_new_clock_taken() {
             .collect::<Vec<_>>()
             .join("\n")
     );
-    assert_eq!(j.robot_site_silences, 1, "{j:?}");
+    // Each silence said once and counted (a stall of the first robot site under load could
+    // make one more before the kill), the restart once.
+    assert!(j.robot_site_silences >= 1, "{j:?}");
     assert_eq!(j.robot_site_restarts, 1, "{j:?}");
-    for said in [
-        "no word from the robot site for 1.0 s",
-        "the robot site is heard again after",
-        "the robot site restarted (its clock jumped by -",
+    for (said, times) in [
+        (
+            "no word from the robot site for 1.0 s",
+            j.robot_site_silences,
+        ),
+        ("the robot site is heard again after", j.robot_site_silences),
+        ("the robot site restarted (its clock jumped by -", 1),
     ] {
-        assert_eq!(log.matches(said).count(), 1, "{said}:\n{log}");
+        assert_eq!(log.matches(said).count() as u64, times, "{said}:\n{log}");
     }
     // The second robot site's clock started after the operator's: its offset is negative (the
     // first's was positive), as the report now says.
@@ -306,196 +311,6 @@ fn the_operator_killed_the_arm_stops_and_holds() {
     let log = std::fs::read_to_string(dir.join("serve.log")).expect("the test's set-up");
     assert!(log.contains("the operator left; stopping the arm"), "{log}");
     assert_eq!(s.nan_commands, 0);
-}
-
-/// A certificate authority and the robot site's certificate for localhost and 127.0.0.1,
-/// made with the openssl command line (Debian's `openssl` package).
-fn certificates(dir: &Path) {
-    let sh = |args: &str| {
-        let out = Command::new("sh")
-            .arg("-c")
-            .arg(args)
-            .current_dir(dir)
-            .output()
-            .expect("needs the openssl command (apt install openssl)");
-        assert!(
-            out.status.success(),
-            "{args}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    };
-    sh(
-        "openssl req -x509 -newkey rsa:2048 -nodes -keyout ca.key -out ca.pem -days 2 -subj '/CN=avatarm test CA'",
-    );
-    sh("openssl req -newkey rsa:2048 -nodes -keyout site.key -out site.csr -subj '/CN=localhost'");
-    std::fs::write(
-        dir.join("ext.cnf"),
-        "subjectAltName=DNS:localhost,IP:127.0.0.1\n",
-    )
-    .expect("the test's set-up");
-    sh(
-        "openssl x509 -req -in site.csr -CA ca.pem -CAkey ca.key -CAcreateserial -out site.pem -days 2 -extfile ext.cnf",
-    );
-}
-
-#[test]
-fn over_tls_only_the_authenticated_operator_moves_the_robot() {
-    let _serial = serial();
-    let dir = out_dir("tls");
-    certificates(&dir);
-    std::fs::write(
-        dir.join("users.txt"),
-        "blair:pour-carefully\nwatcher:just-looking\n",
-    )
-    .expect("the test's set-up");
-    std::fs::write(dir.join("blair.txt"), "blair:pour-carefully\n").expect("the test's set-up");
-    std::fs::write(dir.join("watcher.txt"), "watcher:just-looking\n").expect("the test's set-up");
-    let port = free_port();
-    let endpoint = format!("tls/localhost:{port}");
-    let path = |name: &str| {
-        dir.join(name)
-            .to_str()
-            .expect("the test's set-up")
-            .to_owned()
-    };
-    let log = std::fs::File::create(dir.join("serve.log")).expect("the test's set-up");
-    let robot = Command::new(env!("CARGO_BIN_EXE_avatarm"))
-        .args([
-            "serve",
-            "assets/scenes/pouring.toml",
-            "--video",
-            "off",
-            "--listen",
-            &endpoint,
-        ])
-        .args([
-            "--tls-cert",
-            &path("site.pem"),
-            "--tls-key",
-            &path("site.key"),
-        ])
-        .args(["--credentials", &path("users.txt"), "--operator", "blair"])
-        .args(["--duration", "30", "--report", &path("serve.json")])
-        .stdout(Stdio::null())
-        .stderr(log)
-        .spawn()
-        .expect("the test's set-up");
-    let join_as = |name: &str, extra: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_avatarm"))
-            .args(["join", &endpoint, "--scene", "assets/scenes/pouring.toml"])
-            .args(["--report", &path(&format!("{name}.json"))])
-            .args(extra)
-            .output()
-            .expect("the test's set-up")
-    };
-    // Without the authority's certificate, or without credentials: refused.
-    let out = join_as(
-        "no_ca",
-        &["--credentials", &path("blair.txt"), "--wait", "3"],
-    );
-    // Each refusal says what to check (Zenoh itself says only that it could not connect).
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!out.status.success(), "joined without the CA");
-    assert!(
-        err.contains("no --tls-ca") && err.contains("login of user 'blair'"),
-        "{err}"
-    );
-    let out = join_as("no_user", &["--tls-ca", &path("ca.pem"), "--wait", "3"]);
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!out.status.success(), "joined without credentials");
-    assert!(
-        err.contains("requires a login: give --credentials") && err.contains("ca.pem"),
-        "{err}"
-    );
-    // An observer's credentials playing an operator: refused at once, naming --watch (the
-    // access control would deny its targets anyway: avatarm_net's
-    // `only_the_dictionary_s_operator_can_command_the_robot`).
-    let watcher = [
-        "--tls-ca",
-        &path("ca.pem"),
-        "--credentials",
-        &path("watcher.txt"),
-        "--duration",
-        "3",
-        "--wait",
-        "10",
-    ];
-    let out = join_as("watcher", &watcher);
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!out.status.success(), "an observer joined as an operator");
-    assert!(
-        err.contains("user 'watcher' may not command")
-            && err.contains("operators: blair")
-            && err.contains("--watch"),
-        "{err}"
-    );
-    // As an observer, it watches.
-    let out = join_as("watcher", &[&watcher[..], &["--watch"]].concat());
-    assert!(
-        out.status.success(),
-        "{:?}: {}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
-    // The operator.
-    let out = join_as(
-        "blair",
-        &[
-            "--tls-ca",
-            &path("ca.pem"),
-            "--credentials",
-            &path("blair.txt"),
-            "--duration",
-            "4",
-            "--wait",
-            "10",
-        ],
-    );
-    assert!(
-        out.status.success(),
-        "{:?}: {}",
-        out.status,
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let s: ServeReport = finish(robot, &dir, "serve");
-    let watcher: JoinReport = report(&dir, "watcher");
-    let blair: JoinReport = report(&dir, "blair");
-    assert_eq!(watcher.role, "observer", "{watcher:?}");
-    assert_eq!(watcher.targets_sent, 0, "{watcher:?}");
-    assert!(watcher.joint_states > 0, "{watcher:?}");
-    assert!(blair.targets_sent > 350, "{blair:?}");
-    // Only the operator's targets reached the robot.
-    let used = s.targets_used;
-    assert!(used > 0 && used <= blair.targets_sent, "{s:?}");
-    // An operator was present only inside Blair's window, never in the observer's, which
-    // ended before hers began: every join the robot site saw (on its clock) lies between Blair's
-    // clock's zero, before which her token cannot exist, and her exit (her session's length,
-    // plus 2 s for her start-up queries and the close). Zenoh 1.10's TLS link can drop and
-    // reconnect under load (eclipse-zenoh/zenoh#2557; docs/network.md), each time a leave and
-    // a join of the same operator, so joins are not asserted to be one.
-    let start = blair.clock_offset_s;
-    let end = start + blair.duration_s + 2.0;
-    assert!(
-        watcher.clock_offset_s + watcher.duration_s < start,
-        "the watcher's window overlaps Blair's: {watcher:?} {blair:?}"
-    );
-    let changes = &s.operator_changes;
-    let joins = s.operator_joins;
-    assert!(joins >= 1, "{s:?}");
-    assert_eq!(s.operator_leaves, joins, "she left at the end: {s:?}");
-    assert_eq!(changes.len() as u64, 2 * joins, "{s:?}");
-    for (i, change) in changes.iter().enumerate() {
-        assert_eq!(
-            change.present,
-            i % 2 == 0,
-            "joins and leaves alternate, a join first: {s:?}"
-        );
-        let t = change.t_s;
-        assert!(
-            t >= start - 0.05 && t <= end,
-            "an operator came or went outside Blair's window [{start}, {end}]: {s:?}"
-        );
-    }
 }
 
 /// Waits (at most 120 s: the robot site's renderer starts first) until the robot site on

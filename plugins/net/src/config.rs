@@ -75,6 +75,13 @@ pub struct TlsFiles {
     pub private_key: Option<PathBuf>,
 }
 
+/// An endpoint whose link is encrypted and authenticated by certificates: QUIC (`quic/`, TLS 1.3
+/// inside QUIC, through quinn) or TLS over TCP (`tls/`). Both take the same certificate files
+/// (Zenoh's `transport.link.tls`).
+pub fn secure(endpoint: &str) -> bool {
+    endpoint.starts_with("quic/") || endpoint.starts_with("tls/")
+}
+
 /// A site's network settings.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NetConfig {
@@ -82,7 +89,7 @@ pub struct NetConfig {
     pub role: Role,
     /// The session's key space.
     pub keys: Keys,
-    /// Endpoints to listen on (`tcp/0.0.0.0:7447`, `udp/...`, `tls/...`).
+    /// Endpoints to listen on (`tcp/0.0.0.0:7447`, `udp/...`, `tls/...`, `quic/...`).
     pub listen: Vec<String>,
     /// Endpoints to connect to.
     pub connect: Vec<String>,
@@ -147,11 +154,12 @@ impl NetConfig {
         // it must know that router (TLS, checked against the authority's certificate).
         if self.role == Role::RobotSite && !listens && !self.insecure_lan {
             let checked = self.tls.as_ref().is_some_and(|t| t.root_ca.is_some());
-            if !self.connect.iter().all(|e| e.starts_with("tls/")) || !checked {
+            if !self.connect.iter().all(|e| secure(e)) || !checked {
                 return bad(
                     "--connect",
-                    "a robot site that connects to a router obeys it: connect over tls/ with \
-                     --tls-ca (the router's authority), or --insecure-lan on a network you trust"
+                    "a robot site that connects to a router obeys it: connect over quic/ or tls/ \
+                     with --tls-ca (the router's authority), or --insecure-lan on a network you \
+                     trust"
                         .into(),
                 );
             }
@@ -164,11 +172,15 @@ impl NetConfig {
         }
         for e in self.listen.iter().chain(&self.connect) {
             if e.parse::<zenoh::config::EndPoint>().is_err()
-                || !["tcp/", "udp/", "tls/"].iter().any(|p| e.starts_with(p))
+                || !["tcp/", "udp/", "tls/", "quic/"]
+                    .iter()
+                    .any(|p| e.starts_with(p))
             {
                 return bad(
                     "endpoint",
-                    format!("'{e}' is not tcp/HOST:PORT, udp/HOST:PORT or tls/HOST:PORT"),
+                    format!(
+                        "'{e}' is not tcp/HOST:PORT, udp/HOST:PORT, quic/HOST:PORT or tls/HOST:PORT"
+                    ),
                 );
             }
         }
@@ -248,11 +260,11 @@ impl NetConfig {
                     return bad(name, format!("{} is not a file", p.display()));
                 }
             }
-            let tls_listen = self.listen.iter().any(|e| e.starts_with("tls/"));
+            let tls_listen = self.listen.iter().any(|e| secure(e));
             if tls_listen && (tls.certificate.is_none() || tls.private_key.is_none()) {
                 return bad(
                     "--tls-cert",
-                    "a TLS listener needs --tls-cert and --tls-key".into(),
+                    "a QUIC or TLS listener needs --tls-cert and --tls-key".into(),
                 );
             }
         }

@@ -98,23 +98,31 @@ fn connect_causes(config: &NetConfig) -> String {
         "nothing listens there (is `avatarm serve` or `avatarm router` running, on that endpoint?)"
             .to_owned(),
     ];
+    // Who checks the login and shows the certificate: the robot site, or the router between.
+    let peer = if config.role == crate::Role::RobotSite {
+        "the router"
+    } else {
+        "the robot site (or its router)"
+    };
     causes.push(match &config.credentials {
         Some(c) => format!(
             "the login of user '{}' was refused (a wrong password and an unknown user look alike from here)",
             c.user
         ),
-        None => "the robot site requires a login: give --credentials FILE (user:password)".into(),
+        None => format!("{peer} requires a login: give --credentials FILE (user:password)"),
     });
-    if config.connect.iter().any(|e| e.starts_with("tls/")) {
+    if config.connect.iter().any(|e| crate::config::secure(e)) {
         causes.push(match config.tls.as_ref().and_then(|t| t.root_ca.as_ref()) {
             Some(ca) => format!(
-                "the robot site's certificate is not signed by {}, or not for that host name",
+                "{peer}'s certificate is not signed by {}, or not for that host name",
                 ca.display()
             ),
-            None => "no --tls-ca: the robot site's certificate was checked against the system's authorities only".into(),
+            None => format!(
+                "no --tls-ca: {peer}'s certificate was checked against the system's authorities only"
+            ),
         });
     }
-    format!("check that {}", causes.join("; or "))
+    format!("possible causes: {}", causes.join("; "))
 }
 
 fn publisher(
@@ -578,9 +586,18 @@ impl OperatorSite {
         })
     }
 
-    /// The robot site's info.
+    /// The robot site's info, as it answered at the join.
     pub fn info(&self) -> &RobotInfo {
         &self.info
+    }
+
+    /// Asks the robot site for its info again (a restarted robot site may run another scene,
+    /// version or operators): `None` when none answers within `timeout`. Errors for an answer
+    /// that does not decode (another protocol version named).
+    pub fn ask_info(&self, timeout: Duration) -> Result<Option<RobotInfo>, NetError> {
+        query(&self.session, &self.keys.info(), timeout)
+            .map(|bytes| msg::decode_info(&bytes))
+            .transpose()
     }
 
     /// The clock offset's estimate (re-estimated every [`OFFSET_REFRESH`] on a thread of its
@@ -746,8 +763,8 @@ impl Drop for OperatorSite {
 pub struct RobotClock {
     /// The newest estimate in use.
     pub sample: ClockSample,
-    /// Jumps of the robot site's clock by more than [`RESTART_JUMP_S`] (plus the round trip):
-    /// restarts of the robot site.
+    /// Jumps of the robot site's clock back by more than [`RESTART_JUMP_S`] (plus the round
+    /// trip): restarts of the robot site.
     pub restarts: u64,
     /// The last jump (s, new offset minus the old).
     pub last_jump_s: f64,
@@ -788,9 +805,12 @@ fn refresher(
                     continue;
                 }
                 last = Instant::now();
-                if let Ok(o) = estimate_offset(&session, &keys, &local, 5) {
-                    let mut current = offset.lock().unwrap_or_else(|e| e.into_inner());
-                    current.take(o);
+                match estimate_offset(&session, &keys, &local, 5) {
+                    Ok(o) => offset.lock().unwrap_or_else(|e| e.into_inner()).take(o),
+                    // Asked for at once (the robot site heard again) and not had: asked again
+                    // at the next look, not a whole refresh later.
+                    Err(_) if soon => f.soon.store(true, std::sync::atomic::Ordering::Relaxed),
+                    Err(_) => {}
                 }
             }
         });
@@ -798,13 +818,16 @@ fn refresher(
 }
 
 impl RobotClock {
-    /// Takes a new estimate: at once when the robot site's clock jumped (a restart, counted),
-    /// else only when its round trip is close to the one in use (a worse round trip gives a
-    /// worse estimate: its queueing is one-sided).
+    /// Takes a new estimate: at once when the robot site's clock jumped, counted as a restart
+    /// when it jumped back (a restarted robot site starts its clock from zero; a jump forward
+    /// is this machine's clock stopped, e.g. suspended); else only when its round trip is close
+    /// to the one in use (a worse round trip gives a worse estimate: its queueing is one-sided).
     fn take(&mut self, o: ClockSample) {
         let jump = o.offset_s - self.sample.offset_s;
         if jump.abs() > RESTART_JUMP_S + o.rtt_s {
-            self.restarts += 1;
+            if jump < 0.0 {
+                self.restarts += 1;
+            }
             self.last_jump_s = jump;
             self.sample = o;
         } else if o.rtt_s <= self.sample.rtt_s * 1.5 + 0.002 {
@@ -908,5 +931,8 @@ mod tests {
         // A reply delayed by 3 s may be off by 1.5 s: not taken for a restart.
         clock.take(sample(-17.8, 3.0));
         assert_eq!((clock.sample.offset_s, clock.restarts), (-19.0, 1));
+        // A jump forward (this machine suspended for 60 s): taken, not a restart.
+        clock.take(sample(41.0, 0.001));
+        assert_eq!((clock.sample.offset_s, clock.restarts), (41.0, 1));
     }
 }

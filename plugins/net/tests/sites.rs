@@ -278,6 +278,29 @@ fn a_listener_without_credentials_is_refused_unless_on_a_trusted_lan() {
     assert!(Keys::new("a/b").is_err() && Keys::new("").is_err());
 }
 
+/// QUIC is taken as TLS is (the same certificate files): a listener needs its certificate, and
+/// a robot site that connects to a router may do so over either with the router's authority.
+#[test]
+fn quic_endpoints_take_the_tls_files() {
+    let mut listener = config(Role::RobotSite, "quic/127.0.0.1:7447", "t4");
+    assert!(listener.validate().is_ok());
+    listener.tls = Some(avatarm_net::TlsFiles {
+        root_ca: None,
+        certificate: None,
+        private_key: None,
+    });
+    let e = listener.validate().expect_err("no certificate");
+    assert!(e.to_string().contains("--tls-cert"), "{e}");
+    let mut connecting = config(Role::RobotSite, "quic/127.0.0.1:7447", "t4");
+    connecting.connect = std::mem::take(&mut connecting.listen);
+    connecting.insecure_lan = false;
+    let e = connecting.validate().expect_err("no authority");
+    assert!(e.to_string().contains("quic/ or tls/"), "{e}");
+    let bad = config(Role::Operator, "sctp/127.0.0.1:7447", "t4");
+    let e = bad.validate().expect_err("not a link Avatarm builds");
+    assert!(e.to_string().contains("quic/HOST:PORT"), "{e}");
+}
+
 #[test]
 fn only_the_dictionary_s_operator_can_command_the_robot() {
     let dir = std::env::temp_dir().join(format!("avatarm-net-{}", std::process::id()));

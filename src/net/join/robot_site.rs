@@ -1,6 +1,7 @@
 //! What the operator's site knows of the robot site beyond its streams: who may command it
 //! (its `robot/info`), and when it falls silent, is heard again or restarted (its clock
-//! jumped), each said once and counted in the report.
+//! jumped), each said once and counted in the report; a robot site restarted as another (its
+//! scene, operators or cameras) ends the session.
 
 use super::*;
 
@@ -69,6 +70,49 @@ impl Collect {
                 clock.sample.offset_s * 1e3,
                 clock.sample.rtt_s * 1e3
             );
+            self.changed_site = changed_site(site);
         }
+    }
+}
+
+/// A restarted robot site that is not the one joined (another scene, protocol or operators),
+/// or that does not say: why the session must end; `None` when it is the same.
+fn changed_site(site: &OperatorSite) -> Option<String> {
+    let first = site.info();
+    match site.ask_info(Duration::from_secs(2)) {
+        Ok(Some(now))
+            if now.scene_hash == first.scene_hash
+                && now.operators == first.operators
+                && now.cameras == first.cameras =>
+        {
+            None
+        }
+        Ok(Some(now)) => Some(format!(
+            "the robot site restarted as another: scene '{}' (fingerprint {}), operators [{}], cameras [{}]; joined to '{}' ({}), [{}], [{}]: join it again",
+            now.scene,
+            now.scene_hash,
+            now.operators.join(", "),
+            now.cameras.join(", "),
+            first.scene,
+            first.scene_hash,
+            first.operators.join(", "),
+            first.cameras.join(", ")
+        )),
+        Ok(None) => Some(
+            "the robot site restarted and did not say who it is (its info within 2 s): join it again"
+                .into(),
+        ),
+        Err(e) => Some(format!("the robot site restarted: {e}")),
+    }
+}
+
+impl Collect {
+    /// The session must end: the window closed, or the robot site restarted as another.
+    pub(super) fn closed(&self) -> bool {
+        self.changed_site.is_some()
+            || self
+                .view
+                .as_ref()
+                .is_some_and(|v| v.closed.load(Ordering::Relaxed))
     }
 }

@@ -34,7 +34,8 @@ fn robot_command_prints_fk_poses_as_json() {
     let w = tip.rotation_xyzw[3];
     assert!((w.abs() - t.rotation.w.abs()).abs() < 1e-12);
     assert_eq!(json.links.len(), model.links.len());
-    assert_eq!(json.q, q[..json.q.len()]);
+    assert_eq!(json.q.len(), model.dof());
+    assert_eq!(json.q, q[..model.dof()]);
 
     // Named values, and the tree.
     let tree = Command::new(env!("CARGO_BIN_EXE_avatarm"))
