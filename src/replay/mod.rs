@@ -47,12 +47,12 @@ use crate::score::{
 use crate::{AppError, AppTwin, AvatarmSystems, SceneResource};
 
 pub mod report;
+pub(crate) use report::lens_report;
 pub use report::{
     DrReport, GpuVsCpu, MaskReport, ReplayCamera, ReplayOutputs, ReplayReport, ReplayRobot,
     ViewsReport,
 };
 use report::{head_report, mean, stage_timings};
-pub(crate) use report::{lens_report, spread};
 pub use task::ObjectReport;
 
 mod record;
@@ -713,12 +713,14 @@ fn finish(
         .iter()
         .filter(|f| f.mask.robot_px > 0)
         .collect();
+    let of_robot =
+        |f: fn(&FrameScore) -> f64| -> Vec<f64> { with_robot.iter().map(|s| f(s)).collect() };
     let mask = MaskReport {
-        iou_mean: mean(with_robot.iter().map(|f| f.mask.iou)),
+        iou_mean: mean(&of_robot(|f| f.mask.iou)),
         iou_min: with_robot.iter().map(|f| f.mask.iou).reduce(f64::min),
-        leak_pct_mean: mean(with_robot.iter().map(|f| f.mask.leak_pct)),
+        leak_pct_mean: mean(&of_robot(|f| f.mask.leak_pct)),
         leak_pct_max: with_robot.iter().map(|f| f.mask.leak_pct).reduce(f64::max),
-        overmask_pct_mean: mean(with_robot.iter().map(|f| f.mask.overmask_pct)),
+        overmask_pct_mean: mean(&of_robot(|f| f.mask.overmask_pct)),
         frames_scored: replay.scores.len(),
         frames_with_robot: with_robot.len(),
     };
@@ -764,7 +766,7 @@ fn finish(
         background: erase.background_origin.clone(),
         mask,
         dr: DrReport {
-            psnr_robot_db_mean: mean(psnrs.iter().copied()),
+            psnr_robot_db_mean: mean(&psnrs),
             psnr_robot_db_min: psnrs.iter().copied().reduce(f64::min),
         },
         gpu_vs_cpu: GpuVsCpu {

@@ -772,4 +772,4 @@ enum Part {
     Raw,
 }
 
-use super::spread;
+use avatarm_core::stats::Spread;

@@ -340,18 +340,9 @@ pub struct AngleBin {
     pub psnr_robot_db_mean: Option<f64>,
 }
 
-/// Median, p95, largest and count of some times; `None` when there is none.
-pub(crate) fn spread(values: &[f64]) -> Times {
-    avatarm_core::stats::Spread::some_of(values)
-}
-
-pub(super) fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
-    let (mut s, mut n) = (0.0, 0usize);
-    for v in values {
-        s += v;
-        n += 1;
-    }
-    (n > 0).then(|| s / n as f64)
+/// The mean of `values`, `None` when there is none.
+pub(crate) fn mean(values: &[f64]) -> Option<f64> {
+    (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64)
 }
 
 /// `timing_ms`: the erase's mask (the mask twin's render and the dilation passes) and
@@ -394,7 +385,7 @@ pub(super) fn stage_timings(replay: &Replay, gpu: &SpanTimes) -> StageTimings {
         (None, false) => "cpu reference: no GPU pass time arrived".to_string(),
     };
     let entry = |ms: &[f64]| TimedRenders {
-        ms: spread(ms),
+        ms: Spread::some_of(ms),
         renders_timed: ms.len(),
     };
     let gpu_passes = passes
@@ -408,18 +399,18 @@ pub(super) fn stage_timings(replay: &Replay, gpu: &SpanTimes) -> StageTimings {
         .map(|name| (name.clone(), entry(&since(name))))
         .collect();
     StageTimings {
-        mask: spread(if on_gpu { &gpu_mask } else { &cpu_mask }),
-        composite: spread(if on_gpu { &gpu_comp } else { &cpu_comp }),
-        erase: spread(&gpu_erase),
-        upload: spread(&since(UPLOAD_SPAN)),
-        upload_cpu: spread(&since(UPLOAD_CPU_SPAN)),
-        frame: spread(&replay.frame_ms),
+        mask: Spread::some_of(if on_gpu { &gpu_mask } else { &cpu_mask }),
+        composite: Spread::some_of(if on_gpu { &gpu_comp } else { &cpu_comp }),
+        erase: Spread::some_of(&gpu_erase),
+        upload: Spread::some_of(&since(UPLOAD_SPAN)),
+        upload_cpu: Spread::some_of(&since(UPLOAD_CPU_SPAN)),
+        frame: Spread::some_of(&replay.frame_ms),
         source,
         gpu_passes,
         gpu_views,
         cpu_reference: CpuReference {
-            mask: spread(&cpu_mask),
-            composite: spread(&cpu_comp),
+            mask: Spread::some_of(&cpu_mask),
+            composite: Spread::some_of(&cpu_comp),
         },
         note: "mask: the mask twin's flat render plus the dilation passes; composite: the feathering and composite passes (the composite thresholds too when nothing dilates); erase: all of them; each the GPU time between timestamps written around the pass (source \"gpu\"), or the CPU reference of the same steps when the device has no timestamp queries; upload: the GPU copies of the live frame and H from their staging buffers, upload_cpu: the CPU copies into them; gpu_views: every other timed render (cameras and flat views) in this replay; cpu_reference: avatarm_core::dr on the same frame; frame: wall time per app update, all cameras included".into(),
     }
@@ -473,7 +464,7 @@ pub(super) fn head_report(
                 (!psnrs.is_empty()).then(|| AngleBin {
                     angle_deg: [lo, hi],
                     frames: psnrs.len(),
-                    psnr_robot_db_mean: mean(psnrs.iter().copied()),
+                    psnr_robot_db_mean: mean(&psnrs),
                 })
             })
             .collect()
@@ -489,9 +480,9 @@ pub(super) fn head_report(
             views_offered: vb.views.offered(),
             blank_frames_refused: vb.views.blank(),
             view_times_s: vb.views.times(),
-            seen_share_of_robot_region: mean(seen.iter().copied()),
-            nearest_view_deg: spread(&nearest),
-            cpu_ms: spread(&cpu),
+            seen_share_of_robot_region: mean(&seen),
+            nearest_view_deg: Spread::some_of(&nearest),
+            cpu_ms: Spread::some_of(&cpu),
             psnr_by_nearest_view: by_angle(&|e| e.nearest_view_deg),
         });
     let angles: Vec<f64> = errors.iter().map(|e| e.angle_deg).collect();
@@ -504,7 +495,7 @@ pub(super) fn head_report(
             .motion
             .peak_angular_speed(s.file.duration_s)
             .to_degrees(),
-        speed_deg_s_at_frames: spread(&speeds),
+        speed_deg_s_at_frames: Spread::some_of(&speeds),
         tracking: HeadTrackingReport {
             rate_hz: t.rate_hz,
             latency_s: t.latency_s,
@@ -512,9 +503,9 @@ pub(super) fn head_report(
             angle_sigma_deg: t.angle_sigma_rad.to_degrees(),
         },
         pose_compensation: s.file.erase.pose_compensation,
-        mask_camera_error_deg: spread(&angles),
-        mask_camera_error_mm: spread(&offsets),
-        newest_tracked_pose_age_ms: spread(&ages),
+        mask_camera_error_deg: Spread::some_of(&angles),
+        mask_camera_error_mm: Spread::some_of(&offsets),
+        newest_tracked_pose_age_ms: Spread::some_of(&ages),
         frames: errors.len(),
         view_background,
         psnr_by_angle_from_photo: by_angle(&|e| Some(e.photo_angle_deg)),

@@ -2,11 +2,7 @@
 //! session as a recording, and the report.
 
 use super::*;
-use crate::replay::report::GpuVsCpu;
-
-pub(super) fn mean(v: &[f64]) -> Option<f64> {
-    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-}
+use crate::replay::report::{GpuVsCpu, mean};
 
 /// Writes PNGs into the output folder and reads each back (for the erased recording).
 struct Images<'a> {
@@ -279,7 +275,7 @@ fn background_report(
             max_views: vb.max_views,
             min_separation_deg: vb.min_separation_rad.to_degrees(),
             robot_region_seen_pct_mean: mean(&seen).map(|f| 100.0 * f),
-            nearest_view_deg: spread(&nearest),
+            nearest_view_deg: Spread::some_of(&nearest),
             note: "each frame's H: the kept views re-projected through the room's boxes where the robot may be, the frame itself elsewhere; robot_region_seen_pct_mean: of the robot's region, the share some view saw (the footage's median fills the rest)".into(),
         });
     }
@@ -302,7 +298,7 @@ fn report(
     let get = |f: fn(&FrameVsReference) -> f64| -> Vec<f64> { scored.iter().map(f).collect() };
     let (iou, leak, over) = (get(|s| s.iou), get(|s| s.leak_pct), get(|s| s.overmask_pct));
     let span = |name: &str| {
-        spread(
+        Spread::some_of(
             &times
                 .spans
                 .get(name)

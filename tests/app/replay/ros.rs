@@ -33,6 +33,16 @@ fn sawyer_off_the_start(off_rad: f64) -> (Master, FakeSawyer) {
     (master, sawyer)
 }
 
+/// `avatarm run assets/scenes/pouring.toml --robot ros EXTRA` under Xvfb against `master`,
+/// its output in the test folder `name`; the run's log.
+#[cfg(feature = "ros")]
+fn preview_on_ros(master: &Master, name: &str, extra: &[&str]) -> String {
+    let out = out_dir(name);
+    std::fs::create_dir_all(&out).expect("the test's folder");
+    let args = [&["assets/scenes/pouring.toml", "--robot", "ros"][..], extra].concat();
+    run_preview_with(&args, &out, &[("ROS_MASTER_URI", &master.uri)])
+}
+
 /// `avatarm run --robot ros`: the live pouring task commands a Sawyer over ROS 1 (a real master
 /// and the simulated Sawyer node of `avatarm_ros::testing`, its arm where the task starts).
 #[cfg(feature = "ros")]
@@ -42,19 +52,7 @@ fn live_teleoperation_commands_a_sawyer_over_ros() {
     // The real arm left 0.05 rad off the task's start on its first joint: Avatarm moves it
     // there before the hand drives it.
     let (master, sawyer) = sawyer_off_the_start(0.05);
-    let out = out_dir("ros_live");
-    std::fs::create_dir_all(&out).unwrap();
-    let log = run_preview_with(
-        &[
-            "assets/scenes/pouring.toml",
-            "--robot",
-            "ros",
-            "--frames",
-            "90",
-        ],
-        &out,
-        &[("ROS_MASTER_URI", &master.uri)],
-    );
+    let log = preview_on_ros(&master, "ros_live", &["--frames", "90"]);
     assert!(
         log.contains("on the ROS robot at http://127.0.0.1"),
         "{log}"
@@ -103,20 +101,10 @@ fn a_slow_renderer_does_not_slow_the_robots_control() {
     // 0.3 rad off on the first joint: seconds of moving to the start, a steady stream of
     // commands that no hand data gates.
     let (master, sawyer) = sawyer_off_the_start(0.3);
-    let out = out_dir("ros_slow_render");
-    std::fs::create_dir_all(&out).unwrap();
-    let log = run_preview_with(
-        &[
-            "assets/scenes/pouring.toml",
-            "--robot",
-            "ros",
-            "--frames",
-            "30",
-            "--slow-update-ms",
-            "250",
-        ],
-        &out,
-        &[("ROS_MASTER_URI", &master.uri)],
+    let log = preview_on_ros(
+        &master,
+        "ros_slow_render",
+        &["--frames", "30", "--slow-update-ms", "250"],
     );
     let r = sawyer.report();
     eprintln!("fake Sawyer after a slowed run: {r}");
