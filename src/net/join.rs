@@ -208,7 +208,7 @@ impl Collect {
             match j {
                 Ok(j) => {
                     r.joint_states += 1;
-                    self.joint_age.push((robot_now - j.stamp_s) * 1e3);
+                    Spread::push(&mut self.joint_age, (robot_now - j.stamp_s) * 1e3);
                     if let Some(o) = &j.object {
                         // The last seconds, for the frames' capture times (a robot site that
                         // started again starts its clock again).

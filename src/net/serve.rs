@@ -17,8 +17,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use avatarm_core::stats::Spread;
-use avatarm_core::teleop::mapping::{MappingMode, pose_rmse};
-use avatarm_mapping::{RemoteTarget, Teleop, TeleopSample, TickSource};
+use avatarm_core::teleop::mapping::MappingMode;
+use avatarm_mapping::{RemoteTarget, Teleop, TickSource};
 use avatarm_net::RobotSite;
 use avatarm_net::episodes::RefusalEpisodes;
 use avatarm_net::msg::MAX_AHEAD_S;
@@ -28,9 +28,12 @@ use bevy::log::{info, warn};
 use super::video::ArmUpdate;
 
 mod camera_video;
+mod trial;
 pub use camera_video::{CameraVideo, PlayerReport};
-use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
+pub use trial::TrialMeasure;
+use trial::TrialTrack;
 
 /// One stop of the arm: when it began (s, site clock), why, and how long it lasted.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -56,26 +59,17 @@ pub struct OperatorChange {
 /// for hours must not grow the report without bound.
 pub const MAX_OPERATOR_CHANGES: usize = 1000;
 
-/// The paper's measure at the robot site: the real object against the twin's target of the
-/// same moment (the target stamped then, interpolated), from the grasp on.
-#[derive(Debug, Clone, Serialize, Deserialize, Default)]
-pub struct TrialMeasure {
-    /// When the gripper first closed (s, site clock).
-    pub grasp_at_s: Option<f64>,
-    /// Position RMSE (m).
-    pub pos_rmse_m: Option<f64>,
-    /// Roll, pitch, yaw RMSE (degrees).
-    pub rpy_rmse_deg: Option<[f64; 3]>,
-    /// Position RMSE against the target as it arrived (m): without the network's delay.
-    pub pos_rmse_as_received_m: Option<f64>,
-    /// Samples compared.
-    pub samples: usize,
-    /// Highest lift of the real object from its start (m).
-    pub real_lift_m: f64,
-    /// Highest commanded tool-point speed (m/s).
-    pub max_tcp_speed: f64,
-    /// Ticks the limiter was stopping the arm.
-    pub stop_ticks: u64,
+/// How many of the arm's stops the report lists (counted beyond), for the same reason.
+pub const MAX_STOPS: usize = 1000;
+
+impl ServeReport {
+    /// Counts a stop of the arm and lists it while fewer than [`MAX_STOPS`] are.
+    fn stopped(&mut self, stop: StopEpisode) {
+        self.stops_total += 1;
+        if self.stops.len() < MAX_STOPS {
+            self.stops.push(stop);
+        }
+    }
 }
 
 /// The robot site's report (`--report`).
@@ -117,8 +111,10 @@ pub struct ServeReport {
     pub operator_leaves: u64,
     /// When operators joined and left, in order (the first [`MAX_OPERATOR_CHANGES`]).
     pub operator_changes: Vec<OperatorChange>,
-    /// The arm's stops.
+    /// The arm's stops, in order (the first [`MAX_STOPS`]).
     pub stops: Vec<StopEpisode>,
+    /// All the arm's stops, listed or not.
+    pub stops_total: u64,
     /// Age of the target each tick used (ms, site clock minus the hand frame's stamp).
     pub target_age_ms: Spread,
     /// The control loop's tick period as run (ms).
@@ -222,9 +218,7 @@ impl ControlLoop {
         let mut refused: Option<String> = None;
         let mut episodes = RefusalEpisodes::new(2.0, 5.0);
         let mut stop_since: Option<(f64, String)> = None;
-        let mut samples: Vec<TeleopSample> = Vec::new();
-        // Every target used: (its stamp, the pose), and when it arrived.
-        let mut targets: Vec<(f64, Isometry3<f64>)> = Vec::new();
+        let mut trial = TrialTrack::new(self.start_z);
         let mut ages = Vec::new();
         let mut periods = Vec::new();
         let mut last_status = f64::NEG_INFINITY;
@@ -248,7 +242,7 @@ impl ControlLoop {
             }
             let at = Instant::now();
             if let Some(prev) = last_tick_at {
-                periods.push((at - prev).as_secs_f64() * 1e3);
+                Spread::push(&mut periods, (at - prev).as_secs_f64() * 1e3);
             }
             last_tick_at = Some(at);
             let now = clock.now_s();
@@ -298,7 +292,7 @@ impl ControlLoop {
                         }
                         last_seq = Some((m.seq, now));
                         refused = None;
-                        targets.push((t.stamp_s, t.target));
+                        trial.target(t.stamp_s, t.target);
                         latest = Some(RemoteTarget {
                             target: t,
                             hand_stamp_s: m.hand_stamp_s.min(now),
@@ -327,7 +321,7 @@ impl ControlLoop {
                 .filter(|_| present && refused.is_none())
                 .map(|t| t.freshened(now - latest_arrival_s, fresh_for_s));
             if let Some(t) = &use_target {
-                ages.push((now - t.hand_stamp_s) * 1e3);
+                Spread::push(&mut ages, (now - t.hand_stamp_s) * 1e3);
             }
             self.teleop.tick(now, dt, TickSource::Remote(use_target));
             let stopping = self.teleop.log.last().is_some_and(|s| s.stopping);
@@ -376,7 +370,7 @@ impl ControlLoop {
                             now - since
                         );
                     }
-                    report.stops.push(StopEpisode {
+                    report.stopped(StopEpisode {
                         t_s: *since,
                         reason: r.clone(),
                         length_s: Some(now - since),
@@ -402,10 +396,12 @@ impl ControlLoop {
                     warn!("robot site: {e}");
                 }
             }
-            samples.append(&mut self.teleop.log);
+            for s in self.teleop.log.drain(..) {
+                trial.sample(&s);
+            }
         }
         if let Some((since, r)) = stop_since {
-            report.stops.push(StopEpisode {
+            report.stopped(StopEpisode {
                 t_s: since,
                 reason: r,
                 length_s: None,
@@ -419,16 +415,8 @@ impl ControlLoop {
         report.last_error = self.teleop.status.last_error.clone();
         report.target_age_ms = Spread::of(&ages);
         report.tick_period_ms = Spread::of(&periods);
-        report.nan_commands = samples
-            .iter()
-            .filter(|s| s.qdot.iter().any(|v| !v.is_finite()))
-            .count() as u64;
-        report.trial = measure(
-            &samples,
-            &targets,
-            self.start_z,
-            self.teleop.status.max_tcp_speed,
-        );
+        report.nan_commands = trial.nan_commands();
+        report.trial = trial.finish(self.teleop.status.max_tcp_speed);
         report
     }
 }
@@ -460,71 +448,6 @@ fn pose7(p: Isometry3<f64>) -> [f64; 7] {
     [t.x, t.y, t.z, q.x, q.y, q.z, q.w]
 }
 
-/// The target stamped at `t_s`, interpolated between the two around it; `None` outside them
-/// or across a gap of more than 0.2 s.
-fn target_at(targets: &[(f64, Isometry3<f64>)], t_s: f64) -> Option<Isometry3<f64>> {
-    let after = targets.partition_point(|(t, _)| *t <= t_s);
-    if after == 0 || after >= targets.len() {
-        return None;
-    }
-    let (t0, a) = &targets[after - 1];
-    let (t1, b) = &targets[after];
-    if t1 - t0 > 0.2 {
-        return None;
-    }
-    let f = if t1 > t0 { (t_s - t0) / (t1 - t0) } else { 1.0 };
-    Some(Isometry3::from_parts(
-        Translation3::from(a.translation.vector.lerp(&b.translation.vector, f)),
-        a.rotation
-            * UnitQuaternion::from_scaled_axis(
-                (a.rotation.inverse() * b.rotation).scaled_axis() * f,
-            ),
-    ))
-}
-
-fn measure(
-    samples: &[TeleopSample],
-    targets: &[(f64, Isometry3<f64>)],
-    start_z: f64,
-    max_tcp_speed: f64,
-) -> TrialMeasure {
-    let mut sorted = targets.to_vec();
-    sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let grasp = samples.iter().position(|s| s.gripper_closed);
-    let mut m = TrialMeasure {
-        grasp_at_s: grasp.map(|i| samples[i].t_s),
-        max_tcp_speed,
-        stop_ticks: samples.iter().filter(|s| s.stopping).count() as u64,
-        ..TrialMeasure::default()
-    };
-    let real = TeleopSample::real_object;
-    m.real_lift_m = samples
-        .iter()
-        .filter_map(real)
-        .map(|p| p.translation.z - start_z)
-        .fold(0.0, f64::max);
-    let Some(from) = grasp else { return m };
-    let (mut then, mut actual, mut received, mut actual_r) = (vec![], vec![], vec![], vec![]);
-    for s in &samples[from..] {
-        let Some(r) = real(s) else { continue };
-        if let Some(t) = target_at(&sorted, s.t_s) {
-            then.push(t);
-            actual.push(r);
-        }
-        if s.target.translation.vector.iter().all(|v| v.is_finite()) {
-            received.push(s.target);
-            actual_r.push(r);
-        }
-    }
-    m.samples = then.len();
-    if let Some(e) = pose_rmse(&then, &actual) {
-        m.pos_rmse_m = Some(e[0]);
-        m.rpy_rmse_deg = Some([e[1], e[2], e[3]]);
-    }
-    m.pos_rmse_as_received_m = pose_rmse(&received, &actual_r).map(|e| e[0]);
-    m
-}
-
 /// A place the video side and the loop share: whether the loop should stop.
 pub type StopFlag = Arc<AtomicBool>;
 
@@ -534,19 +457,6 @@ pub type ReportSlot = Arc<Mutex<Option<ServeReport>>>;
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_target_of_a_moment_is_interpolated_and_gaps_are_left_out() {
-        let p = |x: f64| Isometry3::translation(x, 0.0, 0.0);
-        let targets = vec![(0.0, p(0.0)), (0.01, p(1.0)), (0.5, p(2.0))];
-        let t = target_at(&targets, 0.005).expect("between two");
-        assert!((t.translation.x - 0.5).abs() < 1e-12);
-        assert!(target_at(&targets, 0.2).is_none(), "across a gap");
-        assert!(target_at(&targets, -1.0).is_none());
-        assert!(target_at(&targets, 1.0).is_none());
-        let s = Spread::of(&[3.0, 1.0, 2.0, f64::NAN]);
-        assert_eq!((s.median, s.max, s.n), (2.0, 3.0, 3));
-    }
 
     #[test]
     fn a_stop_says_why() {

@@ -95,9 +95,9 @@ impl Stages {
         if !(h.capture_s <= h.arrived_s && h.arrived_s <= h.erased_s && h.erased_s <= h.sent_s) {
             video.stamps_out_of_order += 1;
         }
-        self.erase.push((h.erased_s - h.capture_s) * 1e3);
-        self.arrive.push((h.arrived_s - h.capture_s) * 1e3);
-        self.in_app.push((h.erased_s - h.arrived_s) * 1e3);
+        Spread::push(&mut self.erase, (h.erased_s - h.capture_s) * 1e3);
+        Spread::push(&mut self.arrive, (h.arrived_s - h.capture_s) * 1e3);
+        Spread::push(&mut self.in_app, (h.erased_s - h.arrived_s) * 1e3);
         let waited = h.handed_update.saturating_sub(h.arrived_update);
         let bucket = (waited as usize).min(WAITED_UPDATES_KEPT - 1);
         if video.waited_updates.len() <= bucket {
@@ -105,11 +105,11 @@ impl Stages {
         }
         video.waited_updates[bucket] += 1;
         video.waited_updates_max = video.waited_updates_max.max(waited);
-        self.encode.push((h.sent_s - h.erased_s) * 1e3);
-        self.network.push((received - h.sent_s) * 1e3);
-        self.decode.push(decode_ms);
+        Spread::push(&mut self.encode, (h.sent_s - h.erased_s) * 1e3);
+        Spread::push(&mut self.network, (received - h.sent_s) * 1e3);
+        Spread::push(&mut self.decode, decode_ms);
         let total = (received - h.capture_s) * 1e3 + decode_ms;
-        self.total.push(total);
+        Spread::push(&mut self.total, total);
         total
     }
 }

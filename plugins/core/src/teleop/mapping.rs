@@ -596,26 +596,61 @@ impl Mapper {
 
 /// Errors of a trial's pose track, the paper's measure: position RMSE (m) and roll/pitch/yaw
 /// RMSE (degrees) of `actual` against `target`, each orientation error as the roll-pitch-yaw
-/// of `target⁻¹ · actual`.
+/// of `target⁻¹ · actual`; `None` for tracks of different lengths or none.
 pub fn pose_rmse(target: &[Isometry3<f64>], actual: &[Isometry3<f64>]) -> Option<[f64; 4]> {
-    if target.len() != actual.len() || target.is_empty() {
+    if target.len() != actual.len() {
         return None;
     }
-    let mut sum = [0.0; 4];
+    let mut errors = PoseErrors::default();
     for (t, a) in target.iter().zip(actual) {
-        sum[0] += (a.translation.vector - t.translation.vector).norm_squared();
-        let (r, p, y) = (t.rotation.inverse() * a.rotation).euler_angles();
-        sum[1] += r * r;
-        sum[2] += p * p;
-        sum[3] += y * y;
+        errors.push(t, a);
     }
-    let n = target.len() as f64;
-    Some([
-        (sum[0] / n).sqrt(),
-        (sum[1] / n).sqrt().to_degrees(),
-        (sum[2] / n).sqrt().to_degrees(),
-        (sum[3] / n).sqrt().to_degrees(),
-    ])
+    errors.rmse()
+}
+
+/// [`pose_rmse`] as running sums: pairs pushed one at a time, so a track of any length (a
+/// robot site serving for days) is measured in constant memory.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PoseErrors {
+    /// Sums of squares: position (m²), roll, pitch, yaw (rad²).
+    sum: [f64; 4],
+    n: usize,
+}
+
+impl PoseErrors {
+    /// Adds the pair (`actual` against `target`); a pair with a value that is not finite is
+    /// left out.
+    pub fn push(&mut self, target: &Isometry3<f64>, actual: &Isometry3<f64>) {
+        let d = (actual.translation.vector - target.translation.vector).norm_squared();
+        let (r, p, y) = (target.rotation.inverse() * actual.rotation).euler_angles();
+        let add = [d, r * r, p * p, y * y];
+        if add.iter().all(|v| v.is_finite()) {
+            for (s, a) in self.sum.iter_mut().zip(add) {
+                *s += a;
+            }
+            self.n += 1;
+        }
+    }
+
+    /// Pairs summed.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// No pair summed.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// Position RMSE (m) and roll, pitch, yaw RMSE (degrees); `None` before any pair.
+    pub fn rmse(&self) -> Option<[f64; 4]> {
+        if self.n == 0 {
+            return None;
+        }
+        let n = self.n as f64;
+        let [p, r, pi, y] = self.sum.map(|s| (s / n).sqrt());
+        Some([p, r.to_degrees(), pi.to_degrees(), y.to_degrees()])
+    }
 }
 
 fn bad_input(message: String) -> crate::Error {
@@ -951,5 +986,13 @@ mod tests {
         assert!((r[0] - 0.005).abs() < 1e-12);
         assert!((r[3] - 2.0).abs() < 1e-9 && r[1].abs() < 1e-9);
         assert!(pose_rmse(&t, &a[..2]).is_none());
+        assert!(pose_rmse(&[], &[]).is_none());
+        // The running sums: the same figures, a pair that is not finite left out.
+        let mut errors = PoseErrors::default();
+        for (t, a) in t.iter().zip(&a) {
+            errors.push(t, a);
+        }
+        errors.push(&t[0], &Isometry3::translation(f64::NAN, 0.0, 0.0));
+        assert_eq!((errors.len(), errors.rmse()), (3, Some(r)));
     }
 }
