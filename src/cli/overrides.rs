@@ -186,6 +186,23 @@ impl EraseOverrides {
         Ok(())
     }
 
+    /// Without `--dilate`, the erase margin a believed pose or mount file carries
+    /// (`erase_margin_px`, what `avatarm calibrate` writes beside the pose it fits) becomes
+    /// the scene's `[erase] dilate_px`, said on the standard error.
+    fn take_margin(&self, file: &std::path::Path, scene: &mut Scene) -> Result<(), AppError> {
+        if self.dilate.is_some() {
+            return Ok(());
+        }
+        if let Some(px) = avatarm_record::camera::read_erase_margin(file)? {
+            eprintln!(
+                "erase: dilating the mask by {px} px, the margin {} asks for (--dilate to say otherwise)",
+                file.display()
+            );
+            scene.file.erase.dilate_px = px;
+        }
+        Ok(())
+    }
+
     /// Applies the overrides to `scene` and checks the result; errors name the flag.
     pub fn apply(&self, scene: &mut Scene) -> Result<(), AppError> {
         if let Some((width, height)) = self.camera_size {
@@ -207,6 +224,7 @@ impl EraseOverrides {
             }
             let base_from_camera = avatarm_record::camera::read_pose(path)?;
             scene.believed_camera.world_from_camera = scene.robot_base() * base_from_camera;
+            self.take_margin(path, scene)?;
         }
         if let Some(path) = &self.believed_mount {
             let Some(head) = scene.head.as_mut() else {
@@ -219,6 +237,7 @@ impl EraseOverrides {
             // The camera as believed at t = 0 (before the first tracked pose; where a
             // background photograph was taken from).
             scene.believed_camera.world_from_camera = head.believed_camera_at(0.0);
+            self.take_margin(path, scene)?;
         }
         if let Some(path) = &self.background {
             if !path.is_file() {

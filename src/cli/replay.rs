@@ -94,6 +94,11 @@ impl ReplayArgs {
                         pose,
                         mount: overrides.believed_mount.clone(),
                         settings,
+                        dilate_from: if overrides.dilate.is_some() {
+                            crate::replay::recording::DilateFrom::Flag
+                        } else {
+                            crate::replay::recording::DilateFrom::Default
+                        },
                         background: overrides.background.clone(),
                         background_margin_px: background_margin,
                         room,

@@ -74,6 +74,9 @@ pub struct RecordingOptions {
     pub mount: Option<PathBuf>,
     /// The erase's settings.
     pub settings: EraseSettings,
+    /// Where `settings.dilate_px` comes from: [`DilateFrom::Default`] lets the pose (or
+    /// mount) file's `erase_margin_px` (written by `avatarm calibrate`) replace it.
+    pub dilate_from: DilateFrom,
     /// H from an image file instead of from the footage.
     pub background: Option<PathBuf>,
     /// How far beyond the mask a pixel counts as possibly the robot when H is built (px).
@@ -85,6 +88,49 @@ pub struct RecordingOptions {
     pub out: PathBuf,
     /// Show a progress bar.
     pub progress: bool,
+}
+
+/// Where the mask's dilation comes from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum DilateFrom {
+    /// `--dilate`: as given.
+    Flag,
+    /// Nothing said: the pose or mount file's margin where it has one, else the default.
+    Default,
+    /// The margin `avatarm calibrate` wrote into this pose or mount file.
+    Calibration(PathBuf),
+}
+
+impl DilateFrom {
+    /// What the report says.
+    pub fn said(&self) -> String {
+        match self {
+            Self::Flag => "--dilate".into(),
+            Self::Default => "the default (no --dilate, no erase_margin_px in a pose file)".into(),
+            Self::Calibration(p) => {
+                format!("erase_margin_px in {} (avatarm calibrate)", p.display())
+            }
+        }
+    }
+}
+
+impl RecordingOptions {
+    /// These options with the dilation the pose (or mount) file asks for, where `--dilate`
+    /// did not say and the file has `erase_margin_px`. Errors: the file's margin is malformed.
+    fn with_calibrated_margin(&self) -> Result<Self, AppError> {
+        let mut o = self.clone();
+        if o.dilate_from != DilateFrom::Default {
+            return Ok(o);
+        }
+        let Some(file) = o.pose.as_ref().or(o.mount.as_ref()) else {
+            return Ok(o);
+        };
+        if let Some(px) = avatarm_record::camera::read_erase_margin(file)? {
+            o.settings.dilate_px = px;
+            o.dilate_from = DilateFrom::Calibration(file.clone());
+        }
+        Ok(o)
+    }
 }
 
 /// H built from the footage (its origin's name).
@@ -99,6 +145,7 @@ const MAX_WAIT_UPDATES: u32 = 600;
 /// Replays the recording; returns the report (also written to `out/report.json`).
 pub fn run_recording(o: &RecordingOptions) -> Result<RecordingReport, AppError> {
     let started = Instant::now();
+    let o = &o.with_calibrated_margin()?;
     let input = Input::load(o)?;
     std::fs::create_dir_all(&o.out).map_err(|source| AppError::Io {
         path: o.out.clone(),

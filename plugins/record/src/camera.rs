@@ -415,6 +415,29 @@ pub fn read_pose(path: &Path) -> Result<Isometry3<f64>, CameraFileError> {
     )
 }
 
+/// The largest erase margin a pose file may ask for (px).
+pub const MAX_ERASE_MARGIN_PX: i64 = 64;
+
+/// The erase margin a pose or mount file carries (`erase_margin_px: N`, which `avatarm
+/// calibrate` writes beside the pose it fits: the mask dilation, in pixels, that covers how
+/// far the fitted outline stays from the frames'); `None` when the file has none. Errors: the
+/// file cannot be read or parsed, or the value is not a whole number from 0 to
+/// [`MAX_ERASE_MARGIN_PX`] (naming the file).
+pub fn read_erase_margin(path: &Path) -> Result<Option<u32>, CameraFileError> {
+    let text = read_text(path)?;
+    let y = parse_yaml(path, &text)?;
+    match &y["erase_margin_px"] {
+        Yaml::BadValue => Ok(None),
+        Yaml::Integer(v) if (0..=MAX_ERASE_MARGIN_PX).contains(v) => Ok(Some(*v as u32)),
+        other => Err(content(
+            path,
+            format!(
+                "erase_margin_px: {other:?} is not a whole number of pixels from 0 to {MAX_ERASE_MARGIN_PX}"
+            ),
+        )),
+    }
+}
+
 /// Reads the mount of a camera on a head: a YAML or JSON file whose one top-level key is
 /// `head_from_camera` (the camera's pose in the head's optical frame: x right, y down,
 /// z forward) or `camera_from_head`, holding a pose as [`read_pose`] reads it. Returns
@@ -613,6 +636,22 @@ mod tests {
         );
         let c = read_calibration(&fisheye, Some((640, 480))).expect("fisheye");
         assert_eq!(c.distortion_model, DistortionModel::Equidistant);
+    }
+
+    #[test]
+    fn a_pose_file_s_erase_margin_is_read_and_a_bad_one_named() {
+        let pose = "base_from_camera:\n  - [1, 0, 0, 0]\n  - [0, 1, 0, 0]\n  - [0, 0, 1, 1]\n  - [0, 0, 0, 1]\n";
+        let plain = file("pose_plain.yaml", pose);
+        assert_eq!(read_erase_margin(&plain).expect("read"), None);
+        let with = file("pose_margin.yaml", &format!("{pose}erase_margin_px: 3\n"));
+        assert_eq!(read_erase_margin(&with).expect("read"), Some(3));
+        read_pose(&with).expect("the pose still reads");
+        for bad in ["-1", "2.5", "1000", "wide"] {
+            let f = file("pose_bad.yaml", &format!("{pose}erase_margin_px: {bad}\n"));
+            let e = read_erase_margin(&f).expect_err(bad);
+            assert!(e.to_string().contains("pose_bad.yaml"), "{e}");
+            assert!(e.to_string().contains("erase_margin_px"), "{e}");
+        }
     }
 
     #[test]

@@ -336,6 +336,7 @@ fn report(
         },
         erase: RecordingErase {
             dilate_px: settings.dilate_px,
+            dilate_from: o.dilate_from.said(),
             feather_px: settings.feather_px,
             resolution_scale: settings.resolution_scale,
             photometric: settings.photometric,

@@ -76,10 +76,12 @@ pub struct MountPose {
 }
 
 /// The erase's settings used.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RecordingErase {
     /// The mask's dilation (px).
     pub dilate_px: u32,
+    /// Where it comes from: `--dilate`, the calibration's margin in a pose file, the default.
+    pub dilate_from: String,
     /// The alpha ramp's width (px).
     pub feather_px: u32,
     /// The mask twin's render scale.

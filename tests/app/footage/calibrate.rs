@@ -107,7 +107,13 @@ fn the_camera_calibrated_from_a_simulated_session_erases_the_robot() {
         deg_bg <= 0.2 && mm_bg <= 2.0,
         "{deg_bg} deg {mm_bg} mm\n{rep_bg:?}"
     );
-    // The scene with the calibrated pose: no dilation, the robot erased.
+    // The margin the fit calls for (measured: a fraction of a pixel's outline distance,
+    // the spread over starts below a pixel: 1 or 2 px in all).
+    let margin = rep.margin.as_ref().expect("a margin measured");
+    eprintln!("margin {margin:?}");
+    assert!(margin.dilate_px <= 3 && !margin.capped, "{margin:?}");
+    // The scene with the calibrated pose (and the margin written beside it, taken with no
+    // --dilate): the robot erased.
     let replayed = out.join("replayed");
     let (ok, log) = replay(&[
         scene_path.to_str().expect("utf-8"),

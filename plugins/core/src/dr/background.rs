@@ -3,14 +3,34 @@
 //! Each frame adds its pixels that the (dilated) robot mask does not cover; the estimate of a
 //! pixel is the per-channel median of the last `keep` samples it got (robust to a passer-by or
 //! a missed sliver of the robot in a few frames), with the number of samples it got in all.
-//! Pixels no frame ever uncovered (where the robot stood the whole time) are filled from their
-//! surroundings: in order of their distance (in 8-connected steps) from the seen pixels, each
-//! takes the mean of its neighbours already known, so a hole fills inwards from its rim. Filled
-//! pixels are marked: they are a guess, and the replay reports how much of the robot's region
-//! had to be guessed.
+//! Pixels no frame ever uncovered (where the robot stood the whole time) are inpainted
+//! ([`HoleFill`]): by default with Telea's method ([`super::inpaint`]), which carries the
+//! colours and the isophotes arriving at the hole's rim inwards; or, for comparison, ring by
+//! ring (each pixel the mean of its 8-neighbours already known: a flat smear). Filled pixels
+//! are marked: they are a guess, and the replay reports how much of the robot's region had to
+//! be guessed.
 
 use crate::dr::RgbaView;
 use crate::error::{Error, Result};
+
+/// How the pixels no frame showed are filled.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum HoleFill {
+    /// Telea's fast-marching inpainting with neighbourhoods of this radius (px).
+    Telea {
+        /// Neighbourhood radius (px).
+        radius: f32,
+    },
+    /// Ring by ring inwards, each pixel the rounded mean of its 8-neighbours already known.
+    Rings,
+}
+
+impl Default for HoleFill {
+    /// Telea's method with a 5 px radius.
+    fn default() -> Self {
+        Self::Telea { radius: 5.0 }
+    }
+}
 
 /// Accumulates uncovered pixels of frames of one size.
 #[derive(Debug, Clone)]
@@ -121,9 +141,14 @@ impl FootageBackground {
         Ok(())
     }
 
-    /// The background so far: medians where seen, the rest filled from the surroundings (all
+    /// The background so far: medians where seen, the rest inpainted by Telea's method (all
     /// black when nothing was seen).
     pub fn estimate(&self) -> BackgroundEstimate {
+        self.estimate_with(HoleFill::default())
+    }
+
+    /// [`FootageBackground::estimate`] with the pixels no frame showed filled by `fill`.
+    pub fn estimate_with(&self, fill: HoleFill) -> BackgroundEstimate {
         let (w, h) = (self.width as usize, self.height as usize);
         let n = w * h;
         let mut rgb = vec![[0u8; 3]; n];
@@ -146,7 +171,7 @@ impl FootageBackground {
         }
         let seen: Vec<u8> = known.iter().map(|&k| u8::from(k)).collect();
         if known.iter().any(|&k| k) {
-            fill_from_surroundings(&mut rgb, &mut known, w, h);
+            fill_hole(&mut rgb, &mut known, w, h, fill);
         }
         BackgroundEstimate {
             width: self.width,
@@ -158,9 +183,18 @@ impl FootageBackground {
     }
 }
 
+/// Fills the pixels of `rgb` where `known` is `false` by `fill` (`known` all `true` after).
+pub fn fill_hole(rgb: &mut [[u8; 3]], known: &mut [bool], w: usize, h: usize, fill: HoleFill) {
+    match fill {
+        HoleFill::Rings => fill_rings(rgb, known, w, h),
+        HoleFill::Telea { radius } => super::inpaint::inpaint_telea(rgb, known, w, h, radius),
+    }
+    known.fill(true);
+}
+
 /// Fills the unknown pixels in order of their 8-connected distance from the known ones, each
 /// with the rounded mean of its known neighbours.
-fn fill_from_surroundings(rgb: &mut [[u8; 3]], known: &mut [bool], w: usize, h: usize) {
+fn fill_rings(rgb: &mut [[u8; 3]], known: &mut [bool], w: usize, h: usize) {
     let neighbours = |i: usize| {
         let (x, y) = ((i % w) as i64, (i / w) as i64);
         (-1i64..=1)

@@ -25,6 +25,7 @@
 
 pub mod background;
 pub mod composite;
+pub mod inpaint;
 pub mod mask;
 pub mod photometric;
 pub mod scores;

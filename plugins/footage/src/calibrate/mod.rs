@@ -51,6 +51,7 @@ use crate::FootageError;
 use crate::recording::{joint_vectors, recording_camera, recording_mount};
 
 mod frames;
+pub mod margin;
 mod outputs;
 mod report;
 
@@ -289,7 +290,24 @@ pub fn run(
     let scored = outputs::score(o, &inputs, &used.frames, &result, in_fit)?;
     let pairing = outputs::pairing(&used.frames, &scored.drawn, &mut notes);
     outputs::note_far_move(o, &inputs, &result, &options, &mut notes);
-    let files = outputs::write_files(o, &inputs, &result, fit.len())?;
+    let (w, h) = inputs.size;
+    let margin = margin::erase_margin(
+        &used.frames,
+        &scored.drawn,
+        &pairing.1,
+        (w as usize, h as usize),
+        o.edges.is_some(),
+        &result,
+    );
+    match &margin {
+        None => notes.push("no outline could be measured: no erase margin is written beside the pose (replay then dilates by --dilate, 0 by default)".into()),
+        Some(m) if m.capped => notes.push(format!(
+            "the fit calls for an erase margin beyond {} px (its outline p95 {:.1} px, its spread over starts {:.1} px): too uncertain to erase with, so none is written beside the pose; check the overlays and fit again (a closer rough pose, frames that carry their own joints)",
+            margin::MAX_MARGIN_PX, m.outline_p95_px, m.spread_px
+        )),
+        Some(_) => {}
+    }
+    let files = outputs::write_files(o, &inputs, &result, fit.len(), margin.as_ref())?;
     let report = outputs::report(&outputs::Parts {
         o,
         inputs: &inputs,
@@ -299,6 +317,7 @@ pub fn run(
         pairing,
         frames_fit: fit.len(),
         outputs: files,
+        margin,
         notes,
         wall_time_s: started.elapsed().as_secs_f64(),
     });

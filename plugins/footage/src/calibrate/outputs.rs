@@ -183,6 +183,7 @@ pub(super) fn write_files(
     inputs: &Inputs,
     result: &CalibrationResult,
     frames_fit: usize,
+    margin: Option<&super::margin::EraseMargin>,
 ) -> Result<CalibrateOutputs, FootageError> {
     let (pose_file, key, frame_name) = if inputs.on_head {
         (
@@ -210,10 +211,16 @@ pub(super) fn write_files(
             )
         })
         .collect();
-    let text = format!(
+    let mut text = format!(
         "# The camera's pose in {frame_name} (OpenCV optical axes: x right, y down,\n# z forward), fitted by `avatarm calibrate` to {frames_fit} frames of {}.\n{key}:\n{rows}",
         inputs.name
     );
+    if let Some(m) = margin.filter(|m| !m.capped) {
+        text += &format!(
+            "# The erase margin this fit calls for (px; `replay --recording` dilates the mask by\n# it unless --dilate says otherwise): the model's outline within {:.1} px of the\n# frames' (95th percentile), the fit's spread {:.1} px, 1 px for the edge itself.\nerase_margin_px: {}\n",
+            m.outline_p95_px, m.spread_px, m.dilate_px
+        );
+    }
     std::fs::write(&pose_path, text).map_err(|e| FootageError::write(&pose_path, e))?;
     let camera = if o.fit_focal {
         Some(write_intrinsics(o, inputs, result)?)
@@ -266,6 +273,7 @@ pub(super) struct Parts<'a> {
     pub pairing: (Vec<Pairing>, Vec<usize>),
     pub frames_fit: usize,
     pub outputs: CalibrateOutputs,
+    pub margin: Option<super::margin::EraseMargin>,
     pub notes: Vec<String>,
     pub wall_time_s: f64,
 }
@@ -346,6 +354,7 @@ pub(super) fn report(p: &Parts) -> CalibrateReport {
         wall_time_s: p.wall_time_s,
         notes: p.notes.clone(),
         outputs: p.outputs.clone(),
+        margin: p.margin.clone(),
     }
 }
 

@@ -42,6 +42,9 @@ pub struct CalibrateReport {
     pub cost_px: FitCost,
     /// How far other good starts ended from the answer.
     pub uncertainty: Uncertainty,
+    /// The erase margin the fit calls for (written beside the pose as `erase_margin_px`);
+    /// `None` when no outline could be measured.
+    pub margin: Option<super::margin::EraseMargin>,
     /// Each frame's reference against every frame's joints (empty when skipped: see `notes`).
     pub pairing: Vec<Pairing>,
     /// Frames whose mask another frame's joints explain clearly better than their own.

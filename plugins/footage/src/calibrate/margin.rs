@@ -1,0 +1,245 @@
+//! The erase margin a fit calls for: how far the fitted model's outline stays from what the
+//! frames show of the robot's outline, as a mask dilation in pixels, written beside the pose
+//! (`erase_margin_px`) for `replay --recording` to take by default.
+//!
+//! Per used frame (those the pairing check found recorded with another frame's joints left
+//! out: no pose fits them): the model's outline at the fitted pose (its silhouette's border pixels,
+//! those on the image's border left out), and for each of its pixels the Euclidean distance to
+//! the nearest observed outline pixel (the image's edges with `--edges`, else the observed
+//! silhouette's border; exact distance transform, Felzenszwalb and Huttenlocher 2012). Pixels
+//! farther than [`MATCH_PX`] have no counterpart (an occluded part, an edge too faint) and are
+//! counted apart. The margin is `ceil(p95 + spread + 1)`: the 95th percentile of the matched
+//! distances over all frames, the fit's spread over its starts projected to pixels at the
+//! robot's distance, and one pixel for the edge's own width (a pixel the outline crosses
+//! mixes the robot's colour with the background's).
+
+use avatarm_core::stats::quantile;
+use avatarm_core::vision::calibrate::{CalibrationResult, distance_transform, outline};
+use serde::{Deserialize, Serialize};
+
+use super::frames::UsedFrame;
+
+/// Outline pixels farther than this from any observed outline pixel have no counterpart (px).
+pub const MATCH_PX: f32 = 8.0;
+
+/// The largest margin (px): a fit that calls for more is too uncertain to erase with; its
+/// margin is reported (capped) but not written beside the pose, and a note says to fit again.
+pub const MAX_MARGIN_PX: u32 = avatarm_record::camera::MAX_ERASE_MARGIN_PX as u32;
+
+/// The margin the fit calls for, and what it is made of.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EraseMargin {
+    /// The mask's dilation to erase with (px): `ceil(outline_p95_px + spread_px + 1)`, at
+    /// most [`MAX_MARGIN_PX`].
+    pub dilate_px: u32,
+    /// The fit called for more than [`MAX_MARGIN_PX`]: too uncertain to erase with (not
+    /// written beside the pose).
+    pub capped: bool,
+    /// Frames measured (the used frames not mispaired, with an observed outline).
+    pub frames_measured: usize,
+    /// Median distance from the model's outline to the observed one (px).
+    pub outline_median_px: f64,
+    /// 95th percentile of the same (px).
+    pub outline_p95_px: f64,
+    /// The fit's spread over its starts (rotation and translation), projected to pixels at
+    /// the robot's distance from the camera.
+    pub spread_px: f64,
+    /// Outline pixels measured (over all used frames).
+    pub outline_pixels: usize,
+    /// Of the model's outline pixels, the share with no observed outline within
+    /// [`MATCH_PX`] (%): occluded or too faint to see.
+    pub unmatched_pct: f64,
+    /// How it was found.
+    pub note: String,
+}
+
+/// The margin over `frames` (each with `drawn`, its model silhouette at the fitted pose,
+/// `w × h`, 0/1; those whose index is in `mispaired` left out), fitted to edges (`edges`) or
+/// silhouettes. `None` when no outline pixel was matched (nothing to measure).
+pub(super) fn erase_margin(
+    frames: &[UsedFrame],
+    drawn: &[Vec<u8>],
+    mispaired: &[usize],
+    (w, h): (usize, usize),
+    edges: bool,
+    result: &CalibrationResult,
+) -> Option<EraseMargin> {
+    let mut distances: Vec<f64> = Vec::new();
+    let mut unmatched = 0usize;
+    let mut measured = 0usize;
+    for (f, model) in frames.iter().zip(drawn) {
+        if mispaired.contains(&f.index) {
+            continue;
+        }
+        let observed = if edges {
+            f.silhouette.observed.clone()
+        } else {
+            outline(&f.silhouette.observed, w, h)
+        };
+        if !observed.iter().any(|&v| v != 0) {
+            continue;
+        }
+        measured += 1;
+        let field = distance_transform(&observed, w, h);
+        for (i, &o) in outline(model, w, h).iter().enumerate() {
+            let (x, y) = (i % w, i / w);
+            if o == 0 || x == 0 || y == 0 || x + 1 == w || y + 1 == h {
+                continue;
+            }
+            if field[i] <= MATCH_PX {
+                distances.push(f64::from(field[i]));
+            } else {
+                unmatched += 1;
+            }
+        }
+    }
+    distances.sort_by(f64::total_cmp);
+    let p95 = quantile(&distances, 0.95)?;
+    let median = quantile(&distances, 0.5)?;
+    let spread_px = spread_px(result);
+    let total = distances.len() + unmatched;
+    let wanted = (p95 + spread_px + 1.0).ceil();
+    Some(EraseMargin {
+        dilate_px: wanted.min(f64::from(MAX_MARGIN_PX)) as u32,
+        capped: wanted > f64::from(MAX_MARGIN_PX),
+        frames_measured: measured,
+        outline_median_px: median,
+        outline_p95_px: p95,
+        spread_px,
+        outline_pixels: distances.len(),
+        unmatched_pct: 100.0 * unmatched as f64 / total.max(1) as f64,
+        note: format!(
+            "dilate_px = ceil(outline_p95_px + spread_px + 1): the 95th percentile of the distance from the fitted model's outline to the nearest observed {} pixel (those within {MATCH_PX} px), the fit's spread over its starts at the robot's distance, and 1 px for the edge's own width",
+            if edges {
+                "image edge"
+            } else {
+                "silhouette border"
+            }
+        ),
+    })
+}
+
+/// The fit's spread over its starts in pixels: the rotation's (focal length × angle) plus the
+/// translation's (focal length × distance / depth, at the robot base's depth).
+fn spread_px(result: &CalibrationResult) -> f64 {
+    let (deg, mm) = result.spread_deg_mm;
+    let f = result.intrinsics.fx.max(result.intrinsics.fy);
+    let depth = result.camera_from_base.translation.vector.norm().max(0.1);
+    f * (deg.to_radians() + mm / 1e3 / depth)
+}
+
+#[cfg(test)]
+mod tests {
+    use avatarm_core::vision::calibrate::SilhouetteFrame;
+    use avatarm_core::vision::camera::Intrinsics;
+    use nalgebra::Isometry3;
+
+    use super::*;
+
+    fn square(w: usize, h: usize, from: usize, to: usize) -> Vec<u8> {
+        (0..w * h)
+            .map(|i| u8::from((from..to).contains(&(i % w)) && (from..to).contains(&(i / w))))
+            .collect()
+    }
+
+    fn result(spread_deg_mm: (f64, f64)) -> CalibrationResult {
+        CalibrationResult {
+            camera_from_base: Isometry3::translation(0.0, 0.0, 1.0),
+            intrinsics: Intrinsics {
+                width: 40,
+                height: 40,
+                fx: 100.0,
+                fy: 100.0,
+                cx: 20.0,
+                cy: 20.0,
+            },
+            cost_px: 0.0,
+            rough_cost_px: 0.0,
+            starts: Vec::new(),
+            spread_deg_mm,
+            evaluations: 0,
+            stage_seconds: [0.0; 3],
+            stage_evaluations: [0; 3],
+        }
+    }
+
+    #[test]
+    fn a_model_two_pixels_inside_the_robot_calls_for_three() {
+        let (w, h) = (40, 40);
+        // The robot is the square 10..30; the model drawn 2 px smaller on every side.
+        let frame = UsedFrame {
+            index: 0,
+            silhouette: SilhouetteFrame {
+                triangles: Vec::new(),
+                observed: square(w, h, 10, 30),
+            },
+            scored: None,
+        };
+        let drawn = square(w, h, 12, 28);
+        let m = erase_margin(&[frame], &[drawn], &[], (w, h), false, &result((0.0, 0.0)))
+            .expect("measured");
+        assert!((m.outline_p95_px - 2.0).abs() < 1e-6, "{m:?}");
+        assert_eq!((m.dilate_px, m.unmatched_pct), (3, 0.0));
+        // A spread of 0.5 deg at f = 100 px is 0.87 px more.
+        let frame = UsedFrame {
+            index: 0,
+            silhouette: SilhouetteFrame {
+                triangles: Vec::new(),
+                observed: square(w, h, 10, 30),
+            },
+            scored: None,
+        };
+        let m = erase_margin(
+            &[frame],
+            &[square(w, h, 12, 28)],
+            &[],
+            (w, h),
+            false,
+            &result((0.5, 0.0)),
+        )
+        .expect("measured");
+        assert_eq!(m.dilate_px, 4, "{m:?}");
+        // A frame recorded with another frame's joints is left out; a spread beyond reason
+        // is capped and said.
+        let frame = |index| UsedFrame {
+            index,
+            silhouette: SilhouetteFrame {
+                triangles: Vec::new(),
+                observed: square(w, h, 10, 30),
+            },
+            scored: None,
+        };
+        let drawn = [square(w, h, 12, 28), square(w, h, 16, 24)];
+        let m = erase_margin(
+            &[frame(0), frame(1)],
+            &drawn,
+            &[1],
+            (w, h),
+            false,
+            &result((0.0, 0.0)),
+        )
+        .expect("measured");
+        assert_eq!((m.dilate_px, m.frames_measured), (3, 1));
+        let m = erase_margin(
+            &[frame(0)],
+            &drawn[..1],
+            &[],
+            (w, h),
+            false,
+            &result((45.0, 0.0)),
+        )
+        .expect("measured");
+        assert_eq!((m.dilate_px, m.capped), (MAX_MARGIN_PX, true));
+        // Nothing observed: nothing to measure.
+        let empty = UsedFrame {
+            index: 0,
+            silhouette: SilhouetteFrame {
+                triangles: Vec::new(),
+                observed: vec![0; w * h],
+            },
+            scored: None,
+        };
+        let drawn = [square(w, h, 12, 28)];
+        assert!(erase_margin(&[empty], &drawn, &[], (w, h), true, &result((0.0, 0.0))).is_none());
+    }
+}
