@@ -6,11 +6,15 @@
 # if the robot site dies; says how it ended (exit code and signal), how long it ran, and its
 # report's counts. Not in CI.
 #
-#   scripts/hostile_serve.sh [PROTO] [MINUTES]      default: tls 5
+#   scripts/hostile_serve.sh [PROTO] [MINUTES]      default: quic 5
+#
+# tls (Zenoh's TLS over TCP) is refused by Avatarm since it crashed here (eclipse-zenoh/zenoh#2557,
+# docs/network.md); to reproduce that crash, run this with tls against a build from before
+# (commit 557b1bf or earlier).
 #   AVATARM=path/to/avatarm  OUT=folder             (default: the debug build, target/hostile)
 set -euo pipefail
 cd "$(dirname "$0")/.."
-PROTO=${1:-tls}
+PROTO=${1:-quic}
 MINUTES=${2:-5}
 AVATARM=${AVATARM:-${CARGO_TARGET_DIR:-target}/debug/avatarm}
 OUT=${OUT:-target/hostile_$PROTO}

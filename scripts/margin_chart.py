@@ -32,7 +32,9 @@ ROUGH = """camera_from_base:
 
 
 def run(*args):
-    subprocess.run([AVATARM, *map(str, args)], check=True, stdout=subprocess.DEVNULL)
+    done = subprocess.run([AVATARM, *map(str, args)], capture_output=True, text=True)
+    if done.returncode != 0:
+        sys.exit(f"avatarm {args[0]} failed ({done.returncode}):\n{done.stderr[-2000:]}")
 
 
 def replay(pose, out, dilate=None):
@@ -46,24 +48,29 @@ def replay(pose, out, dilate=None):
 
 
 def svg(rows, margin, path):
-    w, h, left, bottom = 560, 320, 60, 40
-    top = max(max(r[2] for r in rows), 1.0)
-    xs = lambda d: left + (w - left - 20) * d / max(r[0] for r in rows)
-    ys = lambda v: h - bottom - (h - bottom - 20) * v / top
+    """Leak (left axis, red) and overmask (right axis, blue) against the dilation."""
+    w, h, left, right, bottom = 600, 320, 60, 60, 40
+    most = max(r[0] for r in rows)
+    tops = (max(max(r[1] for r in rows), 0.1), max(max(r[2] for r in rows), 1.0))
+    xs = lambda d: left + (w - left - right) * d / most
+    ys = lambda v, top: h - bottom - (h - bottom - 20) * v / top
     out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">',
            f'<rect width="{w}" height="{h}" fill="white"/>',
-           f'<line x1="{left}" y1="{h - bottom}" x2="{w - 20}" y2="{h - bottom}" stroke="black"/>',
-           f'<line x1="{left}" y1="20" x2="{left}" y2="{h - bottom}" stroke="black"/>',
-           f'<text x="{w / 2}" y="{h - 8}" text-anchor="middle">mask dilation (px)</text>',
-           f'<text x="14" y="{h / 2}" transform="rotate(-90 14 {h / 2})" text-anchor="middle">% of the robot (frames 0, 1, 5)</text>']
-    for d in range(0, int(max(r[0] for r in rows)) + 1, 2):
+           f'<line x1="{left}" y1="{h - bottom}" x2="{w - right}" y2="{h - bottom}" stroke="black"/>',
+           f'<text x="{w / 2}" y="{h - 8}" text-anchor="middle">mask dilation (px)</text>']
+    for d in range(0, int(most) + 1, 2):
         out.append(f'<text x="{xs(d)}" y="{h - bottom + 15}" text-anchor="middle">{d}</text>')
-    for v in (0, top / 2, top):
-        out.append(f'<text x="{left - 5}" y="{ys(v) + 4}" text-anchor="end">{v:.1f}</text>')
-    for i, (name, colour) in enumerate((("leak", "#e15759"), ("overmask", "#4e79a7"))):
-        pts = " ".join(f"{xs(r[0])},{ys(r[1 + i])}" for r in rows)
+    for i, (name, colour, x, anchor) in enumerate((
+            ("leak (% of the robot, frames 0, 1, 5)", "#e15759", left, "end"),
+            ("overmask (%)", "#4e79a7", w - right, "start"))):
+        top = tops[i]
+        out.append(f'<line x1="{x}" y1="20" x2="{x}" y2="{h - bottom}" stroke="{colour}"/>')
+        for v in (0, top / 2, top):
+            dx = -5 if anchor == "end" else 5
+            out.append(f'<text x="{x + dx}" y="{ys(v, top) + 4}" text-anchor="{anchor}" fill="{colour}">{v:.1f}</text>')
+        pts = " ".join(f"{xs(r[0])},{ys(r[1 + i], top)}" for r in rows)
         out.append(f'<polyline points="{pts}" fill="none" stroke="{colour}" stroke-width="2"/>')
-        out.append(f'<text x="{w - 120}" y="{30 + 16 * i}" fill="{colour}">{name}</text>')
+        out.append(f'<text x="{left + 10}" y="{34 + 16 * i}" fill="{colour}">{name}</text>')
     out.append(f'<line x1="{xs(margin)}" y1="20" x2="{xs(margin)}" y2="{h - bottom}" stroke="#59a14f" stroke-dasharray="4 3"/>')
     out.append(f'<text x="{xs(margin) + 4}" y="{h - bottom - 6}" fill="#59a14f">calibrated margin {margin} px</text>')
     out.append("</svg>")

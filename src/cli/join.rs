@@ -13,8 +13,8 @@ use crate::cli::args::{live_hand, packages, pouring_scene};
 /// The arguments of `avatarm join`.
 #[derive(Args, Debug)]
 pub struct JoinArgs {
-    /// The robot site (or a router): tcp/HOST:PORT, udp/HOST:PORT, quic/HOST:PORT or
-    /// tls/HOST:PORT.
+    /// The robot site (or a router): tcp/HOST:PORT, udp/HOST:PORT or quic/HOST:PORT (tls/ is
+    /// refused: Zenoh's TLS link crashes under load, docs/network.md).
     endpoint: String,
     /// The scene file, the same as the robot site's (default: the pouring scene).
     #[arg(long, value_name = "FILE")]

@@ -33,8 +33,8 @@ pub struct ServeArgs {
     /// recording's robot are counted, not obeyed.
     #[arg(long = "camera-recording", value_name = "FILE.mcap")]
     camera_recording: Option<PathBuf>,
-    /// Where to listen (tcp/HOST:PORT, udp/HOST:PORT, quic/HOST:PORT or tls/HOST:PORT; quic/
-    /// between real sites; default tcp/0.0.0.0:7447 unless --connect is given).
+    /// Where to listen (tcp/HOST:PORT, udp/HOST:PORT or quic/HOST:PORT; quic/ between real
+    /// sites; default tcp/0.0.0.0:7447 unless --connect is given).
     #[arg(long, value_name = "ENDPOINT")]
     listen: Vec<String>,
     /// Connect to a router instead of listening (`avatarm router`, docs/network.md):

@@ -41,13 +41,13 @@ pub struct NetArgs {
     /// video through the router (repeatable).
     #[arg(long = "robot-site", value_name = "USER")]
     pub robot_sites: Vec<String>,
-    /// QUIC or TLS: the certificate authority's certificate (PEM), to check the other side.
+    /// QUIC: the certificate authority's certificate (PEM), to check the other side.
     #[arg(long = "tls-ca", value_name = "FILE")]
     pub tls_ca: Option<PathBuf>,
-    /// QUIC or TLS: this side's certificate (PEM; a quic/ or tls/ listener needs it).
+    /// QUIC: this side's certificate (PEM; a quic/ listener needs it).
     #[arg(long = "tls-cert", value_name = "FILE")]
     pub tls_cert: Option<PathBuf>,
-    /// QUIC or TLS: this side's private key (PEM).
+    /// QUIC: this side's private key (PEM).
     #[arg(long = "tls-key", value_name = "FILE")]
     pub tls_key: Option<PathBuf>,
     /// serve/router: listen without authentication (a trusted LAN or a test).

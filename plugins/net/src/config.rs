@@ -76,11 +76,18 @@ pub struct TlsFiles {
 }
 
 /// An endpoint whose link is encrypted and authenticated by certificates: QUIC (`quic/`, TLS 1.3
-/// inside QUIC, through quinn) or TLS over TCP (`tls/`). Both take the same certificate files
-/// (Zenoh's `transport.link.tls`).
+/// inside QUIC, through quinn; Zenoh's `transport.link.tls` certificate files).
 pub fn secure(endpoint: &str) -> bool {
-    endpoint.starts_with("quic/") || endpoint.starts_with("tls/")
+    endpoint.starts_with("quic/")
 }
+
+/// Why `tls/` (Zenoh's TLS over TCP) is refused: its link reads and writes one rustls stream
+/// from two tasks at once, and the process dies of it under load (SIGILL in the link's sending
+/// task: eclipse-zenoh/zenoh#2557, zenoh 1.10.2; docs/network.md).
+pub const TLS_REFUSED: &str = "Zenoh's tls/ link crashes its process under load (it reads and \
+    writes one TLS stream from two tasks: eclipse-zenoh/zenoh#2557, docs/network.md): use \
+    quic/ with the same certificate flags, or tcp/ inside a tunnel you trust (WireGuard, SSH) \
+    where UDP is blocked";
 
 /// A site's network settings.
 #[derive(Debug, Clone, PartialEq)]
@@ -89,7 +96,7 @@ pub struct NetConfig {
     pub role: Role,
     /// The session's key space.
     pub keys: Keys,
-    /// Endpoints to listen on (`tcp/0.0.0.0:7447`, `udp/...`, `tls/...`, `quic/...`).
+    /// Endpoints to listen on (`tcp/0.0.0.0:7447`, `udp/...`, `quic/...`).
     pub listen: Vec<String>,
     /// Endpoints to connect to.
     pub connect: Vec<String>,
@@ -157,7 +164,7 @@ impl NetConfig {
             if !self.connect.iter().all(|e| secure(e)) || !checked {
                 return bad(
                     "--connect",
-                    "a robot site that connects to a router obeys it: connect over quic/ or tls/ \
+                    "a robot site that connects to a router obeys it: connect over quic/ \
                      with --tls-ca (the router's authority), or --insecure-lan on a network you \
                      trust"
                         .into(),
@@ -171,16 +178,15 @@ impl NetConfig {
             );
         }
         for e in self.listen.iter().chain(&self.connect) {
+            if e.starts_with("tls/") {
+                return bad("endpoint", format!("'{e}': {TLS_REFUSED}"));
+            }
             if e.parse::<zenoh::config::EndPoint>().is_err()
-                || !["tcp/", "udp/", "tls/", "quic/"]
-                    .iter()
-                    .any(|p| e.starts_with(p))
+                || !["tcp/", "udp/", "quic/"].iter().any(|p| e.starts_with(p))
             {
                 return bad(
                     "endpoint",
-                    format!(
-                        "'{e}' is not tcp/HOST:PORT, udp/HOST:PORT, quic/HOST:PORT or tls/HOST:PORT"
-                    ),
+                    format!("'{e}' is not tcp/HOST:PORT, udp/HOST:PORT or quic/HOST:PORT"),
                 );
             }
         }

@@ -163,83 +163,50 @@ mod tests {
         }
     }
 
+    /// Frame `index` seeing the robot as `observed` (0/1, 40x40).
+    fn frame(index: usize, observed: Vec<u8>) -> UsedFrame {
+        UsedFrame {
+            index,
+            silhouette: SilhouetteFrame {
+                triangles: Vec::new(),
+                observed,
+            },
+            scored: None,
+        }
+    }
+
     #[test]
     fn a_model_two_pixels_inside_the_robot_calls_for_three() {
         let (w, h) = (40, 40);
         // The robot is the square 10..30; the model drawn 2 px smaller on every side.
-        let frame = UsedFrame {
-            index: 0,
-            silhouette: SilhouetteFrame {
-                triangles: Vec::new(),
-                observed: square(w, h, 10, 30),
-            },
-            scored: None,
+        let robot = || frame(0, square(w, h, 10, 30));
+        let drawn = [square(w, h, 12, 28), square(w, h, 16, 24)];
+        let margin = |frames: &[UsedFrame], mispaired: &[usize], spread_deg: f64| {
+            erase_margin(
+                frames,
+                &drawn[..frames.len()],
+                mispaired,
+                (w, h),
+                false,
+                &result((spread_deg, 0.0)),
+            )
+            .expect("measured")
         };
-        let drawn = square(w, h, 12, 28);
-        let m = erase_margin(&[frame], &[drawn], &[], (w, h), false, &result((0.0, 0.0)))
-            .expect("measured");
+        let m = margin(&[robot()], &[], 0.0);
         assert!((m.outline_p95_px - 2.0).abs() < 1e-6, "{m:?}");
         assert_eq!((m.dilate_px, m.unmatched_pct), (3, 0.0));
         // A spread of 0.5 deg at f = 100 px is 0.87 px more.
-        let frame = UsedFrame {
-            index: 0,
-            silhouette: SilhouetteFrame {
-                triangles: Vec::new(),
-                observed: square(w, h, 10, 30),
-            },
-            scored: None,
-        };
-        let m = erase_margin(
-            &[frame],
-            &[square(w, h, 12, 28)],
-            &[],
-            (w, h),
-            false,
-            &result((0.5, 0.0)),
-        )
-        .expect("measured");
-        assert_eq!(m.dilate_px, 4, "{m:?}");
-        // A frame recorded with another frame's joints is left out; a spread beyond reason
-        // is capped and said.
-        let frame = |index| UsedFrame {
-            index,
-            silhouette: SilhouetteFrame {
-                triangles: Vec::new(),
-                observed: square(w, h, 10, 30),
-            },
-            scored: None,
-        };
-        let drawn = [square(w, h, 12, 28), square(w, h, 16, 24)];
-        let m = erase_margin(
-            &[frame(0), frame(1)],
-            &drawn,
-            &[1],
-            (w, h),
-            false,
-            &result((0.0, 0.0)),
-        )
-        .expect("measured");
+        assert_eq!(margin(&[robot()], &[], 0.5).dilate_px, 4);
+        // A frame recorded with another frame's joints (drawn 6 px inside) is left out.
+        let m = margin(&[robot(), frame(1, square(w, h, 10, 30))], &[1], 0.0);
         assert_eq!((m.dilate_px, m.frames_measured), (3, 1));
-        let m = erase_margin(
-            &[frame(0)],
-            &drawn[..1],
-            &[],
-            (w, h),
-            false,
-            &result((45.0, 0.0)),
-        )
-        .expect("measured");
+        // A spread beyond reason is capped and said.
+        let m = margin(&[robot()], &[], 45.0);
         assert_eq!((m.dilate_px, m.capped), (MAX_MARGIN_PX, true));
         // Nothing observed: nothing to measure.
-        let empty = UsedFrame {
-            index: 0,
-            silhouette: SilhouetteFrame {
-                triangles: Vec::new(),
-                observed: vec![0; w * h],
-            },
-            scored: None,
-        };
-        let drawn = [square(w, h, 12, 28)];
-        assert!(erase_margin(&[empty], &drawn, &[], (w, h), true, &result((0.0, 0.0))).is_none());
+        let empty = [frame(0, vec![0; w * h])];
+        assert!(
+            erase_margin(&empty, &drawn[..1], &[], (w, h), true, &result((0.0, 0.0))).is_none()
+        );
     }
 }
