@@ -10,8 +10,10 @@ packages=(
   libssl-dev python3-rosmaster python3-rospy python3-sensor-msgs python3-std-msgs python3-genpy
   # The bag import's tests write their bags with Debian's rosbag.
   python3-rosbag python3-tf2-msgs python3-geometry-msgs
-  # pip, for PyPI's MCAP reader below.
+  # pip, for PyPI's MCAP reader and rosbags below.
   python3-pip
+  # rosbag2's SQLite storage (avatarm import links the system's SQLite).
+  libsqlite3-dev
   # The two-site tests make their TLS certificates with the openssl command.
   openssl
   # OpenH264's SIMD kernels (the h264 video codec builds without them, several times slower).
@@ -33,9 +35,11 @@ command -v cargo >/dev/null || {
   exit 1
 }
 # PyPI's MCAP reader: the recording tests read each file back with it too (a second,
-# independent reader). Installed into Avatarm's cache folder, not the system's Python.
+# independent reader); PyPI's rosbags: the rosbag2 import's tests convert their ROS 1 bags
+# with it (rosbag2 written by an implementation Avatarm did not write). Installed into
+# Avatarm's cache folder, not the system's Python.
 python_dir="$HOME/.cache/avatarm/python"
-if ! PYTHONPATH="$python_dir" python3 -c "import mcap.reader" 2>/dev/null; then
-  echo "installing PyPI's mcap into $python_dir"
-  PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet --target "$python_dir" "mcap>=1.1"
+if ! PYTHONPATH="$python_dir" python3 -c "import mcap.reader, rosbags.convert" 2>/dev/null; then
+  echo "installing PyPI's mcap and rosbags into $python_dir"
+  PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet --upgrade --target "$python_dir" "mcap>=1.1" "rosbags==0.11.*"
 fi

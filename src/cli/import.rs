@@ -1,5 +1,6 @@
 //! `avatarm import`: a real Leap Motion recording to a `.hand.jsonl`, or a folder of camera
-//! frames or a ROS 1 bag to a recording (MCAP, `avatarm_footage`).
+//! frames or a ROS bag (ROS 1, or a rosbag2's folder or storage file) to a recording (MCAP,
+//! `avatarm_footage`).
 
 use std::path::PathBuf;
 
@@ -13,8 +14,9 @@ use crate::cli::args::packages;
 #[derive(Args, Debug)]
 pub struct ImportArgs {
     /// The Leap recording, a folder of camera frames with the robot's joints (a listing
-    /// frames.csv or frames.json, or EasyHeC's color/ qpos/ mask/ K.txt), or a ROS 1 bag
-    /// (.bag: Image or CompressedImage, CameraInfo, JointState, /tf; docs/real-footage.md).
+    /// frames.csv or frames.json, or EasyHeC's color/ qpos/ mask/ K.txt), or a ROS bag: ROS 1
+    /// (.bag), or a rosbag2 folder (metadata.yaml) or storage file (.mcap, .db3); Image or
+    /// CompressedImage, CameraInfo, JointState, /tf (docs/real-footage.md).
     recording: PathBuf,
     /// The .hand.jsonl to write (a Leap recording), or the .mcap (frames or a bag).
     #[arg(long, value_name = "FILE")]
@@ -94,10 +96,7 @@ impl ImportArgs {
                 joint_states_topic,
                 base_frame,
                 ..
-            } if recording
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("bag")) =>
-            {
+            } if is_bag(&recording) => {
                 let s = avatarm_footage::bag::import_bag(&avatarm_footage::bag::BagOptions {
                     bag: recording,
                     out: out.clone(),
@@ -116,8 +115,9 @@ impl ImportArgs {
                     eprintln!("note: {note}");
                 }
                 println!(
-                    "wrote {} (ROS bag): {} frames {}x{} over {:.2} s, {} reference masks, {} joint states of {}, camera pose {}",
+                    "wrote {} ({}): {} frames {}x{} over {:.2} s, {} reference masks, {} joint states of {}, camera pose {}",
                     out.display(),
+                    s.format,
                     s.frames,
                     s.size.0,
                     s.size.1,
@@ -215,4 +215,19 @@ impl ImportArgs {
             }
         }
     }
+}
+
+/// A ROS 1 bag (`.bag`), a rosbag2 folder (with `metadata.yaml`) or a rosbag2 storage file
+/// (`.mcap`, `.db3`, either as `.zstd`).
+fn is_bag(path: &std::path::Path) -> bool {
+    if path.is_dir() {
+        return path.join("metadata.yaml").is_file();
+    }
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or_default()
+        .to_ascii_lowercase();
+    let name = name.strip_suffix(".zstd").unwrap_or(&name);
+    [".bag", ".mcap", ".db3"].iter().any(|e| name.ends_with(e))
 }

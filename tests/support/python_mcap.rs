@@ -21,13 +21,10 @@ for topic in sorted(counts):
     name, enc, menc = schemas[topic]
     print(topic, name, enc, menc, counts[topic], ",".join(keys[topic]))
 "#;
-    let python_path = std::env::var("HOME")
-        .map(|h| format!("{h}/.cache/avatarm/python"))
-        .unwrap_or_default();
     let out = Command::new("python3")
         .args(["-c", script])
         .arg(path)
-        .env("PYTHONPATH", python_path)
+        .env("PYTHONPATH", python_path())
         .output()
         .expect("python3");
     assert!(
@@ -36,4 +33,12 @@ for topic in sorted(counts):
         String::from_utf8_lossy(&out.stderr)
     );
     String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Where `scripts/setup.sh` installs PyPI's packages for the tests (`mcap`, `rosbags`):
+/// `~/.cache/avatarm/python`, for `PYTHONPATH`.
+pub fn python_path() -> String {
+    std::env::var("HOME")
+        .map(|h| format!("{h}/.cache/avatarm/python"))
+        .unwrap_or_default()
 }

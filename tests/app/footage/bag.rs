@@ -1,5 +1,7 @@
-//! `avatarm import FILE.bag`: ROS 1 bags written by Debian's python3-rosbag, compressed or not,
-//! with raw and compressed images.
+//! `avatarm import BAG`: ROS 1 bags written by Debian's python3-rosbag, compressed or not,
+//! with raw and compressed images; the same bags as rosbag2 (MCAP and SQLite storage,
+//! compressed every way rosbag2 does) converted by PyPI's `rosbags` (an implementation
+//! Avatarm did not write), which must import to the very same recording.
 
 use super::*;
 
@@ -15,6 +17,51 @@ fn write_bag(args: &[&str]) {
         out.status.success(),
         "writing the bag with python3-rosbag failed (run scripts/setup.sh): {}",
         String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// `rosbags-convert` (PyPI's `rosbags`, which `scripts/setup.sh` installs) from the ROS 1 bag
+/// `src` to the rosbag2 `dst`, its messages rewritten to ROS 2 Humble's definitions (a
+/// Header without `seq`), with `extra` options (storage, compression).
+fn rosbags_convert(src: &Path, dst: &Path, extra: &[&str]) {
+    let _ = std::fs::remove_dir_all(dst);
+    let out = Command::new("python3")
+        .args(["-m", "rosbags.convert", "--src"])
+        .arg(src)
+        .arg("--dst")
+        .arg(dst)
+        .args(["--dst-typestore", "ros2_humble"])
+        .args(extra)
+        .env("PYTHONPATH", crate::support::python_mcap::python_path())
+        .output()
+        .expect("python3 runs");
+    assert!(
+        out.status.success(),
+        "rosbags-convert failed (scripts/setup.sh installs PyPI's rosbags): {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Imports `bag` with `args` to `out` and checks the recording is, byte for byte, `expected`.
+fn imports_to(bag: &Path, out: &Path, args: &[&str], expected: &Path, format: &str) {
+    let mut all = vec![
+        bag.to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+    ];
+    all.extend(args);
+    let (ok, log) = import(&all);
+    assert!(ok && log.contains(format), "{}: {log}", bag.display());
+    let (a, b) = (
+        std::fs::read(out).expect("written"),
+        std::fs::read(expected).expect("the ROS 1 bag's"),
+    );
+    assert!(
+        a == b,
+        "{}: not the recording the ROS 1 bag gives ({} and {} bytes)",
+        bag.display(),
+        a.len(),
+        b.len()
     );
 }
 
@@ -108,6 +155,33 @@ fn a_ros_bag_imports_to_the_recording_its_folder_gives() {
         "{}",
         d.translation.vector.norm()
     );
+    // The same bag as rosbag2, MCAP (chunks zstd-compressed, rosbag2's default) and SQLite.
+    let args = [
+        "--mask-topic",
+        "/camera/mask/compressed",
+        "--base-frame",
+        "panda_link0",
+    ];
+    for (storage, extra) in [
+        (
+            "mcap",
+            &["--compress", "zstd", "--compress-mode", "storage"][..],
+        ),
+        ("sqlite3", &[][..]),
+    ] {
+        let dst = out.join(format!("panda_{storage}"));
+        let mut options = vec!["--dst-storage", storage];
+        options.extend(extra);
+        rosbags_convert(&bag, &dst, &options);
+        let format = format!("rosbag2 ({storage})");
+        imports_to(
+            &dst,
+            &out.join(format!("from_{storage}.mcap")),
+            &args,
+            &from_bag,
+            &format,
+        );
+    }
     // Without --base-frame the pose is not guessed; a base /tf does not connect is refused.
     let (ok, log) = import(&[
         bag.to_str().expect("utf-8"),
@@ -219,6 +293,9 @@ fn raw_bag(compression: &str) {
     }
     let pose = r.base_from_camera.expect("from /tf");
     assert!((pose.translation.vector.z - 1.0).abs() < 1e-12 && pose.rotation.angle() < 1e-12);
+    if compression == "none" {
+        rosbag2_layouts(&out, &bag, &file);
+    }
     // A topic of another type, and a file that is not a bag.
     let (ok, log) = import(&[
         bag.to_str().expect("utf-8"),
@@ -239,4 +316,73 @@ fn raw_bag(compression: &str) {
         !ok && log.contains("not a ROS 1 bag") && log.contains("fake.bag"),
         "{log}"
     );
+}
+
+/// The raw bag as rosbag2 in every layout rosbag2 writes: MCAP and SQLite, uncompressed, zstd
+/// by file, by message and (MCAP) by chunk; a folder or its one storage file. Each imports to
+/// the recording the ROS 1 bag gives (`expected`, from the same options); what is not a
+/// rosbag2 is refused by name.
+fn rosbag2_layouts(out: &Path, bag: &Path, expected: &Path) {
+    let args = [
+        "--image-topic",
+        "/camera/image_raw",
+        "--mask-topic",
+        "/camera/mask",
+        "--base-frame",
+        "camera_base",
+    ];
+    let zstd = |mode: &'static str| vec!["--compress", "zstd", "--compress-mode", mode];
+    for (name, storage, extra, file) in [
+        ("mcap", "mcap", vec![], Some("mcap.mcap")),
+        (
+            "mcap_file",
+            "mcap",
+            zstd("file"),
+            Some("mcap_file.mcap.zstd"),
+        ),
+        ("mcap_message", "mcap", zstd("message"), None),
+        ("mcap_chunks", "mcap", zstd("storage"), None),
+        ("sqlite3", "sqlite3", vec![], Some("sqlite3.db3")),
+        ("sqlite3_message", "sqlite3", zstd("message"), None),
+    ] {
+        let dst = out.join(name);
+        let mut options = vec!["--dst-storage", storage];
+        options.extend(extra);
+        rosbags_convert(bag, &dst, &options);
+        let format = format!("rosbag2 ({storage})");
+        imports_to(
+            &dst,
+            &out.join(format!("{name}.mcap")),
+            &args,
+            expected,
+            &format,
+        );
+        if let Some(f) = file {
+            let one = dst.join(f);
+            let to = out.join(format!("{name}_file.mcap"));
+            imports_to(&one, &to, &args, expected, &format);
+        }
+    }
+    // An Avatarm recording is not a rosbag2; a .db3 that is not SQLite; a storage not read.
+    let fake = out.join("fake.db3");
+    std::fs::write(&fake, b"not a database").expect("write");
+    let other = out.join("other_storage");
+    std::fs::create_dir_all(&other).expect("mkdir");
+    std::fs::write(
+        other.join("metadata.yaml"),
+        "rosbag2_bagfile_information:\n  storage_identifier: foo\n  relative_file_paths: [a.foo]\n",
+    )
+    .expect("write");
+    for (input, said) in [
+        (expected, ["not CDR", "--recording"]),
+        (&fake, ["fake.db3", "not a rosbag2 SQLite file"]),
+        (&other, ["metadata.yaml", "ros2 bag convert"]),
+    ] {
+        let (ok, log) = import(&[
+            input.to_str().expect("utf-8"),
+            "--out",
+            out.join("x.mcap").to_str().expect("utf-8"),
+        ]);
+        assert!(!ok && said.iter().all(|s| log.contains(s)), "{log}");
+    }
 }
