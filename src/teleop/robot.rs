@@ -24,6 +24,15 @@ pub fn link_settings(
     use avatarm_scene::spec::{RobotLinkKind, RosControlController};
     let spec = &scene.file.robot.link;
     let intera = spec.kind == RobotLinkKind::Intera;
+    let ros2 = (spec.kind == RobotLinkKind::Ros2Control).then(|| avatarm_ros::Ros2Transport {
+        domain_id: spec.domain_id.unwrap_or_else(|| {
+            std::env::var("ROS_DOMAIN_ID")
+                .ok()
+                .and_then(|d| d.parse().ok())
+                .unwrap_or(0)
+        }),
+        namespace: "/".into(),
+    });
     let master_uri = spec
         .master_uri
         .clone()
@@ -50,10 +59,15 @@ pub fn link_settings(
                 "a ros_control link needs its controller's command topic",
             )
         })?;
+    // ros2_control's joint_state_broadcaster publishes /joint_states.
+    let joint_states_topic = match &ros2 {
+        Some(_) if spec.joint_states_topic == sawyer.joint_states_topic => "/joint_states".into(),
+        _ => spec.joint_states_topic.clone(),
+    };
     Ok(LinkSettings {
         master_uri,
         node_name: spec.node_name.clone(),
-        joint_states_topic: spec.joint_states_topic.clone(),
+        joint_states_topic,
         command_topic,
         command: {
             let joints = if spec.controller_joints.is_empty() {
@@ -92,6 +106,7 @@ pub fn link_settings(
             .joint_state_rate_hz
             .map(|hz| ("/robot/joint_state_publish_rate".to_owned(), hz)),
         stale_after_s: spec.stale_after_s,
+        ros2,
     })
 }
 

@@ -126,13 +126,24 @@ impl RosArm {
         let (tx, rx) = channel();
         {
             let (settings, shared, notify) = (settings.clone(), shared.clone(), notify.clone());
-            std::thread::Builder::new()
-                .name("avatarm-ros".into())
-                .spawn(move || client_thread(settings, shared, notify, tx))
-                .map_err(LinkError::Thread)?;
+            let thread = std::thread::Builder::new().name("avatarm-ros".into());
+            match settings.ros2.clone() {
+                None => thread.spawn(move || client_thread(settings, shared, notify, tx)),
+                #[cfg(feature = "ros2")]
+                Some(transport) => thread.spawn(move || {
+                    crate::ros2::client_thread(settings, transport, shared, notify, tx);
+                }),
+                #[cfg(not(feature = "ros2"))]
+                Some(_) => {
+                    return Err(LinkError::Settings(
+                        "this build has no ROS 2 (the avatarm_ros feature `ros2`)".into(),
+                    ));
+                }
+            }
+            .map_err(LinkError::Thread)?;
         }
         Ok(Self {
-            name: format!("ROS robot at {}", settings.master_uri),
+            name: settings.link_name(),
             settings,
             joints,
             arm,

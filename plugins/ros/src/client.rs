@@ -97,6 +97,16 @@ impl Drop for AbortOnDrop {
     }
 }
 
+/// The link thread's single-threaded runtime; `None` (said, naming `link`) where it cannot
+/// start.
+pub(crate) fn link_runtime(link: &str) -> Option<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| eprintln!("{link}: cannot start its runtime: {e}"))
+        .ok()
+}
+
 /// The client thread: a single-threaded runtime that keeps the node connected.
 pub(crate) fn client_thread(
     settings: LinkSettings,
@@ -104,15 +114,8 @@ pub(crate) fn client_thread(
     notify: Arc<tokio::sync::Notify>,
     tx: Sender<Sample>,
 ) {
-    let runtime = match tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-    {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("ROS link: cannot start its runtime: {e}");
-            return;
-        }
+    let Some(runtime) = link_runtime("ROS link") else {
+        return;
     };
     runtime.block_on(async move {
         let mut said = false;

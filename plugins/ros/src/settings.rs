@@ -65,6 +65,9 @@ pub struct LinkSettings {
     pub joint_state_rate: Option<(String, u16)>,
     /// The link is lost when no joint state arrived for this long (s).
     pub stale_after_s: f64,
+    /// ROS 2 (DDS) instead of ROS 1 (`master_uri` unused): a ros2_control arm (feature
+    /// `ros2`).
+    pub ros2: Option<Ros2Transport>,
 }
 
 impl LinkSettings {
@@ -85,6 +88,42 @@ impl LinkSettings {
             gripper: Some(GripperLink::default()),
             joint_state_rate: None,
             stale_after_s: 0.2,
+            ros2: None,
+        }
+    }
+
+    /// A ros2_control arm over ROS 2 (DDS domain `domain_id`): joint states on
+    /// `/joint_states`, joint velocities to the `forward_command_controller` named
+    /// `controller` (`/<controller>/commands`) in the order of `joints`.
+    pub fn ros2_control(controller: &str, joints: Vec<String>, domain_id: u16) -> Self {
+        Self {
+            master_uri: String::new(),
+            node_name: "avatarm".into(),
+            joint_states_topic: "/joint_states".into(),
+            command_topic: format!("/{}/commands", controller.trim_matches('/')),
+            command: CommandKind::GroupVelocity {
+                joints: joints.clone(),
+            },
+            arm_joints: joints,
+            robot_state_topic: None,
+            command_timeout_topic: None,
+            command_timeout_s: 0.2,
+            speed_ratio: None,
+            gripper: None,
+            joint_state_rate: None,
+            stale_after_s: 0.2,
+            ros2: Some(Ros2Transport {
+                domain_id,
+                namespace: "/".into(),
+            }),
+        }
+    }
+
+    /// The link's name in messages: `ROS robot at MASTER` or `ROS 2 robot (DDS domain N)`.
+    pub fn link_name(&self) -> String {
+        match &self.ros2 {
+            Some(t) => format!("ROS 2 robot (DDS domain {})", t.domain_id),
+            None => format!("ROS robot at {}", self.master_uri),
         }
     }
 
@@ -117,6 +156,31 @@ impl LinkSettings {
             return Err(format!(
                 "gripper device '{d}': must be a name (as the IO node's config gives it)"
             ));
+        }
+        if let Some(t) = &self.ros2 {
+            if t.domain_id > 232 {
+                return Err(format!(
+                    "DDS domain {}: must be within 0..232 (ROS 2's ROS_DOMAIN_ID)",
+                    t.domain_id
+                ));
+            }
+            if self.command.controller_joints().is_none() {
+                return Err(
+                    "a ROS 2 link commands a ros2_control forward_command_controller, not Intera's JointCommand".into(),
+                );
+            }
+            let ros1_only = [
+                ("robot state", self.robot_state_topic.is_some()),
+                ("command timeout", self.command_timeout_topic.is_some()),
+                ("speed ratio", self.speed_ratio.is_some()),
+                ("gripper", self.gripper.is_some()),
+                ("joint-state rate", self.joint_state_rate.is_some()),
+            ];
+            if let Some((what, _)) = ros1_only.iter().find(|(_, set)| *set) {
+                return Err(format!(
+                    "a ROS 2 link has no {what} topic (Intera's, ROS 1): leave it out"
+                ));
+            }
         }
         if let Some(joints) = self.command.controller_joints() {
             if joints.is_empty() {
@@ -161,6 +225,23 @@ impl Default for GripperLink {
         Self {
             io_node: "/io/end_effector".into(),
             device: None,
+        }
+    }
+}
+/// Where the robot is on ROS 2.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Ros2Transport {
+    /// The DDS domain (`ROS_DOMAIN_ID`, 0..232).
+    pub domain_id: u16,
+    /// This node's namespace (`/` for none).
+    pub namespace: String,
+}
+
+impl Default for Ros2Transport {
+    fn default() -> Self {
+        Self {
+            domain_id: 0,
+            namespace: "/".into(),
         }
     }
 }

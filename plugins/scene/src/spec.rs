@@ -80,6 +80,10 @@ pub enum RobotLinkKind {
     /// Any arm with a ros_control joint group velocity or position controller
     /// (`controller`): `std_msgs/Float64MultiArray` in the controller's joint order.
     RosControl,
+    /// Any arm with a ros2_control `forward_command_controller` (a joint group velocity or
+    /// position controller) over ROS 2 (DDS, `domain_id`): `std_msgs/msg/Float64MultiArray`
+    /// on its `/<controller>/commands`; joint states default to `/joint_states`.
+    Ros2Control,
 }
 
 /// Which ros_control joint group controller a `ros_control` link commands.
@@ -99,13 +103,16 @@ pub enum RosControlController {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RobotLinkSpec {
-    /// `intera` or `ros_control`.
+    /// `intera`, `ros_control` (ROS 1) or `ros2_control` (ROS 2).
     pub kind: RobotLinkKind,
+    /// `ros2_control`: the DDS domain (0..232); default: `ROS_DOMAIN_ID`, else 0.
+    pub domain_id: Option<u16>,
     /// The ROS master; default: `ROS_MASTER_URI`, else `http://localhost:11311`.
     pub master_uri: Option<String>,
     /// This node's name.
     pub node_name: String,
-    /// `sensor_msgs/JointState` in.
+    /// `sensor_msgs/JointState` in; default `/robot/joint_states` (Intera), `/joint_states`
+    /// for `ros2_control`.
     pub joint_states_topic: String,
     /// Commands out; default `/robot/limb/right/joint_command` (Intera).
     pub command_topic: Option<String>,
@@ -143,6 +150,7 @@ impl Default for RobotLinkSpec {
     fn default() -> Self {
         Self {
             kind: RobotLinkKind::Intera,
+            domain_id: None,
             master_uri: None,
             node_name: "avatarm".into(),
             joint_states_topic: "/robot/joint_states".into(),

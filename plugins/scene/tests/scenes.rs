@@ -120,6 +120,14 @@ fn bad_scenes_are_refused_naming_the_field() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("robot.link.speed_ratio"), "{e}");
+    let ros2 = parse(&format!(
+        "{text}\n[robot.link]\nkind = \"ros2_control\"\ndomain_id = 7\ncommand_topic = \"/forward_velocity_controller/commands\"\n"
+    ))
+    .expect("a ros2_control link");
+    assert_eq!(
+        (ros2.file.robot.link.kind, ros2.file.robot.link.domain_id),
+        (avatarm_scene::spec::RobotLinkKind::Ros2Control, Some(7))
+    );
 }
 
 /// `../shared/cases/18-scene-nan-camera-pose`: a NaN in the camera pose (found by mutating the

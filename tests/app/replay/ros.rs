@@ -223,6 +223,88 @@ fn the_pouring_task_runs_against_a_ros_sawyer_as_in_the_simulated_room() {
     );
 }
 
+/// The pouring trial, closed loop, through the ROS 2 link (DDS) against the fake ros2_control
+/// arm on Cyclone DDS (`avatarm_ros::testing::FakeRos2Arm`, its forward_command_controller
+/// taking the Sawyer's seven joint velocities): the same figures as the embedded simulated arm,
+/// within twice its position RMSE.
+#[cfg(feature = "ros")]
+#[test]
+fn the_pouring_task_runs_against_a_ros2_control_arm_over_dds() {
+    let path = root().join("assets/scenes/pouring.toml");
+    let scene = Scene::load(&path, &PackagePath::default()).expect("the pouring scene");
+    let (Some(task), Some(setup)) = (scene.file.task.clone(), scene.trial.clone()) else {
+        panic!("the pouring scene has a [task]");
+    };
+    let prepared = prepare(&task, &setup).expect("the arm reaches the bottle");
+    let q0 = prepared.q0().clone();
+    let _serial = ros_support::serial();
+    let joints: Vec<String> = (0..7).map(|i| format!("right_j{i}")).collect();
+    let start: Vec<String> = (0..7).map(|i| q0[i].to_string()).collect();
+    let names: Vec<&str> = joints.iter().map(String::as_str).collect();
+    let domain = 63;
+    let node = avatarm_ros::testing::FakeRos2Arm::start(
+        domain,
+        &names,
+        &["--start", &start.join(","), "--offset", "512.25"],
+    );
+    let model: Vec<String> = setup
+        .model
+        .dof_names()
+        .iter()
+        .map(|s| (*s).to_owned())
+        .collect();
+    let settings = LinkSettings::ros2_control("forward_velocity_controller", joints, domain);
+    let mut arm = RosArm::start(settings, model, q0.clone()).expect("link");
+    let started = std::time::Instant::now();
+    while !arm.alive() {
+        assert!(started.elapsed().as_secs() < 20, "{:?}", arm.status());
+        use avatarm_core::sim::arm::RobotInterface;
+        arm.advance(ros_support::wall_s());
+        arm.receive();
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let ros2 = run_trial_on_robot(
+        &task,
+        &setup,
+        &prepared,
+        MappingMode::ClosedLoop,
+        0,
+        Box::new(arm),
+    )
+    .expect("trial over ROS 2");
+    let sim = run_trial(&task, &setup, MappingMode::ClosedLoop, 0).expect("simulated trial");
+    let r = node.report();
+    eprintln!(
+        "pouring, closed loop, trial 0: over ROS 2 (DDS) {:.2} mm / roll {:.2} / pitch {:.2} / yaw {:.2} deg (lift {:.1} cm, max TCP {:.3} m/s); simulated arm {:.2} mm / {:.2} / {:.2} / {:.2} deg; the fake arm took {} commands",
+        ros2.result.pos_rmse_m * 1e3,
+        ros2.result.roll_rmse_deg,
+        ros2.result.pitch_rmse_deg,
+        ros2.result.yaw_rmse_deg,
+        ros2.result.real_lift_m * 1e2,
+        ros2.result.max_tcp_speed,
+        sim.result.pos_rmse_m * 1e3,
+        sim.result.roll_rmse_deg,
+        sim.result.pitch_rmse_deg,
+        sim.result.yaw_rmse_deg,
+        r["commands"],
+    );
+    assert!(
+        ros2.result.real_lift_m > 0.10,
+        "the arm lifts: {:?}",
+        ros2.result
+    );
+    assert!(ros2.result.max_tcp_speed <= task.max_tcp_speed + 1e-9);
+    let bound = (2.0 * sim.result.pos_rmse_m).max(0.001);
+    assert!(
+        ros2.result.pos_rmse_m <= bound,
+        "{} vs {}",
+        ros2.result.pos_rmse_m,
+        sim.result.pos_rmse_m
+    );
+    assert!(r["commands"].as_u64().is_some_and(|n| n > 500), "{r}");
+    assert_eq!(r["bad"].as_u64(), Some(0), "{r}");
+}
+
 /// The robot site killed mid-pour (SIGKILL: no goodbye, no last zero command): the Sawyer stops
 /// by itself within the command timeout Avatarm set on the link (Intera's
 /// `joint_command_timeout`, 0.2 s), and holds where it was. What keeps a real arm safe when the

@@ -118,38 +118,13 @@ impl FakeSawyer {
             .stderr(Stdio::null())
             .spawn()
             .expect("/usr/bin/python3 with rospy (python3-rospy)");
-        let report = Arc::new(Mutex::new(None));
-        let out = child.stdout.take().expect("stdout");
-        let sink = report.clone();
-        std::thread::spawn(move || {
-            for line in BufReader::new(out).lines().map_while(Result::ok) {
-                if let Ok(v) = serde_json::from_str::<Value>(&line) {
-                    *sink.lock().expect("report") = Some(v);
-                }
-            }
-        });
+        let report = reports_of(&mut child);
         Self { child, report }
     }
 
     /// The node's newest report, waiting for one printed after now.
     pub fn report(&self) -> Value {
-        let asked = SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .expect("clock")
-            .as_secs_f64();
-        let started = Instant::now();
-        loop {
-            if let Some(v) = self.report.lock().expect("report").clone()
-                && v["t"].as_f64().is_some_and(|t| t > asked)
-            {
-                return v;
-            }
-            assert!(
-                started.elapsed() < Duration::from_secs(10),
-                "the fake Sawyer stopped reporting"
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        newest_report(&self.report, 10, "the fake Sawyer stopped reporting")
     }
 
     /// Sends `sig` (`-USR1`: toggle the e-stop, `-USR2`: toggle enabled).
@@ -166,6 +141,96 @@ impl Drop for FakeSawyer {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+}
+
+/// A fake ros2_control arm on DDS (`fake_ros2_arm.py` beside this file, PyPI's cyclonedds,
+/// which `scripts/setup.sh` installs into `~/.cache/avatarm/python`): its process and the last
+/// report it printed.
+pub struct FakeRos2Arm {
+    child: Child,
+    report: Arc<Mutex<Option<Value>>>,
+}
+
+impl FakeRos2Arm {
+    /// The arm on DDS domain `domain` with `joints` (its controller's order) and more of the
+    /// script's arguments (`--mode position`, `--offset S`, `--controller NAME`).
+    pub fn start(domain: u16, joints: &[&str], more: &[&str]) -> Self {
+        let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src/testing/fake_ros2_arm.py");
+        let python_path = std::env::var("HOME")
+            .map(|h| format!("{h}/.cache/avatarm/python"))
+            .unwrap_or_default();
+        let mut child = Command::new("python3")
+            .arg(&script)
+            .args([
+                "--domain",
+                &domain.to_string(),
+                "--joints",
+                &joints.join(","),
+            ])
+            .args(more)
+            .env("PYTHONPATH", python_path)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("python3 runs");
+        let report = reports_of(&mut child);
+        Self { child, report }
+    }
+
+    /// The arm's newest report, waiting for one printed after now.
+    pub fn report(&self) -> Value {
+        newest_report(
+            &self.report,
+            20,
+            "the fake ROS 2 arm stopped reporting (is PyPI's cyclonedds installed? scripts/setup.sh)",
+        )
+    }
+
+    /// Kills the arm's process (a vanished robot node).
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for FakeRos2Arm {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+/// The JSON reports a fake robot prints on its stdout, the newest kept, read on a thread.
+fn reports_of(child: &mut Child) -> Arc<Mutex<Option<Value>>> {
+    let report = Arc::new(Mutex::new(None));
+    let out = child.stdout.take().expect("stdout");
+    let sink = report.clone();
+    std::thread::spawn(move || {
+        for line in BufReader::new(out).lines().map_while(Result::ok) {
+            if let Ok(v) = serde_json::from_str::<Value>(&line) {
+                *sink.lock().expect("report") = Some(v);
+            }
+        }
+    });
+    report
+}
+
+/// The newest report printed after now (its `t` later), waiting at most `within_s`; panics
+/// with `silent` past that.
+fn newest_report(report: &Mutex<Option<Value>>, within_s: u64, silent: &str) -> Value {
+    let asked = wall_s();
+    let started = Instant::now();
+    loop {
+        if let Some(v) = report.lock().expect("report").clone()
+            && v["t"].as_f64().is_some_and(|t| t > asked)
+        {
+            return v;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(within_s),
+            "{silent}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
     }
 }
 

@@ -1,0 +1,257 @@
+//! The link over ROS 2 (feature `ros2`): a ros2_control arm through DDS, spoken by
+//! `ros2-client` over RustDDS (pure Rust, no ROS install to build or run), on the link's own
+//! thread and runtime, behind the same [`crate::RosArm`] (its safety checks, clock and stops)
+//! as the ROS 1 link.
+//!
+//! - In: `sensor_msgs/msg/JointState` (best effort, which matches a reliable or best-effort
+//!   publisher such as ros2_control's `joint_state_broadcaster`).
+//! - Out: `std_msgs/msg/Float64MultiArray` to a `forward_command_controller` (a
+//!   `JointGroupVelocityController` or `JointGroupPositionController`: one value per joint in
+//!   the controller's order), reliable, on `/<controller>/commands`.
+//!
+//! DDS has no master: the link is up once the participant and node exist, and alive while
+//! joint states arrive (a vanished robot node is a stale link, which stops the arm). Names
+//! follow ROS 2's DDS conventions (the topic `rt/<name>`, the type
+//! `<pkg>::msg::dds_::<Type>_`), which `ros2-client` applies.
+
+use std::sync::mpsc::Sender;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use futures::StreamExt;
+use ros2_client::{
+    Context, ContextOptions, Message, MessageTypeName, Name, NodeName, NodeOptions, QosProfile,
+};
+use serde::{Deserialize, Serialize};
+
+use crate::client::{Outbound, Sample, Shared};
+use crate::settings::{LinkSettings, Ros2Transport};
+
+/// `builtin_interfaces/msg/Time`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct Time {
+    /// Seconds since the epoch.
+    pub sec: i32,
+    /// Nanoseconds within the second.
+    pub nanosec: u32,
+}
+
+/// `std_msgs/msg/Header`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct Header {
+    /// The stamp.
+    pub stamp: Time,
+    /// The frame.
+    pub frame_id: String,
+}
+
+/// `sensor_msgs/msg/JointState`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct JointState {
+    /// Stamp and frame.
+    pub header: Header,
+    /// Joint names.
+    pub name: Vec<String>,
+    /// Positions (rad or m).
+    pub position: Vec<f64>,
+    /// Velocities (rad/s or m/s).
+    pub velocity: Vec<f64>,
+    /// Efforts (N m or N).
+    pub effort: Vec<f64>,
+}
+impl Message for JointState {}
+
+/// `std_msgs/msg/MultiArrayDimension`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct MultiArrayDimension {
+    /// The dimension's label.
+    pub label: String,
+    /// Its size.
+    pub size: u32,
+    /// Its stride.
+    pub stride: u32,
+}
+
+/// `std_msgs/msg/MultiArrayLayout`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct MultiArrayLayout {
+    /// The dimensions.
+    pub dim: Vec<MultiArrayDimension>,
+    /// Padding before the data.
+    pub data_offset: u32,
+}
+
+/// `std_msgs/msg/Float64MultiArray`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct Float64MultiArray {
+    /// The layout (empty: a plain vector, as forward_command_controller takes it).
+    pub layout: MultiArrayLayout,
+    /// The values.
+    pub data: Vec<f64>,
+}
+impl Message for Float64MultiArray {}
+
+/// A ROS 2 topic name (`/ns/base`, or relative to the node's namespace) for ros2-client.
+fn topic_name(topic: &str) -> Result<Name, String> {
+    Name::parse(topic).map_err(|e| format!("topic '{topic}': not a ROS 2 name: {e:?}"))
+}
+
+/// The client thread: a single-threaded runtime holding the DDS participant, its node, the
+/// joint-state subscription and the command publisher until shutdown.
+pub(crate) fn client_thread(
+    settings: LinkSettings,
+    transport: Ros2Transport,
+    shared: Arc<Mutex<Shared>>,
+    notify: Arc<tokio::sync::Notify>,
+    tx: Sender<Sample>,
+) {
+    let Some(runtime) = crate::client::link_runtime("ROS 2 link") else {
+        return;
+    };
+    if let Err(e) = runtime.block_on(session(&settings, &transport, &shared, &notify, &tx)) {
+        eprintln!(
+            "ROS 2 link (DDS domain {}): {e}; the link stays down",
+            transport.domain_id
+        );
+    }
+    if let Ok(mut s) = shared.lock() {
+        s.status.connected = false;
+        s.finished = true;
+    }
+}
+
+/// The session: runs until shutdown (Ok) or until DDS cannot be set up (Err).
+async fn session(
+    settings: &LinkSettings,
+    transport: &Ros2Transport,
+    shared: &Arc<Mutex<Shared>>,
+    notify: &Arc<tokio::sync::Notify>,
+    tx: &Sender<Sample>,
+) -> Result<(), String> {
+    let context = Context::with_options(ContextOptions::new().domain_id(transport.domain_id))
+        .map_err(|e| format!("cannot join DDS: {e:?}"))?;
+    let node_name = NodeName::new(&transport.namespace, &settings.node_name)
+        .map_err(|e| format!("node name '{}': {e:?}", settings.node_name))?;
+    let mut node = context
+        .new_node(node_name, NodeOptions::new().enable_rosout(false))
+        .map_err(|e| format!("cannot create the node: {e:?}"))?;
+    let spin = node
+        .spinner()
+        .map_err(|e| format!("cannot spin the node: {e:?}"))?
+        .spin();
+    let states_topic = node
+        .create_topic(
+            &topic_name(&settings.joint_states_topic)?,
+            MessageTypeName::new("sensor_msgs", "JointState"),
+            &QosProfile::subscription_default(),
+        )
+        .map_err(|e| format!("{}: {e:?}", settings.joint_states_topic))?;
+    // Best effort, the last 10: matches reliable and best-effort publishers alike.
+    let states = node
+        .create_subscription::<JointState>(
+            &states_topic,
+            Some(
+                QosProfile::subscription_default()
+                    .history(ros2_client::qos::History::KeepLast { depth: 10 }),
+            ),
+        )
+        .map_err(|e| format!("{}: {e:?}", settings.joint_states_topic))?;
+    let command_topic = node
+        .create_topic(
+            &topic_name(&settings.command_topic)?,
+            MessageTypeName::new("std_msgs", "Float64MultiArray"),
+            &QosProfile::publisher_default(),
+        )
+        .map_err(|e| format!("{}: {e:?}", settings.command_topic))?;
+    let commands = node
+        .create_publisher::<Float64MultiArray>(&command_topic, None)
+        .map_err(|e| format!("{}: {e:?}", settings.command_topic))?;
+    if let Ok(mut s) = shared.lock() {
+        s.status.connected = true;
+        s.status.connects += 1;
+        s.outbound = None;
+    }
+    let max_age = Duration::from_secs_f64(settings.stale_after_s.min(settings.command_timeout_s));
+    let mut stream = std::pin::pin!(states.async_stream());
+    let mut spin = std::pin::pin!(spin);
+    loop {
+        tokio::select! {
+            m = stream.next() => match m {
+                Some(Ok((m, _))) => {
+                    let sample = Sample {
+                        arrival: Instant::now(),
+                        stamp_s: f64::from(m.header.stamp.sec)
+                            + f64::from(m.header.stamp.nanosec) * 1e-9,
+                        names: m.name,
+                        position: m.position,
+                        velocity: m.velocity,
+                    };
+                    if tx.send(sample).is_err() {
+                        return Ok(());
+                    }
+                }
+                Some(Err(e)) => {
+                    if let Ok(mut s) = shared.lock() {
+                        s.status.bad_joint_states += 1;
+                        s.status.last_bad = Some(format!("{e:?}"));
+                    }
+                }
+                None => return Err("the joint-state subscription closed".into()),
+            },
+            () = notify.notified() => {
+                if send_outbound(settings, shared, &commands, max_age).await? {
+                    return Ok(());
+                }
+            },
+            r = &mut spin => {
+                return Err(format!("the node's spinner stopped: {r:?}"));
+            },
+            () = tokio::time::sleep(Duration::from_secs(1)) => {
+                if shared.lock().map_or(true, |s| s.shutdown) {
+                    return Ok(());
+                }
+            },
+        }
+    }
+}
+
+/// Sends the newest joint command (unless older than `max_age`; a stop always). Returns
+/// whether the link is shutting down (after giving the last command time to leave).
+async fn send_outbound(
+    settings: &LinkSettings,
+    shared: &Arc<Mutex<Shared>>,
+    commands: &ros2_client::Publisher<Float64MultiArray>,
+    max_age: Duration,
+) -> Result<bool, String> {
+    let (out, stop) = match shared.lock() {
+        Ok(mut s) => {
+            // ROS 2 links have no gripper yet: a gripper command is dropped here (the arm's
+            // settings refuse one).
+            s.gripper = None;
+            (s.outbound.take(), s.shutdown)
+        }
+        Err(_) => (None, true),
+    };
+    let values = match out {
+        Some(Outbound::Joints { values, at }) if at.elapsed() <= max_age => Some(values),
+        Some(Outbound::Stop(values)) => Some(values),
+        _ => None,
+    };
+    if let Some(data) = values {
+        commands
+            .async_publish(Float64MultiArray {
+                layout: MultiArrayLayout::default(),
+                data,
+            })
+            .await
+            .map_err(|e| format!("{}: {e:?}", settings.command_topic))?;
+    }
+    if stop {
+        // A reliable writer resends what was lost; give the stop time to arrive.
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        if let Ok(mut s) = shared.lock() {
+            s.finished = true;
+        }
+    }
+    Ok(stop)
+}

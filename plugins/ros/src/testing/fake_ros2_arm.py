@@ -1,0 +1,165 @@
+#!/usr/bin/env python3
+"""A fake ros2_control arm on ROS 2's DDS, written with PyPI's cyclonedds (Eclipse Cyclone DDS,
+the DDS under ROS 2's rmw_cyclonedds_cpp), not with anything of Avatarm's: it follows ROS 2's
+DDS conventions (topics `rt/<name>`, types `<pkg>::msg::dds_::<Type>_`, ROS 2's default QoS:
+reliable, volatile, keep last 10) as rmw does.
+
+- Publishes sensor_msgs/msg/JointState on /joint_states at --rate Hz, stamped with its own clock
+  (the wall clock plus --offset s), as joint_state_broadcaster does.
+- Subscribes to std_msgs/msg/Float64MultiArray on /<controller>/commands, one value per joint
+  in --joints order (starting at --start), as forward_command_controller does: velocities (--mode velocity), clamped
+  to +-(--max-velocity) and integrated, or position targets (--mode position) approached at
+  --max-velocity. A command of the wrong length is counted as bad and ignored. With no
+  command for --timeout s, velocities go to zero.
+- Prints a JSON report every 50 ms: t (wall clock), q, velocity, commands, bad, and the
+  receipts of the last 300 commands as [wall time, first value].
+
+Run it with PYTHONPATH=~/.cache/avatarm/python (scripts/setup.sh installs cyclonedds there).
+"""
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass
+
+from cyclonedds.core import Policy, Qos
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.idl import IdlStruct
+from cyclonedds.idl.types import float64, int32, sequence, uint32
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+
+@dataclass
+class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+    sec: int32
+    nanosec: uint32
+
+
+@dataclass
+class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+    stamp: Time
+    frame_id: str
+
+
+@dataclass
+class JointState(IdlStruct, typename="sensor_msgs::msg::dds_::JointState_"):
+    header: Header
+    name: sequence[str]
+    position: sequence[float64]
+    velocity: sequence[float64]
+    effort: sequence[float64]
+
+
+@dataclass
+class MultiArrayDimension(IdlStruct, typename="std_msgs::msg::dds_::MultiArrayDimension_"):
+    label: str
+    size: uint32
+    stride: uint32
+
+
+@dataclass
+class MultiArrayLayout(IdlStruct, typename="std_msgs::msg::dds_::MultiArrayLayout_"):
+    dim: sequence[MultiArrayDimension]
+    data_offset: uint32
+
+
+@dataclass
+class Float64MultiArray(IdlStruct, typename="std_msgs::msg::dds_::Float64MultiArray_"):
+    layout: MultiArrayLayout
+    data: sequence[float64]
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("--domain", type=int, default=0)
+    p.add_argument("--joints", required=True)
+    p.add_argument("--controller", default="forward_velocity_controller")
+    p.add_argument("--mode", choices=["velocity", "position"], default="velocity")
+    p.add_argument("--rate", type=float, default=100.0)
+    p.add_argument("--offset", type=float, default=0.0)
+    p.add_argument("--max-velocity", type=float, default=1.0)
+    p.add_argument("--timeout", type=float, default=0.5)
+    p.add_argument("--start", default="", help="the joints' start positions, comma-separated")
+    a = p.parse_args()
+    joints = a.joints.split(",")
+    n = len(joints)
+    qos = Qos(
+        Policy.Reliability.Reliable(duration(milliseconds=100)),
+        Policy.Durability.Volatile,
+        Policy.History.KeepLast(10),
+    )
+    dp = DomainParticipant(a.domain)
+    states = DataWriter(dp, Topic(dp, "rt/joint_states", JointState, qos=qos), qos=qos)
+    commands = DataReader(
+        dp, Topic(dp, "rt/%s/commands" % a.controller, Float64MultiArray, qos=qos), qos=qos
+    )
+    q = [float(x) for x in a.start.split(",")] if a.start else [0.0] * n
+    v = [0.0] * n
+    target = None
+    last_command = None
+    count, bad = 0, 0
+    receipts = []
+    period = 1.0 / a.rate
+    t_prev = time.time()
+    next_report = t_prev
+    next_state = t_prev
+    while True:
+        now = time.time()
+        for m in commands.take(N=100):
+            if not isinstance(m, Float64MultiArray):
+                # A writer gone (the link's end): an instance-state sample without data.
+                continue
+            if len(m.data) != n:
+                bad += 1
+                continue
+            count += 1
+            last_command = now
+            receipts.append([now, m.data[0]])
+            del receipts[:-300]
+            if a.mode == "velocity":
+                v = [max(-a.max_velocity, min(a.max_velocity, x)) for x in m.data]
+            else:
+                target = list(m.data)
+        dt = now - t_prev
+        t_prev = now
+        if a.mode == "velocity":
+            if last_command is None or now - last_command > a.timeout:
+                v = [0.0] * n
+            q = [qi + vi * dt for qi, vi in zip(q, v)]
+        elif target is not None:
+            step = a.max_velocity * dt
+            v = [max(-a.max_velocity, min(a.max_velocity, (t - qi) / max(dt, 1e-6))) for t, qi in zip(target, q)]
+            q = [qi + max(-step, min(step, t - qi)) for t, qi in zip(target, q)]
+        if now >= next_state:
+            stamp = now + a.offset
+            sec = int(stamp)
+            states.write(
+                JointState(
+                    header=Header(stamp=Time(sec=sec, nanosec=int((stamp - sec) * 1e9)), frame_id=""),
+                    name=joints,
+                    position=q,
+                    velocity=v,
+                    effort=[],
+                )
+            )
+            next_state += period
+            if next_state < now:
+                next_state = now + period
+        if now >= next_report:
+            print(
+                json.dumps({"t": now, "q": q, "velocity": v, "commands": count, "bad": bad, "receipts": receipts}),
+                flush=True,
+            )
+            next_report = now + 0.05
+        time.sleep(0.001)
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except KeyboardInterrupt:
+        sys.exit(0)
