@@ -1,5 +1,7 @@
 //! `avatarm run --record FILE.mcap`: the live session as a recording (`avatarm_record`'s
-//! channels, docs/real-footage.md), written while it runs.
+//! channels, docs/real-footage.md), written while it runs; `avatarm run --ros2-publish`: the
+//! same session's erased frames, masks, commands and safety events published on ROS 2
+//! (`avatarm_ros::ros2::publish`, feature `ros`; docs/robot-ros2.md), with or without the file.
 //!
 //! What is recorded, each stamped with its capture or sample time on the app's clock (offset to
 //! the Unix epoch at start): the camera's frames (JPEG) as the pipeline received them, its
@@ -18,7 +20,7 @@
 //! completed when the app ends (the recorder's resource is dropped with the app's world).
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::thread::JoinHandle;
@@ -42,24 +44,47 @@ use crate::{AppError, AppTwin};
 /// The JPEG quality of recorded camera and erased frames.
 const JPEG_QUALITY: u8 = 90;
 
-/// Adds the session recorder to `app`: creates `path` now (an error names it), records until
-/// the app ends.
-pub fn add_session_recorder(app: &mut App, path: &Path, scene: &Scene) -> Result<(), AppError> {
-    let mut writer = RecordingWriter::create(path)?;
+/// Where the session's ROS 2 messages go (feature `ros`; nothing can be made without it).
+#[cfg(feature = "ros")]
+pub type Ros2Sink = avatarm_ros::ros2::publish::Ros2Publisher;
+/// Where the session's ROS 2 messages go (feature `ros`; nothing can be made without it).
+#[cfg(not(feature = "ros"))]
+pub type Ros2Sink = std::convert::Infallible;
+
+/// Adds the session recorder to `app`: creates `path` now (an error names it) and publishes
+/// on `ros2`, until the app ends. At least one of them.
+pub fn add_session_recorder(
+    app: &mut App,
+    path: Option<&Path>,
+    ros2: Option<Ros2Sink>,
+    scene: &Scene,
+) -> Result<(), AppError> {
     let epoch_ns = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_nanos() as u64);
-    let calibration = crate::replay::scene_calibration(scene);
     let base = scene.robot_base();
-    writer.calibration(epoch_ns, &calibration)?;
-    crate::replay::write_scene_camera(&mut writer, epoch_ns, scene)?;
-    writer.base_pose(epoch_ns, &base)?;
+    let writer = match path {
+        Some(path) => {
+            let mut writer = RecordingWriter::create(path)?;
+            let calibration = crate::replay::scene_calibration(scene);
+            writer.calibration(epoch_ns, &calibration)?;
+            crate::replay::write_scene_camera(&mut writer, epoch_ns, scene)?;
+            writer.base_pose(epoch_ns, &base)?;
+            Some(writer)
+        }
+        None => None,
+    };
+    let outputs = match (path, ros2.is_some()) {
+        (Some(p), false) => p.display().to_string(),
+        (Some(p), true) => format!("{} and on ROS 2", p.display()),
+        (None, _) => "on ROS 2".to_owned(),
+    };
     let (tx, rx) = channel();
     let thread = std::thread::Builder::new()
         .name("session recorder".into())
-        .spawn(move || write_session(writer, rx))
+        .spawn(move || write_session(writer, ros2, rx))
         .map_err(|source| RecordError::Io {
-            path: path.to_owned(),
+            path: path.map(Path::to_owned).unwrap_or_default(),
             source,
         })?;
     let names = scene
@@ -69,7 +94,7 @@ pub fn add_session_recorder(app: &mut App, path: &Path, scene: &Scene) -> Result
         .map(|n| n.to_string())
         .collect();
     app.insert_resource(SessionRecorder {
-        path: path.to_owned(),
+        outputs,
         tx: Some(tx),
         thread: Some(thread),
         epoch_ns,
@@ -142,6 +167,9 @@ enum Stream {
 #[derive(Debug, Default)]
 struct Written {
     messages: u64,
+    /// Handed to the ROS 2 publisher, and dropped by it (its queue full).
+    published: u64,
+    dropped: u64,
     refused: u64,
     first_refusal: Option<String>,
 }
@@ -184,18 +212,40 @@ pub(crate) fn jpeg(width: u32, height: u32, rgba: &[u8]) -> Result<Vec<u8>, Stri
     Ok(out.into_inner())
 }
 
-fn write_session(mut writer: RecordingWriter, rx: Receiver<Item>) -> Result<Written, RecordError> {
+/// The recorder's thread: each item encoded once, written to the file and published on ROS 2
+/// where they are given.
+fn write_session(
+    mut writer: Option<RecordingWriter>,
+    ros2: Option<Ros2Sink>,
+    rx: Receiver<Item>,
+) -> Result<Written, RecordError> {
     let mut written = Written::default();
     for item in rx {
-        let result = match item {
+        // Each image encoded once, for the file and for ROS 2 (which takes no camera frame).
+        let encoded = match &item {
             Item::End => break,
             Item::Image {
                 stream,
-                stamp_ns,
                 width,
                 height,
                 data,
-            } => match encode(stream, width, height, &data) {
+                ..
+            } if writer.is_some() || (ros2.is_some() && *stream != Stream::Frame) => {
+                Some(encode(*stream, *width, *height, data))
+            }
+            _ => None,
+        };
+        if let Some(publisher) = &ros2 {
+            written.published += u64::from(publish(publisher, &item, encoded.as_ref()));
+        }
+        let Some(writer) = writer.as_mut() else {
+            continue;
+        };
+        let result = match item {
+            Item::End => break,
+            Item::Image {
+                stream, stamp_ns, ..
+            } => match encoded.unwrap_or_else(|| Err("not encoded".into())) {
                 Ok(frame) => {
                     let frame = CompressedFrame { stamp_ns, ..frame };
                     match stream {
@@ -227,9 +277,75 @@ fn write_session(mut writer: RecordingWriter, rx: Receiver<Item>) -> Result<Writ
             Err(e) => return Err(e),
         }
     }
-    written.messages = writer.messages();
-    writer.finish()?;
+    #[cfg(feature = "ros")]
+    if let Some(publisher) = &ros2 {
+        written.dropped = publisher.dropped();
+    }
+    if let Some(writer) = writer {
+        written.messages = writer.messages();
+        writer.finish()?;
+    }
     Ok(written)
+}
+
+/// Publishes what ROS 2 takes of `item` (the erased frames, the masks, the commands, the
+/// safety events; the camera's frames and joint states have their own topics already);
+/// whether one was handed over.
+#[cfg(feature = "ros")]
+fn publish(
+    publisher: &Ros2Sink,
+    item: &Item,
+    encoded: Option<&Result<CompressedFrame, String>>,
+) -> bool {
+    use avatarm_ros::ros2::publish::Outgoing;
+    let message = match (item, encoded) {
+        (
+            Item::Image {
+                stream: stream @ (Stream::Erased | Stream::Mask),
+                stamp_ns,
+                ..
+            },
+            Some(Ok(f)),
+        ) => {
+            if *stream == Stream::Erased {
+                Outgoing::Erased {
+                    stamp_ns: *stamp_ns,
+                    jpeg: f.data.clone(),
+                }
+            } else {
+                Outgoing::Mask {
+                    stamp_ns: *stamp_ns,
+                    png: f.data.clone(),
+                }
+            }
+        }
+        (Item::Command(c), _) => Outgoing::Command {
+            stamp_ns: c.stamp_ns,
+            names: c.names.clone(),
+            velocities: c.velocities.clone(),
+        },
+        (Item::Safety(e), _) => Outgoing::Safety {
+            stamp_ns: e.stamp_ns,
+            text: format!(
+                "{} {}: {}",
+                match e.level {
+                    LogLevel::Info => "INFO",
+                    LogLevel::Warning => "WARN",
+                    LogLevel::Error => "ERROR",
+                },
+                e.source,
+                e.message
+            ),
+        },
+        _ => return false,
+    };
+    publisher.publish(message)
+}
+
+/// Nothing is published without the feature `ros` (no sink can be made).
+#[cfg(not(feature = "ros"))]
+fn publish(publisher: &Ros2Sink, _: &Item, _: Option<&Result<CompressedFrame, String>>) -> bool {
+    match *publisher {}
 }
 
 /// Intervention counts and flags seen so far, to turn the limiter's counters into events.
@@ -246,7 +362,8 @@ struct SafetyWatch {
 /// The live session's recorder (its thread finishes the file when this is dropped).
 #[derive(Resource)]
 struct SessionRecorder {
-    path: PathBuf,
+    /// Where it goes (the file, ROS 2), for messages.
+    outputs: String,
     tx: Option<Sender<Item>>,
     thread: Option<JoinHandle<Result<Written, RecordError>>>,
     epoch_ns: u64,
@@ -287,7 +404,7 @@ impl SessionRecorder {
             // The thread ended early (the file failed): its error is reported at the end.
             error!(
                 "recording {}: the writer stopped; nothing more is recorded",
-                self.path.display()
+                self.outputs
             );
         }
     }
@@ -314,9 +431,11 @@ impl Drop for SessionRecorder {
         match thread.join() {
             Ok(Ok(w)) => {
                 eprintln!(
-                    "recorded the session: {} messages in {}{}",
+                    "recorded the session: {} messages in a file, {} published on ROS 2 ({} dropped), {}{}",
                     w.messages,
-                    self.path.display(),
+                    w.published,
+                    w.dropped,
+                    self.outputs,
                     match w.first_refusal {
                         Some(m) => format!(" ({} left out, the first: {m})", w.refused),
                         None => String::new(),

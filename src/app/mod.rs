@@ -8,6 +8,8 @@
 //! - [`background`]: where the background H comes from (the scene's `[background]`).
 
 pub mod background;
+#[cfg(feature = "ros")]
+pub mod ros2_camera;
 
 use std::time::Duration;
 
@@ -62,6 +64,9 @@ pub enum CameraSource {
     Webcam(u32),
     /// A recording played as a live camera, frames released at their capture times.
     Recording(avatarm_video::recorded::RecordedCameraConfig),
+    /// A ROS 2 camera topic over DDS (feature `ros`).
+    #[cfg(feature = "ros")]
+    Ros2(avatarm_ros::ros2::camera::CameraTopic),
 }
 
 impl CameraSource {
@@ -76,6 +81,8 @@ impl CameraSource {
             Self::Simulated => "simulated camera".to_owned(),
             Self::Webcam(i) => format!("webcam {i}"),
             Self::Recording(r) => r.name.clone(),
+            #[cfg(feature = "ros")]
+            Self::Ros2(t) => format!("ROS 2 camera {}", t.topic),
         }
     }
 }
@@ -330,6 +337,10 @@ impl PluginGroup for AvatarmPlugins {
                 group = group.add(avatarm_video::recorded::RecordedCameraPlugin(
                     config.clone(),
                 ));
+            }
+            #[cfg(feature = "ros")]
+            CameraSource::Ros2(topic) => {
+                group = group.add(ros2_camera::Ros2CameraPlugin(topic.clone()));
             }
         }
         group

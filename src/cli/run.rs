@@ -42,12 +42,21 @@ pub struct RunArgs {
     #[arg(long = "package-path", value_name = "DIR")]
     package_path: Vec<PathBuf>,
     /// Take the camera feed from webcam N (feature `webcam`) instead of the simulated room.
-    #[arg(long, value_name = "N", conflicts_with = "camera_recording")]
+    #[arg(long, value_name = "N", conflicts_with_all = ["camera_recording", "ros2_camera"])]
     webcam: Option<u32>,
     /// Play a recording (MCAP) as the camera, each frame at its capture time, in a loop, and
     /// its joint states as the robot's (the live task's robot with a hand; docs/latency.md).
-    #[arg(long = "camera-recording", value_name = "FILE.mcap")]
+    #[arg(
+        long = "camera-recording",
+        value_name = "FILE.mcap",
+        conflicts_with = "ros2_camera"
+    )]
     camera_recording: Option<PathBuf>,
+    /// Take the camera feed from a ROS 2 topic over DDS (sensor_msgs/msg/Image, or
+    /// CompressedImage on a topic ending in /compressed; the scene's ros2_control link's
+    /// domain, else ROS_DOMAIN_ID; docs/robot-ros2.md).
+    #[arg(long = "ros2-camera", value_name = "TOPIC")]
+    ros2_camera: Option<String>,
     /// With a scene that has a [task]: teleoperate it live with this hand: scripted (the
     /// task's trial, default), desktop (keys and mouse), xr (OpenXR hand tracking, with
     /// --xr), leap (feature `leap`), a recorded FILE.hand.jsonl, or none.
@@ -57,15 +66,23 @@ pub struct RunArgs {
     /// [leap] mount otherwise; docs/hand.md).
     #[arg(long = "leap-mount", value_name = "MOUNT", value_parser = leap_mount)]
     leap_mount: Option<LeapMountKind>,
-    /// The robot the live task commands: sim (the simulated arm) or ros (the real robot
-    /// through the scene's [robot.link], ROS 1; docs/robot-ros.md).
-    #[arg(long, value_name = "ROBOT", value_parser = ["sim", "ros"], default_value = "sim")]
+    /// The robot the live task commands: sim (the simulated arm), ros (the real robot
+    /// through the scene's [robot.link], ROS 1 or ROS 2 as its kind says; docs/robot-ros.md)
+    /// or ros2 (the same, checked to be kind = "ros2_control"; docs/robot-ros2.md).
+    #[arg(long, value_name = "ROBOT", value_parser = ["sim", "ros", "ros2"], default_value = "sim")]
     robot: String,
     /// Record the session (MCAP, Foxglove's schemas): camera frames, calibration and pose,
     /// joint states, Avatarm's erased frames and masks, the hand, the robot's commands and
     /// safety events (docs/real-footage.md).
     #[arg(long, value_name = "FILE.mcap")]
     record: Option<PathBuf>,
+    /// Publish the session on ROS 2 over DDS (feature `ros`), under /avatarm: the erased
+    /// frames and the masks (CompressedImage on /avatarm/erased/compressed and
+    /// /avatarm/mask/compressed), the commands (JointState on /avatarm/joint_commands) and
+    /// the safety events (String on /avatarm/safety), on the scene's ros2_control link's
+    /// domain, else ROS_DOMAIN_ID (docs/robot-ros2.md).
+    #[arg(long = "ros2-publish")]
+    ros2_publish: bool,
     /// Sleep MS at the end of every app update: a renderer slowed on purpose, to check that the
     /// robot's control loop keeps its rate whatever the render costs (docs/latency.md).
     #[arg(long = "slow-update-ms", value_name = "MS", value_parser = clap::value_parser!(u64).range(1..=10_000))]
@@ -87,17 +104,19 @@ impl RunArgs {
             package_path,
             webcam,
             camera_recording,
+            ros2_camera,
             hand,
             leap_mount,
             robot,
             record,
+            ros2_publish,
             slow_update_ms,
             overrides,
             view,
         } = self;
-        if camera_recording.is_some() && robot == "ros" {
+        if camera_recording.is_some() && robot != "sim" {
             return Err(AppError::flag(
-                "--robot ros",
+                "--robot",
                 "with --camera-recording the robot is the recording's; leave --robot out",
             ));
         }
@@ -136,7 +155,7 @@ impl RunArgs {
         ride(&mut scene);
         // A webcam or a recording as the camera (a recording's robot as the robot).
         let opened = crate::net::site_camera::open(
-            &crate::net::site_camera::SiteCamera::of(webcam, camera_recording),
+            &crate::net::site_camera::SiteCamera::of(webcam, camera_recording, ros2_camera),
             &mut scene,
             1,
         )?;
@@ -176,17 +195,13 @@ impl RunArgs {
             Vec::new()
         };
         let hand = live_hand(&scene, hand.as_deref(), xr)?;
-        let robot = if robot == "ros" {
-            if hand.is_none() {
-                return Err(AppError::flag(
-                    "--robot ros",
-                    "commands the robot from a live task: the scene needs a [task] and a hand",
-                ));
-            }
-            crate::teleop::RobotChoice::Ros
-        } else {
-            crate::teleop::RobotChoice::Sim
-        };
+        let robot = crate::teleop::robot_choice(&robot, &scene)?;
+        if robot == crate::teleop::RobotChoice::Ros && hand.is_none() {
+            return Err(AppError::flag(
+                "--robot ros",
+                "commands the robot from a live task: the scene needs a [task] and a hand",
+            ));
+        }
         let options = PreviewOptions {
             frames,
             screenshot,
@@ -203,9 +218,14 @@ impl RunArgs {
             press,
             slow_update: slow_update_ms.map(std::time::Duration::from_millis),
         };
+        let ros2 = if ros2_publish {
+            Some(ros2_publisher(&scene)?)
+        } else {
+            None
+        };
         let mut app = crate::preview::build_app(&scene, &options)?;
-        if let Some(path) = &record {
-            crate::session::add_session_recorder(&mut app, path, &scene)?;
+        if record.is_some() || ros2.is_some() {
+            crate::session::add_session_recorder(&mut app, record.as_deref(), ros2, &scene)?;
         }
         let exit = app.run();
         if exit.is_error() {
@@ -213,4 +233,30 @@ impl RunArgs {
         }
         Ok(())
     }
+}
+
+/// The session's ROS 2 publisher (`--ros2-publish`): under `/avatarm`, on the scene's DDS
+/// domain.
+#[cfg(feature = "ros")]
+fn ros2_publisher(scene: &Scene) -> Result<crate::session::Ros2Sink, AppError> {
+    let transport = avatarm_ros::Ros2Transport {
+        domain_id: crate::net::site_camera::ros2_domain(scene)?,
+        namespace: "/".into(),
+    };
+    avatarm_ros::ros2::publish::Ros2Publisher::start(
+        transport,
+        "avatarm_out",
+        "/avatarm",
+        "camera_optical",
+    )
+    .map_err(|e| AppError::flag("--ros2-publish", format!("cannot start its thread: {e}")))
+}
+
+/// Without the feature `ros` there is no ROS 2.
+#[cfg(not(feature = "ros"))]
+fn ros2_publisher(_: &Scene) -> Result<crate::session::Ros2Sink, AppError> {
+    Err(AppError::flag(
+        "--ros2-publish",
+        "this avatarm was built without the ros feature; rebuild with `cargo build --features ros`",
+    ))
 }

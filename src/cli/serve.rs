@@ -19,20 +19,31 @@ pub struct ServeArgs {
     /// one), each erased by an app of its own and published under its name.
     #[arg(long, value_name = "NAME", value_delimiter = ',')]
     view: Vec<String>,
-    /// The robot: sim (the simulated arm) or ros (the scene's [robot.link], ROS 1). With
+    /// The robot: sim (the simulated arm), ros (the scene's [robot.link], ROS 1 or ROS 2 as
+    /// its kind says) or ros2 (the same, checked to be kind = "ros2_control"). With
     /// --camera-recording the robot is the recording's.
-    #[arg(long, value_name = "ROBOT", value_parser = ["sim", "ros"], default_value = "sim")]
+    #[arg(long, value_name = "ROBOT", value_parser = ["sim", "ros", "ros2"], default_value = "sim")]
     robot: String,
     /// Take the camera from webcam N (feature `webcam`) instead of the simulated room (one
     /// camera: one --view).
-    #[arg(long, value_name = "N", conflicts_with = "camera_recording")]
+    #[arg(long, value_name = "N", conflicts_with_all = ["camera_recording", "ros2_camera"])]
     webcam: Option<u32>,
     /// Play a recording (MCAP: `avatarm replay --record`, `run --record`, `import`) as the
     /// camera, each frame released at its capture time (in a loop), and its joint states as
     /// the robot's: the real frame path without hardware (docs/latency.md). Commands to the
     /// recording's robot are counted, not obeyed.
-    #[arg(long = "camera-recording", value_name = "FILE.mcap")]
+    #[arg(
+        long = "camera-recording",
+        value_name = "FILE.mcap",
+        conflicts_with = "ros2_camera"
+    )]
     camera_recording: Option<PathBuf>,
+    /// Take the camera from a ROS 2 topic over DDS (sensor_msgs/msg/Image, or
+    /// CompressedImage on a topic ending in /compressed, e.g. /camera/image_raw/compressed;
+    /// the scene's ros2_control link's domain, else ROS_DOMAIN_ID; one camera: one --view;
+    /// docs/robot-ros2.md).
+    #[arg(long = "ros2-camera", value_name = "TOPIC")]
+    ros2_camera: Option<String>,
     /// Where to listen (tcp/HOST:PORT, udp/HOST:PORT or quic/HOST:PORT; quic/ between real
     /// sites; default tcp/0.0.0.0:7447 unless --connect is given).
     #[arg(long, value_name = "ENDPOINT")]
@@ -87,6 +98,7 @@ impl ServeArgs {
             robot,
             webcam,
             camera_recording,
+            ros2_camera,
             mut listen,
             connect,
             mode,
@@ -103,13 +115,13 @@ impl ServeArgs {
             view,
             overrides,
         } = self;
-        if camera_recording.is_some() && robot == "ros" {
+        if camera_recording.is_some() && robot != "sim" {
             return Err(AppError::flag(
-                "--robot ros",
+                "--robot",
                 "with --camera-recording the robot is the recording's; leave --robot out",
             ));
         }
-        let camera = crate::net::site_camera::SiteCamera::of(webcam, camera_recording);
+        let camera = crate::net::site_camera::SiteCamera::of(webcam, camera_recording, ros2_camera);
         crate::net::init_log();
         let path = scene.unwrap_or_else(pouring_scene);
         let packages = packages(package_path);
@@ -136,6 +148,7 @@ impl ServeArgs {
             keyframe_interval,
             scene.file.camera.fps,
         )?;
+        let robot = crate::teleop::robot_choice(&robot, &scene)?;
         let options = crate::net::serve::ServeOptions {
             net: {
                 if listen.is_empty() && connect.is_empty() {
@@ -145,11 +158,7 @@ impl ServeArgs {
             },
             scene,
             more_views,
-            robot: if robot == "ros" {
-                crate::teleop::RobotChoice::Ros
-            } else {
-                crate::teleop::RobotChoice::Sim
-            },
+            robot,
             mode,
             duration_s: duration,
             report,

@@ -26,16 +26,48 @@ pub enum SiteCamera {
     Webcam(u32),
     /// A recording (MCAP) played as the camera, its joint states as the robot's.
     Recording(PathBuf),
+    /// A ROS 2 camera topic (`Image`, or `CompressedImage` on a `/compressed` topic) over DDS
+    /// (feature `ros`; the domain of the scene's `ros2_control` link, else `ROS_DOMAIN_ID`,
+    /// else 0).
+    Ros2(String),
 }
 
 impl SiteCamera {
-    /// The camera the command line names (clap keeps the two flags apart).
-    pub fn of(webcam: Option<u32>, recording: Option<PathBuf>) -> Self {
-        match (webcam, recording) {
-            (Some(index), _) => Self::Webcam(index),
-            (None, Some(path)) => Self::Recording(path),
-            (None, None) => Self::Simulated,
+    /// The camera the command line names (clap keeps the flags apart).
+    pub fn of(webcam: Option<u32>, recording: Option<PathBuf>, ros2: Option<String>) -> Self {
+        match (webcam, recording, ros2) {
+            (Some(index), _, _) => Self::Webcam(index),
+            (None, Some(path), _) => Self::Recording(path),
+            (None, None, Some(topic)) => Self::Ros2(topic),
+            (None, None, None) => Self::Simulated,
         }
+    }
+}
+
+/// The DDS domain of `scene`: its `ros2_control` link's (checked at load), else
+/// `ROS_DOMAIN_ID`, else 0. Errors: a `ROS_DOMAIN_ID` that is not a number within 0..232.
+pub fn ros2_domain(scene: &Scene) -> Result<u16, AppError> {
+    let link = &scene.file.robot.link;
+    if let Some(d) = link
+        .domain_id
+        .filter(|_| link.kind == avatarm_scene::spec::RobotLinkKind::Ros2Control)
+    {
+        return Ok(d);
+    }
+    match std::env::var("ROS_DOMAIN_ID") {
+        Ok(text) if text.trim().is_empty() => Ok(0),
+        Ok(text) => text
+            .trim()
+            .parse::<u16>()
+            .ok()
+            .filter(|d| *d <= 232)
+            .ok_or_else(|| {
+                AppError::flag(
+                    "ROS_DOMAIN_ID",
+                    format!("'{text}': a DDS domain is a number within 0..232"),
+                )
+            }),
+        Err(_) => Ok(0),
     }
 }
 
@@ -72,6 +104,7 @@ pub fn open(
         }
         SiteCamera::Webcam(_) => "--webcam",
         SiteCamera::Recording(_) => "--camera-recording",
+        SiteCamera::Ros2(_) => "--ros2-camera",
     };
     if views > 1 {
         return Err(AppError::flag(
@@ -112,6 +145,25 @@ pub fn open(
         SiteCamera::Recording(path) => {
             let (camera, arm) = open_recording(path, scene, &mut notes)?;
             (CameraSource::Recording(camera), Some(arm))
+        }
+        #[cfg(feature = "ros")]
+        SiteCamera::Ros2(topic) => (
+            CameraSource::Ros2(avatarm_ros::ros2::camera::CameraTopic {
+                transport: avatarm_ros::Ros2Transport {
+                    domain_id: ros2_domain(scene)?,
+                    namespace: "/".into(),
+                },
+                topic: topic.clone(),
+                node_name: "avatarm_camera".into(),
+            }),
+            None,
+        ),
+        #[cfg(not(feature = "ros"))]
+        SiteCamera::Ros2(_) => {
+            return Err(AppError::flag(
+                "--ros2-camera",
+                "this avatarm was built without the ros feature; rebuild with `cargo build --features ros`",
+            ));
         }
     };
     Ok(OpenedCamera { source, arm, notes })

@@ -38,9 +38,9 @@ use avatarm_core::stats::Spread;
 use avatarm_scene::Scene;
 
 mod robot;
-pub use robot::RobotChoice;
 #[cfg(feature = "ros")]
 pub use robot::link_settings;
+pub use robot::{RobotChoice, robot_choice};
 use robot::{prepared_q0, ros_arm};
 
 mod hands;

@@ -13,6 +13,33 @@ pub enum RobotChoice {
     Ros,
 }
 
+/// `--robot NAME` for `scene`: `sim`, `ros` (the scene's `[robot.link]`, ROS 1 or ROS 2 as
+/// its `kind` says) or `ros2` (the same, checked to be a `ros2_control` link). Errors name
+/// `--robot` and the link's kind.
+pub fn robot_choice(name: &str, scene: &Scene) -> Result<RobotChoice, AppError> {
+    use avatarm_scene::spec::RobotLinkKind;
+    match name {
+        "sim" => Ok(RobotChoice::Sim),
+        "ros" => Ok(RobotChoice::Ros),
+        "ros2" if scene.file.robot.link.kind == RobotLinkKind::Ros2Control => Ok(RobotChoice::Ros),
+        "ros2" => Err(AppError::flag(
+            "--robot ros2",
+            format!(
+                "the scene's [robot.link] is kind = \"{}\" (ROS 1); a ROS 2 robot needs kind = \"ros2_control\" (docs/robot-ros2.md)",
+                match scene.file.robot.link.kind {
+                    RobotLinkKind::Intera => "intera",
+                    RobotLinkKind::RosControl => "ros_control",
+                    RobotLinkKind::Ros2Control => "ros2_control",
+                }
+            ),
+        )),
+        other => Err(AppError::flag(
+            "--robot",
+            format!("'{other}': sim, ros or ros2"),
+        )),
+    }
+}
+
 /// The scene's `[robot.link]` as the ROS link's settings: Intera's topics by default, the
 /// master from the scene, else `ROS_MASTER_URI`, else `http://localhost:11311`.
 #[cfg(feature = "ros")]
@@ -24,15 +51,14 @@ pub fn link_settings(
     use avatarm_scene::spec::{RobotLinkKind, RosControlController};
     let spec = &scene.file.robot.link;
     let intera = spec.kind == RobotLinkKind::Intera;
-    let ros2 = (spec.kind == RobotLinkKind::Ros2Control).then(|| avatarm_ros::Ros2Transport {
-        domain_id: spec.domain_id.unwrap_or_else(|| {
-            std::env::var("ROS_DOMAIN_ID")
-                .ok()
-                .and_then(|d| d.parse().ok())
-                .unwrap_or(0)
-        }),
-        namespace: "/".into(),
-    });
+    let ros2 = if spec.kind == RobotLinkKind::Ros2Control {
+        Some(avatarm_ros::Ros2Transport {
+            domain_id: crate::net::site_camera::ros2_domain(scene)?,
+            namespace: "/".into(),
+        })
+    } else {
+        None
+    };
     let master_uri = spec
         .master_uri
         .clone()
@@ -56,7 +82,7 @@ pub fn link_settings(
         topic(&spec.command_topic, Some(sawyer.command_topic.clone())).ok_or_else(|| {
             AppError::flag(
                 "robot.link.command_topic",
-                "a ros_control link needs its controller's command topic",
+                "a ros_control or ros2_control link needs its controller's command topic",
             )
         })?;
     // ros2_control's joint_state_broadcaster publishes /joint_states.

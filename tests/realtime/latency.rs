@@ -257,3 +257,56 @@ fn the_preview_plays_a_recording_as_its_camera_and_erases_its_robot() {
     assert!(frames >= 3.0, "{line}");
     assert!(median > 0.0 && median <= p95, "{line}");
 }
+
+/// `avatarm run --ros2-camera TOPIC`: the preview takes its camera from a ROS 2 camera driver
+/// over DDS (the fake driver of `avatarm_ros::testing`, on Cyclone DDS, publishing a 640x480
+/// PNG as `sensor_msgs/msg/CompressedImage` at 15 fps), decodes each frame, erases the robot
+/// from it and presents it; the glass to glass line counts the frames from the driver's stamp.
+#[cfg(feature = "ros")]
+#[test]
+fn the_preview_takes_its_camera_from_a_ros2_driver() {
+    let _serial = serial();
+    let dir = out_dir("preview_ros2_camera");
+    let picture = dir.join("frame.png");
+    image::RgbImage::from_fn(640, 480, |x, y| {
+        image::Rgb([(x % 256) as u8, (y % 256) as u8, 128])
+    })
+    .save(&picture)
+    .expect("a PNG");
+    let domain = avatarm_ros::testing::test_domain(7);
+    let topic = "/camera/image_raw/compressed";
+    let _camera = avatarm_ros::testing::FakeRos2Camera::start(
+        domain,
+        topic,
+        &["--file", picture.to_str().expect("utf-8"), "--fps", "15"],
+    );
+    let run = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1280x720x24"])
+        .arg(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["run", POURING, "--hand", "none", "--ros2-camera", topic])
+        .args(["--press", "90:Esc"])
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .env("XR_RUNTIME_JSON", dir.join("no_runtime.json"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("xvfb-run starts (scripts/setup.sh installs it)");
+    let log = output::printed(&run);
+    assert!(run.status.success(), "{log}");
+    assert!(
+        log.contains(&format!(
+            "streaming from sensor_msgs/msg/CompressedImage on {topic} (DDS domain {domain})"
+        )),
+        "{log}"
+    );
+    let line = log
+        .lines()
+        .find(|l| l.contains("glass to glass (capture -> presented) median"))
+        .unwrap_or_else(|| panic!("no glass to glass line:\n{log}"));
+    eprintln!("ROS 2 camera in the preview: {line}");
+    let frames: f64 = line
+        .split_once(" over ")
+        .and_then(|(_, rest)| rest.split_whitespace().next())
+        .and_then(|w| w.parse().ok())
+        .unwrap_or_else(|| panic!("no frame count in: {line}"));
+    assert!(frames >= 3.0, "{line}");
+}

@@ -1,5 +1,5 @@
-//! The robot arm over ROS 1 ([`RosArm`]) behind the core's [`RobotInterface`]: the commands' safety
-//! checks and the link's state.
+//! The robot arm over ROS 1 or ROS 2 ([`RosArm`]) behind the core's [`RobotInterface`]: the
+//! commands' safety checks and the link's state.
 
 use std::collections::VecDeque;
 use std::sync::mpsc::{Receiver, channel};
@@ -16,7 +16,7 @@ use crate::clock::ClockOffset;
 use crate::settings::{CommandKind, LinkSettings};
 use crate::status::LinkStatus;
 
-/// A robot arm over ROS 1 ([`RobotInterface`]): joint states in, joint velocities out.
+/// A robot arm over ROS 1 or ROS 2 ([`RobotInterface`]): joint states in, joint velocities out.
 pub struct RosArm {
     name: String,
     settings: LinkSettings,
@@ -449,12 +449,20 @@ impl RosArm {
         let mut qd = DVector::zeros(self.joints.len());
         for (k, name) in s.names.iter().enumerate() {
             if let Some(i) = self.joints.iter().position(|j| j == name) {
-                let (p, v) = (s.position[k], s.velocity.get(k).copied().unwrap_or(0.0));
-                if !(p.is_finite() && v.is_finite()) {
-                    return Err(format!("joint '{name}': position {p}, velocity {v}"));
+                let p = s.position[k];
+                if !p.is_finite() {
+                    return Err(format!("joint '{name}': position {p}"));
                 }
                 q[i] = p;
-                qd[i] = v;
+                // A velocity the robot does not measure is NaN (ros2_control's
+                // joint_state_broadcaster for hardware without a velocity interface): unknown,
+                // taken as 0; the positions are what the link needs.
+                qd[i] = s
+                    .velocity
+                    .get(k)
+                    .copied()
+                    .filter(|v| v.is_finite())
+                    .unwrap_or(0.0);
             }
         }
         if let Some(j) = self

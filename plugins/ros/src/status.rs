@@ -57,8 +57,10 @@ pub struct RobotState {
 /// What the link has measured, for the status line and the report.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct LinkStatus {
-    /// Connected to the master, topics up.
+    /// Connected to the master (ROS 1), or the DDS participant and node up (ROS 2); topics up.
     pub connected: bool,
+    /// A ROS 2 link (DDS), not ROS 1's.
+    pub dds: bool,
     /// Joint states received.
     pub joint_states: u64,
     /// Joint states refused (a missing arm joint, a NaN, sizes that do not match).
@@ -96,6 +98,9 @@ impl LinkStatus {
     pub fn line(&self) -> String {
         let mut parts = Vec::new();
         match (self.connected, self.joint_state_rate_hz) {
+            (false, _) if self.dds => {
+                parts.push("ROS 2 link DOWN (not on DDS)".to_owned());
+            }
             (false, _) => parts.push("ROS link DOWN (not connected to the master)".to_owned()),
             (true, None) => parts.push("ROS link DOWN (no joint states)".to_owned()),
             (true, Some(_)) => parts.push("ROS link up".to_owned()),

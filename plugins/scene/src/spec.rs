@@ -192,6 +192,27 @@ impl RobotLinkSpec {
                 format!("{} s: must be within 0.01..5", self.stale_after_s),
             );
         }
+        match (self.kind, self.domain_id) {
+            (RobotLinkKind::Ros2Control, Some(d)) if d > 232 => {
+                return bad(
+                    "domain_id",
+                    format!("{d}: must be within 0..232 (ROS 2's ROS_DOMAIN_ID)"),
+                );
+            }
+            (RobotLinkKind::Intera | RobotLinkKind::RosControl, Some(_)) => {
+                return bad(
+                    "domain_id",
+                    "a ROS 1 link has no DDS domain (its master is master_uri); kind = \"ros2_control\" for ROS 2".into(),
+                );
+            }
+            _ => {}
+        }
+        if self.kind == RobotLinkKind::Ros2Control && self.master_uri.is_some() {
+            return bad(
+                "master_uri",
+                "a ROS 2 link has no master (DDS discovers its peers); leave it out".into(),
+            );
+        }
         if let Some(hz) = self.joint_state_rate_hz {
             if !(1..=800).contains(&hz) {
                 return bad(

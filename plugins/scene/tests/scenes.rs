@@ -128,6 +128,22 @@ fn bad_scenes_are_refused_naming_the_field() {
         (ros2.file.robot.link.kind, ros2.file.robot.link.domain_id),
         (avatarm_scene::spec::RobotLinkKind::Ros2Control, Some(7))
     );
+    for (link, field) in [
+        (
+            "kind = \"ros2_control\"\ndomain_id = 300",
+            "robot.link.domain_id",
+        ),
+        ("kind = \"intera\"\ndomain_id = 3", "robot.link.domain_id"),
+        (
+            "kind = \"ros2_control\"\nmaster_uri = \"http://x:11311\"",
+            "robot.link.master_uri",
+        ),
+    ] {
+        let e = parse(&format!("{text}\n[robot.link]\n{link}\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(field), "{e}");
+    }
 }
 
 /// `../shared/cases/18-scene-nan-camera-pose`: a NaN in the camera pose (found by mutating the

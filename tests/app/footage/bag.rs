@@ -373,16 +373,22 @@ fn rosbag2_layouts(out: &Path, bag: &Path, expected: &Path) {
         "rosbag2_bagfile_information:\n  storage_identifier: foo\n  relative_file_paths: [a.foo]\n",
     )
     .expect("write");
+    let lone = out.join("mcap_message/mcap_message.mcap");
     for (input, said) in [
-        (expected, ["not CDR", "--recording"]),
+        (expected, ["no topic is CDR", "--recording"]),
+        // A message-compressed bag's storage file without its metadata.yaml.
+        (&lone, ["zstd-compressed message", "metadata.yaml"]),
         (&fake, ["fake.db3", "not a rosbag2 SQLite file"]),
         (&other, ["metadata.yaml", "ros2 bag convert"]),
     ] {
-        let (ok, log) = import(&[
+        let x = out.join("x.mcap");
+        let mut all = vec![
             input.to_str().expect("utf-8"),
             "--out",
-            out.join("x.mcap").to_str().expect("utf-8"),
-        ]);
+            x.to_str().expect("utf-8"),
+        ];
+        all.extend(args);
+        let (ok, log) = import(&all);
         assert!(!ok && said.iter().all(|s| log.contains(s)), "{log}");
     }
 }

@@ -241,7 +241,7 @@ fn the_pouring_task_runs_against_a_ros2_control_arm_over_dds() {
     let joints: Vec<String> = (0..7).map(|i| format!("right_j{i}")).collect();
     let start: Vec<String> = (0..7).map(|i| q0[i].to_string()).collect();
     let names: Vec<&str> = joints.iter().map(String::as_str).collect();
-    let domain = 63;
+    let domain = ros_support::test_domain(3);
     let node = avatarm_ros::testing::FakeRos2Arm::start(
         domain,
         &names,
@@ -303,6 +303,129 @@ fn the_pouring_task_runs_against_a_ros2_control_arm_over_dds() {
     );
     assert!(r["commands"].as_u64().is_some_and(|n| n > 500), "{r}");
     assert_eq!(r["bad"].as_u64(), Some(0), "{r}");
+}
+
+/// `avatarm run SCENE --robot ros2`: the live pouring task commands a ros2_control arm over
+/// DDS (the fake arm of `avatarm_ros::testing`, on Cyclone DDS, its arm where the task starts
+/// but 0.05 rad off on its first joint), the scene's `[robot.link]` of kind `ros2_control`;
+/// `--robot ros2` on a scene whose link is ROS 1's is refused naming the kind.
+#[cfg(feature = "ros")]
+#[test]
+fn live_teleoperation_commands_a_ros2_control_arm_over_dds() {
+    let _serial = ros_support::serial();
+    let scene = scene("pouring");
+    let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
+        panic!("the pouring scene has a task");
+    };
+    let prepared = avatarm_mapping::pouring::prepare(task, setup).expect("grasp");
+    let start: Vec<String> = setup
+        .arm
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| (prepared.q0()[i] + if k == 0 { 0.05 } else { 0.0 }).to_string())
+        .collect();
+    let joints: Vec<String> = (0..7).map(|i| format!("right_j{i}")).collect();
+    let names: Vec<&str> = joints.iter().map(String::as_str).collect();
+    let domain = ros_support::test_domain(4);
+    let node =
+        avatarm_ros::testing::FakeRos2Arm::start(domain, &names, &["--start", &start.join(",")]);
+    let out = out_dir("ros2_live");
+    std::fs::create_dir_all(&out).expect("the test's folder");
+    // The pouring scene with a ROS 2 link, its robot's path made absolute.
+    let text = std::fs::read_to_string(root().join("assets/scenes/pouring.toml"))
+        .expect("the pouring scene")
+        .replace(
+            "urdf = \"../robots/",
+            &format!("urdf = \"{}/assets/robots/", root().display()),
+        );
+    let path = out.join("pouring_ros2.toml");
+    std::fs::write(
+        &path,
+        format!(
+            "{text}\n[robot.link]\nkind = \"ros2_control\"\ndomain_id = {domain}\ncommand_topic = \"/forward_velocity_controller/commands\"\n"
+        ),
+    )
+    .expect("write the scene");
+    let log = run_preview_with(
+        &[
+            path.to_str().expect("utf-8"),
+            "--robot",
+            "ros2",
+            "--frames",
+            "90",
+        ],
+        &out,
+        &[],
+    );
+    assert!(
+        log.contains(&format!("on the ROS 2 robot (DDS domain {domain})")),
+        "{log}"
+    );
+    assert!(
+        log.contains("the arm is at the task's start after"),
+        "{log}"
+    );
+    let line = log
+        .lines()
+        .find(|l| l.contains("teleop: "))
+        .unwrap_or_default();
+    eprintln!("{line}");
+    assert!(
+        line.contains("ROS link up") && line.contains("real object not measured"),
+        "{line}"
+    );
+    let r = node.report();
+    assert!(r["commands"].as_u64().is_some_and(|n| n > 0), "{r}");
+    assert_eq!(r["bad"].as_u64(), Some(0), "{r}");
+    let run = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["run", "assets/scenes/pouring.toml", "--robot", "ros2"])
+        .current_dir(root())
+        .output()
+        .expect("avatarm runs");
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !run.status.success() && err.contains("kind = \"intera\"") && err.contains("ros2_control"),
+        "{err}"
+    );
+}
+
+/// `avatarm run --ros2-publish`: the live pouring session's erased frames, masks and commands
+/// reach a ROS 2 listener written with Cyclone DDS (`avatarm_ros::testing::Ros2Listener`), as
+/// rviz2 would subscribe.
+#[cfg(feature = "ros")]
+#[test]
+fn a_live_session_is_published_on_ros2() {
+    let _serial = ros_support::serial();
+    let domain = ros_support::test_domain(9);
+    let listener = avatarm_ros::testing::Ros2Listener::start(domain, "/avatarm");
+    let out = out_dir("ros2_publish");
+    std::fs::create_dir_all(&out).expect("the test's folder");
+    let log = run_preview_with(
+        &[
+            "assets/scenes/pouring.toml",
+            "--ros2-publish",
+            "--frames",
+            "60",
+        ],
+        &out,
+        &[("ROS_DOMAIN_ID", &domain.to_string())],
+    );
+    let r = listener.report();
+    eprintln!("the ROS 2 listener after the run: {r}");
+    let count = |topic: &str| r[topic]["count"].as_u64().unwrap_or(0);
+    assert!(count("erased/compressed") > 0, "{r}\n{log}");
+    assert!(count("mask/compressed") > 0, "{r}");
+    assert!(count("joint_commands") > 0, "{r}");
+    assert_eq!(r["erased/compressed"]["format"], "jpeg", "{r}");
+    assert_eq!(r["erased/compressed"]["magic"], true, "{r}");
+    assert_eq!(r["mask/compressed"]["magic"], true, "{r}");
+    assert!(
+        r["joint_commands"]["name"]
+            .as_array()
+            .is_some_and(|n| n.iter().any(|j| j == "right_j0")),
+        "{r}"
+    );
+    assert!(log.contains("published on ROS 2"), "{log}");
 }
 
 /// The robot site killed mid-pour (SIGKILL: no goodbye, no last zero command): the Sawyer stops

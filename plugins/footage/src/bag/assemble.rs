@@ -161,7 +161,16 @@ impl<'a, D: Dialect> Importer<'a, D> {
                 self.skipped_states += 1;
             }
         } else if kind == t.tf {
-            let tf: TfMessage<D::Header> = D::decode(data).map_err(decode)?;
+            // A transform message that does not decode fails the import only where the pose
+            // is chained from /tf; otherwise it is left out and said.
+            let tf: TfMessage<D::Header> = match D::decode(data) {
+                Ok(tf) => tf,
+                Err(e) if self.o.pose.is_some() || self.o.base_frame.is_none() => {
+                    self.bad_links.push(format!("{at}: not a {kind}: {e}"));
+                    return Ok(());
+                }
+                Err(e) => return Err(decode(e)),
+            };
             let is_static = topic == "/tf_static";
             for t in tf.transforms {
                 let (p, q) = (&t.transform.translation, &t.transform.rotation);
@@ -272,7 +281,7 @@ impl<'a, D: Dialect> Importer<'a, D> {
         }
         if !self.bad_links.is_empty() {
             notes.push(format!(
-                "transforms left out (not finite or not unit): {}",
+                "transforms left out (not finite, not unit, or not decoded): {}",
                 self.bad_links.join("; ")
             ));
         }

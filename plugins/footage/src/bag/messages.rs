@@ -184,13 +184,20 @@ pub(super) fn raw_frame<H: Stamped>(
             ));
         }
     };
-    let row = w * channels * bytes;
     let step = m.step as usize;
-    if step < row || m.data.len() < step * (h - 1) + row {
+    // Sizes from the message's header: checked, a crafted one may overflow.
+    let row = w.checked_mul(channels * bytes);
+    let needed = row.and_then(|row| step.checked_mul(h - 1)?.checked_add(row));
+    let (Some(row), Some(needed)) = (row, needed) else {
         return Err(format!(
-            "{at}: {w}x{h} {} needs a step of at least {row} bytes and {} bytes of data; the message has step {step} and {} bytes",
+            "{at}: {w}x{h} {} with step {step}: sizes past this machine's range",
+            m.encoding
+        ));
+    };
+    if step < row || m.data.len() < needed {
+        return Err(format!(
+            "{at}: {w}x{h} {} needs a step of at least {row} bytes and {needed} bytes of data; the message has step {step} and {} bytes",
             m.encoding,
-            step * (h - 1) + row,
             m.data.len()
         ));
     }

@@ -80,6 +80,11 @@ impl Dialect for Ros2 {
         let (value, used) = match [header[0], header[1]] {
             [0, 1] => cdr_encoding::from_bytes::<T, LittleEndian>(body),
             [0, 0] => cdr_encoding::from_bytes::<T, BigEndian>(body),
+            [0x28, 0xb5] if header[2..] == [0x2f, 0xfd] => {
+                return Err(
+                    "a zstd-compressed message (a bag recorded with compression_mode: message): give the bag's folder, whose metadata.yaml says so".into(),
+                );
+            }
             id => {
                 return Err(format!(
                     "encapsulation {:02x}{:02x}, not plain CDR (0001 little-endian, 0000 big-endian)",
@@ -244,8 +249,14 @@ fn mcap_error(file: &Path, e: &mcap::McapError) -> FootageError {
     bag_error(file, format!("not a readable MCAP file: {e}"))
 }
 
-/// The MCAP file's channels, from its summary (the messages where it has none).
-fn mcap_topics(file: &Path, bytes: &[u8], topics: &mut Topics) -> Result<(), FootageError> {
+/// The MCAP file's CDR channels, from its summary (the messages where it has none); the
+/// others (`topic (encoding)`) into `skipped`.
+fn mcap_topics(
+    file: &Path,
+    bytes: &[u8],
+    topics: &mut Topics,
+    skipped: &mut Vec<String>,
+) -> Result<(), FootageError> {
     // (topic, message encoding, type) of each channel.
     let mut channels: BTreeMap<u16, (String, String, String)> = BTreeMap::new();
     let mut add = |c: &mcap::Channel<'_>| {
@@ -267,15 +278,11 @@ fn mcap_topics(file: &Path, bytes: &[u8], topics: &mut Topics) -> Result<(), Foo
         }
     }
     for (topic, encoding, kind) in channels.into_values() {
-        if encoding != "cdr" {
-            return Err(bag_error(
-                file,
-                format!(
-                    "{topic}: message encoding '{encoding}', not CDR: not a rosbag2 (an Avatarm recording replays with --recording)"
-                ),
-            ));
+        if encoding == "cdr" {
+            topics.insert(topic, kind);
+        } else {
+            skipped.push(format!("{topic} ({encoding})"));
         }
-        topics.insert(topic, kind);
     }
     Ok(())
 }
@@ -289,8 +296,12 @@ fn open_sqlite(file: &Path) -> Result<rusqlite::Connection, FootageError> {
         .map_err(|e| sqlite_error(file, &e))
 }
 
-/// The SQLite file's topics: id -> (name, type).
-fn sqlite_topics(file: &Path) -> Result<BTreeMap<i64, (String, String)>, FootageError> {
+/// The SQLite file's CDR topics: id -> (name, type); the others (`topic (format)`) into
+/// `skipped`.
+fn sqlite_topics(
+    file: &Path,
+    skipped: &mut Vec<String>,
+) -> Result<BTreeMap<i64, (String, String)>, FootageError> {
     let db = open_sqlite(file)?;
     let fail = |e: rusqlite::Error| sqlite_error(file, &e);
     let mut query = db
@@ -309,13 +320,11 @@ fn sqlite_topics(file: &Path) -> Result<BTreeMap<i64, (String, String)>, Footage
     let mut topics = BTreeMap::new();
     for row in rows {
         let (id, name, kind, format) = row.map_err(fail)?;
-        if format != "cdr" {
-            return Err(bag_error(
-                file,
-                format!("{name}: serialization_format '{format}', not CDR"),
-            ));
+        if format == "cdr" {
+            topics.insert(id, (name, kind));
+        } else {
+            skipped.push(format!("{name} ({format})"));
         }
-        topics.insert(id, (name, kind));
     }
     Ok(topics)
 }
@@ -340,6 +349,9 @@ fn each_message(
             let bytes = read_file(file, layout.compression)?;
             for m in mcap::MessageStream::new(&bytes).map_err(|e| mcap_error(file, &e))? {
                 let m = m.map_err(|e| mcap_error(file, &e))?;
+                if m.channel.message_encoding != "cdr" {
+                    continue;
+                }
                 if layout.compression == Compression::Message {
                     importer.message(&m.channel.topic, &unpack(&m.data)?, m.log_time)?;
                 } else {
@@ -348,7 +360,7 @@ fn each_message(
             }
         }
         Storage::Sqlite => {
-            let topics = sqlite_topics(file)?;
+            let topics = sqlite_topics(file, &mut Vec::new())?;
             let db = open_sqlite(file)?;
             let fail = |e: rusqlite::Error| sqlite_error(file, &e);
             let mut query = db
@@ -362,13 +374,16 @@ fn each_message(
                     row.get_ref(2).map_err(fail)?.as_blob().map_err(|e| {
                         bag_error(file, format!("a message's data is not bytes: {e}"))
                     })?;
-                let (topic, _) = topics.get(&id).ok_or_else(|| {
+                // A message of a topic that is not CDR (skipped and said) is left out.
+                let Some((topic, _)) = topics.get(&id) else {
+                    continue;
+                };
+                let stamp = u64::try_from(stamp).map_err(|_| {
                     bag_error(
                         file,
-                        format!("a message on topic id {id}, which the topics table does not list"),
+                        format!("{topic}: a message received at {stamp} ns, before the epoch"),
                     )
                 })?;
-                let stamp = u64::try_from(stamp).unwrap_or(0);
                 if layout.compression == Compression::Message {
                     importer.message(topic, &unpack(data)?, stamp)?;
                 } else {
@@ -390,16 +405,26 @@ pub(super) fn import(o: &BagOptions) -> Result<BagSummary, FootageError> {
         ));
     }
     let mut topics = Topics::new();
+    let mut skipped = Vec::new();
     for file in &layout.files {
         match layout.storage {
             Storage::Mcap => {
                 let bytes = read_file(file, layout.compression)?;
-                mcap_topics(file, &bytes, &mut topics)?;
+                mcap_topics(file, &bytes, &mut topics, &mut skipped)?;
             }
             Storage::Sqlite => {
-                topics.extend(sqlite_topics(file)?.into_values());
+                topics.extend(sqlite_topics(file, &mut skipped)?.into_values());
             }
         }
+    }
+    if topics.is_empty() && !skipped.is_empty() {
+        return Err(bag_error(
+            &o.bag,
+            format!(
+                "no topic is CDR ({}): not a rosbag2 (an Avatarm recording replays with --recording)",
+                skipped.join(", ")
+            ),
+        ));
     }
     let format = match layout.storage {
         Storage::Mcap => "rosbag2 (mcap)",
@@ -409,7 +434,14 @@ pub(super) fn import(o: &BagOptions) -> Result<BagSummary, FootageError> {
     for file in &layout.files {
         each_message(file, &layout, &mut importer)?;
     }
-    importer.finish()
+    let mut summary = importer.finish()?;
+    if !skipped.is_empty() {
+        summary.notes.push(format!(
+            "topics not in CDR, left out: {}",
+            skipped.join(", ")
+        ));
+    }
+    Ok(summary)
 }
 
 #[cfg(test)]

@@ -9,7 +9,8 @@ reliable, volatile, keep last 10) as rmw does.
 - Subscribes to std_msgs/msg/Float64MultiArray on /<controller>/commands, one value per joint
   in --joints order (starting at --start), as forward_command_controller does: velocities (--mode velocity), clamped
   to +-(--max-velocity) and integrated, or position targets (--mode position) approached at
-  --max-velocity. A command of the wrong length is counted as bad and ignored. With no
+  --max-velocity (NaN velocities published with --no-velocity, as joint_state_broadcaster
+  does for hardware without a velocity interface). A command of the wrong length is counted as bad and ignored. With no
   command for --timeout s, velocities go to zero.
 - Prints a JSON report every 50 ms: t (wall clock), q, velocity, commands, bad, and the
   receipts of the last 300 commands as [wall time, first value].
@@ -21,56 +22,19 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import dataclass
 
-from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
-from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import float64, int32, sequence, uint32
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
-from cyclonedds.util import duration
+
+from ros2_types import Header, JointState, Float64MultiArray, default_qos, stamp_of
 
 
-@dataclass
-class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
-    sec: int32
-    nanosec: uint32
 
 
-@dataclass
-class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
-    stamp: Time
-    frame_id: str
 
 
-@dataclass
-class JointState(IdlStruct, typename="sensor_msgs::msg::dds_::JointState_"):
-    header: Header
-    name: sequence[str]
-    position: sequence[float64]
-    velocity: sequence[float64]
-    effort: sequence[float64]
-
-
-@dataclass
-class MultiArrayDimension(IdlStruct, typename="std_msgs::msg::dds_::MultiArrayDimension_"):
-    label: str
-    size: uint32
-    stride: uint32
-
-
-@dataclass
-class MultiArrayLayout(IdlStruct, typename="std_msgs::msg::dds_::MultiArrayLayout_"):
-    dim: sequence[MultiArrayDimension]
-    data_offset: uint32
-
-
-@dataclass
-class Float64MultiArray(IdlStruct, typename="std_msgs::msg::dds_::Float64MultiArray_"):
-    layout: MultiArrayLayout
-    data: sequence[float64]
 
 
 def main():
@@ -84,14 +48,15 @@ def main():
     p.add_argument("--max-velocity", type=float, default=1.0)
     p.add_argument("--timeout", type=float, default=0.5)
     p.add_argument("--start", default="", help="the joints' start positions, comma-separated")
+    p.add_argument(
+        "--no-velocity",
+        action="store_true",
+        help="publish NaN velocities, as joint_state_broadcaster does for hardware without a velocity interface",
+    )
     a = p.parse_args()
     joints = a.joints.split(",")
     n = len(joints)
-    qos = Qos(
-        Policy.Reliability.Reliable(duration(milliseconds=100)),
-        Policy.Durability.Volatile,
-        Policy.History.KeepLast(10),
-    )
+    qos = default_qos()
     dp = DomainParticipant(a.domain)
     states = DataWriter(dp, Topic(dp, "rt/joint_states", JointState, qos=qos), qos=qos)
     commands = DataReader(
@@ -135,14 +100,12 @@ def main():
             v = [max(-a.max_velocity, min(a.max_velocity, (t - qi) / max(dt, 1e-6))) for t, qi in zip(target, q)]
             q = [qi + max(-step, min(step, t - qi)) for t, qi in zip(target, q)]
         if now >= next_state:
-            stamp = now + a.offset
-            sec = int(stamp)
             states.write(
                 JointState(
-                    header=Header(stamp=Time(sec=sec, nanosec=int((stamp - sec) * 1e9)), frame_id=""),
+                    header=Header(stamp=stamp_of(now + a.offset), frame_id=""),
                     name=joints,
                     position=q,
-                    velocity=v,
+                    velocity=[float("nan")] * n if a.no_velocity else v,
                     effort=[],
                 )
             )

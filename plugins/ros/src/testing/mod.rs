@@ -156,25 +156,11 @@ impl FakeRos2Arm {
     /// The arm on DDS domain `domain` with `joints` (its controller's order) and more of the
     /// script's arguments (`--mode position`, `--offset S`, `--controller NAME`).
     pub fn start(domain: u16, joints: &[&str], more: &[&str]) -> Self {
-        let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src/testing/fake_ros2_arm.py");
-        let python_path = std::env::var("HOME")
-            .map(|h| format!("{h}/.cache/avatarm/python"))
-            .unwrap_or_default();
-        let mut child = Command::new("python3")
-            .arg(&script)
-            .args([
-                "--domain",
-                &domain.to_string(),
-                "--joints",
-                &joints.join(","),
-            ])
-            .args(more)
-            .env("PYTHONPATH", python_path)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("python3 runs");
-        let report = reports_of(&mut child);
+        let (child, report) = ros2_peer(
+            "fake_ros2_arm.py",
+            &[&["--joints", &joints.join(",")][..], more].concat(),
+            domain,
+        );
         Self { child, report }
     }
 
@@ -197,6 +183,103 @@ impl FakeRos2Arm {
 impl Drop for FakeRos2Arm {
     fn drop(&mut self) {
         self.kill();
+    }
+}
+
+/// The DDS domain of a ROS 2 test: `AVATARM_TEST_DDS_DOMAIN` (default 60) plus `offset`
+/// (each test its own: a test binary runs its tests in one process, the DDS participants of
+/// several on one domain would see each other's robots), so that two runs on one network can
+/// keep apart.
+pub fn test_domain(offset: u16) -> u16 {
+    std::env::var("AVATARM_TEST_DDS_DOMAIN")
+        .ok()
+        .and_then(|d| d.parse::<u16>().ok())
+        .filter(|d| *d <= 200)
+        .unwrap_or(60)
+        + offset
+}
+
+/// A ROS 2 peer (a script beside this file, run with PyPI's packages of
+/// `~/.cache/avatarm/python`) on DDS domain `domain` with `args`: its process and its reports.
+fn ros2_peer(script: &str, args: &[&str], domain: u16) -> (Child, Arc<Mutex<Option<Value>>>) {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("src/testing")
+        .join(script);
+    let python_path = std::env::var("HOME")
+        .map(|h| format!("{h}/.cache/avatarm/python"))
+        .unwrap_or_default();
+    let mut child = Command::new("python3")
+        .arg(&script)
+        .args(["--domain", &domain.to_string()])
+        .args(args)
+        .env("PYTHONPATH", python_path)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("python3 runs");
+    let report = reports_of(&mut child);
+    (child, report)
+}
+
+/// A fake ROS 2 camera driver on DDS (`fake_ros2_camera.py` beside this file, PyPI's
+/// cyclonedds): raw `Image` frames of a known pattern, or a file's bytes as
+/// `CompressedImage`.
+pub struct FakeRos2Camera {
+    child: Child,
+    report: Arc<Mutex<Option<Value>>>,
+}
+
+impl FakeRos2Camera {
+    /// The camera on DDS domain `domain` publishing on `topic`, with more of the script's
+    /// arguments (`--file PATH`, `--fps N`, `--width W --height H`).
+    pub fn start(domain: u16, topic: &str, more: &[&str]) -> Self {
+        let (child, report) = ros2_peer(
+            "fake_ros2_camera.py",
+            &[&["--topic", topic][..], more].concat(),
+            domain,
+        );
+        Self { child, report }
+    }
+
+    /// The camera's newest report (`frames` published), waiting for one printed after now.
+    pub fn report(&self) -> Value {
+        newest_report(&self.report, 5, "the fake ROS 2 camera stopped reporting")
+    }
+}
+
+impl Drop for FakeRos2Camera {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A ROS 2 listener on DDS (`ros2_listener.py` beside this file, PyPI's cyclonedds) of what
+/// Avatarm publishes under a prefix: the erased video, the mask, the commands, the safety
+/// events.
+pub struct Ros2Listener {
+    child: Child,
+    report: Arc<Mutex<Option<Value>>>,
+}
+
+impl Ros2Listener {
+    /// The listener on DDS domain `domain` of the topics under `prefix` (e.g. `/avatarm`).
+    pub fn start(domain: u16, prefix: &str) -> Self {
+        let (child, report) = ros2_peer("ros2_listener.py", &["--prefix", prefix], domain);
+        Self { child, report }
+    }
+
+    /// The listener's newest report (per topic: `count` and the last message's content),
+    /// waiting for one printed after now.
+    pub fn report(&self) -> Value {
+        newest_report(&self.report, 10, "the ROS 2 listener stopped reporting")
+    }
+}
+
+impl Drop for Ros2Listener {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
     }
 }
 

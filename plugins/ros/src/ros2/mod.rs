@@ -13,6 +13,12 @@
 //! joint states arrive (a vanished robot node is a stale link, which stops the arm). Names
 //! follow ROS 2's DDS conventions (the topic `rt/<name>`, the type
 //! `<pkg>::msg::dds_::<Type>_`), which `ros2-client` applies.
+//!
+//! [`camera`]: a camera from ROS 2 (`Image` or `CompressedImage`) as a live camera source;
+//! [`publish`]: the erased video, the mask, the commands and the safety events published.
+
+pub mod camera;
+pub mod publish;
 
 use std::sync::mpsc::Sender;
 use std::sync::{Arc, Mutex};
@@ -96,6 +102,34 @@ fn topic_name(topic: &str) -> Result<Name, String> {
     Name::parse(topic).map_err(|e| format!("topic '{topic}': not a ROS 2 name: {e:?}"))
 }
 
+/// A node `node_name` on `transport`'s DDS domain (its context, which must outlive it) and its
+/// spinner's future (ros2-client's graph and discovery events: polled beside the node's work).
+/// Errors say which step failed.
+pub(crate) fn join(
+    transport: &Ros2Transport,
+    node_name: &str,
+) -> Result<
+    (
+        Context,
+        ros2_client::Node,
+        impl std::future::Future<Output = ros2_client::CreateResult<()>>,
+    ),
+    String,
+> {
+    let context = Context::with_options(ContextOptions::new().domain_id(transport.domain_id))
+        .map_err(|e| format!("cannot join DDS: {e:?}"))?;
+    let name = NodeName::new(&transport.namespace, node_name)
+        .map_err(|e| format!("node name '{node_name}': {e:?}"))?;
+    let mut node = context
+        .new_node(name, NodeOptions::new().enable_rosout(false))
+        .map_err(|e| format!("cannot create the node: {e:?}"))?;
+    let spin = node
+        .spinner()
+        .map_err(|e| format!("cannot spin the node: {e:?}"))?
+        .spin();
+    Ok((context, node, spin))
+}
+
 /// The client thread: a single-threaded runtime holding the DDS participant, its node, the
 /// joint-state subscription and the command publisher until shutdown.
 pub(crate) fn client_thread(
@@ -108,11 +142,32 @@ pub(crate) fn client_thread(
     let Some(runtime) = crate::client::link_runtime("ROS 2 link") else {
         return;
     };
-    if let Err(e) = runtime.block_on(session(&settings, &transport, &shared, &notify, &tx)) {
-        eprintln!(
-            "ROS 2 link (DDS domain {}): {e}; the link stays down",
-            transport.domain_id
-        );
+    if let Ok(mut s) = shared.lock() {
+        s.status.dds = true;
+    }
+    // As the ROS 1 link: a session that fails is said once and tried again every second.
+    let mut said = false;
+    loop {
+        if shared.lock().map_or(true, |s| s.shutdown) {
+            break;
+        }
+        match runtime.block_on(session(&settings, &transport, &shared, &notify, &tx)) {
+            Ok(()) => break,
+            Err(e) => {
+                if let Ok(mut s) = shared.lock() {
+                    s.status.connected = false;
+                    s.status.last_bad = Some(e.clone());
+                }
+                if !said {
+                    said = true;
+                    eprintln!(
+                        "ROS 2 link (DDS domain {}): {e}; retrying every second",
+                        transport.domain_id
+                    );
+                }
+                std::thread::sleep(Duration::from_secs(1));
+            }
+        }
     }
     if let Ok(mut s) = shared.lock() {
         s.status.connected = false;
@@ -120,7 +175,8 @@ pub(crate) fn client_thread(
     }
 }
 
-/// The session: runs until shutdown (Ok) or until DDS cannot be set up (Err).
+/// The session: runs until shutdown or the app is gone (Ok) or until DDS cannot be set up or
+/// its node stops (Err, the caller retries).
 async fn session(
     settings: &LinkSettings,
     transport: &Ros2Transport,
@@ -128,17 +184,7 @@ async fn session(
     notify: &Arc<tokio::sync::Notify>,
     tx: &Sender<Sample>,
 ) -> Result<(), String> {
-    let context = Context::with_options(ContextOptions::new().domain_id(transport.domain_id))
-        .map_err(|e| format!("cannot join DDS: {e:?}"))?;
-    let node_name = NodeName::new(&transport.namespace, &settings.node_name)
-        .map_err(|e| format!("node name '{}': {e:?}", settings.node_name))?;
-    let mut node = context
-        .new_node(node_name, NodeOptions::new().enable_rosout(false))
-        .map_err(|e| format!("cannot create the node: {e:?}"))?;
-    let spin = node
-        .spinner()
-        .map_err(|e| format!("cannot spin the node: {e:?}"))?
-        .spin();
+    let (_context, mut node, spin) = join(transport, &settings.node_name)?;
     let states_topic = node
         .create_topic(
             &topic_name(&settings.joint_states_topic)?,
@@ -172,6 +218,7 @@ async fn session(
         s.outbound = None;
     }
     let max_age = Duration::from_secs_f64(settings.stale_after_s.min(settings.command_timeout_s));
+    let mut publish_said = false;
     let mut stream = std::pin::pin!(states.async_stream());
     let mut spin = std::pin::pin!(spin);
     loop {
@@ -199,8 +246,20 @@ async fn session(
                 None => return Err("the joint-state subscription closed".into()),
             },
             () = notify.notified() => {
-                if send_outbound(settings, shared, &commands, max_age).await? {
-                    return Ok(());
+                match send_outbound(settings, shared, &commands, max_age).await {
+                    Ok(true) => return Ok(()),
+                    Ok(false) => {}
+                    // A command that could not go out (the writer's window full): counted and
+                    // said once; the next command is the newest anyway.
+                    Err(e) => {
+                        if let Ok(mut s) = shared.lock() {
+                            s.status.commands_refused += 1;
+                        }
+                        if !publish_said {
+                            publish_said = true;
+                            eprintln!("ROS 2 link: {e} (further failures are counted)");
+                        }
+                    }
                 }
             },
             r = &mut spin => {

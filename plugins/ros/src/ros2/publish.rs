@@ -1,0 +1,232 @@
+//! What Avatarm does, published on ROS 2 (DDS) so that rviz2, Foxglove and `ros2 topic echo`
+//! show it: the erased video and the mask (`sensor_msgs/msg/CompressedImage`, image_transport's
+//! `/compressed` convention), the joint velocity commands (`sensor_msgs/msg/JointState`, names
+//! and velocities) and the safety events (`std_msgs/msg/String`), under a prefix (`/avatarm`
+//! by default). A thread of its own with its own runtime and node; [`Ros2Publisher::publish`]
+//! never blocks: a message that finds the queue full is dropped and counted (a late frame is
+//! worth less than the next).
+//!
+//! | topic | type |
+//! |---|---|
+//! | `PREFIX/erased/compressed` | `CompressedImage`, `format = "jpeg"`: the frame with the robot erased |
+//! | `PREFIX/mask/compressed` | `CompressedImage`, `format = "png"`: M(t), 255 = robot |
+//! | `PREFIX/joint_commands` | `JointState`: `name`, `velocity` (rad/s or m/s) of each command sent |
+//! | `PREFIX/safety` | `String`: `LEVEL source: message` |
+//!
+//! All reliable, keep last 2 (a reliable writer matches reliable and best-effort readers).
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use ros2_client::{Message, MessageTypeName, QosProfile};
+use serde::{Deserialize, Serialize};
+
+use super::camera::CompressedImage;
+use super::{Header, JointState, Time, topic_name};
+use crate::settings::Ros2Transport;
+
+/// `std_msgs/msg/String`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct StringMsg {
+    /// The text.
+    pub data: String,
+}
+impl Message for StringMsg {}
+
+/// One message to publish; stamps are ns since the Unix epoch.
+#[derive(Debug, Clone)]
+pub enum Outgoing {
+    /// An erased frame as JPEG.
+    Erased {
+        /// The frame's capture.
+        stamp_ns: u64,
+        /// The JPEG file.
+        jpeg: Vec<u8>,
+    },
+    /// A mask as PNG (255 = robot).
+    Mask {
+        /// The frame's capture.
+        stamp_ns: u64,
+        /// The PNG file.
+        png: Vec<u8>,
+    },
+    /// A joint velocity command.
+    Command {
+        /// The control tick.
+        stamp_ns: u64,
+        /// The joints, in the velocities' order.
+        names: Vec<String>,
+        /// rad/s or m/s.
+        velocities: Vec<f64>,
+    },
+    /// A safety event.
+    Safety {
+        /// When.
+        stamp_ns: u64,
+        /// `LEVEL source: message`.
+        text: String,
+    },
+}
+
+/// The publishing thread's handle; see the module docs.
+pub struct Ros2Publisher {
+    tx: tokio::sync::mpsc::Sender<Outgoing>,
+    dropped: Arc<AtomicU64>,
+}
+
+/// Messages that may wait for the thread before new ones are dropped.
+const QUEUE: usize = 64;
+
+fn header(stamp_ns: u64, frame_id: &str) -> Header {
+    Header {
+        stamp: Time {
+            sec: i32::try_from(stamp_ns / 1_000_000_000).unwrap_or(i32::MAX),
+            nanosec: (stamp_ns % 1_000_000_000) as u32,
+        },
+        frame_id: frame_id.to_owned(),
+    }
+}
+
+impl Ros2Publisher {
+    /// Starts the thread publishing under `prefix` (e.g. `/avatarm`) on `transport`'s domain,
+    /// as the node `node_name`; `camera_frame` is the images' `frame_id`. Errors: the thread
+    /// could not start (DDS errors are said on stderr once, and the messages dropped).
+    pub fn start(
+        transport: Ros2Transport,
+        node_name: &str,
+        prefix: &str,
+        camera_frame: &str,
+    ) -> std::io::Result<Self> {
+        let (tx, rx) = tokio::sync::mpsc::channel(QUEUE);
+        let (node_name, prefix, frame) = (
+            node_name.to_owned(),
+            prefix.trim_end_matches('/').to_owned(),
+            camera_frame.to_owned(),
+        );
+        std::thread::Builder::new()
+            .name("ros2 publisher".into())
+            .spawn(move || {
+                let Some(runtime) = crate::client::link_runtime("ROS 2 publisher") else {
+                    return;
+                };
+                if let Err(e) = runtime.block_on(run(&transport, &node_name, &prefix, &frame, rx)) {
+                    eprintln!(
+                        "ROS 2 publisher (DDS domain {}): {e}; nothing is published",
+                        transport.domain_id
+                    );
+                }
+            })?;
+        Ok(Self {
+            tx,
+            dropped: Arc::default(),
+        })
+    }
+
+    /// Hands `message` to the thread; `false` (and counted) when the queue is full or the
+    /// thread is gone.
+    pub fn publish(&self, message: Outgoing) -> bool {
+        let sent = self.tx.try_send(message).is_ok();
+        if !sent {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+        sent
+    }
+
+    /// Messages dropped so far.
+    pub fn dropped(&self) -> u64 {
+        self.dropped.load(Ordering::Relaxed)
+    }
+}
+
+async fn run(
+    transport: &Ros2Transport,
+    node_name: &str,
+    prefix: &str,
+    frame: &str,
+    mut rx: tokio::sync::mpsc::Receiver<Outgoing>,
+) -> Result<(), String> {
+    let (_context, mut node, spin) = super::join(transport, node_name)?;
+    let qos =
+        QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast { depth: 2 });
+    let topic = |base: &str, package: &str, kind: &str| {
+        let full = format!("{prefix}/{base}");
+        node.create_topic(
+            &topic_name(&full)?,
+            MessageTypeName::new(package, kind),
+            &qos,
+        )
+        .map_err(|e| format!("{full}: {e:?}"))
+    };
+    let (erased_t, mask_t, commands_t, safety_t) = (
+        topic("erased/compressed", "sensor_msgs", "CompressedImage")?,
+        topic("mask/compressed", "sensor_msgs", "CompressedImage")?,
+        topic("joint_commands", "sensor_msgs", "JointState")?,
+        topic("safety", "std_msgs", "String")?,
+    );
+    let fail = |what: &str, e: ros2_client::CreateError| format!("{prefix}/{what}: {e:?}");
+    let erased = node
+        .create_publisher::<CompressedImage>(&erased_t, None)
+        .map_err(|e| fail("erased/compressed", e))?;
+    let mask = node
+        .create_publisher::<CompressedImage>(&mask_t, None)
+        .map_err(|e| fail("mask/compressed", e))?;
+    let commands = node
+        .create_publisher::<JointState>(&commands_t, None)
+        .map_err(|e| fail("joint_commands", e))?;
+    let safety = node
+        .create_publisher::<StringMsg>(&safety_t, None)
+        .map_err(|e| fail("safety", e))?;
+    let mut spin = std::pin::pin!(spin);
+    let mut failed_said = false;
+    loop {
+        let message = tokio::select! {
+            m = rx.recv() => match m {
+                Some(m) => m,
+                None => return Ok(()),
+            },
+            r = &mut spin => return Err(format!("the node's spinner stopped: {r:?}")),
+        };
+        let result = match message {
+            Outgoing::Erased { stamp_ns, jpeg } => erased
+                .async_publish(CompressedImage {
+                    header: header(stamp_ns, frame),
+                    format: "jpeg".into(),
+                    data: jpeg,
+                })
+                .await
+                .map_err(|e| format!("erased: {e:?}")),
+            Outgoing::Mask { stamp_ns, png } => mask
+                .async_publish(CompressedImage {
+                    header: header(stamp_ns, frame),
+                    format: "png".into(),
+                    data: png,
+                })
+                .await
+                .map_err(|e| format!("mask: {e:?}")),
+            Outgoing::Command {
+                stamp_ns,
+                names,
+                velocities,
+            } => commands
+                .async_publish(JointState {
+                    header: header(stamp_ns, ""),
+                    name: names,
+                    position: Vec::new(),
+                    velocity: velocities,
+                    effort: Vec::new(),
+                })
+                .await
+                .map_err(|e| format!("joint_commands: {e:?}")),
+            Outgoing::Safety { stamp_ns: _, text } => safety
+                .async_publish(StringMsg { data: text })
+                .await
+                .map_err(|e| format!("safety: {e:?}")),
+        };
+        if let Err(e) = result
+            && !failed_said
+        {
+            failed_said = true;
+            eprintln!("ROS 2 publisher: {e} (further failures are not said)");
+        }
+    }
+}
