@@ -44,12 +44,7 @@ use crate::{AppError, AppTwin};
 /// The JPEG quality of recorded camera and erased frames.
 const JPEG_QUALITY: u8 = 90;
 
-/// Where the session's ROS 2 messages go (feature `ros`; nothing can be made without it).
-#[cfg(feature = "ros")]
-pub type Ros2Sink = avatarm_ros::ros2::publish::Ros2Publisher;
-/// Where the session's ROS 2 messages go (feature `ros`; nothing can be made without it).
-#[cfg(not(feature = "ros"))]
-pub type Ros2Sink = std::convert::Infallible;
+pub use crate::net::ros2_out::Ros2Sink;
 
 /// Adds the session recorder to `app`: creates `path` now (an error names it) and publishes
 /// on `ros2`, until the app ends. At least one of them.
@@ -277,9 +272,8 @@ fn write_session(
             Err(e) => return Err(e),
         }
     }
-    #[cfg(feature = "ros")]
     if let Some(publisher) = &ros2 {
-        written.dropped = publisher.dropped();
+        written.dropped = crate::net::ros2_out::dropped(publisher);
     }
     if let Some(writer) = writer {
         written.messages = writer.messages();
@@ -289,63 +283,39 @@ fn write_session(
 }
 
 /// Publishes what ROS 2 takes of `item` (the erased frames, the masks, the commands, the
-/// safety events; the camera's frames and joint states have their own topics already);
-/// whether one was handed over.
-#[cfg(feature = "ros")]
+/// safety events; the camera's frames and joint states have their own topics already), its
+/// image `encoded` once; whether one was handed over.
 fn publish(
     publisher: &Ros2Sink,
     item: &Item,
     encoded: Option<&Result<CompressedFrame, String>>,
 ) -> bool {
-    use avatarm_ros::ros2::publish::Outgoing;
-    let message = match (item, encoded) {
+    use crate::net::ros2_out as out;
+    match (item, encoded) {
         (
             Item::Image {
-                stream: stream @ (Stream::Erased | Stream::Mask),
+                stream: Stream::Erased,
                 stamp_ns,
                 ..
             },
             Some(Ok(f)),
-        ) => {
-            if *stream == Stream::Erased {
-                Outgoing::Erased {
-                    stamp_ns: *stamp_ns,
-                    jpeg: f.data.clone(),
-                }
-            } else {
-                Outgoing::Mask {
-                    stamp_ns: *stamp_ns,
-                    png: f.data.clone(),
-                }
-            }
+        ) => out::publish_erased(publisher, *stamp_ns, f.data.clone()),
+        (
+            Item::Image {
+                stream: Stream::Mask,
+                stamp_ns,
+                ..
+            },
+            Some(Ok(f)),
+        ) => out::publish_mask(publisher, *stamp_ns, f.data.clone()),
+        (Item::Command(c), _) => {
+            out::publish_command(publisher, c.stamp_ns, &c.names, &c.velocities)
         }
-        (Item::Command(c), _) => Outgoing::Command {
-            stamp_ns: c.stamp_ns,
-            names: c.names.clone(),
-            velocities: c.velocities.clone(),
-        },
-        (Item::Safety(e), _) => Outgoing::Safety {
-            stamp_ns: e.stamp_ns,
-            text: format!(
-                "{} {}: {}",
-                match e.level {
-                    LogLevel::Info => "INFO",
-                    LogLevel::Warning => "WARN",
-                    LogLevel::Error => "ERROR",
-                },
-                e.source,
-                e.message
-            ),
-        },
-        _ => return false,
-    };
-    publisher.publish(message)
-}
-
-/// Nothing is published without the feature `ros` (no sink can be made).
-#[cfg(not(feature = "ros"))]
-fn publish(publisher: &Ros2Sink, _: &Item, _: Option<&Result<CompressedFrame, String>>) -> bool {
-    match *publisher {}
+        (Item::Safety(e), _) => {
+            out::publish_safety(publisher, e.stamp_ns, e.level, &e.source, &e.message)
+        }
+        _ => false,
+    }
 }
 
 /// Intervention counts and flags seen so far, to turn the limiter's counters into events.

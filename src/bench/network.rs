@@ -190,6 +190,7 @@ fn run_cell(
         period: parts.period,
         mode,
         scene: scene.file.name.clone(),
+        ros2: None,
     };
     let stop = Arc::new(AtomicBool::new(false));
     let loop_stop = stop.clone();

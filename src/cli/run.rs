@@ -219,7 +219,7 @@ impl RunArgs {
             slow_update: slow_update_ms.map(std::time::Duration::from_millis),
         };
         let ros2 = if ros2_publish {
-            Some(ros2_publisher(&scene)?)
+            Some(crate::net::ros2_out::ros2_publisher(&scene)?)
         } else {
             None
         };
@@ -233,30 +233,4 @@ impl RunArgs {
         }
         Ok(())
     }
-}
-
-/// The session's ROS 2 publisher (`--ros2-publish`): under `/avatarm`, on the scene's DDS
-/// domain.
-#[cfg(feature = "ros")]
-fn ros2_publisher(scene: &Scene) -> Result<crate::session::Ros2Sink, AppError> {
-    let transport = avatarm_ros::Ros2Transport {
-        domain_id: crate::net::site_camera::ros2_domain(scene)?,
-        namespace: "/".into(),
-    };
-    avatarm_ros::ros2::publish::Ros2Publisher::start(
-        transport,
-        "avatarm_out",
-        "/avatarm",
-        "camera_optical",
-    )
-    .map_err(|e| AppError::flag("--ros2-publish", format!("cannot start its thread: {e}")))
-}
-
-/// Without the feature `ros` there is no ROS 2.
-#[cfg(not(feature = "ros"))]
-fn ros2_publisher(_: &Scene) -> Result<crate::session::Ros2Sink, AppError> {
-    Err(AppError::flag(
-        "--ros2-publish",
-        "this avatarm was built without the ros feature; rebuild with `cargo build --features ros`",
-    ))
 }

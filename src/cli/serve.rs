@@ -44,6 +44,12 @@ pub struct ServeArgs {
     /// docs/robot-ros2.md).
     #[arg(long = "ros2-camera", value_name = "TOPIC")]
     ros2_camera: Option<String>,
+    /// Publish on ROS 2 over DDS (feature `ros`), under /avatarm: the erased frames (with
+    /// --codec jpeg: CompressedImage on /avatarm/erased/compressed), the commands (JointState
+    /// on /avatarm/joint_commands) and the safety events (String on /avatarm/safety), on the
+    /// scene's ros2_control link's domain, else ROS_DOMAIN_ID (docs/robot-ros2.md).
+    #[arg(long = "ros2-publish")]
+    ros2_publish: bool,
     /// Where to listen (tcp/HOST:PORT, udp/HOST:PORT or quic/HOST:PORT; quic/ between real
     /// sites; default tcp/0.0.0.0:7447 unless --connect is given).
     #[arg(long, value_name = "ENDPOINT")]
@@ -99,6 +105,7 @@ impl ServeArgs {
             webcam,
             camera_recording,
             ros2_camera,
+            ros2_publish,
             mut listen,
             connect,
             mode,
@@ -166,6 +173,7 @@ impl ServeArgs {
             target_timeout_s: target_timeout,
             encoder,
             camera,
+            ros2_publish,
         };
         let r = crate::net::serve::serve(&options)?;
         println!("{}", crate::net::serve::summary(&r));

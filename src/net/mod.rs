@@ -10,6 +10,7 @@
 //! - [`window`]: the operator's or observer's window (`join --window`).
 
 pub mod join;
+pub mod ros2_out;
 pub mod serve;
 pub mod site_camera;
 pub mod video;

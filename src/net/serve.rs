@@ -23,6 +23,7 @@ use avatarm_net::RobotSite;
 use avatarm_net::episodes::RefusalEpisodes;
 use avatarm_net::msg::MAX_AHEAD_S;
 use avatarm_net::msg::{JointStatesMsg, PROTOCOL_VERSION, RobotStatusMsg};
+use avatarm_record::LogLevel;
 use bevy::log::{info, warn};
 
 use super::video::ArmUpdate;
@@ -155,6 +156,9 @@ pub struct ControlLoop {
     pub mode: MappingMode,
     /// The scene's name.
     pub scene: String,
+    /// `--ros2-publish`: the commands and the safety events published on ROS 2, with the
+    /// robot's joints' names (q order).
+    pub ros2: Option<(crate::net::ros2_out::Ros2Sink, Vec<String>)>,
 }
 
 /// Why the arm is stopped now, if it is.
@@ -313,6 +317,7 @@ impl ControlLoop {
             }
             if let Some(line) = episodes.tick(now) {
                 warn!("robot site: {line}");
+                self.safety(LogLevel::Warning, &line);
             }
             if !present {
                 latest = None;
@@ -361,6 +366,7 @@ impl ControlLoop {
                     if tick > 1 && report.targets_used > 0 && !quiet {
                         warn!("robot site: stopping the arm: {r}");
                     }
+                    self.safety(LogLevel::Warning, &format!("stopping the arm: {r}"));
                     stop_since = Some((now, r.clone()));
                 }
                 (Some((since, r)), None) => {
@@ -370,6 +376,10 @@ impl ControlLoop {
                             now - since
                         );
                     }
+                    self.safety(
+                        LogLevel::Info,
+                        &format!("resumed after {:.2} s stopped ({r})", now - since),
+                    );
                     report.stopped(StopEpisode {
                         t_s: *since,
                         reason: r.clone(),
@@ -397,6 +407,15 @@ impl ControlLoop {
                 }
             }
             for s in self.teleop.log.drain(..) {
+                if let Some((sink, names)) = &self.ros2 {
+                    let names: Vec<String> = names.iter().take(s.qdot.len()).cloned().collect();
+                    crate::net::ros2_out::publish_command(
+                        sink,
+                        crate::net::ros2_out::unix_now_ns(),
+                        &names,
+                        s.qdot.as_slice(),
+                    );
+                }
                 trial.sample(&s);
             }
         }
@@ -418,6 +437,21 @@ impl ControlLoop {
         report.nan_commands = trial.nan_commands();
         report.trial = trial.finish(self.teleop.status.max_tcp_speed);
         report
+    }
+}
+
+impl ControlLoop {
+    /// A safety event on ROS 2 (`--ros2-publish`), now.
+    fn safety(&self, level: LogLevel, message: &str) {
+        if let Some((sink, _)) = &self.ros2 {
+            crate::net::ros2_out::publish_safety(
+                sink,
+                crate::net::ros2_out::unix_now_ns(),
+                level,
+                "robot site",
+                message,
+            );
+        }
     }
 }
 
@@ -510,6 +544,9 @@ pub struct ServeOptions {
     pub encoder: avatarm_net::codec::EncoderSettings,
     /// Where the camera comes from (a recording's robot replaces `robot`).
     pub camera: super::site_camera::SiteCamera,
+    /// Publish on ROS 2 (`--ros2-publish`): the erased frames (with `--codec jpeg`), the
+    /// commands and the safety events, under `/avatarm`.
+    pub ros2_publish: bool,
 }
 
 /// Sets the flag when dropped.
@@ -670,12 +707,26 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
             "off".to_owned()
         }
     );
+    let ros2 = if options.ros2_publish {
+        Some(crate::net::ros2_out::ros2_publisher(scene)?)
+    } else {
+        None
+    };
     let control = ControlLoop {
         teleop: parts.teleop,
         start_z,
         period: parts.period,
         mode,
         scene: scene.file.name.clone(),
+        ros2: ros2.clone().map(|sink| {
+            let names = scene
+                .model
+                .dof_names()
+                .iter()
+                .map(ToString::to_string)
+                .collect();
+            (sink, names)
+        }),
     };
     let stop: StopFlag = Arc::new(AtomicBool::new(false));
     let duration = options.duration_s.map(Duration::from_secs_f64);
@@ -697,6 +748,7 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
                 counters: Arc::default(),
                 head: None,
                 source: opened.source.clone(),
+                ros2: ros2.clone(),
             };
             let mut view = (*view).clone();
             if let Some(head) = view.head.as_mut() {

@@ -97,6 +97,9 @@ pub struct ServeVideoOptions {
     pub head: Option<Arc<avatarm_net::HeadReceiver>>,
     /// Where the camera's frames come from.
     pub source: crate::app::CameraSource,
+    /// `--ros2-publish`: each erased frame also on ROS 2 (`/avatarm/erased/compressed`; the
+    /// JPEG the network gets, so with `--codec jpeg` only).
+    pub ros2: Option<crate::net::ros2_out::Ros2Sink>,
 }
 
 impl std::fmt::Debug for ServeVideoOptions {
@@ -171,9 +174,20 @@ impl Plugin for ServeVideoPlugin {
         let counters = options.counters.clone();
         let settings = options.encoder;
         let camera = options.camera.clone();
+        let ros2 = options.ros2.clone();
         let _ = std::thread::Builder::new()
             .name("video encoder".into())
-            .spawn(move || encode_and_send(rx, sender, clock, settings, &camera, &counters));
+            .spawn(move || {
+                encode_and_send(
+                    rx,
+                    sender,
+                    clock,
+                    settings,
+                    &camera,
+                    &counters,
+                    ros2.as_ref(),
+                );
+            });
         let carried = app
             .world()
             .get_resource::<crate::SceneResource>()
@@ -510,7 +524,14 @@ fn encode_and_send(
     settings: avatarm_net::codec::EncoderSettings,
     camera: &str,
     counters: &VideoCounters,
+    ros2: Option<&crate::net::ros2_out::Ros2Sink>,
 ) {
+    let jpeg = settings.codec == avatarm_net::msg::Codec::Jpeg;
+    if ros2.is_some() && !jpeg {
+        warn!(
+            "robot site video: --ros2-publish publishes the network's JPEG frames; with --codec h264 no erased frame goes to ROS 2 (use --codec jpeg)"
+        );
+    }
     let mut encoder = match avatarm_net::codec::VideoEncoder::new(settings) {
         Ok(e) => e,
         Err(e) => {
@@ -554,6 +575,12 @@ fn encode_and_send(
         header.stream = coded.stream;
         header.keyframe = coded.keyframe;
         header.sent_s = clock.now_s();
+        if let Some(sink) = ros2.filter(|_| jpeg) {
+            // The capture on the system clock: the site clock's age of the frame back from now.
+            let age_ns = ((header.sent_s - header.capture_s).max(0.0) * 1e9) as u64;
+            let stamp_ns = crate::net::ros2_out::unix_now_ns().saturating_sub(age_ns);
+            crate::net::ros2_out::publish_erased(sink, stamp_ns, coded.bytes.clone());
+        }
         match sender.send(&header, coded.bytes) {
             Ok(()) => {
                 counters.published.fetch_add(1, Ordering::Relaxed);

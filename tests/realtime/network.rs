@@ -750,3 +750,60 @@ fn alice_watching_sees_the_operator_s_hand_on_the_bottle_the_arm_carries() {
     assert!(moved >= 10.0, "{report:?}");
     assert!(moved <= 500.0, "{report:?}");
 }
+
+/// `avatarm serve --ros2-publish`: while an operator pours, the robot site publishes its erased
+/// frames (the network's JPEG), the commands and the safety events on ROS 2; a listener written
+/// with Cyclone DDS (`avatarm_ros::testing::Ros2Listener`, as rviz2 subscribes) receives and
+/// decodes them.
+#[cfg(feature = "ros")]
+#[test]
+fn the_robot_site_publishes_on_ros2() {
+    let _serial = serial();
+    let dir = out_dir("serve_ros2_publish");
+    let port = free_port();
+    let domain = avatarm_ros::testing::test_domain(10);
+    let listener = avatarm_ros::testing::Ros2Listener::start(domain, "/avatarm");
+    let log = std::fs::File::create(dir.join("serve.log")).expect("the test's set-up");
+    let robot = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["serve", POURING, "--listen"])
+        .arg(format!("tcp/127.0.0.1:{port}"))
+        .args(["--duration", "10", "--report"])
+        .arg(dir.join("serve.json"))
+        .args(["--insecure-lan", "--ros2-publish"])
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .stdout(Stdio::null())
+        .stderr(log)
+        .spawn()
+        .expect("the test's set-up");
+    // The operator leaves after 5 s: the robot site stops the arm (a safety event).
+    let operator = join(&dir, "join", port, &["--wait", "20", "--duration", "5"]);
+    let _: JoinReport = finish(operator, &dir, "join");
+    let s: ServeReport = finish(robot, &dir, "serve");
+    let r = listener.report();
+    eprintln!(
+        "the ROS 2 listener after serve: erased {}, commands {}, safety {} (the last: {}); serve published {} frames",
+        r["erased/compressed"]["count"],
+        r["joint_commands"]["count"],
+        r["safety"]["count"],
+        r["safety"]["data"],
+        s.video_frames
+    );
+    let count = |topic: &str| r[topic]["count"].as_u64().unwrap_or(0);
+    assert!(count("erased/compressed") > 0, "{r}");
+    assert_eq!(r["erased/compressed"]["magic"], true, "{r}");
+    assert!(count("joint_commands") > 100, "{r}");
+    assert!(
+        r["joint_commands"]["name"]
+            .as_array()
+            .is_some_and(|n| n.iter().any(|j| j == "right_j0")),
+        "{r}"
+    );
+    // At least the stop when the operator left.
+    assert!(count("safety") > 0, "{r}");
+    assert!(
+        r["safety"]["data"]
+            .as_str()
+            .is_some_and(|t| t.contains("robot site: ")),
+        "{r}"
+    );
+}

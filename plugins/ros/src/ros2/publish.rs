@@ -68,7 +68,8 @@ pub enum Outgoing {
     },
 }
 
-/// The publishing thread's handle; see the module docs.
+/// The publishing thread's handle (a clone hands to the same thread); see the module docs.
+#[derive(Clone)]
 pub struct Ros2Publisher {
     tx: tokio::sync::mpsc::Sender<Outgoing>,
     dropped: Arc<AtomicU64>,
