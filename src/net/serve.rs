@@ -408,11 +408,11 @@ impl ControlLoop {
             }
             for s in self.teleop.log.drain(..) {
                 if let Some((sink, names)) = &self.ros2 {
-                    let names: Vec<String> = names.iter().take(s.qdot.len()).cloned().collect();
+                    // q order: the names are the model's movable joints, one per velocity.
                     crate::net::ros2_out::publish_command(
                         sink,
                         crate::net::ros2_out::unix_now_ns(),
-                        &names,
+                        names,
                         s.qdot.as_slice(),
                     );
                 }
@@ -735,7 +735,7 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
         // (where the process's apps have always run), the others on threads of their own.
         let mut feeds = Vec::new();
         let mut apps = Vec::new();
-        for (view, camera) in views.iter().zip(&cameras) {
+        for (i, (view, camera)) in views.iter().zip(&cameras).enumerate() {
             let (tx, rx) = std::sync::mpsc::channel();
             feeds.push(tx);
             let mut video = super::video::ServeVideoOptions {
@@ -748,7 +748,8 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
                 counters: Arc::default(),
                 head: None,
                 source: opened.source.clone(),
-                ros2: ros2.clone(),
+                // One erased stream on /avatarm/erased: the scene's own camera's.
+                ros2: ros2.clone().filter(|_| i == 0),
             };
             let mut view = (*view).clone();
             if let Some(head) = view.head.as_mut() {
