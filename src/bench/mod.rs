@@ -17,9 +17,12 @@
 //! - [`head`]: a camera on a moving head (Alice's headset camera): leak against the head's
 //!   angular speed and tracking latency, with and without pose compensation, and against an
 //!   error in the camera's mount.
+//! - [`chess`]: the paper's chess scene through the robot: virtual to real grasp and the real
+//!   pieces' placement against the one-way delay, with and without the intent estimate.
 //! - [`chart`]: what all share: the Pareto front and the charts' house style.
 
 pub mod chart;
+pub mod chess;
 pub mod control;
 pub mod dr;
 pub mod gpu;

@@ -306,9 +306,9 @@ pub struct HeldObject {
     pub grasps: u32,
     /// Releases so far.
     pub releases: u32,
-    /// The closure at the last release while the hand still touches the object: an opening
-    /// hand whose fingers still rest on the object does not take it again until it closes
-    /// again (or lets go of it).
+    /// The most open closure since the last release: a hand takes an object again only once it
+    /// has closed by `release_opening_m` from there (an opening hand whose fingers still rest
+    /// on the object, or meet it again as it drops, does not take it back).
     pub released_at: Option<f64>,
 }
 
@@ -697,16 +697,18 @@ fn assist_grasp(
         }
         return;
     }
-    if contacts.contacts.is_empty() {
-        held.released_at = None;
-    }
     let Some(closure_now) = now_closure else {
         return;
     };
     if let Some(at) = held.released_at {
+        // The bar rises as the hand opens further: a hand takes an object again only by
+        // closing again, whether or not its fingers lost the released one for a moment (a
+        // piece set down drops the last millimetres out of the fingers).
+        let at = at.max(closure_now);
         if closure_now < at - assist.release_opening_m {
             held.released_at = None;
         } else {
+            held.released_at = Some(at);
             return;
         }
     }

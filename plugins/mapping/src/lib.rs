@@ -8,15 +8,18 @@
 //! a ramped stop; the gripper keeps its state while the robot is being stopped, so a lost hand
 //! does not drop the real object.
 //!
-//! Modules: [`pouring`], [`error`]. The robot-interface trait and the simulated arm are
+//! Modules: [`pouring`], [`chess`], [`error`]. The robot-interface trait and the simulated arm are
 //! Bevy-free, in [`avatarm_core::sim::arm`], so that a robot link (`avatarm_ros`) builds without
 //! Bevy.
 //!
 //! [`pouring`] is the paper's experiment with the same [`Teleop`] (ticked after each physics
 //! step of a headless hand world, as a two-site session's operator steps it): a scripted hand
 //! grasps the bottle's twin, lifts, pours and raises it, and the simulated arm carries the real
-//! bottle; the error between them is the paper's measure.
+//! bottle; the error between them is the paper's measure. [`chess`] is the paper's opening
+//! scene: several pieces, pick and place, and the robot anticipating the piece the hand reaches
+//! for (`avatarm_core::teleop::{intent, pick_place}`).
 
+pub mod chess;
 pub mod error;
 pub mod pouring;
 pub mod threaded;

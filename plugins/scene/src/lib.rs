@@ -12,10 +12,13 @@
 //!   proportions.
 //! - [`task`]: the paper's pouring task as data ([`task::PouringTask`]) and its real side
 //!   ([`task::TrialSetup`]).
+//! - [`chess`]: the paper's chess scene as data (`[chess]`: board, pieces, moves;
+//!   [`chess::ChessSetup`]).
 //! - [`hand`]: which hand teleoperates the task ([`hand::HandChoice`]).
 //! - [`finite`]: the check that every number in the file is finite.
 //! - [`error`]: the crate's error type ([`SceneError`]).
 
+pub mod chess;
 pub mod error;
 pub mod finite;
 pub mod hand;

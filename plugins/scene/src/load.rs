@@ -58,6 +58,9 @@ pub struct Scene {
     /// afterwards resolves it again with [`TrialSetup::resolve`]; readers take the task from
     /// `file.task` and its set-up from here, and run it only when both are there.
     pub trial: Option<TrialSetup>,
+    /// The `[chess]` task's real side, resolved when the scene loads (`None` without one); its
+    /// board and pieces are among `props` (and `file.props`).
+    pub chess: Option<crate::chess::ChessSetup>,
 }
 
 impl Scene {
@@ -367,6 +370,26 @@ impl Scene {
             keyframes.push(Keyframe { t_s: k.t_s, q });
         }
 
+        let mut file = file;
+        if let Some(chess) = &file.chess {
+            chess.validate().map_err(|e| e.in_file(path))?;
+            let board = chess.props().map_err(|e| e.in_file(path))?;
+            file.props.extend(board.into_iter().map(|p| {
+                let (r, pi, y) = p.pose.rotation.euler_angles();
+                let t = p.pose.translation.vector;
+                crate::spec::PropSpec {
+                    name: p.name,
+                    shape: p.shape,
+                    pose: crate::spec::PoseSpec {
+                        xyz: [t.x, t.y, t.z],
+                        rpy: [r, pi, y],
+                    },
+                    rgba: p.rgba,
+                    object: p.object,
+                    occluder: false,
+                }
+            }));
+        }
         let mut props: Vec<Prop> = Vec::new();
         for (i, p) in file.props.iter().enumerate() {
             let field = format!("props[{i}] ({})", p.name);
@@ -411,9 +434,24 @@ impl Scene {
             }
             None => None,
         };
+        let chess = match &file.chess {
+            Some(task) => Some(
+                crate::chess::ChessSetup::resolve(
+                    task,
+                    &model,
+                    base,
+                    q0.clone(),
+                    file.robot.sim,
+                    file.control_rate_hz,
+                )
+                .map_err(|e| e.in_file(path))?,
+            ),
+            None => None,
+        };
         Ok(Scene {
             path: path.to_owned(),
             trial,
+            chess,
             background_path,
             model,
             twin_model,

@@ -533,6 +533,9 @@ pub struct SceneFile {
     /// The teleoperation task measured on every replay (`[task]`), e.g. the paper's pouring.
     #[serde(default)]
     pub task: Option<PouringTask>,
+    /// The paper's chess scene (`[chess]`, docs/chess.md): its board and pieces become props.
+    #[serde(default)]
+    pub chess: Option<crate::chess::ChessTask>,
     /// Start `avatarm run` in XR (an OpenXR headset), as `--xr` does.
     #[serde(default)]
     pub xr: bool,

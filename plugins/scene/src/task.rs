@@ -195,6 +195,45 @@ impl PouringTask {
     }
 }
 
+/// A task's tool link and arm joints looked up in `model`: `arm_joints` by name, or, when
+/// empty, every movable joint whose name does not contain "finger" (the gripper's). Errors
+/// name `TABLE.tcp_link` or `TABLE.arm_joints`.
+pub fn resolve_tool(
+    model: &RobotModel,
+    tcp_link: &str,
+    arm_joints: &[String],
+    table: &str,
+) -> Result<(LinkId, Vec<usize>), SceneError> {
+    let tcp = model
+        .link_id(tcp_link)
+        .map_err(|e| SceneError::value(format!("{table}.tcp_link"), e))?;
+    let arm: Vec<usize> = if arm_joints.is_empty() {
+        model
+            .dof_names()
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| !n.contains("finger"))
+            .map(|(i, _)| i)
+            .collect()
+    } else {
+        arm_joints
+            .iter()
+            .map(|n| {
+                model
+                    .dof_index(n)
+                    .map_err(|e| SceneError::value(format!("{table}.arm_joints"), e))
+            })
+            .collect::<Result<_, _>>()?
+    };
+    if arm.is_empty() {
+        return Err(SceneError::field(
+            format!("{table}.arm_joints"),
+            "no arm joints to drive",
+        ));
+    }
+    Ok((tcp, arm))
+}
+
 /// The real side of a trial: the robot and the bottle, from the scene.
 #[derive(Debug, Clone)]
 pub struct TrialSetup {
@@ -243,33 +282,7 @@ impl TrialSetup {
         control_rate_hz: f64,
         props: &[Prop],
     ) -> Result<Self, SceneError> {
-        let tcp = model
-            .link_id(&task.tcp_link)
-            .map_err(|e| SceneError::value("task.tcp_link", e))?;
-        let arm: Vec<usize> = if task.arm_joints.is_empty() {
-            model
-                .dof_names()
-                .iter()
-                .enumerate()
-                .filter(|(_, n)| !n.contains("finger"))
-                .map(|(i, _)| i)
-                .collect()
-        } else {
-            task.arm_joints
-                .iter()
-                .map(|n| {
-                    model
-                        .dof_index(n)
-                        .map_err(|e| SceneError::value("task.arm_joints", e))
-                })
-                .collect::<Result<_, _>>()?
-        };
-        if arm.is_empty() {
-            return Err(SceneError::field(
-                "task.arm_joints",
-                "no arm joints to drive",
-            ));
-        }
+        let (tcp, arm) = resolve_tool(model, &task.tcp_link, &task.arm_joints, "task")?;
         let (_, prop) = find_prop(props, &task.object).ok_or_else(|| {
             SceneError::field(
                 "task.object",

@@ -551,3 +551,59 @@ fn several_cameras_load_by_name_and_each_is_checked() {
         .to_string();
     assert!(e.contains("one camera"), "{e}");
 }
+
+#[test]
+fn the_chess_scene_puts_its_board_and_pieces_among_the_props_and_checks_its_moves() {
+    let (path, text) = scene_text("chess.toml");
+    let parse = |t: &str| Scene::parse(t, &path, &PackagePath::default());
+    let scene = parse(&text).expect("chess.toml loads");
+    let chess = scene.chess.as_ref().expect("[chess] resolved");
+    assert_eq!(chess.pieces.len(), 32);
+    assert_eq!(chess.moves.len(), 5);
+    // The room's three props, the board, its 32 light squares and the 32 pieces; the pieces
+    // are objects (each gets its twin), the board is not.
+    assert_eq!(scene.props.len(), 3 + 1 + 32 + 32);
+    assert_eq!(scene.file.props.len(), scene.props.len());
+    let objects: Vec<_> = scene.file.props.iter().filter(|p| p.object).collect();
+    assert_eq!(objects.len(), 32);
+    // White's king on e1, nearest the camera (the files run along +y, rank 1 at x = 0.795).
+    let king = scene
+        .props
+        .iter()
+        .find(|p| p.name == "white_king_e1")
+        .unwrap();
+    let at = king.pose.translation.vector;
+    assert!(
+        (at.x - 0.795).abs() < 1e-3 && (at.y - 0.025).abs() < 1e-3,
+        "{at:?}"
+    );
+    let e = parse(&text.replace("\"g1f3\"", "\"g1g2\""))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("chess.moves[2]") && e.contains("white_pawn_g2 stands on g2"),
+        "{e}"
+    );
+    let e = parse(&text.replace("k = 2.0", "k = 0.0"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("chess.k"), "{e}");
+    let e = parse(&text.replace("trials = 4", "trials = 4\nbeta = 1"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("beta"), "{e}");
+    let e = parse(&text.replace(
+        "seed = 1\n# Blair",
+        "seed = 1\nintent = { window_s = -1.0 }\n# Blair",
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("intent.window_s"), "{e}");
+    let e = parse(&text.replace(
+        "[[props]]\nname = \"wall\"",
+        "[[props]]\nname = \"white_king_e1\"",
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("white_king_e1"), "{e}");
+}

@@ -1,5 +1,6 @@
 //! `avatarm bench ...`: speed against accuracy, each measured and charted by a command of its own.
 
+pub mod chess;
 pub mod control;
 pub mod dr;
 pub mod gpu;
@@ -34,6 +35,11 @@ pub enum BenchCommand {
     /// DIR/gpu_erase.{csv,svg,png}. The scene (default: the default scene) gives the robot,
     /// the camera's pose and field of view, and the erase settings.
     Gpu(gpu::GpuArgs),
+    /// Play the paper's chess scene through the robot (default: the bundled chess scene):
+    /// every move of its opening, each trial with intent off and on at each one-way delay;
+    /// virtual grasp to real grasp and the real pieces' placement error against the delay:
+    /// DIR/chess.{csv,json,svg,png} (docs/chess.md).
+    Chess(chess::ChessArgs),
     /// Sweep the teleoperation loop on a scene's pouring task (default: the pouring scene):
     /// control rate x simulated command latency x TCP speed cap, both mapping modes, and chart
     /// object position RMSE against rate and loop cost: DIR/control_speed_accuracy.{svg,png,csv}.
@@ -57,6 +63,7 @@ impl BenchCommand {
             Self::Dr(args) => args.run(),
             Self::Twin(args) => args.run(),
             Self::Gpu(args) => args.run(),
+            Self::Chess(args) => args.run(),
             Self::Control(args) => args.run(),
             Self::Network(args) => args.run(),
             Self::Video(args) => args.run(),

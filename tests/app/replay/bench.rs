@@ -224,3 +224,65 @@ fn bench_gpu_writes_the_chart_and_the_table() {
     assert!(!status.status.success());
     assert!(String::from_utf8_lossy(&status.stderr).contains("0x480"));
 }
+
+/// `avatarm bench chess` on the chess scene cut to two moves, one trial, both delays: a CSV row
+/// per move and case, the summaries as JSON (read back as their type), the chart; every move
+/// lands, and with intent the real grasp comes sooner.
+#[test]
+fn bench_chess_writes_the_chart_the_table_and_the_summaries() {
+    let out = out_dir("bench_chess");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/scenes/chess.toml");
+    let text = std::fs::read_to_string(&path).expect("chess.toml");
+    let moves = "moves = [\"e2e4\", \"e7e5\", \"g1f3\", \"b8c6\", \"d2d4\"]";
+    assert!(text.contains(moves), "the scene's opening changed");
+    let short = text.replace(moves, "moves = [\"e2e4\", \"e7e5\"]").replace(
+        "\"../robots/",
+        &format!("\"{}/assets/robots/", env!("CARGO_MANIFEST_DIR")),
+    );
+    std::fs::create_dir_all(&out).expect("out");
+    let scene = out.join("chess_short.toml");
+    std::fs::write(&scene, short).expect("scene");
+    let run = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["bench", "chess"])
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .args(["--trials", "1", "--delay-ms", "0,100"])
+        .output()
+        .expect("runs avatarm");
+    let stdout = succeeded(&run);
+    assert!(
+        stdout.contains("no intent") && stdout.contains("chess.png"),
+        "{stdout}"
+    );
+    let table = Table::read(&out.join("chess.csv"));
+    assert_eq!(table.rows.len(), 2 * 4, "{}", table.text);
+    for row in 0..table.rows.len() {
+        assert_eq!(table.cell(row, "correct"), "true", "{}", table.text);
+        assert!(table.number(row, "place_error_mm") < 5.0, "{}", table.text);
+    }
+    let json = std::fs::read_to_string(out.join("chess.json")).expect("json");
+    let report: avatarm_mapping::chess::ChessReport = serde_json::from_str(&json).expect("typed");
+    assert_eq!(report.conditions.len(), 4);
+    for delay in [0.0, 100.0] {
+        let case = |intent: bool| {
+            report
+                .conditions
+                .iter()
+                .find(|c| c.intent == intent && c.delay_ms == delay)
+                .expect("case")
+                .summary
+                .grasp_delay_ms
+                .median
+        };
+        assert!(
+            case(true) < case(false),
+            "{delay} ms: {} vs {}",
+            case(true),
+            case(false)
+        );
+    }
+    let svg = std::fs::read_to_string(out.join("chess.svg")).expect("svg");
+    assert!(svg.contains("no intent") && svg.contains("goal 150"), "svg");
+    assert!(out.join("chess.png").is_file());
+}

@@ -73,14 +73,18 @@ pub struct CarriedObject {
     pub held: Option<Isometry3<f64>>,
 }
 
-/// The simulated robot with a gripper and the real object.
+/// The simulated robot with a gripper and the real objects (one for pouring, a chess set's
+/// pieces for pick and place).
 pub struct SimArm {
     robot: SimRobot,
     model: Arc<RobotModel>,
     base: Isometry3<f64>,
     tcp: LinkId,
     closed: bool,
-    object: CarriedObject,
+    /// Never empty.
+    objects: Vec<CarriedObject>,
+    /// The object the gripper holds (an index into `objects`).
+    holding: Option<usize>,
 }
 
 impl SimArm {
@@ -98,8 +102,46 @@ impl SimArm {
             base,
             tcp,
             closed: false,
-            object,
+            objects: vec![object],
+            holding: None,
         }
+    }
+
+    /// A simulated arm with several real objects: a closing gripper takes the one whose
+    /// reference point is nearest its tool point, within that object's grasp radius. Errors
+    /// (naming the backend) for an empty list.
+    pub fn with_objects(
+        robot: SimRobot,
+        model: Arc<RobotModel>,
+        base: Isometry3<f64>,
+        tcp: LinkId,
+        objects: Vec<CarriedObject>,
+    ) -> Result<Self, RobotError> {
+        if objects.is_empty() {
+            return Err(RobotError {
+                robot: "simulated arm".into(),
+                message: "no real object to simulate".into(),
+            });
+        }
+        Ok(Self {
+            robot,
+            model,
+            base,
+            tcp,
+            closed: false,
+            objects,
+            holding: None,
+        })
+    }
+
+    /// Every real object (the truth), in the order given.
+    pub fn objects(&self) -> &[CarriedObject] {
+        &self.objects
+    }
+
+    /// The object the gripper holds, if any (an index into [`SimArm::objects`]).
+    pub fn holding(&self) -> Option<usize> {
+        self.holding
     }
 
     /// The simulated robot (true joint positions, time).
@@ -107,9 +149,9 @@ impl SimArm {
         &self.robot
     }
 
-    /// The real object.
+    /// The real object (the first, where there are several).
     pub fn object(&self) -> &CarriedObject {
-        &self.object
+        &self.objects[0]
     }
 
     /// Whether the gripper is closed.
@@ -120,17 +162,31 @@ impl SimArm {
     fn update_object(&mut self) {
         let q: Vec<f64> = self.robot.true_positions().iter().copied().collect();
         let tool = self.model.forward_kinematics(&self.base, &q)[self.tcp];
-        let o = &mut self.object;
-        match (self.closed, o.held) {
-            (true, Some(held)) => o.pose = tool * held,
-            (true, None) => {
-                if (tool.translation.vector - o.pose.translation.vector).norm() <= o.grasp_radius_m
-                {
-                    o.held = Some(tool.inverse() * o.pose);
+        match (self.closed, self.holding) {
+            (true, Some(i)) => {
+                let o = &mut self.objects[i];
+                if let Some(held) = o.held {
+                    o.pose = tool * held;
                 }
             }
-            (false, Some(_)) => {
+            (true, None) => {
+                let p = tool.translation.vector;
+                let nearest = self
+                    .objects
+                    .iter()
+                    .enumerate()
+                    .map(|(i, o)| (i, (p - o.pose.translation.vector).norm()))
+                    .filter(|&(i, d)| d <= self.objects[i].grasp_radius_m)
+                    .min_by(|a, b| a.1.total_cmp(&b.1));
+                if let Some((i, _)) = nearest {
+                    let o = &mut self.objects[i];
+                    o.held = Some(tool.inverse() * o.pose);
+                    self.holding = Some(i);
+                }
+            }
+            (false, Some(i)) => {
                 // Released: it drops onto the table, upright, where it is.
+                let o = &mut self.objects[i];
                 o.held = None;
                 let (_, _, yaw) = o.pose.rotation.euler_angles();
                 let p = o.pose.translation.vector;
@@ -138,6 +194,7 @@ impl SimArm {
                     Translation3::new(p.x, p.y, o.rest_z),
                     UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
                 );
+                self.holding = None;
             }
             (false, None) => {}
         }
@@ -183,7 +240,7 @@ impl RobotInterface for SimArm {
     }
 
     fn true_object_pose(&self) -> Option<Isometry3<f64>> {
-        Some(self.object.pose)
+        Some(self.objects[self.holding.unwrap_or(0)].pose)
     }
 
     fn simulated(&self) -> Option<&SimRobot> {

@@ -1,0 +1,595 @@
+//! The robot's side of a pick-and-place task with several objects (the paper's chess scene).
+//!
+//! The operator's side sends, each tick, a [`PickPlaceCommand`]: which object the hand holds
+//! (or last let go of), the mapping's target for it ([`OperatorTarget`], the twin mapped into
+//! the real world), and the intent estimate ([`crate::teleop::intent`]) while the hand reaches.
+//! [`PickPlaceRobot`] turns that into joint velocities and gripper commands, phase by phase
+//! ([`PickPhase`]):
+//!
+//! - **Free**: no object held. With an intent estimate the tool moves to the goal's
+//!   pre-grasp pose (hovering [`PickPlaceSettings::hover_m`] above its grasp pose), and around
+//!   it, gripper open, once the estimate says the hand is near; without one it holds still.
+//! - **Reach**: the hand holds object `i`'s twin; the tool goes to `i`'s grasp pose (a top grasp
+//!   [`PickPlaceSettings::grasp_depth_m`] below the object's top) and closes there: the real
+//!   grasp.
+//! - **Carry**: the mapping ([`Mapper::robot_side`]) moves the real object with the twin, kept
+//!   upright ([`upright`]).
+//! - **Place**: the hand let go: the arm brings the real object to the twin's last pose, then
+//!   opens, and the object's believed pose becomes where the tool left it.
+//! - **Retreat**: the tool rises to the clearance height before anything else.
+//!
+//! Between grasps the tool travels on a clearance path ([`clearance_twist`]): up to
+//! [`PickPlaceSettings::clearance_z`] first, across at that height, down onto the goal, so
+//! that it never crosses the other objects. Every twist is capped at
+//! [`PickPlaceSettings::max_speed`] (below the safety limiter's cap) and goes to the joints by
+//! damped least squares, as the mapping's does.
+
+use std::sync::Arc;
+
+use nalgebra::{DVector, Isometry3, Matrix6xX, Translation3, UnitQuaternion, Vector3, Vector6};
+
+use crate::robot::ik::dls_step;
+use crate::robot::kinematics::{Frame, pose_difference};
+use crate::robot::{LinkId, RobotModel};
+use crate::teleop::mapping::{
+    GripperCommand, Mapper, MappingSettings, OperatorTarget, RobotInputs, RobotSide,
+};
+
+/// An object the robot may pick: an upright round body (a chess piece), real world.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PickObject {
+    /// The object's reference frame: the centre of its body, z up at rest.
+    pub pose: Isometry3<f64>,
+    /// Radius (m).
+    pub radius_m: f64,
+    /// Height (m).
+    pub height_m: f64,
+}
+
+impl PickObject {
+    /// The height of the object's top (world z, m).
+    pub fn top_z(&self) -> f64 {
+        self.pose.translation.z + self.height_m / 2.0
+    }
+}
+
+/// Settings of [`PickPlaceRobot`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PickPlaceSettings {
+    /// The height the tool point travels at between grasps (world z, m): above every object's
+    /// top by a margin larger than `over_m` (the tool moves sideways from `over_m` below it).
+    pub clearance_z: f64,
+    /// The pre-grasp pose: this far above the grasp pose (m).
+    pub hover_m: f64,
+    /// The grasp pose: the tool point this far below the object's top (m).
+    pub grasp_depth_m: f64,
+    /// The tool's orientation while it grasps (world): a top grasp, approach axis down.
+    pub tool_down: UnitQuaternion<f64>,
+    /// Arrived within this distance (m) ...
+    pub arrive_m: f64,
+    /// ... and this angle (rad).
+    pub arrive_rad: f64,
+    /// Horizontally over the goal within this distance (m): the tool may leave the clearance
+    /// height; and the band below the clearance height in which it may move sideways.
+    pub over_m: f64,
+    /// Gain of the moves between grasps (1/s).
+    pub gain_per_s: f64,
+    /// Largest tool speed of those moves (m/s).
+    pub max_speed: f64,
+    /// Largest tool turn rate of those moves (rad/s).
+    pub max_turn: f64,
+    /// Placed when the real object is within this distance (m) ...
+    pub place_m: f64,
+    /// ... and this angle (rad) of the twin's last pose ...
+    pub place_rad: f64,
+    /// ... or after this long (s).
+    pub place_timeout_s: f64,
+    /// The mapping while the object is carried.
+    pub mapping: MappingSettings,
+}
+
+impl PickPlaceSettings {
+    /// Checks the numbers; errors name the field.
+    pub fn validate(&self) -> crate::Result<()> {
+        for (name, v) in [
+            ("hover_m", self.hover_m),
+            ("arrive_m", self.arrive_m),
+            ("arrive_rad", self.arrive_rad),
+            ("over_m", self.over_m),
+            ("gain_per_s", self.gain_per_s),
+            ("max_speed", self.max_speed),
+            ("max_turn", self.max_turn),
+            ("place_m", self.place_m),
+            ("place_rad", self.place_rad),
+            ("place_timeout_s", self.place_timeout_s),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(crate::Error::BadSetting {
+                    what: format!("pick_place.{name}"),
+                    message: format!("{v} must be > 0"),
+                });
+            }
+        }
+        for (name, v) in [
+            ("clearance_z", self.clearance_z),
+            ("grasp_depth_m", self.grasp_depth_m),
+        ] {
+            if !v.is_finite() {
+                return Err(crate::Error::BadSetting {
+                    what: format!("pick_place.{name}"),
+                    message: format!("{v} is not finite"),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What the operator's side sends each tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PickPlaceCommand {
+    /// The object the hand holds, or last let go of (an index into the robot's objects).
+    pub object: Option<usize>,
+    /// The mapping's target for `object` (its `held` says whether the hand holds it now).
+    pub target: Option<OperatorTarget>,
+    /// The intent estimate's goal while the hand holds nothing; `None` without one (or with
+    /// intent off).
+    pub intent: Option<usize>,
+    /// The hand is near the goal (the robot may go around it).
+    pub intent_near: bool,
+}
+
+/// Where the robot is in the task.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PickPhase {
+    /// Nothing held; moving to the intent's pre-grasp, or still.
+    Free,
+    /// The hand holds the twin of `object`: the tool goes to its grasp pose.
+    Reach {
+        /// The object.
+        object: usize,
+    },
+    /// The real object follows the twin.
+    Carry {
+        /// The object.
+        object: usize,
+    },
+    /// The hand let go: the real object is brought to the twin's last pose, then released.
+    Place {
+        /// The object.
+        object: usize,
+        /// When the hand let go (s).
+        since_s: f64,
+    },
+    /// Up to the clearance height.
+    Retreat,
+}
+
+/// What the tool moves to between grasps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PickGoal {
+    /// Above `object`'s grasp pose by [`PickPlaceSettings::hover_m`].
+    Hover(usize),
+    /// `object`'s grasp pose, gripper open.
+    Around(usize),
+    /// The grasp itself (the hand holds the twin).
+    Grasp(usize),
+}
+
+/// One tick's outputs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PickTick {
+    /// Joint velocities (all joints; zero for the others than the arm's).
+    pub qdot: DVector<f64>,
+    /// The gripper.
+    pub gripper: GripperCommand,
+    /// The phase after this tick.
+    pub phase: PickPhase,
+    /// Where the tool was going between grasps, if anywhere.
+    pub goal: Option<PickGoal>,
+    /// The tool point's Jacobian at the measured joints (6 × dof, world), for the limiter.
+    pub tcp_jacobian: Matrix6xX<f64>,
+    /// The tool pose at the measured joints (world).
+    pub tool: Isometry3<f64>,
+    /// The real object's target while carried or placed.
+    pub target: Option<Isometry3<f64>>,
+    /// The gripper closed on `object` in this tick (the real grasp).
+    pub grasped: Option<usize>,
+    /// The gripper opened on `object` in this tick (the real release).
+    pub released: Option<usize>,
+}
+
+/// The linear and angular velocity of a move between grasps: up to `clearance_z`, across,
+/// and down onto `goal` (module docs), at `gain_per_s` × the distance left, capped at
+/// `max_speed` and `max_turn`. Returns the twist (world, at the tool point) and whether the
+/// tool has arrived (within `arrive_m` and `arrive_rad`).
+pub fn clearance_twist(
+    tool: &Isometry3<f64>,
+    goal: &Isometry3<f64>,
+    s: &PickPlaceSettings,
+) -> (Vector6<f64>, bool) {
+    let p = tool.translation.vector;
+    let e = goal.translation.vector - p;
+    let across = Vector3::new(e.x, e.y, 0.0).norm();
+    // Sideways only within a band below the clearance height (the margin above the tallest
+    // object covers it), so that a tool that sagged a few millimetres does not crawl up first.
+    let band = s.over_m;
+    let mut v = if across > s.over_m {
+        if p.z < s.clearance_z - band {
+            // Straight up first: nothing below the clearance height moves sideways.
+            Vector3::new(0.0, 0.0, s.clearance_z + band - p.z)
+        } else {
+            Vector3::new(e.x, e.y, s.clearance_z - p.z)
+        }
+    } else {
+        e
+    } * s.gain_per_s;
+    if v.norm() > s.max_speed {
+        v *= s.max_speed / v.norm();
+    }
+    let turn = (goal.rotation * tool.rotation.inverse()).scaled_axis();
+    let mut w = turn * s.gain_per_s;
+    if w.norm() > s.max_turn {
+        w *= s.max_turn / w.norm();
+    }
+    let arrived = e.norm() <= s.arrive_m && turn.norm() <= s.arrive_rad;
+    (Vector6::new(v.x, v.y, v.z, w.x, w.y, w.z), arrived)
+}
+
+/// The target kept upright: its position and its turn about the vertical, its tilt left out
+/// (and the twist's turn about horizontal axes). A piece is carried and set down upright: a
+/// twin tilted a few degrees in the virtual hand, followed by a top grasp, swings the wrist at
+/// rad/s and the piece by centimetres (measured: 30-70 mm carry RMSE when the full orientation
+/// was followed, docs/chess.md).
+pub fn upright(target: &OperatorTarget) -> OperatorTarget {
+    let (_, _, yaw) = target.target.rotation.euler_angles();
+    let mut object_twist = target.object_twist;
+    object_twist[3] = 0.0;
+    object_twist[4] = 0.0;
+    OperatorTarget {
+        target: Isometry3::from_parts(
+            target.target.translation,
+            UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+        ),
+        object_twist,
+        ..*target
+    }
+}
+
+/// The robot's side of the pick-and-place task (module docs). No Bevy, time as an argument.
+#[derive(Debug, Clone)]
+pub struct PickPlaceRobot {
+    settings: PickPlaceSettings,
+    model: Arc<RobotModel>,
+    base: Isometry3<f64>,
+    tcp: LinkId,
+    arm: Vec<usize>,
+    objects: Vec<PickObject>,
+    phase: PickPhase,
+    mapper: Mapper,
+    tcp_from_object: Isometry3<f64>,
+    closed: bool,
+    /// The twin's last target while carried (what a release places the object at).
+    last_target: Option<OperatorTarget>,
+}
+
+impl PickPlaceRobot {
+    /// The robot side for `objects` (their believed real poses), gripper open, phase Free.
+    /// Errors for bad settings or an arm joint out of range.
+    pub fn new(
+        settings: PickPlaceSettings,
+        model: Arc<RobotModel>,
+        base: Isometry3<f64>,
+        tcp: LinkId,
+        arm: Vec<usize>,
+        objects: Vec<PickObject>,
+    ) -> crate::Result<Self> {
+        settings.validate()?;
+        if let Some(&bad) = arm.iter().find(|&&i| i >= model.dof()) {
+            return Err(crate::Error::BadSetting {
+                what: "pick_place.arm".into(),
+                message: format!("joint index {bad} out of range ({} joints)", model.dof()),
+            });
+        }
+        Ok(Self {
+            mapper: Mapper::new(settings.mapping),
+            settings,
+            model,
+            base,
+            tcp,
+            arm,
+            objects,
+            phase: PickPhase::Free,
+            tcp_from_object: Isometry3::identity(),
+            closed: false,
+            last_target: None,
+        })
+    }
+
+    /// The phase.
+    pub fn phase(&self) -> PickPhase {
+        self.phase
+    }
+
+    /// Where the robot believes each object stands.
+    pub fn objects(&self) -> &[PickObject] {
+        &self.objects
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &PickPlaceSettings {
+        &self.settings
+    }
+
+    /// The tool's grasp pose on object `i` (world): a top grasp on its axis,
+    /// [`PickPlaceSettings::grasp_depth_m`] below its top.
+    pub fn grasp_pose(&self, i: usize) -> Option<Isometry3<f64>> {
+        let o = self.objects.get(i)?;
+        let p = o.pose.translation.vector;
+        Some(Isometry3::from_parts(
+            Translation3::new(p.x, p.y, o.top_z() - self.settings.grasp_depth_m),
+            self.settings.tool_down,
+        ))
+    }
+
+    fn goal_pose(&self, goal: PickGoal) -> Option<Isometry3<f64>> {
+        match goal {
+            PickGoal::Hover(i) => self
+                .grasp_pose(i)
+                .map(|g| Translation3::new(0.0, 0.0, self.settings.hover_m) * g),
+            PickGoal::Around(i) | PickGoal::Grasp(i) => self.grasp_pose(i),
+        }
+    }
+
+    /// One tick at `now_s` with the measured joints `q` (all joints, stamped `joints_stamp_s`)
+    /// and the newest operator command (`None`: none yet). Errors name the bad input; the
+    /// caller stops the robot on an error.
+    pub fn tick(
+        &mut self,
+        command: Option<&PickPlaceCommand>,
+        q: &[f64],
+        now_s: f64,
+        joints_stamp_s: f64,
+    ) -> crate::Result<PickTick> {
+        let n = self.model.dof();
+        if q.len() != n || q.iter().any(|v| !v.is_finite()) {
+            return Err(crate::Error::BadTickInput {
+                message: format!("joint state: {n} finite values needed"),
+            });
+        }
+        if let Some(c) = command {
+            let bad = [c.object, c.intent]
+                .into_iter()
+                .flatten()
+                .find(|&i| i >= self.objects.len());
+            if let Some(i) = bad {
+                return Err(crate::Error::BadTickInput {
+                    message: format!("object {i} of {}", self.objects.len()),
+                });
+            }
+            if let Some(t) = &c.target {
+                t.validate()?;
+            }
+        }
+        let poses = self.model.forward_kinematics(&self.base, q);
+        let tool = poses[self.tcp];
+        let jacobian =
+            self.model
+                .jacobian_from_poses(&poses, self.tcp, &Vector3::zeros(), Frame::World);
+        let held = command.and_then(|c| match (c.object, c.target) {
+            (Some(i), Some(t)) if t.held => Some((i, t)),
+            _ => None,
+        });
+        let mut out = PickTick {
+            qdot: DVector::zeros(n),
+            gripper: GripperCommand {
+                closed: self.closed,
+                force_n: if self.closed {
+                    self.settings.mapping.max_grip_n
+                } else {
+                    0.0
+                },
+            },
+            phase: self.phase,
+            goal: None,
+            tcp_jacobian: jacobian.clone(),
+            tool,
+            target: None,
+            grasped: None,
+            released: None,
+        };
+        match self.phase {
+            PickPhase::Free | PickPhase::Retreat => {
+                if let Some((i, _)) = held {
+                    self.phase = PickPhase::Reach { object: i };
+                    return self.tick(command, q, now_s, joints_stamp_s);
+                }
+                if self.phase == PickPhase::Retreat {
+                    let up = Isometry3::from_parts(
+                        Translation3::new(
+                            tool.translation.x,
+                            tool.translation.y,
+                            self.settings.clearance_z,
+                        ),
+                        tool.rotation,
+                    );
+                    let (twist, arrived) = clearance_twist(&tool, &up, &self.settings);
+                    if arrived || tool.translation.z >= self.settings.clearance_z {
+                        self.phase = PickPhase::Free;
+                    } else {
+                        out.qdot = self.joint_velocity(&jacobian, &twist, q)?;
+                    }
+                } else if let Some(c) = command
+                    && let Some(i) = c.intent
+                {
+                    let goal = if c.intent_near {
+                        PickGoal::Around(i)
+                    } else {
+                        PickGoal::Hover(i)
+                    };
+                    out.goal = Some(goal);
+                    if let Some(g) = self.goal_pose(goal) {
+                        let (twist, arrived) = clearance_twist(&tool, &g, &self.settings);
+                        if !arrived {
+                            out.qdot = self.joint_velocity(&jacobian, &twist, q)?;
+                        }
+                    }
+                }
+            }
+            PickPhase::Reach { object } => {
+                if held.is_none_or(|(i, _)| i != object) {
+                    // Let go (or another object) before the robot got there: start over.
+                    self.phase = PickPhase::Retreat;
+                    return self.tick(command, q, now_s, joints_stamp_s);
+                }
+                out.goal = Some(PickGoal::Grasp(object));
+                if let Some(g) = self.goal_pose(PickGoal::Grasp(object)) {
+                    let (twist, arrived) = clearance_twist(&tool, &g, &self.settings);
+                    if arrived {
+                        self.closed = true;
+                        self.tcp_from_object = tool.inverse() * self.objects[object].pose;
+                        self.mapper = Mapper::new(self.settings.mapping);
+                        self.phase = PickPhase::Carry { object };
+                        out.grasped = Some(object);
+                        out.gripper = GripperCommand {
+                            closed: true,
+                            force_n: self.settings.mapping.max_grip_n,
+                        };
+                    } else {
+                        out.qdot = self.joint_velocity(&jacobian, &twist, q)?;
+                    }
+                }
+            }
+            PickPhase::Carry { object } => {
+                let target = match held {
+                    Some((i, t)) if i == object => t,
+                    _ => {
+                        self.phase = PickPhase::Place {
+                            object,
+                            since_s: now_s,
+                        };
+                        return self.tick(command, q, now_s, joints_stamp_s);
+                    }
+                };
+                self.last_target = Some(target);
+                out.target = Some(target.target);
+                out.qdot = self.carry(&target, q, now_s, joints_stamp_s)?;
+            }
+            PickPhase::Place { object, since_s } => {
+                self.place(object, since_s, &tool, q, (now_s, joints_stamp_s), &mut out)?;
+            }
+        }
+        out.phase = self.phase;
+        Ok(out)
+    }
+
+    /// The Place phase's tick: the real object held at the twin's last pose (upright, still)
+    /// until it is there or the time is up, then let go. `times` is the tick's time and the
+    /// joints' stamp (s).
+    fn place(
+        &mut self,
+        object: usize,
+        since_s: f64,
+        tool: &Isometry3<f64>,
+        q: &[f64],
+        times: (f64, f64),
+        out: &mut PickTick,
+    ) -> crate::Result<()> {
+        let (now_s, joints_stamp_s) = times;
+        let Some(last) = self.last_target else {
+            self.release(object, tool, out);
+            return Ok(());
+        };
+        let target = upright(&OperatorTarget {
+            held: true,
+            object_twist: Vector6::zeros(),
+            twin_twist: Vector6::zeros(),
+            stamp_s: joints_stamp_s,
+            ..last
+        });
+        out.target = Some(target.target);
+        let measured = tool * self.tcp_from_object;
+        let error = pose_difference(&measured, &target.target);
+        let placed = error.fixed_rows::<3>(0).norm() <= self.settings.place_m
+            && error.fixed_rows::<3>(3).norm() <= self.settings.place_rad;
+        if placed || now_s - since_s >= self.settings.place_timeout_s {
+            self.release(object, tool, out);
+        } else {
+            out.qdot = self.carry(&target, q, now_s, joints_stamp_s)?;
+        }
+        Ok(())
+    }
+
+    fn carry(
+        &mut self,
+        target: &OperatorTarget,
+        q: &[f64],
+        now_s: f64,
+        joints_stamp_s: f64,
+    ) -> crate::Result<DVector<f64>> {
+        let target = &upright(target);
+        let side = RobotSide {
+            model: &self.model,
+            base: self.base,
+            tcp: self.tcp,
+            arm: &self.arm,
+            tcp_from_object: self.tcp_from_object,
+        };
+        let out = self.mapper.robot_side(
+            target,
+            &RobotInputs {
+                q,
+                now_s,
+                joints_stamp_s,
+            },
+            &side,
+        )?;
+        Ok(out.qdot)
+    }
+
+    fn release(&mut self, object: usize, tool: &Isometry3<f64>, out: &mut PickTick) {
+        self.closed = false;
+        let held = tool * self.tcp_from_object;
+        let o = &mut self.objects[object];
+        // It stands where the tool left it, upright, at its rest height.
+        let (_, _, yaw) = held.rotation.euler_angles();
+        o.pose = Isometry3::from_parts(
+            Translation3::new(held.translation.x, held.translation.y, o.pose.translation.z),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+        );
+        self.last_target = None;
+        self.phase = PickPhase::Retreat;
+        out.released = Some(object);
+        out.phase = self.phase;
+        out.gripper = GripperCommand {
+            closed: false,
+            force_n: 0.0,
+        };
+    }
+
+    fn joint_velocity(
+        &self,
+        jacobian: &Matrix6xX<f64>,
+        twist: &Vector6<f64>,
+        q: &[f64],
+    ) -> crate::Result<DVector<f64>> {
+        let j = Matrix6xX::from_fn(self.arm.len(), |r, c| jacobian[(r, self.arm[c])]);
+        let q_arm: Vec<f64> = self.arm.iter().map(|&i| q[i]).collect();
+        let limits = self.model.dof_limits();
+        let lim_arm: Vec<_> = self.arm.iter().map(|&i| limits[i]).collect();
+        let step = dls_step(&j, twist, &q_arm, &lim_arm, &self.settings.mapping.dls);
+        if step.rejected {
+            return Err(crate::Error::BadTickInput {
+                message: "the arm Jacobian or the twist is not finite".into(),
+            });
+        }
+        let mut qdot = DVector::zeros(q.len());
+        for (k, &i) in self.arm.iter().enumerate() {
+            qdot[i] = step.qdot[k];
+        }
+        Ok(qdot)
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,251 @@
+use super::*;
+use crate::robot::kinematics::tests::sawyer;
+use nalgebra::Matrix3;
+
+const ARM: [usize; 7] = [0, 1, 2, 3, 4, 5, 6];
+const DT: f64 = 0.01;
+
+/// The top grasp: approach axis (the tool's z) down, its x pointing away from the robot.
+fn down() -> UnitQuaternion<f64> {
+    UnitQuaternion::from_matrix(&Matrix3::from_columns(&[
+        Vector3::x(),
+        -Vector3::y(),
+        -Vector3::z(),
+    ]))
+}
+
+fn settings() -> PickPlaceSettings {
+    PickPlaceSettings {
+        clearance_z: 0.75 + 0.10 + 0.08,
+        hover_m: 0.04,
+        grasp_depth_m: 0.015,
+        tool_down: down(),
+        arrive_m: 0.003,
+        arrive_rad: 0.02,
+        over_m: 0.01,
+        gain_per_s: 8.0,
+        max_speed: 0.24,
+        max_turn: 1.5,
+        place_m: 0.002,
+        place_rad: 0.02,
+        place_timeout_s: 1.5,
+        mapping: MappingSettings::default(),
+    }
+}
+
+/// Three pieces 6 cm apart across the robot's front, 5 and 9 cm tall, on a 0.75 m table.
+fn pieces() -> Vec<PickObject> {
+    [(-0.06, 0.05), (0.0, 0.09), (0.06, 0.05)]
+        .iter()
+        .map(|&(y, h)| PickObject {
+            pose: Isometry3::translation(0.65, y, 0.75 + h / 2.0),
+            radius_m: 0.015,
+            height_m: h,
+        })
+        .collect()
+}
+
+struct World {
+    robot: PickPlaceRobot,
+    q: DVector<f64>,
+    t: f64,
+    /// The closest the tool point came to a piece's body it was not sent to (m, negative:
+    /// inside), over the run.
+    closest: f64,
+}
+
+impl World {
+    fn new() -> Self {
+        let model = Arc::new(sawyer());
+        let tcp = model.link_id("right_gripper_tip").unwrap();
+        let robot = PickPlaceRobot::new(
+            settings(),
+            model,
+            Isometry3::translation(0.0, 0.0, 0.75),
+            tcp,
+            ARM.to_vec(),
+            pieces(),
+        )
+        .unwrap();
+        Self {
+            robot,
+            q: DVector::from_vec(vec![0.0, -1.18, 0.0, 2.18, 0.0, 0.57, 3.3161, 0.02, 0.02]),
+            t: 0.0,
+            closest: f64::INFINITY,
+        }
+    }
+
+    /// Runs for `seconds` with `command`, integrating the joint velocities; returns every tick.
+    fn run(
+        &mut self,
+        seconds: f64,
+        command: &PickPlaceCommand,
+        goal: Option<usize>,
+    ) -> Vec<PickTick> {
+        let mut out = Vec::new();
+        for _ in 0..(seconds / DT).round() as usize {
+            self.t += DT;
+            let q: Vec<f64> = self.q.iter().copied().collect();
+            let tick = self.robot.tick(Some(command), &q, self.t, self.t).unwrap();
+            assert!(tick.qdot.iter().all(|v| v.is_finite()));
+            let p = tick.tool.translation.vector;
+            for (i, o) in pieces().iter().enumerate() {
+                if Some(i) == goal || command.object == Some(i) {
+                    continue;
+                }
+                let c = o.pose.translation.vector;
+                let radial = Vector3::new(p.x - c.x, p.y - c.y, 0.0).norm() - o.radius_m;
+                let above = p.z - o.top_z();
+                self.closest = self.closest.min(radial.max(above));
+            }
+            self.q += &tick.qdot * DT;
+            out.push(tick);
+        }
+        out
+    }
+}
+
+fn target_at(stamp_s: f64, pose: Isometry3<f64>, held: bool) -> OperatorTarget {
+    OperatorTarget {
+        stamp_s,
+        target: pose,
+        object_twist: Vector6::zeros(),
+        twin_twist: Vector6::zeros(),
+        squeeze_n: if held { 3.0 } else { 0.0 },
+        rank: 6,
+        contacts: 4,
+        held,
+    }
+}
+
+#[test]
+fn intent_hovers_then_goes_around_the_goal_without_crossing_the_others() {
+    let mut w = World::new();
+    let hover = PickPlaceCommand {
+        object: None,
+        target: None,
+        intent: Some(0),
+        intent_near: false,
+    };
+    w.run(4.0, &hover, Some(0));
+    let g = w.robot.grasp_pose(0).unwrap();
+    let tool = w.run(0.01, &hover, Some(0)).pop().unwrap().tool;
+    let off = tool.translation.vector - (g.translation.vector + Vector3::new(0.0, 0.0, 0.04));
+    assert!(off.norm() < 0.005, "hovering {off:?} off");
+    // The estimate moves to the far piece, across the tall one in the middle.
+    let other = PickPlaceCommand {
+        intent: Some(2),
+        intent_near: true,
+        ..hover
+    };
+    w.closest = f64::INFINITY;
+    let ticks = w.run(4.0, &other, Some(2));
+    assert!(
+        w.closest > 0.02,
+        "the tool came within {} m of a piece",
+        w.closest
+    );
+    let g = w.robot.grasp_pose(2).unwrap();
+    let last = ticks.last().unwrap();
+    assert!((last.tool.translation.vector - g.translation.vector).norm() < 0.005);
+    assert_eq!(last.goal, Some(PickGoal::Around(2)));
+    assert!(!last.gripper.closed);
+    // Every commanded tool speed stayed under the cap.
+    let fastest = ticks
+        .iter()
+        .map(|t| {
+            (t.tcp_jacobian.columns(0, 7) * t.qdot.rows(0, 7))
+                .fixed_rows::<3>(0)
+                .norm()
+        })
+        .fold(0.0, f64::max);
+    assert!(fastest <= 0.24 + 1e-6, "{fastest}");
+}
+
+#[test]
+fn a_grasp_carry_and_place_moves_the_believed_piece_and_only_it() {
+    let mut w = World::new();
+    let start = pieces()[1].pose;
+    let held = PickPlaceCommand {
+        object: Some(1),
+        target: Some(target_at(0.0, start, true)),
+        intent: None,
+        intent_near: false,
+    };
+    let ticks = w.run(5.0, &held, Some(1));
+    let grasp = ticks
+        .iter()
+        .position(|t| t.grasped.is_some())
+        .expect("grasped");
+    assert_eq!(ticks[grasp].grasped, Some(1));
+    assert!(matches!(w.robot.phase(), PickPhase::Carry { object: 1 }));
+    // Carried 10 cm up and 8 cm toward the robot, set down there, and let go.
+    let placed = Isometry3::translation(-0.08, 0.0, 0.0) * start;
+    for k in 0..=100 {
+        let s = f64::from(k) / 100.0;
+        let lift = (s * std::f64::consts::PI).sin() * 0.10;
+        let pose = Isometry3::translation(-0.08 * s, 0.0, lift) * start;
+        let c = PickPlaceCommand {
+            target: Some(target_at(w.t, pose, true)),
+            ..held
+        };
+        w.run(0.02, &c, Some(1));
+    }
+    let release = PickPlaceCommand {
+        target: Some(target_at(w.t, placed, false)),
+        ..held
+    };
+    let ticks = w.run(3.0, &release, Some(1));
+    let r = ticks
+        .iter()
+        .position(|t| t.released.is_some())
+        .expect("released");
+    assert_eq!(ticks[r].released, Some(1));
+    let believed = w.robot.objects()[1].pose.translation.vector;
+    assert!(
+        (believed - placed.translation.vector).norm() < 0.003,
+        "{believed:?}"
+    );
+    assert_eq!(w.robot.objects()[0], pieces()[0]);
+    assert_eq!(w.robot.phase(), PickPhase::Free);
+    assert!(!ticks.last().unwrap().gripper.closed);
+}
+
+#[test]
+fn bad_commands_and_joints_are_refused_by_name() {
+    let mut w = World::new();
+    let q: Vec<f64> = w.q.iter().copied().collect();
+    let c = PickPlaceCommand {
+        object: Some(7),
+        target: None,
+        intent: None,
+        intent_near: false,
+    };
+    let e = w
+        .robot
+        .tick(Some(&c), &q, 0.0, 0.0)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("object 7 of 3"), "{e}");
+    let mut nan = q.clone();
+    nan[2] = f64::NAN;
+    assert!(w.robot.tick(None, &nan, 0.0, 0.0).is_err());
+    let mut t = target_at(0.0, pieces()[0].pose, true);
+    t.squeeze_n = f64::NAN;
+    let c = PickPlaceCommand {
+        object: Some(0),
+        target: Some(t),
+        ..c
+    };
+    assert!(w.robot.tick(Some(&c), &q, 0.0, 0.0).is_err());
+    let s = PickPlaceSettings {
+        max_speed: -1.0,
+        ..settings()
+    };
+    assert!(
+        s.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("pick_place.max_speed")
+    );
+}
