@@ -40,7 +40,16 @@ fn preview_on_ros(master: &Master, name: &str, extra: &[&str]) -> String {
     let out = out_dir(name);
     std::fs::create_dir_all(&out).expect("the test's folder");
     let args = [&["assets/scenes/pouring.toml", "--robot", "ros"][..], extra].concat();
-    run_preview_with(&args, &out, &[("ROS_MASTER_URI", &master.uri)])
+    // Mesa's software rasteriser takes a thread per core; on a 2-core machine it starved the
+    // simulated Sawyer (a Python process) of its 100 Hz joint states for over 0.2 s while the
+    // app's own control thread kept its 10 ms ticks (measured December 2026: link lost twice,
+    // control ticks 10.0 ms median, 16.6 ms max). One rasteriser thread leaves the robot its
+    // core, as a real robot has its own computer.
+    run_preview_with(
+        &args,
+        &out,
+        &[("ROS_MASTER_URI", &master.uri), ("LP_NUM_THREADS", "1")],
+    )
 }
 
 /// `avatarm run --robot ros`: the live pouring task commands a Sawyer over ROS 1 (a real master
