@@ -8,6 +8,7 @@
 //! - [`background`]: where the background H comes from (the scene's `[background]`).
 
 pub mod background;
+pub mod drift;
 #[cfg(feature = "ros")]
 pub mod ros2_camera;
 
@@ -314,6 +315,10 @@ impl PluginGroup for AvatarmPlugins {
             .add(background::BackgroundSourcePlugin);
         if !self.base.interaction_layer {
             group = group.disable::<InteractionPlugin>();
+        }
+        // A real camera can be bumped; the simulated room's never moves.
+        if self.scene.file.erase.drift_watch && !self.base.camera.is_simulated() {
+            group = group.add(drift::DriftWatchPlugin(drift::live_settings()));
         }
         match &self.base.camera {
             CameraSource::Simulated => {}

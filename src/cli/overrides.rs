@@ -37,6 +37,12 @@ pub struct EraseOverrides {
     /// Draw the mask through the camera's lens distortion (off: as a pinhole's).
     #[arg(long, value_name = "on|off", value_parser = on_off)]
     pub lens_distortion: Option<bool>,
+    /// Watch a fixed real camera for moving (a few frames a second, the robot's outline against
+    /// each frame's edges): a move beyond the erase margin is fitted again and the new pose
+    /// used from then on (`replay --recording`'s report says what was found under `drift`;
+    /// `run` and `serve` log it). On by default; no effect on the simulated room's camera.
+    #[arg(long = "drift-watch", value_name = "on|off", value_parser = on_off)]
+    pub drift_watch: Option<bool>,
     /// A camera on a head: draw each frame's mask at the head pose of its capture time (off:
     /// at the newest tracked pose).
     #[arg(long, value_name = "on|off", value_parser = on_off)]
@@ -113,6 +119,9 @@ impl EraseOverrides {
         }
         if let Some(v) = self.pose_compensation {
             e.pose_compensation = v;
+        }
+        if let Some(v) = self.drift_watch {
+            e.drift_watch = v;
         }
         e.validate("command line")?;
         Ok(())

@@ -102,10 +102,30 @@ impl ReplayArgs {
                         background: overrides.background.clone(),
                         background_margin_px: background_margin,
                         room,
+                        drift: settings
+                            .drift_watch
+                            .then(avatarm_footage::drift::DriftSettings::default),
                         out: out.clone(),
                         progress: true,
                     },
                 )?;
+                if let Some(d) = &report.drift {
+                    eprintln!("drift watch: {}", d.note);
+                    for r in &d.refits {
+                        eprintln!(
+                            "  the camera moved by frame {} (first seen at frame {}: the robot's outline {:.0},{:.0} px off): fitted again on frames {:?} ({:.2} deg, {:.1} mm from the pose before, {:.1} s), used from frame {}",
+                            r.detected_frame,
+                            r.first_beyond_frame,
+                            r.shift_px[0],
+                            r.shift_px[1],
+                            r.frames,
+                            r.moved_deg,
+                            r.moved_mm,
+                            r.refit_s,
+                            r.detected_frame
+                        );
+                    }
+                }
                 let vs = &report.mask.vs_reference;
                 eprintln!(
                     "replayed {}: {} frames of '{}', mask covering {:.1} % of the frame; against {} reference masks: IoU {}, leak {} %; background: {}; report: {}",

@@ -505,6 +505,13 @@ impl LiveTeleopStatus<'_, '_> {
     }
 }
 
+/// The status line's optional sources: the live scores, glass to glass, the drift watch.
+type StatusExtras<'w> = (
+    Option<Res<'w, LiveDr>>,
+    Option<Res<'w, glass::GlassToGlass>>,
+    Option<Res<'w, crate::app::drift::LiveDriftWatch>>,
+);
+
 #[expect(clippy::too_many_arguments, reason = "a system's inputs")]
 fn update_status(
     mut text: Query<&mut Text, With<StatusText>>,
@@ -517,7 +524,7 @@ fn update_status(
         Res<LiveVideo>,
         Res<avatarm_erase::GpuTimes>,
     ),
-    (live_dr, glass): (Option<Res<LiveDr>>, Option<Res<glass::GlassToGlass>>),
+    (live_dr, glass, drift): StatusExtras,
     time: Res<Time<Real>>,
     teleop: LiveTeleopStatus,
     scene: Res<crate::app::SceneResource>,
@@ -552,9 +559,10 @@ fn update_status(
     let teleop_line = teleop.line();
     let head = head_line(&scene.0, &erase_state);
     let glass = glass.map_or_else(String::new, |g| g.line());
+    let drift = drift.map_or_else(String::new, |d| format!("\n{}", d.line()));
     for mut line in &mut text {
         **line = format!(
-            "{teleop_line}sim {t:6.2} s   frame {:5.1} ms   refused joint states {}{stale}\ncamera frame age {frame_age_ms:5.1} ms   joint state age {age_ms:5.1} ms{head}\nmask renders per camera frame {per_frame:.2}{gpu}{glass}\n{erasing}{scores}",
+            "{teleop_line}sim {t:6.2} s   frame {:5.1} ms   refused joint states {}{stale}\ncamera frame age {frame_age_ms:5.1} ms   joint state age {age_ms:5.1} ms{head}\nmask renders per camera frame {per_frame:.2}{gpu}{glass}{drift}\n{erasing}{scores}",
             time.delta_secs_f64() * 1e3,
             twin.rejected
         );

@@ -42,6 +42,7 @@ use nalgebra::{DVector, Isometry3};
 
 use crate::AppError;
 
+mod drift;
 mod outputs;
 use outputs::write_outputs;
 
@@ -84,6 +85,10 @@ pub struct RecordingOptions {
     /// A recording of a camera on a head: the scene file of its room, whose boxes that are not
     /// objects are the view-following background's proxy.
     pub room: Option<PathBuf>,
+    /// Watch a fixed camera for moving ([`avatarm_footage::drift`]): a move beyond the
+    /// erase margin is fitted again and the new pose used from the frame that confirmed it.
+    /// `None`: off.
+    pub drift: Option<avatarm_footage::drift::DriftSettings>,
     /// Output folder.
     pub out: PathBuf,
     /// Show a progress bar.
@@ -146,7 +151,12 @@ const MAX_WAIT_UPDATES: u32 = 600;
 pub fn run_recording(o: &RecordingOptions) -> Result<RecordingReport, AppError> {
     let started = Instant::now();
     let o = &o.with_calibrated_margin()?;
-    let input = Input::load(o)?;
+    let mut input = Input::load(o)?;
+    // A fixed camera that moved: the pose at each frame, as a head's track with no mount.
+    let moved = drift::watch(o, &mut input)?;
+    let head_mount = input
+        .head_mount
+        .or(moved.as_ref().map(|_| Isometry3::identity()));
     std::fs::create_dir_all(&o.out).map_err(|source| AppError::Io {
         path: o.out.clone(),
         action: "create",
@@ -203,7 +213,7 @@ pub fn run_recording(o: &RecordingOptions) -> Result<RecordingReport, AppError> 
             base: Isometry3::identity(),
             source_twin: Some(source),
             occluders: Vec::new(),
-            head_mount: input.head_mount,
+            head_mount,
             view_background: input.view_background.clone(),
         })
         .add_plugins(ErasePlugin)
@@ -211,6 +221,7 @@ pub fn run_recording(o: &RecordingOptions) -> Result<RecordingReport, AppError> 
             head: input
                 .head_mount
                 .map(|_| input.recording.head_poses.clone())
+                .or(moved)
                 .unwrap_or_default(),
             frames: input.frames.clone(),
             q: input.q.clone(),
@@ -225,6 +236,16 @@ pub fn run_recording(o: &RecordingOptions) -> Result<RecordingReport, AppError> 
             pending_background: file_background.map(|rgba| (rgba, "file".to_owned())),
             view_background: input.view_background.is_some(),
             background: None,
+            still_from: std::iter::once(0)
+                .chain(
+                    input
+                        .drift
+                        .iter()
+                        .flat_map(|d| d.refits.iter().map(|r| r.first_beyond_frame)),
+                )
+                .collect(),
+            later_backgrounds: Vec::new(),
+            resume: 0,
             shown: None,
             outputs: vec![FrameOutput::default(); input.frames.len()],
             pending: 0,
@@ -286,6 +307,8 @@ struct Input {
     head_mount: Option<Isometry3<f64>>,
     /// `--room`: the background follows the view, through the room's boxes in the base frame.
     view_background: Option<ViewBackgroundConfig>,
+    /// The drift watch's report, where it ran.
+    drift: Option<avatarm_footage::drift::DriftReport>,
 }
 
 impl Input {
@@ -420,6 +443,7 @@ impl Input {
             notes,
             head_mount: head,
             view_background,
+            drift: None,
         })
     }
 }
@@ -571,6 +595,13 @@ struct Driver {
     /// a blend of many views, only the fallback where no view saw a pixel.
     view_background: bool,
     background: Option<(BackgroundEstimate, String)>,
+    /// The first frame of each stretch the camera stood still (the drift watch's moves: from
+    /// the first frame seen moved); H from the footage is built per stretch.
+    still_from: Vec<usize>,
+    /// The later stretches' H from the footage, by their first frame, handed over there.
+    later_backgrounds: Vec<(usize, Arc<Vec<u8>>)>,
+    /// The frame a pass goes on from after settling (a new H mid-pass).
+    resume: usize,
     /// The frame handed over in this update: its index and pass.
     shown: Option<(usize, Pass)>,
     outputs: Vec<FrameOutput>,
@@ -618,10 +649,17 @@ fn feed(
                 d.phase = Phase::Settle(1, pass);
                 return;
             }
-            d.phase = Phase::Run(pass, 0);
+            d.phase = Phase::Run(pass, d.resume);
             hand_over(d, &mut inbox, &mut twins, &mut head, now);
         }
         Phase::Settle(k, pass) => d.phase = Phase::Settle(k - 1, pass),
+        // A stretch after the camera moved: its own H first.
+        Phase::Run(Pass::Erase, i) if d.later_backgrounds.first().is_some_and(|b| b.0 == i) => {
+            let (_, rgba) = d.later_backgrounds.remove(0);
+            d.pending_background = Some((rgba, FOOTAGE.into()));
+            d.resume = i;
+            d.phase = Phase::Settle(0, Pass::Erase);
+        }
         Phase::Run(..) => hand_over(d, &mut inbox, &mut twins, &mut head, now),
         Phase::Drain(pass) => {
             d.waited += 1;
@@ -633,11 +671,17 @@ fn feed(
                     .push(format!("{} frame read-backs never arrived", d.pending));
             }
             match pass {
-                Pass::Mask if d.errors.is_empty() => match footage_background(d) {
-                    Ok(estimate) => {
-                        let rgba = Arc::new(estimate.rgba.clone());
+                Pass::Mask if d.errors.is_empty() => match still_backgrounds(d) {
+                    Ok(mut estimates) => {
+                        let first = estimates.remove(0).1;
+                        d.later_backgrounds = estimates
+                            .into_iter()
+                            .map(|(from, e)| (from, Arc::new(e.rgba)))
+                            .collect();
+                        let rgba = Arc::new(first.rgba.clone());
                         d.pending_background = Some((rgba, FOOTAGE.into()));
-                        d.background = Some((estimate, FOOTAGE.into()));
+                        d.background = Some((first, FOOTAGE.into()));
+                        d.resume = 0;
                         d.phase = Phase::Settle(SETTLE_UPDATES, Pass::Erase);
                     }
                     Err(e) => {
@@ -723,12 +767,37 @@ fn feed(
     }
 }
 
-/// Builds H from the mask pass: each frame's pixels its mask, grown by the margin, leaves.
-fn footage_background(d: &Driver) -> Result<BackgroundEstimate, String> {
+/// H from the footage for each stretch the camera stood still, by the stretch's first frame
+/// (at least one).
+fn still_backgrounds(d: &Driver) -> Result<Vec<(usize, BackgroundEstimate)>, String> {
+    let n = d.frames.len();
+    let mut out = Vec::with_capacity(d.still_from.len());
+    for (j, &from) in d.still_from.iter().enumerate() {
+        let to = d.still_from.get(j + 1).copied().unwrap_or(n).min(n);
+        if from < to || out.is_empty() {
+            out.push((from, footage_background(d, from..to.max(from + 1).min(n))?));
+        }
+    }
+    Ok(out)
+}
+
+/// Builds H from the mask pass over the frames in `range`: each frame's pixels its mask, grown
+/// by the margin, leaves.
+fn footage_background(
+    d: &Driver,
+    range: std::ops::Range<usize>,
+) -> Result<BackgroundEstimate, String> {
     let (w, h) = d.size;
-    let keep = d.frames.len().clamp(1, 32);
+    let keep = range.len().clamp(1, 32);
     let mut b = FootageBackground::new(w, h, keep).map_err(|e| e.to_string())?;
-    for (i, (frame, out)) in d.frames.iter().zip(&d.outputs).enumerate() {
+    for (i, (frame, out)) in d
+        .frames
+        .iter()
+        .zip(&d.outputs)
+        .enumerate()
+        .skip(range.start)
+        .take(range.len())
+    {
         let mask = out
             .first_mask
             .as_ref()

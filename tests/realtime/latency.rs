@@ -14,19 +14,24 @@ use crate::support::output;
 /// A second of the pouring scene recorded by the replay (its frames, the joints at each
 /// capture, the camera), as `dir/session.mcap`.
 fn record_a_second(dir: &Path) -> std::path::PathBuf {
+    record_pouring(dir, "1.0")
+}
+
+/// `duration_s` (as the scene file writes it) of the pouring scene recorded by the replay (its
+/// frames, the joints at each capture, the camera), as `dir/session.mcap`; the replay's own
+/// outputs (the empty room's `background.png`) in `dir/replay`.
+pub(crate) fn record_pouring(dir: &Path, duration_s: &str) -> std::path::PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let urdf = root.join("assets/robots/sawyer_lite/sawyer_lite.urdf");
+    let duration = format!("duration_s = {duration_s}");
     let text = std::fs::read_to_string(root.join(POURING))
         .expect("the pouring scene")
         .replace(
             "../robots/sawyer_lite/sawyer_lite.urdf",
             urdf.to_str().expect("a UTF-8 path"),
         )
-        .replacen("duration_s = 2.0", "duration_s = 1.0", 1);
-    assert!(
-        text.contains("duration_s = 1.0"),
-        "the scene's duration moved"
-    );
+        .replacen("duration_s = 2.0", &duration, 1);
+    assert!(text.contains(&duration), "the scene's duration moved");
     let scene = dir.join("scene.toml");
     std::fs::write(&scene, text).expect("the test's set-up");
     let recording = dir.join("session.mcap");

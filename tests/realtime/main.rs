@@ -1,7 +1,8 @@
 //! The app's real-time integration tests, in a binary of their own: two sites as processes
 //! through the impairment relay ([`network`]), over a secure link with access control
 //! ([`secure`]), the real frame path from a recorded camera and
-//! its stage stamps ([`latency`]), and XR against a real OpenXR runtime ([`xr`]).
+//! its stage stamps ([`latency`]), the live drift watch of a bumped camera ([`drift`]), and XR
+//! against a real OpenXR runtime ([`xr`]).
 //! Their processes run on the wall clock, so they run one at a time and apart from the
 //! replays (cargo runs test binaries one after another).
 
@@ -12,6 +13,7 @@
 )]
 mod support;
 
+mod drift;
 mod latency;
 mod network;
 mod secure;

@@ -12,6 +12,8 @@
 //!   serving a recording read them.
 //! - [`calibrate`]: the `avatarm calibrate` command (the fit itself is
 //!   [`avatarm_core::vision::calibrate`]) and its typed report.
+//! - [`drift`]: the drift watch: a fixed camera that moved found from its frames' edges, and
+//!   its pose fitted again.
 //! - [`overlay`]: a mask, edges and a reference outline drawn over a frame.
 //! - [`error`]: the crate's error type ([`FootageError`]).
 //!
@@ -21,6 +23,7 @@
 
 pub mod bag;
 pub mod calibrate;
+pub mod drift;
 pub mod error;
 pub mod footage;
 pub mod overlay;

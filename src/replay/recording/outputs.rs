@@ -362,6 +362,7 @@ fn report(
             upload: span(UPLOAD_SPAN),
             source: times.unavailable.clone().unwrap_or_else(|| "gpu".into()),
         },
+        drift: input.drift.clone(),
         wall_time_s: started.elapsed().as_secs_f64(),
         notes: input.notes.clone(),
         outputs: RecordingOutputs {

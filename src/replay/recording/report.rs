@@ -30,6 +30,9 @@ pub struct RecordingReport {
     pub gpu_vs_cpu: GpuVsCpu,
     /// The erase's GPU passes.
     pub timing_ms: RecordingTimings,
+    /// The drift watch (a fixed camera that moved, found and fitted again); `None` when off.
+    #[serde(default)]
+    pub drift: Option<avatarm_footage::drift::DriftReport>,
     /// The whole command's wall time (s).
     pub wall_time_s: f64,
     /// What the user should know (joints never named, the background's origin, ...).

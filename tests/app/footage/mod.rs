@@ -4,6 +4,7 @@
 
 mod bag;
 mod calibrate;
+mod drift;
 mod import;
 mod panda;
 

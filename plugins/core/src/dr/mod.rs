@@ -110,6 +110,11 @@ pub struct EraseSettings {
     /// ([`crate::vision::head::PoseHistory::at`]); off draws it at the newest tracked pose
     /// received. No effect on a fixed camera.
     pub pose_compensation: bool,
+    /// Watch a fixed camera for moving (`avatarm_footage::drift`: a few frames a second, the
+    /// robot's outline against the frame's edges; a move beyond the margin is fitted again):
+    /// `replay --recording`, and `run`/`serve` with a real camera. No effect on the simulated
+    /// room's camera (it never moves) or a camera on a head.
+    pub drift_watch: bool,
 }
 
 impl Default for EraseSettings {
@@ -126,6 +131,7 @@ impl Default for EraseSettings {
             background_refresh: 0.0,
             lens_distortion: true,
             pose_compensation: true,
+            drift_watch: true,
         }
     }
 }

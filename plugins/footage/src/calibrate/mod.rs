@@ -356,7 +356,7 @@ fn check_fit(fit: &[SilhouetteFrame], used: &[frames::UsedFrame]) -> Result<(), 
 /// (`imageproc::edges::canny`: a Gaussian of σ 1.4, Sobel gradients, non-maximum suppression,
 /// then hysteresis between `low` and `high` on the gradient's magnitude, in imageproc's scale,
 /// [`MAX_SOBEL`] at most).
-fn image_edges(frame: &image::RgbaImage, (low, high): (f32, f32)) -> Vec<u8> {
+pub(crate) fn image_edges(frame: &image::RgbaImage, (low, high): (f32, f32)) -> Vec<u8> {
     let grey = image::imageops::grayscale(frame);
     imageproc::edges::canny(&grey, low, high)
         .into_raw()
