@@ -195,7 +195,8 @@ enum Phase {
     Starting,
     /// The pose fitted a check: drifts are watched for.
     Watching,
-    /// The first checks were all beyond: the pose never fitted; nothing is watched.
+    /// The first checks were all beyond: the pose never fitted; no move is confirmed until a
+    /// check fits (a pose off from the start is not refitted as if it had moved).
     NeverFitted,
 }
 
@@ -267,12 +268,11 @@ impl<'a> DriftWatch<'a> {
     }
 
     /// Whether a frame captured at `stamp_ns` is due a check ([`DriftSettings::every_s`]
-    /// after the last), and the watch is watching.
+    /// after the last).
     pub fn due(&self, stamp_ns: u64) -> bool {
-        self.phase != Phase::NeverFitted
-            && self.last_check_ns.is_none_or(|last| {
-                stamp_ns.saturating_sub(last) as f64 >= self.settings.every_s * 1e9 - 1e3
-            })
+        self.last_check_ns.is_none_or(|last| {
+            stamp_ns.saturating_sub(last) as f64 >= self.settings.every_s * 1e9 - 1e3
+        })
     }
 
     /// Checks one frame (RGBA8, the camera's size) at the robot's joints `q` (the model's q
@@ -319,7 +319,9 @@ impl<'a> DriftWatch<'a> {
             return Ok(None);
         };
         match (self.phase, beyond) {
-            (Phase::NeverFitted, _) => return Ok(None),
+            (Phase::NeverFitted, true) => return Ok(None),
+            // A check that fits (also after a start that did not: the first frames' joints
+            // late, say) starts the watch.
             (_, false) => {
                 self.phase = Phase::Watching;
                 self.streak.clear();
@@ -489,7 +491,7 @@ impl<'a> DriftWatch<'a> {
         let measured = self.checks.iter().filter(|c| c.shift.is_some()).count();
         let note = match self.phase {
             Phase::NeverFitted => format!(
-                "not watched: the pose did not fit the first {measured} checks (the robot's outline sits more than {:.0} px from the frames' edges): calibrate the camera first (avatarm calibrate --edges); the watch tells a moved camera from a pose that fits",
+                "not watched: the pose fitted none of the {measured} checks (the robot's outline sits more than {:.0} px from the frames' edges): calibrate the camera first (avatarm calibrate --edges); the watch tells a moved camera from a pose that fits",
                 self.threshold_px
             ),
             Phase::Starting if measured == 0 => {
