@@ -136,7 +136,13 @@ fn start(
                 let stamp_ns = (job.capture_s.max(0.0) * 1e9) as u64;
                 match watch.check(job.index as usize, stamp_ns, &image, &job.q) {
                     Ok(Some(refit)) => {
-                        let _ = tell.try_send((refit.clone(), watch.camera_from_base()));
+                        // Waits for room rather than lose a pose the worker now believes.
+                        if tell
+                            .send((refit.clone(), watch.camera_from_base()))
+                            .is_err()
+                        {
+                            return;
+                        }
                     }
                     Ok(None) => {}
                     Err(e) => warn!("drift watch: {e}"),

@@ -236,14 +236,7 @@ pub fn run_recording(o: &RecordingOptions) -> Result<RecordingReport, AppError> 
             pending_background: file_background.map(|rgba| (rgba, "file".to_owned())),
             view_background: input.view_background.is_some(),
             background: None,
-            still_from: std::iter::once(0)
-                .chain(
-                    input
-                        .drift
-                        .iter()
-                        .flat_map(|d| d.refits.iter().map(|r| r.first_beyond_frame)),
-                )
-                .collect(),
+            stretches: stretches(input.drift.as_ref(), input.frames.len()),
             later_backgrounds: Vec::new(),
             resume: 0,
             shown: None,
@@ -595,9 +588,11 @@ struct Driver {
     /// a blend of many views, only the fallback where no view saw a pixel.
     view_background: bool,
     background: Option<(BackgroundEstimate, String)>,
-    /// The first frame of each stretch the camera stood still (the drift watch's moves: from
-    /// the first frame seen moved); H from the footage is built per stretch.
-    still_from: Vec<usize>,
+    /// Each stretch the camera stood still (the drift watch's moves): the frame its H is handed
+    /// over at (the first seen moved) and the frames H is built from (those masked at the
+    /// stretch's own pose: the frames between the first seen moved and the one that confirmed
+    /// it were masked at the old pose, so they build no H).
+    stretches: Vec<(usize, std::ops::Range<usize>)>,
     /// The later stretches' H from the footage, by their first frame, handed over there.
     later_backgrounds: Vec<(usize, Arc<Vec<u8>>)>,
     /// The frame a pass goes on from after settling (a new H mid-pass).
@@ -767,18 +762,36 @@ fn feed(
     }
 }
 
-/// H from the footage for each stretch the camera stood still, by the stretch's first frame
-/// (at least one).
-fn still_backgrounds(d: &Driver) -> Result<Vec<(usize, BackgroundEstimate)>, String> {
-    let n = d.frames.len();
-    let mut out = Vec::with_capacity(d.still_from.len());
-    for (j, &from) in d.still_from.iter().enumerate() {
-        let to = d.still_from.get(j + 1).copied().unwrap_or(n).min(n);
-        if from < to || out.is_empty() {
-            out.push((from, footage_background(d, from..to.max(from + 1).min(n))?));
+/// The stretches the camera stood still over `n` frames, from the drift watch's moves: the
+/// frame each one's H is handed over at, and the frames it is built from (never empty where
+/// there are frames: a stretch too short for its own falls back to all of its frames).
+fn stretches(
+    drift: Option<&avatarm_footage::drift::DriftReport>,
+    n: usize,
+) -> Vec<(usize, std::ops::Range<usize>)> {
+    let mut out = Vec::new();
+    let (mut switch, mut from) = (0, 0);
+    for r in drift.iter().flat_map(|d| &d.refits) {
+        out.push((switch, from..r.first_beyond_frame.max(from)));
+        (switch, from) = (r.first_beyond_frame, r.detected_frame);
+    }
+    out.push((switch, from.min(n)..n));
+    let ends: Vec<usize> = out.iter().skip(1).map(|s| s.0).chain([n]).collect();
+    for ((switch, frames), end) in out.iter_mut().zip(ends) {
+        if frames.start >= frames.end {
+            *frames = *switch..end.max(*switch + 1).min(n);
         }
     }
-    Ok(out)
+    out
+}
+
+/// H from the footage for each stretch the camera stood still, by the frame it is handed over
+/// at (at least one).
+fn still_backgrounds(d: &Driver) -> Result<Vec<(usize, BackgroundEstimate)>, String> {
+    d.stretches
+        .iter()
+        .map(|(switch, frames)| Ok((*switch, footage_background(d, frames.clone())?)))
+        .collect()
 }
 
 /// Builds H from the mask pass over the frames in `range`: each frame's pixels its mask, grown

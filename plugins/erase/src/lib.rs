@@ -687,12 +687,14 @@ fn prepare_frame(
                 "erase: no tracked head pose yet; the mask is drawn from the camera's configured pose"
             ),
         }
-        if view.camera.world_from_camera != camera.world_from_camera {
-            view.camera.world_from_camera = camera.world_from_camera;
-        }
     } else if let (Some(pose), Some(_)) = (state.camera_pose, config.head_mount) {
         // Between frames a camera on a head stays where the last frame put it.
         camera.world_from_camera = pose;
+    }
+    // The mask is drawn from it: a head's pose for this frame, or a fixed camera's configured
+    // pose (which the drift watch moves when the camera was bumped).
+    if view.camera.world_from_camera != camera.world_from_camera {
+        view.camera.world_from_camera = camera.world_from_camera;
     }
     if frame.is_some() {
         state.camera_pose = Some(camera.world_from_camera);

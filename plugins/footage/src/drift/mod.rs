@@ -361,9 +361,11 @@ impl<'a> DriftWatch<'a> {
         if self.streak.len() < self.settings.confirm {
             return Ok(None);
         }
-        let refit = self.refit()?;
-        self.refits.push(refit);
+        // The streak is spent either way: a fit that failed is not run again on every later
+        // check.
+        let refit = self.refit();
         self.streak.clear();
+        self.refits.push(refit?);
         Ok(self.refits.last())
     }
 
