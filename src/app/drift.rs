@@ -42,8 +42,11 @@ pub struct LiveDriftWatch {
 impl LiveDriftWatch {
     /// The status line's words: the checks so far and the moves found.
     pub fn line(&self) -> String {
-        let report = self.report.lock().ok().and_then(|r| r.clone());
-        match (report, self.applied.last()) {
+        // Read under the lock, not copied: the report holds every check of the session.
+        let Ok(report) = self.report.lock() else {
+            return "drift watch: its report is unreadable (the worker failed)".into();
+        };
+        match (report.as_ref(), self.applied.last()) {
             (None, _) => "drift watch: no check yet".into(),
             (Some(r), None) if !r.watched => format!("drift watch: {}", r.note),
             (Some(r), None) => format!(
