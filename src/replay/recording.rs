@@ -236,7 +236,15 @@ pub fn run_recording(o: &RecordingOptions) -> Result<RecordingReport, AppError> 
             pending_background: file_background.map(|rgba| (rgba, "file".to_owned())),
             view_background: input.view_background.is_some(),
             background: None,
-            stretches: stretches(input.drift.as_ref(), input.frames.len()),
+            stretches: stretches(
+                &input
+                    .drift
+                    .iter()
+                    .flat_map(|d| &d.refits)
+                    .map(|r| (r.first_beyond_frame, r.detected_frame))
+                    .collect::<Vec<_>>(),
+                input.frames.len(),
+            ),
             later_backgrounds: Vec::new(),
             resume: 0,
             shown: None,
@@ -762,18 +770,16 @@ fn feed(
     }
 }
 
-/// The stretches the camera stood still over `n` frames, from the drift watch's moves: the
-/// frame each one's H is handed over at, and the frames it is built from (never empty where
-/// there are frames: a stretch too short for its own falls back to all of its frames).
-fn stretches(
-    drift: Option<&avatarm_footage::drift::DriftReport>,
-    n: usize,
-) -> Vec<(usize, std::ops::Range<usize>)> {
+/// The stretches the camera stood still over `n` frames, from the drift watch's moves (each
+/// the frame first seen moved and the frame that confirmed it, in order): the frame each
+/// stretch's H is handed over at, and the frames it is built from (never empty where there are
+/// frames: a stretch too short for its own falls back to all of its frames).
+fn stretches(moves: &[(usize, usize)], n: usize) -> Vec<(usize, std::ops::Range<usize>)> {
     let mut out = Vec::new();
     let (mut switch, mut from) = (0, 0);
-    for r in drift.iter().flat_map(|d| &d.refits) {
-        out.push((switch, from..r.first_beyond_frame.max(from)));
-        (switch, from) = (r.first_beyond_frame, r.detected_frame);
+    for &(first_seen, confirmed) in moves {
+        out.push((switch, from..first_seen.max(from)));
+        (switch, from) = (first_seen, confirmed);
     }
     out.push((switch, from.min(n)..n));
     let ends: Vec<usize> = out.iter().skip(1).map(|s| s.0).chain([n]).collect();
@@ -902,3 +908,25 @@ enum Part {
 }
 
 use avatarm_core::stats::Spread;
+
+#[cfg(test)]
+mod tests {
+    use super::stretches;
+
+    #[test]
+    fn each_still_stretch_builds_its_background_from_its_own_pose_s_frames() {
+        // No move: one stretch, every frame.
+        assert_eq!(stretches(&[], 10), vec![(0, 0..10)]);
+        // Seen moved at 4, confirmed at 6: frames 4 and 5 were masked at the old pose and
+        // build no H; the new H is handed over at 4.
+        assert_eq!(stretches(&[(4, 6)], 10), vec![(0, 0..4), (4, 6..10)]);
+        // A second move seen before the first one's confirmed frame: that stretch has no frame
+        // masked at its own pose and falls back to its own frames.
+        assert_eq!(
+            stretches(&[(4, 6), (5, 8)], 10),
+            vec![(0, 0..4), (4, 4..5), (5, 8..10)]
+        );
+        // Confirmed at the last frame: that frame alone.
+        assert_eq!(stretches(&[(4, 9)], 10), vec![(0, 0..4), (4, 9..10)]);
+    }
+}
