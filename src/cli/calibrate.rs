@@ -48,6 +48,11 @@ pub struct CalibrateArgs {
     /// Use only every N-th frame with a silhouette (long recordings).
     #[arg(long, value_name = "N", default_value_t = 1)]
     every: usize,
+    /// Keep the fit's frames that the pairing check finds mispaired (another frame's joints
+    /// explain their reference mask better than their own); by default the pose is fitted
+    /// again without them while at least two frames remain.
+    #[arg(long = "keep-mispaired")]
+    keep_mispaired: bool,
     /// Also fit the focal lengths fx and fy.
     #[arg(long)]
     intrinsics: bool,
@@ -107,6 +112,7 @@ impl CalibrateArgs {
             fit,
             every,
             intrinsics,
+            keep_mispaired,
             triangles,
             hidden_below,
             background,
@@ -161,6 +167,7 @@ impl CalibrateArgs {
             fit,
             every,
             fit_focal: intrinsics,
+            keep_mispaired,
             budget: triangles.max(100),
             hidden_below,
             background,

@@ -42,6 +42,11 @@ pub struct ReplayArgs {
     /// footage's median is then only the fallback where no view saw a pixel).
     #[arg(long, value_name = "SCENE", requires = "recording")]
     room: Option<PathBuf>,
+    /// With --recording: refine the mask's margin band to each frame (on the CPU; on by
+    /// default): the band's pixels that look like the background H (within 30 levels) are
+    /// given back to the frame, those that differ and touch the robot's core stay erased.
+    #[arg(long = "refine-edges", value_name = "on|off", value_parser = crate::cli::overrides::on_off, requires = "recording")]
+    refine_edges: Option<bool>,
     /// With a scene: replay only its camera NAME (one of its [[cameras]]; default: each
     /// camera in turn, into DIR/NAME/).
     #[arg(long, value_name = "NAME", conflicts_with = "recording")]
@@ -78,6 +83,7 @@ impl ReplayArgs {
                 pose,
                 background_margin,
                 room,
+                refine_edges,
                 out,
                 package_path,
                 overrides,
@@ -105,6 +111,7 @@ impl ReplayArgs {
                         drift: settings
                             .drift_watch
                             .then(avatarm_footage::drift::DriftSettings::default),
+                        refine_edges: refine_edges.unwrap_or(true),
                         out: out.clone(),
                         progress: true,
                     },

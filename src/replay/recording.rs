@@ -48,8 +48,9 @@ use outputs::write_outputs;
 
 pub mod report;
 pub use report::{
-    FrameVsReference, HeadMount, MountPose, RecordingBackground, RecordingCamera, RecordingErase,
-    RecordingMask, RecordingOutputs, RecordingReport, RecordingTimings, ViewFollowing, VsReference,
+    FrameRim, FrameVsReference, HeadMount, MountPose, RecordingBackground, RecordingCamera,
+    RecordingErase, RecordingMask, RecordingOutputs, RecordingReport, RecordingTimings, RimReport,
+    ViewFollowing, VsReference,
 };
 
 use avatarm_footage::overlay::overlay;
@@ -89,6 +90,9 @@ pub struct RecordingOptions {
     /// erase margin is fitted again and the new pose used from the frame that confirmed it.
     /// `None`: off.
     pub drift: Option<avatarm_footage::drift::DriftSettings>,
+    /// Refine the margin's band to each frame (`--refine-edges`, on the CPU): the band's
+    /// pixels that look like H are given back to the frame ([`dr::refine_band`]).
+    pub refine_edges: bool,
     /// Output folder.
     pub out: PathBuf,
     /// Show a progress bar.

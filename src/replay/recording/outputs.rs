@@ -61,6 +61,75 @@ struct Tally {
     scored: Vec<FrameVsReference>,
     /// Every pixel any frame's mask covered (0/1).
     robot_union: Vec<u8>,
+    /// Each frame's rim.
+    rims: Vec<FrameRim>,
+}
+
+/// One frame as written: its mask, erased image and erased region (0/1, the feathered mask
+/// at ≥ 0.5), the band refined where asked, and the rim they leave.
+struct Erased {
+    mask: Vec<u8>,
+    composite: Vec<u8>,
+    region: Vec<u8>,
+    rim: Option<dr::RimScore>,
+}
+
+/// The frame's mask and erased image, the margin's band refined to the frame with
+/// `--refine-edges` (the composite then made again on the CPU, [`dr::composite`]), and the
+/// rim left ([`dr::rim_score`]; none without H). `known`: where H was seen (the rest was
+/// filled), `None` when all of it is trusted.
+fn erased(
+    o: &RecordingOptions,
+    input: &Input,
+    result: &FrameOutput,
+    mask: &[u8],
+    composite: &[u8],
+    known: Option<&[u8]>,
+) -> Result<Erased, AppError> {
+    let (w, h) = input.size;
+    let settings = o.settings;
+    let region = |m: &[u8]| -> Vec<u8> {
+        dr::feather_alpha(m, w, h, settings.feather_px)
+            .iter()
+            .map(|&a| u8::from(a >= 0.5))
+            .collect()
+    };
+    let Some((live, Some(bg), photometric)) = &result.inputs else {
+        return Ok(Erased {
+            region: region(mask),
+            mask: mask.to_vec(),
+            composite: composite.to_vec(),
+            rim: None,
+        });
+    };
+    let live = RgbaView::new("live frame", w, h, live)?;
+    let bg_view = RgbaView::new("background", w, h, bg)?;
+    let h_prime = dr::compensated(&bg_view, photometric);
+    let rim_settings = dr::RimSettings::default();
+    let (mask, composite) = if o.refine_edges && settings.enabled {
+        let refined = dr::refine_band(
+            &live,
+            &h_prime,
+            mask,
+            known,
+            settings.dilate_px,
+            1,
+            &rim_settings,
+        )?;
+        let alpha = dr::feather_alpha(&refined, w, h, settings.feather_px);
+        let again = dr::composite(&live, &bg_view, &alpha, settings.alpha_h, photometric)?;
+        (refined, again)
+    } else {
+        (mask.to_vec(), composite.to_vec())
+    };
+    let region = region(&mask);
+    let rim = dr::rim_score(&live, &composite, &h_prime, &region, known, &rim_settings)?;
+    Ok(Erased {
+        mask,
+        composite,
+        region,
+        rim,
+    })
 }
 
 /// Writes each frame's mask, erased image and overlay, the erased session (`erased.mcap`), H
@@ -78,7 +147,13 @@ pub(super) fn write_outputs(
         size: input.size,
     };
     let mcap_path = o.out.join("erased.mcap");
-    let tally = write_frames(o, input, outputs, &images, &mcap_path)?;
+    // Where H was seen: one background for the whole replay (a camera that moved has one per
+    // still stretch, each filled where unseen: trusted as it is).
+    let known = background
+        .as_ref()
+        .filter(|_| input.drift.as_ref().is_none_or(|d| d.refits.is_empty()))
+        .map(|(e, _)| e.seen.as_slice());
+    let tally = write_frames(o, input, outputs, &images, &mcap_path, known)?;
     let background_report = background_report(o, input, outputs, background, &tally, &images)?;
     let report = report(
         o,
@@ -101,6 +176,7 @@ fn write_frames(
     outputs: &[FrameOutput],
     images: &Images,
     mcap_path: &Path,
+    known: Option<&[u8]>,
 ) -> Result<Tally, AppError> {
     let (w, h) = input.size;
     let mut mcap = RecordingWriter::create(mcap_path)?;
@@ -136,13 +212,17 @@ fn write_frames(
             tally.max_diff = tally.max_diff.max(diff);
             tally.mismatch = tally.mismatch.max(mismatch);
         }
-        let erased_region: Vec<u8> = dr::feather_alpha(mask, w, h, o.settings.feather_px)
-            .iter()
-            .map(|&a| u8::from(a >= 0.5))
-            .collect();
+        // The robot's region: where the drawn masks (before any refinement) reached.
         for (u, &m) in tally.robot_union.iter_mut().zip(mask) {
             *u |= m;
         }
+        let Erased {
+            mask,
+            composite,
+            region: erased_region,
+            rim,
+        } = erased(o, input, result, mask, composite, known)?;
+        let (mask, composite) = (&mask, &composite);
         if let Some(truth) = &input.references[i]
             && let Some(s) = dr::mask_scores(&erased_region, truth)
         {
@@ -153,6 +233,30 @@ fn write_frames(
                 leak_pct: s.leak_pct,
                 overmask_pct: s.overmask_pct,
                 robot_px: s.robot_px,
+            });
+        }
+        if let Some(r) = rim {
+            let truth_pct = input.references[i].as_ref().map(|truth| {
+                let ring = dr::ring(
+                    &erased_region,
+                    w,
+                    h,
+                    dr::RimSettings::default().ring_px,
+                    known,
+                );
+                let robot = ring
+                    .iter()
+                    .zip(truth)
+                    .filter(|(r, t)| **r && **t != 0)
+                    .count();
+                100.0 * robot as f64 / (ring.iter().filter(|&&r| r).count().max(1)) as f64
+            });
+            tally.rims.push(FrameRim {
+                frame: i,
+                ring_px: r.ring_px,
+                rim_px: r.rim_px,
+                rim_pct: r.rim_pct,
+                truth_pct,
             });
         }
         if let Some(live) = result.inputs.as_ref().map(|x| &x.0) {
@@ -282,6 +386,29 @@ fn background_report(
     Ok(report)
 }
 
+/// The rim over the frames scored; `None` with none.
+fn rim_report(rims: Vec<FrameRim>) -> Option<RimReport> {
+    if rims.is_empty() {
+        return None;
+    }
+    let settings = dr::RimSettings::default();
+    let pct: Vec<f64> = rims.iter().map(|r| r.rim_pct).collect();
+    let truth: Vec<f64> = rims.iter().filter_map(|r| r.truth_pct).collect();
+    Some(RimReport {
+        ring_px: settings.ring_px,
+        difference_levels: settings.difference,
+        frames_scored: rims.len(),
+        rim_pct_mean: mean(&pct),
+        rim_pct_max: pct.iter().copied().reduce(f64::max),
+        truth_pct_mean: mean(&truth),
+        per_frame: rims,
+        note: format!(
+            "rim_pct: of the pixels within {} px outside the erased region (where H was seen), the share the erased frame still shows differing from H' by more than {} levels in a colour likelier the robot's (learnt from the frame inside the mask) than the room's; truth_pct: the share of that ring the reference masks say is the robot",
+            settings.ring_px, settings.difference
+        ),
+    })
+}
+
 /// The report of a finished replay.
 fn report(
     o: &RecordingOptions,
@@ -340,6 +467,7 @@ fn report(
             feather_px: settings.feather_px,
             resolution_scale: settings.resolution_scale,
             photometric: settings.photometric,
+            refine_edges: o.refine_edges,
         },
         background,
         mask: RecordingMask {
@@ -352,6 +480,7 @@ fn report(
                 overmask_pct_mean: mean(&over),
                 per_frame: scored,
             },
+            rim: rim_report(tally.rims),
         },
         gpu_vs_cpu: GpuVsCpu {
             max_abs_diff: Some(tally.max_diff),

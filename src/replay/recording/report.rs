@@ -91,6 +91,10 @@ pub struct RecordingErase {
     pub resolution_scale: f64,
     /// Whether H's brightness followed the live frame's.
     pub photometric: bool,
+    /// Whether the margin's band was refined to each frame (`--refine-edges`): the band's
+    /// pixels that look like H given back ([`avatarm_core::dr::refine_band`]).
+    #[serde(default)]
+    pub refine_edges: bool,
 }
 
 /// Where H came from. Built from the footage: how much of the robot's region some frame
@@ -143,6 +147,51 @@ pub struct RecordingMask {
     pub coverage_pct_mean: Option<f64>,
     /// Against the recording's reference masks, where it has them.
     pub vs_reference: VsReference,
+    /// What the erased frames still show of the robot just outside the mask (no reference
+    /// needed); `None` with no background to tell the robot from.
+    #[serde(default)]
+    pub rim: Option<RimReport>,
+}
+
+/// The rim: robot-coloured pixels left in a ring outside the erased region
+/// ([`avatarm_core::dr::rim_score`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RimReport {
+    /// The ring's width (px).
+    pub ring_px: u32,
+    /// Levels by which a pixel differs from H' to count as not the background.
+    pub difference_levels: u8,
+    /// Frames scored (those with enough robot pixels to learn its colours from).
+    pub frames_scored: usize,
+    /// Mean share of the ring shown robot-coloured (%).
+    pub rim_pct_mean: Option<f64>,
+    /// The largest share of a frame (%).
+    pub rim_pct_max: Option<f64>,
+    /// Where the recording has reference masks: the mean share of the ring that is the robot
+    /// by them (%), the truth the rim estimates.
+    #[serde(default)]
+    pub truth_pct_mean: Option<f64>,
+    /// Each scored frame.
+    pub per_frame: Vec<FrameRim>,
+    /// How to read it.
+    pub note: String,
+}
+
+/// One frame's rim.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FrameRim {
+    /// The frame's index.
+    pub frame: usize,
+    /// The ring's pixels whose H is known.
+    pub ring_px: u64,
+    /// Those shown robot-coloured.
+    pub rim_px: u64,
+    /// Their share (%).
+    pub rim_pct: f64,
+    /// By the reference mask, where there is one: the share of the ring that is the robot
+    /// (%).
+    #[serde(default)]
+    pub truth_pct: Option<f64>,
 }
 
 /// The erased region against the reference masks.

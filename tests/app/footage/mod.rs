@@ -7,6 +7,7 @@ mod calibrate;
 mod drift;
 mod import;
 mod panda;
+mod rim;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

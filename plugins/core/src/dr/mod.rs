@@ -19,7 +19,8 @@
 //! Modules (their items are re-exported here): [`mask`] (threshold, dilation, feathering, the
 //! links' bounding spheres), [`background`] (a background H built from the footage itself),
 //! [`composite`] (the composite and the background refresh),
-//! [`photometric`] (the background's gain and offset), [`scores`] (IoU, leak, overmask, PSNR);
+//! [`photometric`] (the background's gain and offset), [`scores`] (IoU, leak, overmask, PSNR),
+//! [`rim`] (what the erase leaves along the outline, and the margin's band refined to the frame);
 //! and, not re-exported, [`view_background`] (a background that follows a moving camera,
 //! re-projected from captured views through a geometric proxy of the room).
 
@@ -28,6 +29,7 @@ pub mod composite;
 pub mod inpaint;
 pub mod mask;
 pub mod photometric;
+pub mod rim;
 pub mod scores;
 pub mod view_background;
 
@@ -35,6 +37,7 @@ pub use background::*;
 pub use composite::*;
 pub use mask::*;
 pub use photometric::*;
+pub use rim::*;
 pub use scores::*;
 
 use serde::{Deserialize, Serialize};

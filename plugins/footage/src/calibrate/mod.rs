@@ -95,6 +95,9 @@ pub struct CalibrateOptions {
     pub every: usize,
     /// Also fit fx and fy.
     pub fit_focal: bool,
+    /// Keep the fit's frames the pairing check finds mispaired (by default the pose is
+    /// fitted again without them while two frames remain).
+    pub keep_mispaired: bool,
     /// Triangles the robot's silhouette is drawn with.
     pub budget: usize,
     /// The robot's geometry below this height in the base frame (m) is hidden (the table it
@@ -267,14 +270,7 @@ pub fn run(
         std::fs::create_dir_all(&o.out).map_err(|e| FootageError::create(&o.out, e))?;
     }
     let used = frames::used(o, &inputs, &mut notes)?;
-    let in_fit = |i: usize| o.fit.is_empty() || o.fit.iter().any(|&(a, b)| (a..=b).contains(&i));
-    let fit: Vec<SilhouetteFrame> = used
-        .frames
-        .iter()
-        .filter(|f| in_fit(f.index))
-        .map(|f| f.silhouette.clone())
-        .collect();
-    check_fit(&fit, &used.frames)?;
+    let asked = |i: usize| o.fit.is_empty() || o.fit.iter().any(|&(a, b)| (a..=b).contains(&i));
     std::fs::create_dir_all(&o.out).map_err(|e| FootageError::create(&o.out, e))?;
     let options = CalibrationOptions {
         observed: if o.edges.is_some() {
@@ -286,9 +282,45 @@ pub fn run(
         distortion: inputs.lens,
         ..CalibrationOptions::default()
     };
-    let result = calibrate(&fit, &inputs.k, &inputs.rough, &options, progress)?;
-    let scored = outputs::score(o, &inputs, &used.frames, &result, in_fit)?;
-    let pairing = outputs::pairing(&used.frames, &scored.drawn, &mut notes);
+    // The fit, and again without the fit's frames the pairing check finds mispaired (their
+    // joints belong to another image: no pose fits them, and they pull the fit off the
+    // others), while at least two frames remain.
+    let mut dropped: Vec<usize> = Vec::new();
+    let mut progress = progress;
+    let (fit, result, scored, pairing) = loop {
+        let in_fit = |i: usize| asked(i) && !dropped.contains(&i);
+        let fit: Vec<SilhouetteFrame> = used
+            .frames
+            .iter()
+            .filter(|f| in_fit(f.index))
+            .map(|f| f.silhouette.clone())
+            .collect();
+        check_fit(&fit, &used.frames)?;
+        let result = calibrate(&fit, &inputs.k, &inputs.rough, &options, &mut progress)?;
+        let scored = outputs::score(o, &inputs, &used.frames, &result, in_fit)?;
+        let mut pairing_notes = Vec::new();
+        let pairing = outputs::pairing(&used.frames, &scored.drawn, &mut pairing_notes);
+        let newly: Vec<usize> = pairing.1.iter().copied().filter(|&i| in_fit(i)).collect();
+        if o.keep_mispaired || newly.is_empty() || fit.len() - newly.len() < 2 {
+            notes.extend(pairing_notes);
+            break (fit, result, scored, pairing);
+        }
+        notes.push(format!(
+            "frames {newly:?} of the fit look mispaired (pairing): fitted again without them{}",
+            if dropped.is_empty() {
+                ""
+            } else {
+                " and those dropped before"
+            }
+        ));
+        dropped.extend(newly);
+    };
+    if !dropped.is_empty() {
+        dropped.sort_unstable();
+        notes.push(format!(
+            "the pose is fitted without the mispaired frames {dropped:?} (--keep-mispaired keeps them in the fit)"
+        ));
+    }
     outputs::note_far_move(o, &inputs, &result, &options, &mut notes);
     let (w, h) = inputs.size;
     let margin = margin::erase_margin(
@@ -316,6 +348,7 @@ pub fn run(
         per_frame: scored.per_frame,
         pairing,
         frames_fit: fit.len(),
+        dropped_from_fit: dropped,
         outputs: files,
         margin,
         notes,

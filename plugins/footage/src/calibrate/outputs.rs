@@ -272,6 +272,7 @@ pub(super) struct Parts<'a> {
     pub per_frame: Vec<FrameIou>,
     pub pairing: (Vec<Pairing>, Vec<usize>),
     pub frames_fit: usize,
+    pub dropped_from_fit: Vec<usize>,
     pub outputs: CalibrateOutputs,
     pub margin: Option<super::margin::EraseMargin>,
     pub notes: Vec<String>,
@@ -307,6 +308,7 @@ pub(super) fn report(p: &Parts) -> CalibrateReport {
         frames_used: p.used.frames.len(),
         silhouettes: silhouette_source(o, &p.used.difference_vs_reference),
         frames_fit: p.frames_fit,
+        dropped_from_fit: p.dropped_from_fit.clone(),
         iou: IouReport {
             fit_before: mean(true, |f| f.iou_before),
             fit_after: mean(true, |f| f.iou_after),

@@ -22,6 +22,10 @@ pub struct CalibrateReport {
     pub silhouettes: SilhouetteSource,
     /// Frames in the fit.
     pub frames_fit: usize,
+    /// Frames asked for that the fit left out as mispaired (the pairing check), fitted again
+    /// without them.
+    #[serde(default)]
+    pub dropped_from_fit: Vec<usize>,
     /// The model silhouette's IoU against the reference masks before and after.
     pub iou: IouReport,
     /// `fixed`, or that the camera rides on a head (the fit is then the mount).
