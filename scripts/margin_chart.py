@@ -50,6 +50,8 @@ def replay(pose, out, dilate=None, refine="on"):
         "--out", out)
     r = json.loads((out / "report.json").read_text())
     frames = [f for f in r["mask"]["vs_reference"]["per_frame"] if f["frame"] in GOOD]
+    if not frames or not r["mask"].get("rim"):
+        sys.exit(f"{out}: no reference-scored frame among {GOOD}, or no rim measured")
     rims = [f["rim_pct"] for f in r["mask"]["rim"]["per_frame"] if f["frame"] in GOOD]
     mean = lambda k: sum(f[k] for f in frames) / len(frames)
     return (r["erase"]["dilate_px"], mean("leak_pct"), mean("overmask_pct"),
@@ -65,7 +67,7 @@ def read_png(path):
         body = data[pos + 8:pos + 8 + n]
         if kind == b"IHDR":
             w, h, depth, colour = struct.unpack(">IIBB", body[:10])
-            assert depth == 8 and colour in (2, 6), f"{path}: 8-bit RGB(A) only"
+            assert depth == 8 and colour in (2, 6) and body[12] == 0, f"{path}: 8-bit, non-interlaced RGB(A) only"
             channels = 3 if colour == 2 else 4
         elif kind == b"IDAT":
             idat += body

@@ -42,7 +42,7 @@ pub struct LiveDriftWatch {
 impl LiveDriftWatch {
     /// The status line's words: the checks so far and the moves found.
     pub fn line(&self) -> String {
-        // Read under the lock, not copied: the report holds every check of the session.
+        // Read under the lock, not copied: the report holds the session's latest checks.
         let Ok(report) = self.report.lock() else {
             return "drift watch: its report is unreadable (the worker failed)".into();
         };
@@ -51,12 +51,11 @@ impl LiveDriftWatch {
             (Some(r), None) if !r.watched => format!("drift watch: {}", r.note),
             (Some(r), None) => format!(
                 "drift watch: {} checks, the camera within {:.0} px of its pose",
-                r.checks.len(),
-                r.threshold_px
+                r.checks_total, r.threshold_px
             ),
             (Some(r), Some(last)) => format!(
                 "drift watch: {} checks; the CAMERA MOVED {} time(s), fitted again (last {:.2} deg, at frame {})",
-                r.checks.len(),
+                r.checks_total,
                 self.applied.len(),
                 last.moved_deg,
                 last.detected_frame

@@ -65,6 +65,10 @@ struct Tally {
     rims: Vec<FrameRim>,
 }
 
+/// Pixels this far beyond the mask are left out of the photometric fit the refinement and
+/// the rim make when the erase made none (px).
+const PHOTOMETRIC_EXCLUDE_PX: u32 = 8;
+
 /// One frame as written: its mask, erased image and erased region (0/1, the feathered mask
 /// at ≥ 0.5), the band refined where asked, and the rim they leave.
 struct Erased {
@@ -104,7 +108,16 @@ fn erased(
     };
     let live = RgbaView::new("live frame", w, h, live)?;
     let bg_view = RgbaView::new("background", w, h, bg)?;
-    let h_prime = dr::compensated(&bg_view, photometric);
+    // H' to tell the robot from the room by: the erase's own photometric fit where it made
+    // one, else one made here (a camera's white balance that moves between frames would
+    // otherwise make every pixel differ from H); the composite keeps the erase's setting.
+    let seen_as = if settings.photometric {
+        *photometric
+    } else {
+        let near_robot = dr::dilate(mask, w, h, PHOTOMETRIC_EXCLUDE_PX);
+        dr::fit_photometric(&live, &bg_view, Some(&near_robot), 4)?
+    };
+    let h_prime = dr::compensated(&bg_view, &seen_as);
     let rim_settings = dr::RimSettings::default();
     let (mask, composite) = if o.refine_edges && settings.enabled {
         let refined = dr::refine_band(
@@ -147,11 +160,14 @@ pub(super) fn write_outputs(
         size: input.size,
     };
     let mcap_path = o.out.join("erased.mcap");
-    // Where H was seen: one background for the whole replay (a camera that moved has one per
-    // still stretch, each filled where unseen: trusted as it is).
+    // Where H was seen: one background for the whole replay of a still camera (a camera that
+    // moved has one per still stretch, a camera on a head one per view: each filled where
+    // unseen, trusted as it is).
     let known = background
         .as_ref()
-        .filter(|_| input.drift.as_ref().is_none_or(|d| d.refits.is_empty()))
+        .filter(|_| {
+            input.head_mount.is_none() && input.drift.as_ref().is_none_or(|d| d.refits.is_empty())
+        })
         .map(|(e, _)| e.seen.as_slice());
     let tally = write_frames(o, input, outputs, &images, &mcap_path, known)?;
     let background_report = background_report(o, input, outputs, background, &tally, &images)?;
@@ -205,9 +221,6 @@ fn write_frames(
                 format!("frame {i}: its mask or erased image never arrived"),
             ));
         };
-        tally
-            .coverage
-            .push(100.0 * mask.iter().filter(|&&m| m > 0).count() as f64 / mask.len() as f64);
         if let Some((diff, mismatch)) = cpu_check(o.settings, input, result, mask, composite)? {
             tally.max_diff = tally.max_diff.max(diff);
             tally.mismatch = tally.mismatch.max(mismatch);
@@ -223,6 +236,9 @@ fn write_frames(
             rim,
         } = erased(o, input, result, mask, composite, known)?;
         let (mask, composite) = (&mask, &composite);
+        tally
+            .coverage
+            .push(100.0 * mask.iter().filter(|&&m| m > 0).count() as f64 / mask.len() as f64);
         if let Some(truth) = &input.references[i]
             && let Some(s) = dr::mask_scores(&erased_region, truth)
         {
@@ -403,7 +419,7 @@ fn rim_report(rims: Vec<FrameRim>) -> Option<RimReport> {
         truth_pct_mean: mean(&truth),
         per_frame: rims,
         note: format!(
-            "rim_pct: of the pixels within {} px outside the erased region (where H was seen), the share the erased frame still shows differing from H' by more than {} levels in a colour likelier the robot's (learnt from the frame inside the mask) than the room's; truth_pct: the share of that ring the reference masks say is the robot",
+            "rim_pct: of the pixels within {} px outside the erased region (where some frame showed H, for a camera that stood still throughout; all of the ring otherwise), the share the erased frame still shows differing from H' by more than {} levels in a colour likelier the robot's (learnt from the frame inside the mask) than the room's (H' by the erase's photometric fit, or one made for this where the erase made none); truth_pct: the share of that ring the reference masks say is the robot (truth_pct_mean: over the frames with a reference mask); the refinement and the rim are CPU passes after the GPU's, whose agreement with the CPU reference (gpu_vs_cpu) is checked before them",
             settings.ring_px, settings.difference
         ),
     })

@@ -303,6 +303,11 @@ pub fn run(
         let newly: Vec<usize> = pairing.1.iter().copied().filter(|&i| in_fit(i)).collect();
         if o.keep_mispaired || newly.is_empty() || fit.len() - newly.len() < 2 {
             notes.extend(pairing_notes);
+            if !o.keep_mispaired && !newly.is_empty() {
+                notes.push(format!(
+                    "frames {newly:?} of the fit look mispaired but stay in it: fewer than two frames would remain without them"
+                ));
+            }
             break (fit, result, scored, pairing);
         }
         notes.push(format!(
@@ -320,6 +325,16 @@ pub fn run(
         notes.push(format!(
             "the pose is fitted without the mispaired frames {dropped:?} (--keep-mispaired keeps them in the fit)"
         ));
+        let cleared: Vec<usize> = dropped
+            .iter()
+            .copied()
+            .filter(|i| !pairing.1.contains(i))
+            .collect();
+        if !cleared.is_empty() {
+            notes.push(format!(
+                "frames {cleared:?}, dropped at an earlier fit's pose, are not found mispaired at the final one (a fit pulled off by the others misjudged them, or they are close calls): they are measured for the margin but not fitted"
+            ));
+        }
     }
     outputs::note_far_move(o, &inputs, &result, &options, &mut notes);
     let (w, h) = inputs.size;

@@ -67,6 +67,14 @@ pub struct DriftSettings {
     pub min_outline_px: usize,
     /// Outline pixels matched per check at most (thinned evenly).
     pub max_outline_samples: usize,
+    /// Checks kept for the report (the latest; its counts are of all), so that a live
+    /// session's report stays bounded.
+    #[serde(default = "default_kept_checks")]
+    pub kept_checks: usize,
+}
+
+fn default_kept_checks() -> usize {
+    KEPT_CHECKS
 }
 
 impl Default for DriftSettings {
@@ -80,6 +88,7 @@ impl Default for DriftSettings {
             edges: (20.0, 60.0),
             min_outline_px: 100,
             max_outline_samples: 2000,
+            kept_checks: KEPT_CHECKS,
         }
     }
 }
@@ -105,6 +114,9 @@ impl DriftSettings {
                 "drift.truncate_px",
                 format!("{}: give at least 1", self.truncate_px),
             );
+        }
+        if self.kept_checks == 0 {
+            return bad("drift.kept_checks", "0: give at least 1 check".into());
         }
         if self.confirm == 0 {
             return bad("drift.confirm", "0: give at least 1 check".into());
@@ -178,15 +190,25 @@ pub struct DriftReport {
     pub settings: DriftSettings,
     /// A shift beyond this is a move (px): the erase margin, at least the settings' minimum.
     pub threshold_px: f64,
-    /// Every check.
+    /// The latest checks (at most [`DriftSettings::kept_checks`]).
     pub checks: Vec<DriftCheck>,
+    /// Checks made in all.
+    #[serde(default)]
+    pub checks_total: usize,
+    /// Of those, the ones that saw enough of the robot's outline to measure a shift.
+    #[serde(default)]
+    pub checks_measured: usize,
     /// Every drift found, in order.
     pub refits: Vec<DriftRefit>,
-    /// The checks' own time (ms): median and 95th percentile.
+    /// The kept checks' own time (ms): median and 95th percentile.
     pub check_ms_median: Option<f64>,
     /// 95th percentile of the same.
     pub check_ms_p95: Option<f64>,
 }
+
+/// Checks a watch keeps for its report by default ([`DriftSettings::kept_checks`]): 16 min
+/// of a live session at two checks a second.
+pub const KEPT_CHECKS: usize = 2000;
 
 /// Where the watch stands.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -223,7 +245,9 @@ pub struct DriftWatch<'a> {
     streak: Vec<Beyond>,
     last_fitting_ns: Option<u64>,
     last_check_ns: Option<u64>,
-    checks: Vec<DriftCheck>,
+    checks: std::collections::VecDeque<DriftCheck>,
+    checks_total: usize,
+    checks_measured: usize,
     refits: Vec<DriftRefit>,
 }
 
@@ -252,7 +276,9 @@ impl<'a> DriftWatch<'a> {
             streak: Vec::new(),
             last_fitting_ns: None,
             last_check_ns: None,
-            checks: Vec::new(),
+            checks: std::collections::VecDeque::new(),
+            checks_total: 0,
+            checks_measured: 0,
             refits: Vec::new(),
         })
     }
@@ -308,13 +334,18 @@ impl<'a> DriftWatch<'a> {
         let found = self.shift_of(&triangles, &field, &self.camera_from_base);
         let beyond = found
             .is_some_and(|s| s.cost_px < s.cost_at_pose_px && norm(s.shift_px) > self.threshold_px);
-        self.checks.push(DriftCheck {
+        while self.checks.len() >= self.settings.kept_checks {
+            self.checks.pop_front();
+        }
+        self.checks.push_back(DriftCheck {
             frame,
             stamp_ns,
             shift: found,
             beyond,
             check_ms: 1e3 * started.elapsed().as_secs_f64(),
         });
+        self.checks_total += 1;
+        self.checks_measured += usize::from(found.is_some());
         let Some(found) = found else {
             return Ok(None);
         };
@@ -329,8 +360,7 @@ impl<'a> DriftWatch<'a> {
                 return Ok(None);
             }
             (Phase::Starting, true) => {
-                if self.checks.iter().filter(|c| c.shift.is_some()).count() >= self.settings.confirm
-                {
+                if self.checks_measured >= self.settings.confirm {
                     self.phase = Phase::NeverFitted;
                 }
                 return Ok(None);
@@ -486,11 +516,12 @@ impl<'a> DriftWatch<'a> {
         })
     }
 
-    /// The report of every check and refit so far.
+    /// The report of the checks (the latest [`DriftSettings::kept_checks`], the counts of all)
+    /// and every refit so far.
     pub fn report(&self) -> DriftReport {
         let mut ms: Vec<f64> = self.checks.iter().map(|c| c.check_ms).collect();
         ms.sort_by(f64::total_cmp);
-        let measured = self.checks.iter().filter(|c| c.shift.is_some()).count();
+        let measured = self.checks_measured;
         let note = match self.phase {
             Phase::NeverFitted => format!(
                 "not watched: the pose fitted none of the {measured} checks (the robot's outline sits more than {:.0} px from the frames' edges): calibrate the camera first (avatarm calibrate --edges); the watch tells a moved camera from a pose that fits",
@@ -501,12 +532,11 @@ impl<'a> DriftWatch<'a> {
             }
             _ if self.refits.is_empty() => format!(
                 "{} checks, {measured} measured: the camera stayed within {:.0} px of its pose",
-                self.checks.len(),
-                self.threshold_px
+                self.checks_total, self.threshold_px
             ),
             _ => format!(
                 "{} checks, {measured} measured: the camera moved {} time(s); the pose was fitted again each time and used from the frame that confirmed it",
-                self.checks.len(),
+                self.checks_total,
                 self.refits.len()
             ),
         };
@@ -515,7 +545,9 @@ impl<'a> DriftWatch<'a> {
             note,
             settings: self.settings,
             threshold_px: self.threshold_px,
-            checks: self.checks.clone(),
+            checks: self.checks.iter().cloned().collect(),
+            checks_total: self.checks_total,
+            checks_measured: self.checks_measured,
             refits: self.refits.clone(),
             check_ms_median: quantile(&ms, 0.5),
             check_ms_p95: quantile(&ms, 0.95),

@@ -183,7 +183,11 @@ fn a_pose_that_never_fitted_is_not_watched_and_disagreeing_checks_are_no_move() 
     let model = sawyer();
     let silhouette = RobotSilhouette::new(&model, 6000).expect("silhouette");
     let parts = (&model, &silhouette);
-    let settings = DriftSettings::default();
+    // Six checks kept for the report, whatever the session's length.
+    let settings = DriftSettings {
+        kept_checks: 6,
+        ..DriftSettings::default()
+    };
     let new = |pose| {
         DriftWatch::new(
             &model,
@@ -220,6 +224,15 @@ fn a_pose_that_never_fitted_is_not_watched_and_disagreeing_checks_are_no_move() 
     }
     let report = watch.report();
     assert!(report.refits.is_empty() && report.checks.iter().filter(|c| c.beyond).count() >= 5);
+    assert_eq!(
+        (
+            report.checks.len(),
+            report.checks_total,
+            report.checks_measured
+        ),
+        (6, 9, 9)
+    );
+    assert_eq!(report.checks[0].frame, 3, "the latest kept");
     // Bad input is refused by name.
     let q = joints(&model, 0);
     let f = frame(&model, &silhouette, &truth(), &q);
