@@ -286,6 +286,11 @@ impl Default for ChessTask {
 }
 
 impl ChessTask {
+    /// The board's top height (world z, m).
+    pub fn board_top(&self) -> f64 {
+        self.board_pose().translation.z
+    }
+
     /// The pieces of [`ChessTask::position`], rank 8 first. Errors name the field.
     pub fn pieces(&self) -> Result<Vec<Piece>, SceneError> {
         let bad = |m: String| SceneError::field("chess.position", m);
@@ -587,11 +592,6 @@ impl ChessSetup {
             centres,
             sizes,
         })
-    }
-
-    /// The board's top height (world z, m) under `task`'s pose.
-    pub fn board_top(task: &ChessTask) -> f64 {
-        task.board_pose().translation.z
     }
 
     /// The tallest piece's height (m).

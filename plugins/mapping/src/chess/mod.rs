@@ -36,7 +36,7 @@ use bevy::prelude::*;
 use bevy_rapier3d::prelude::*;
 use nalgebra::{DVector, Isometry3, Matrix3, Matrix6xX, UnitQuaternion, Vector3};
 
-pub use report::{ChessCondition, ChessReport, ConditionSummary, MoveResult};
+pub use report::{ChessCondition, ChessReport, ConditionSummary, MoveResult, TrialTotals};
 pub use script::{ChessScript, MoveTimes, chess_script, chess_v2r};
 
 use crate::MappingError;
@@ -77,7 +77,7 @@ pub fn robot_settings(task: &ChessTask, setup: &ChessSetup) -> PickPlaceSettings
     let y = down.cross(&radial);
     let dt = 1.0 / setup.control_rate_hz;
     PickPlaceSettings {
-        clearance_z: ChessSetup::board_top(task) + setup.tallest_m() + 0.03,
+        clearance_z: task.board_top() + setup.tallest_m() + 0.03,
         hover_m: 0.03,
         grasp_depth_m: 0.015,
         tool_down: UnitQuaternion::from_matrix(&Matrix3::from_columns(&[radial, y, down])),
@@ -559,23 +559,18 @@ pub fn run_chess(
     let mut conditions = Vec::new();
     for case in cases {
         let mut moves = Vec::new();
-        let mut wall_s = 0.0;
-        let mut stop_ticks = 0;
-        let mut max_tcp_speed: f64 = 0.0;
-        let mut refused = 0;
+        let mut totals = TrialTotals::default();
         for trial in 0..task.trials {
             let record = run_chess_trial(task, setup, trial, case)?;
             moves.extend(record.moves);
-            wall_s += record.wall_s;
-            stop_ticks += record.stop_ticks;
-            refused += record.refused_ticks;
-            max_tcp_speed = max_tcp_speed.max(record.max_tcp_speed);
+            totals.wall_s += record.wall_s;
+            totals.stop_ticks += record.stop_ticks;
+            totals.refused_ticks += record.refused_ticks;
+            totals.max_tcp_speed = totals.max_tcp_speed.max(record.max_tcp_speed);
             done += 1;
             progress(done, total);
         }
-        let mut condition = ChessCondition::of(case, moves, wall_s, stop_ticks, max_tcp_speed);
-        condition.summary.refused_ticks = refused;
-        conditions.push(condition);
+        conditions.push(ChessCondition::of(case, moves, totals));
     }
     Ok(ChessReport {
         moves_per_trial: setup.moves.len(),

@@ -102,15 +102,28 @@ pub struct ChessCondition {
     pub moves: Vec<MoveResult>,
 }
 
+/// What a case's trials add up to besides their moves.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct TrialTotals {
+    /// Wall time of the trials (s).
+    pub wall_s: f64,
+    /// Control ticks the safety layer stopped the robot in.
+    pub stop_ticks: u64,
+    /// The robot's fastest tool-centre-point speed (m/s).
+    pub max_tcp_speed: f64,
+    /// Control ticks whose operator sample was refused.
+    pub refused_ticks: u64,
+}
+
 impl ChessCondition {
-    /// Summarises `moves` of `case`.
-    pub fn of(
-        case: ChessCase,
-        moves: Vec<MoveResult>,
-        wall_s: f64,
-        stop_ticks: u64,
-        max_tcp_speed: f64,
-    ) -> Self {
+    /// Summarises `moves` of `case`, with its trials' `totals`.
+    pub fn of(case: ChessCase, moves: Vec<MoveResult>, totals: TrialTotals) -> Self {
+        let TrialTotals {
+            wall_s,
+            stop_ticks,
+            max_tcp_speed,
+            refused_ticks,
+        } = totals;
         let col = |f: fn(&MoveResult) -> Option<f64>| -> Vec<f64> {
             moves.iter().filter_map(f).collect()
         };
@@ -143,7 +156,7 @@ impl ChessCondition {
                 carry_rot_rmse_deg: mean(col(|m| m.carry_rot_rmse_deg)),
                 stop_ticks,
                 max_tcp_speed,
-                refused_ticks: 0,
+                refused_ticks,
                 wall_s,
             },
             moves,
