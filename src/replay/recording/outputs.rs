@@ -86,9 +86,9 @@ fn erased(
     o: &RecordingOptions,
     input: &Input,
     result: &FrameOutput,
-    mask: &[u8],
-    composite: &[u8],
+    (mask, composite): (&[u8], &[u8]),
     known: Option<&[u8]>,
+    truth: Option<&[u8]>,
 ) -> Result<Erased, AppError> {
     let (w, h) = input.size;
     let settings = o.settings;
@@ -136,7 +136,15 @@ fn erased(
         (mask.to_vec(), composite.to_vec())
     };
     let region = region(&mask);
-    let rim = dr::rim_score(&live, &composite, &h_prime, &region, known, &rim_settings)?;
+    let rim = dr::rim_score(
+        &live,
+        &composite,
+        &h_prime,
+        &region,
+        known,
+        truth,
+        &rim_settings,
+    )?;
     Ok(Erased {
         mask,
         composite,
@@ -234,7 +242,14 @@ fn write_frames(
             composite,
             region: erased_region,
             rim,
-        } = erased(o, input, result, mask, composite, known)?;
+        } = erased(
+            o,
+            input,
+            result,
+            (mask, composite),
+            known,
+            input.references[i].as_deref(),
+        )?;
         let (mask, composite) = (&mask, &composite);
         tally
             .coverage
@@ -252,27 +267,12 @@ fn write_frames(
             });
         }
         if let Some(r) = rim {
-            let truth_pct = input.references[i].as_ref().map(|truth| {
-                let ring = dr::ring(
-                    &erased_region,
-                    w,
-                    h,
-                    dr::RimSettings::default().ring_px,
-                    known,
-                );
-                let robot = ring
-                    .iter()
-                    .zip(truth)
-                    .filter(|(r, t)| **r && **t != 0)
-                    .count();
-                100.0 * robot as f64 / (ring.iter().filter(|&&r| r).count().max(1)) as f64
-            });
             tally.rims.push(FrameRim {
                 frame: i,
                 ring_px: r.ring_px,
                 rim_px: r.rim_px,
                 rim_pct: r.rim_pct,
-                truth_pct,
+                truth_pct: r.truth_pct,
             });
         }
         if let Some(live) = result.inputs.as_ref().map(|x| &x.0) {

@@ -22,13 +22,7 @@ pub fn composite(
     // H' per channel and 8-bit value, computed once. Pixels outside the mask (t = 0) take the
     // formula's exact value (the live pixel) without it; the others follow the formula in the
     // order the GPU pass evaluates it, so both round alike.
-    let mut h_lut = [[0f32; 256]; 3];
-    for (c, lut) in h_lut.iter_mut().enumerate() {
-        for (v, hv) in lut.iter_mut().enumerate() {
-            *hv =
-                (photometric.gain[c] * (v as f32 / 255.0) + photometric.offset[c]).clamp(0.0, 1.0);
-        }
-    }
+    let h_lut = photometric.lut();
     let mut out = vec![0u8; live.data.len()];
     for (((o, i), hpx), &a) in out
         .chunks_exact_mut(4)

@@ -130,14 +130,18 @@ pub fn background_difference(
 ) -> Result<Vec<u8>> {
     super::same_size(frame, background, "empty-room background")?;
     let (w, h) = (frame.width, frame.height);
-    let raw: Vec<u8> = frame
-        .data
-        .chunks_exact(4)
-        .zip(background.data.chunks_exact(4))
-        .map(|(a, b)| u8::from((0..3).any(|c| a[c].abs_diff(b[c]) > threshold)))
-        .collect();
+    let raw = differs(frame.data, background.data, threshold);
     let closed = erode(&dilate(&raw, w, h, close_px), w, h, close_px);
     Ok(dilate(&erode(&closed, w, h, 1), w, h, 1))
+}
+
+/// 1 where some RGB channel of the RGBA8 images `a` and `b` differs by more than `levels`,
+/// per pixel.
+pub fn differs(a: &[u8], b: &[u8], levels: u8) -> Vec<u8> {
+    a.chunks_exact(4)
+        .zip(b.chunks_exact(4))
+        .map(|(p, q)| u8::from((0..3).any(|c| p[c].abs_diff(q[c]) > levels)))
+        .collect()
 }
 
 /// `dst[i] = max(src[i - r ..= i + r])` (clamped), by a running count of ones.

@@ -15,6 +15,20 @@ pub struct Photometric {
     pub offset: [f32; 3],
 }
 
+impl Photometric {
+    /// H' per channel (R, G, B) for each 8-bit value of H, in full scale:
+    /// `clamp(gain · v / 255 + offset, 0, 1)`, the composite's arithmetic.
+    pub fn lut(&self) -> [[f32; 256]; 3] {
+        let mut lut = [[0f32; 256]; 3];
+        for (c, l) in lut.iter_mut().enumerate() {
+            for (v, hv) in l.iter_mut().enumerate() {
+                *hv = (self.gain[c] * (v as f32 / 255.0) + self.offset[c]).clamp(0.0, 1.0);
+            }
+        }
+        lut
+    }
+}
+
 impl Default for Photometric {
     fn default() -> Self {
         Self {

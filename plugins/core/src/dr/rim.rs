@@ -15,7 +15,7 @@
 
 use serde::Serialize;
 
-use super::{Photometric, RgbaView, chebyshev_distance, erode};
+use super::{Photometric, RgbaView, chebyshev_distance, differs, erode};
 use crate::error::{Error, Result};
 
 /// How the rim is measured and the band refined.
@@ -52,40 +52,20 @@ pub struct RimScore {
     pub rim_pct: f64,
     /// The pixels the robot's colour model was learnt from.
     pub robot_px: u64,
+    /// With a reference silhouette: the share of the same ring it calls the robot (%), the
+    /// truth `rim_pct` estimates.
+    pub truth_pct: Option<f64>,
 }
 
-/// H' = `clamp(gain · H + offset)` per channel, RGBA8 with α = 255 (the composite's
-/// background, [`super::composite`]).
+/// H' = `clamp(gain · H + offset)` per channel, rounded to 8 bits, RGBA8 with α = 255 (the
+/// composite's background, [`super::composite`], [`Photometric::lut`]).
 pub fn compensated(background: &RgbaView, photometric: &Photometric) -> Vec<u8> {
-    let lut: Vec<[u8; 256]> = (0..3)
-        .map(|c| {
-            let mut l = [0u8; 256];
-            for (v, o) in l.iter_mut().enumerate() {
-                let x = photometric.gain[c] * (v as f32 / 255.0) + photometric.offset[c];
-                *o = (x.clamp(0.0, 1.0) * 255.0).round() as u8;
-            }
-            l
-        })
-        .collect();
+    let lut = photometric.lut();
+    let level = |c: usize, v: u8| (lut[c][usize::from(v)] * 255.0).round() as u8;
     background
         .data
         .chunks_exact(4)
-        .flat_map(|p| {
-            [
-                lut[0][usize::from(p[0])],
-                lut[1][usize::from(p[1])],
-                lut[2][usize::from(p[2])],
-                255,
-            ]
-        })
-        .collect()
-}
-
-/// 1 where some RGB channel of `a` and `b` differs by more than `levels`.
-pub fn differs(a: &[u8], b: &[u8], levels: u8) -> Vec<u8> {
-    a.chunks_exact(4)
-        .zip(b.chunks_exact(4))
-        .map(|(p, q)| u8::from((0..3).any(|c| p[c].abs_diff(q[c]) > levels)))
+        .flat_map(|p| [level(0, p[0]), level(1, p[1]), level(2, p[2]), 255])
         .collect()
 }
 
@@ -161,7 +141,8 @@ pub fn ring(
 /// The rim: of the pixels within `settings.ring_px` outside `erased` (where `known` is
 /// non-zero, all when `None`), the share the erased frame `shown` still shows robot-coloured
 /// (differing from H' and likelier under the robot's colours, learnt from `live` inside
-/// `erased`, than under H''s in the ring). `background` is H' (RGBA8; [`compensated`]).
+/// `erased`, than under H''s in the ring). `background` is H' (RGBA8; [`compensated`]);
+/// `truth`, a reference silhouette (0/1) where there is one, scores the same ring.
 /// `Ok(None)`: too few robot pixels to learn its colours from, or no ring. Errors: sizes
 /// that differ.
 pub fn rim_score(
@@ -170,6 +151,7 @@ pub fn rim_score(
     background: &[u8],
     erased: &[u8],
     known: Option<&[u8]>,
+    truth: Option<&[u8]>,
     settings: &RimSettings,
 ) -> Result<Option<RimScore>> {
     check_sizes(
@@ -179,6 +161,7 @@ pub fn rim_score(
             ("background H'", background, 4),
             ("erased region", erased, 1),
             ("known background", known.unwrap_or(erased), 1),
+            ("reference silhouette", truth.unwrap_or(erased), 1),
         ],
     )?;
     let live_differs = differs(live.data, background, settings.difference);
@@ -205,11 +188,20 @@ pub fn rim_score(
         .zip(&shown_differs)
         .filter(|((px, r), d)| **r && **d != 0 && robot.p(px) > room.p(px))
         .count() as u64;
+    let truth_pct = truth.map(|t| {
+        let robot = in_ring
+            .iter()
+            .zip(t)
+            .filter(|(r, t)| **r && **t != 0)
+            .count();
+        100.0 * robot as f64 / ring_px as f64
+    });
     Ok(Some(RimScore {
         ring_px,
         rim_px,
         rim_pct: 100.0 * rim_px as f64 / ring_px as f64,
         robot_px,
+        truth_pct,
     }))
 }
 
@@ -310,21 +302,23 @@ mod tests {
             .map(|i| u8::from(truth[i] != 0 && i % 64 < 37))
             .collect();
         let shown_short = erased(&live, &room, &short);
-        let r = rim_score(&view, &shown_short, &room, &short, None, &s)
+        let r = rim_score(&view, &shown_short, &room, &short, None, Some(&truth), &s)
             .expect("sizes")
             .expect("a score");
         assert_eq!(r.rim_px, 3 * 30, "{r:?}");
+        assert_eq!(r.truth_pct, Some(r.rim_pct), "the rim is the truth's");
         // Covering it by 2 px: no rim.
         let cover = super::super::dilate(&truth, 64, 48, 2);
         let shown = erased(&live, &room, &cover);
-        let r = rim_score(&view, &shown, &room, &cover, None, &s)
+        let r = rim_score(&view, &shown, &room, &cover, None, None, &s)
             .expect("sizes")
             .expect("a score");
         assert_eq!(r.rim_px, 0, "{r:?}");
         // Too few robot pixels: no score; sizes that differ: an error naming the map.
-        let tiny = rim_score(&view, &shown, &room, &vec![0u8; 64 * 48], None, &s).expect("sizes");
+        let tiny =
+            rim_score(&view, &shown, &room, &vec![0u8; 64 * 48], None, None, &s).expect("sizes");
         assert!(tiny.is_none());
-        let err = rim_score(&view, &shown, &room, &cover[1..], None, &s).expect_err("size");
+        let err = rim_score(&view, &shown, &room, &cover[1..], None, None, &s).expect_err("size");
         assert!(err.to_string().contains("erased region"), "{err}");
     }
 
