@@ -82,6 +82,7 @@ pub(crate) fn live_hand(
         (Some(f), _) => (f.to_owned(), "--hand"),
         (None, Some(h)) => (h.clone(), "hand (scene)"),
         (None, None) if scene.file.task.is_some() => ("scripted".to_owned(), "[task]"),
+        (None, None) if scene.file.chess.is_some() => ("scripted".to_owned(), "[chess]"),
         (None, None) => return Ok(None),
     };
     if text == "none" {
@@ -92,9 +93,10 @@ pub(crate) fn live_hand(
         SceneError::Field { message, .. } => refuse(message),
         other => refuse(other.to_string()),
     })?;
-    if scene.file.task.is_none() {
+    if scene.file.task.is_none() && scene.file.chess.is_none() {
         return Err(refuse(format!(
-            "the scene '{}' has no [task] to teleoperate (try assets/scenes/pouring.toml)",
+            "the scene '{}' has no [task] or [chess] to teleoperate (try \
+             assets/scenes/pouring.toml or assets/scenes/chess.toml)",
             scene.file.name
         )));
     }

@@ -57,8 +57,8 @@ pub struct RunArgs {
     /// domain, else ROS_DOMAIN_ID; docs/robot-ros2.md).
     #[arg(long = "ros2-camera", value_name = "TOPIC")]
     ros2_camera: Option<String>,
-    /// With a scene that has a [task]: teleoperate it live with this hand: scripted (the
-    /// task's trial, default), desktop (keys and mouse), xr (OpenXR hand tracking, with
+    /// With a scene that has a [task] or [chess]: teleoperate it live with this hand: scripted
+    /// (the task's trial or the opening's moves, default), desktop (keys and mouse), xr (OpenXR hand tracking, with
     /// --xr), leap (feature `leap`), a recorded FILE.hand.jsonl, or none.
     #[arg(long, value_name = "SOURCE")]
     hand: Option<String>,

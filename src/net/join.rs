@@ -476,8 +476,12 @@ pub fn join(options: &JoinOptions) -> Result<JoinReport, AppError> {
         let Some(task) = &options.scene.file.task else {
             return Err(AppError::flag("--scene", "the scene has no [task]"));
         };
-        let (hand, desktop) =
-            crate::teleop::hand_source(&options.scene, &options.hand, &parts, task.hand_rate_hz)?;
+        let (hand, desktop) = crate::teleop::hand_source(
+            &options.scene,
+            &options.hand,
+            &parts.script,
+            task.hand_rate_hz,
+        )?;
         Some((parts, hand, desktop))
     };
     let mut window = None;

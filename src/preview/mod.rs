@@ -95,10 +95,8 @@ pub fn build_app(scene: &avatarm_scene::Scene, options: &PreviewOptions) -> Resu
                 Some(arm) => crate::teleop::TrialLink::Given(Box::new(arm.clone())),
                 None => crate::teleop::TrialLink::of(options.robot),
             };
-            crate::teleop::LiveTeleop::prepare_on(scene, choice, link).map_err(|e| {
-                AppError::Teleop {
-                    source: Box::new(e),
-                }
+            crate::teleop::LiveSession::prepare(scene, choice, link).map_err(|e| AppError::Teleop {
+                source: Box::new(e),
             })
         })
         .transpose()?;
@@ -465,11 +463,16 @@ struct LiveTeleopStatus<'w, 's> {
     held: Option<Res<'w, avatarm_hand::HeldObject>>,
     anchor: Option<Res<'w, crate::teleop::HandAnchor>>,
     twin: Query<'w, 's, &'static Transform, With<avatarm_hand::GraspTarget>>,
+    chess: Option<Res<'w, crate::teleop::ChessState>>,
+    game: Option<Res<'w, crate::teleop::LiveGame>>,
 }
 
 impl LiveTeleopStatus<'_, '_> {
     /// The end-of-run summary, or nothing without a teleoperation.
     fn summary(&self) -> Option<String> {
+        if let (Some(chess), Some(game)) = (&self.chess, &self.game) {
+            return Some(chess.summary(&game.0));
+        }
         let (Some(live), Some(teleop), Some(held)) = (&self.live, &self.teleop, &self.held) else {
             return None;
         };
@@ -485,6 +488,9 @@ impl LiveTeleopStatus<'_, '_> {
 
     /// The teleoperation's line and a line break, or nothing without one.
     fn line(&self) -> String {
+        if let (Some(chess), Some(game), Some(held)) = (&self.chess, &self.game, &self.held) {
+            return format!("{}\n", chess.status_line(&game.0, held));
+        }
         match (&self.live, &self.teleop, &self.contacts, &self.held) {
             (Some(live), Some(teleop), Some(contacts), Some(held)) => {
                 let twin = self.twin.single().ok().map(avatarm_twin::transform_to_iso);

@@ -189,6 +189,8 @@ struct Replay {
     /// A camera on a head, recorded (`--record`): the tracked head poses the app received,
     /// `(stamp_s, world_from_head)`.
     head_poses: Vec<(f64, nalgebra::Isometry3<f64>)>,
+    /// A `[chess]` scene: the moves of the game played in the video, at the end.
+    chess: Option<Vec<avatarm_mapping::chess::MoveResult>>,
 }
 
 /// A camera on a head: how far one frame's mask camera was from the truth.
@@ -262,6 +264,7 @@ impl Plugin for ReplayPlugin {
             lens: None,
             head_errors: Vec::new(),
             head_poses: Vec::new(),
+            chess: None,
         })
         .add_systems(Startup, pause_for_warmup)
         .add_systems(
@@ -334,7 +337,11 @@ fn drive_replay(
         Res<GpuTimes>,
     ),
     twins: Query<&RobotTwin>,
-    (scene, lens): (Res<SceneResource>, Option<Res<EraseLens>>),
+    (scene, lens, chess): (
+        Res<SceneResource>,
+        Option<Res<EraseLens>>,
+        Option<Res<crate::teleop::LiveGame>>,
+    ),
     mut exit: MessageWriter<AppExit>,
 ) {
     if replay.lens.is_none() {
@@ -486,6 +493,7 @@ fn drive_replay(
         return;
     }
     let gpu = gpu_times.snapshot();
+    replay.chess = chess.map(|game| game.0.moves());
     let outcome = finish(
         &replay,
         &scene,
@@ -782,6 +790,7 @@ fn finish(
         name: None,
         out: None,
         object: None,
+        chess: replay.chess.clone(),
     };
     let saved: Vec<&FrameRecord> = replay
         .records
@@ -819,8 +828,22 @@ pub fn build_app(scene: &avatarm_scene::Scene, options: ReplayOptions) -> Result
         ground_truth: true,
         ..crate::app::AppBase::new(crate::app::Runner::Replay)
     };
+    // A chess scene plays its opening in the video: the scripted hand's game on the simulated
+    // arm, the robot moving over the board (prepared before the app, so that it fails first).
+    let chess = (scene.file.task.is_none() && scene.file.chess.is_some())
+        .then(|| {
+            crate::teleop::LiveChess::prepare(
+                scene,
+                &avatarm_scene::hand::HandChoice::Scripted,
+                &crate::teleop::TrialLink::Simulated,
+            )
+        })
+        .transpose()?;
     let mut app = crate::app::build_app(scene, &base)?;
     app.add_plugins(ReplayPlugin(options));
+    if let Some(chess) = chess {
+        chess.install(&mut app)?;
+    }
     Ok(app)
 }
 

@@ -69,6 +69,11 @@ pub struct ReplayReport {
     /// The scene's `[task]` trials.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub object: Option<ObjectReport>,
+    /// A `[chess]` scene: the game the video shows (the scripted hand playing the opening on
+    /// the simulated arm, intent on, no delay), each move measured as `avatarm bench chess`
+    /// measures it (a move not reached by the end has no grasp or placement).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chess: Option<Vec<avatarm_mapping::chess::MoveResult>>,
 }
 
 /// A scene replayed through each of its cameras in turn.

@@ -3,23 +3,20 @@
 
 use super::*;
 
-/// The hand source `choice` names for a trial (`parts`: its scripted hand and start pose),
-/// polled at `rate_hz` when scripted; the desktop hand also gives its key-driven state. `None`
+/// The hand source `choice` names for a trial (`script`: its scripted hand, whose first wrist
+/// pose is where the other sources start), polled at `rate_hz` when scripted; the desktop hand also gives its key-driven state. `None`
 /// for OpenXR hand tracking, which comes from an app's XR view ([`xr_inbox`]). Errors when a
 /// recording cannot be read, a device cannot start or a feature is left out of this build.
 pub(crate) fn hand_source(
     scene: &Scene,
     choice: &HandChoice,
-    parts: &TrialParts,
+    script: &avatarm_core::teleop::hand::HandScript,
     rate_hz: f64,
 ) -> Result<(Option<ActiveHand>, Option<DesktopHand>), AppError> {
-    let start = parts.script.wrist_at(0.0).0;
+    let start = script.wrist_at(0.0).0;
     Ok(match choice {
         HandChoice::Scripted => (
-            Some(ActiveHand::new(ScriptedHand::new(
-                parts.script.clone(),
-                rate_hz,
-            ))),
+            Some(ActiveHand::new(ScriptedHand::new(script.clone(), rate_hz))),
             None,
         ),
         HandChoice::Desktop => {

@@ -54,6 +54,42 @@ mod desktop;
 pub use desktop::DesktopHand;
 pub(crate) use desktop::{DesktopControls, drive_desktop_hand};
 
+mod chess;
+pub use chess::{ChessState, LiveChess, LiveGame};
+
+/// A live session of a scene in `avatarm run`: its `[task]` (pouring), or a game of its
+/// `[chess]` where it has no `[task]`.
+pub enum LiveSession {
+    /// The `[task]`'s trial.
+    Task(Box<LiveTeleop>),
+    /// A game of `[chess]`.
+    Chess(Box<LiveChess>),
+}
+
+impl LiveSession {
+    /// Prepares the scene's session driven by `choice` on `link` ([`LiveTeleop::prepare_on`],
+    /// [`LiveChess::prepare`]); errors as those do, before any window exists.
+    pub fn prepare(scene: &Scene, choice: &HandChoice, link: TrialLink) -> Result<Self, AppError> {
+        if scene.file.task.is_none() && scene.file.chess.is_some() {
+            Ok(Self::Chess(Box::new(LiveChess::prepare(
+                scene, choice, &link,
+            )?)))
+        } else {
+            Ok(Self::Task(Box::new(LiveTeleop::prepare_on(
+                scene, choice, link,
+            )?)))
+        }
+    }
+
+    /// Adds the session to a preview app ([`LiveTeleop::install`], [`LiveChess::install`]).
+    pub fn install(self, app: &mut App) -> Result<(), AppError> {
+        match self {
+            Self::Task(live) => live.install(app),
+            Self::Chess(live) => live.install(app),
+        }
+    }
+}
+
 /// The live trial's fixed parts, for the systems.
 #[derive(Resource, Debug, Clone)]
 pub struct LiveTask {
@@ -125,7 +161,7 @@ impl LiveTeleop {
             return Err(AppError::flag("--hand", "the scene has no [task]"));
         };
         let start = parts.script.wrist_at(0.0).0;
-        let (hand, desktop) = hand_source(scene, choice, &parts, task.hand_rate_hz)?;
+        let (hand, desktop) = hand_source(scene, choice, &parts.script, task.hand_rate_hz)?;
         let (prop, _) = find_prop(&scene.props, &task.object).ok_or_else(|| {
             avatarm_scene::SceneError::field(
                 "task.object",
@@ -277,7 +313,7 @@ pub fn trial_parts_on(
         return Err(AppError::flag(
             flag,
             format!(
-                "the scene '{}' has no [task] to teleoperate",
+                "the scene '{}' has no [task] (nor [chess]) to teleoperate",
                 scene.file.name
             ),
         ));

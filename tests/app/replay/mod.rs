@@ -2,6 +2,7 @@
 //! preview and scene validation: a module per topic, the helpers they share here.
 
 mod bench;
+mod chess;
 mod erase;
 mod preview;
 mod robot;

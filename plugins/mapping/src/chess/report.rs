@@ -10,7 +10,7 @@ use avatarm_scene::chess::{ChessSetup, ChessTask};
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::{ChessCase, ChessScript, FINGER_HALF_WIDTH_M, carried, goal_piece};
+use super::{ChessCase, FINGER_HALF_WIDTH_M, carried, goal_piece};
 
 /// One move's result.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -206,9 +206,10 @@ struct MoveState {
 pub(crate) struct Meter {
     trial: u32,
     case: ChessCase,
-    /// Per move: notation, piece, the target square's centre of the piece (world), the time
-    /// its script starts.
-    moves: Vec<(String, usize, Isometry3<f64>, f64)>,
+    /// Per move: notation, piece, the target square's centre of the piece (world).
+    moves: Vec<(String, usize, Isometry3<f64>)>,
+    /// When the operator starts each move (s), where a script knows it.
+    starts: Option<Vec<f64>>,
     names: Vec<String>,
     sizes: Vec<(f64, f64)>,
     square_m: f64,
@@ -228,7 +229,7 @@ impl Meter {
     pub fn new(
         task: &ChessTask,
         setup: &ChessSetup,
-        plan: &ChessScript,
+        starts: Option<Vec<f64>>,
         case: ChessCase,
         trial: u32,
     ) -> Self {
@@ -236,13 +237,11 @@ impl Meter {
         let moves = setup
             .moves
             .iter()
-            .zip(&plan.moves)
-            .map(|(&(m, piece), times)| {
+            .map(|&(m, piece)| {
                 (
                     format!("{}{}", m.from.name(), m.to.name()),
                     piece,
                     setup.centre_on(task, piece, m.to),
-                    times.start_s,
                 )
             })
             .collect::<Vec<_>>();
@@ -251,6 +250,7 @@ impl Meter {
             case,
             state: vec![MoveState::default(); moves.len()],
             moves,
+            starts,
             names: setup.pieces.iter().map(|p| p.name.clone()).collect(),
             sizes: setup.sizes.clone(),
             square_m: task.square_m,
@@ -264,9 +264,18 @@ impl Meter {
         }
     }
 
-    /// The move the operator is playing at `t_s` (by the script's clock).
+    /// The move the operator is playing at `t_s`: by the script's clock where there is one,
+    /// else the first move whose piece the robot has not let go of yet (the last move once all
+    /// are).
     fn current(&self, t_s: f64) -> usize {
-        self.moves.iter().rposition(|m| m.3 <= t_s).unwrap_or(0)
+        match &self.starts {
+            Some(starts) => starts.iter().rposition(|&s| s <= t_s).unwrap_or(0),
+            None => self
+                .state
+                .iter()
+                .position(|s| s.released.is_none())
+                .unwrap_or(self.moves.len().saturating_sub(1)),
+        }
     }
 
     /// The first move of `piece` without `done`, else the current one.
@@ -378,12 +387,13 @@ impl Meter {
         })
     }
 
-    pub fn finish(self) -> Vec<MoveResult> {
+    /// Each move's result so far.
+    pub fn results(&self) -> Vec<MoveResult> {
         self.moves
             .iter()
             .zip(&self.state)
             .enumerate()
-            .map(|(i, ((notation, piece, square, _), s))| {
+            .map(|(i, ((notation, piece, square), s))| {
                 let grasp_delay_ms = match (s.virtual_grasp_s, s.real_grasp_s) {
                     (Some(v), Some(r)) => Some((r - v) * 1000.0),
                     _ => None,
