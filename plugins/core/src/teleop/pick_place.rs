@@ -82,7 +82,8 @@ pub struct PickPlaceSettings {
     pub place_m: f64,
     /// ... and this angle (rad) of the twin's last pose ...
     pub place_rad: f64,
-    /// ... or after this long (s).
+    /// ... or after this long (s) within [`PickPlaceSettings::over_m`] of it (the last
+    /// millimetres; an object still travelling to its place is not let go of in the air).
     pub place_timeout_s: f64,
     /// The mapping while the object is carried.
     pub mapping: MappingSettings,
@@ -158,7 +159,8 @@ pub enum PickPhase {
     Place {
         /// The object.
         object: usize,
-        /// When the hand let go (s).
+        /// When the hand let go, or later when the object came within
+        /// [`PickPlaceSettings::over_m`] of its place (s).
         since_s: f64,
     },
     /// Up to the clearance height.
@@ -473,7 +475,7 @@ impl PickPlaceRobot {
                 };
                 self.last_target = Some(target);
                 out.target = Some(target.target);
-                out.qdot = self.carry(&target, q, now_s, joints_stamp_s)?;
+                out.qdot = self.carry(object, &target, &tool, q, (now_s, joints_stamp_s))?;
             }
             PickPhase::Place { object, since_s } => {
                 self.place(object, since_s, &tool, q, (now_s, joints_stamp_s), &mut out)?;
@@ -512,22 +514,34 @@ impl PickPlaceRobot {
         let error = pose_difference(&measured, &target.target);
         let placed = error.fixed_rows::<3>(0).norm() <= self.settings.place_m
             && error.fixed_rows::<3>(3).norm() <= self.settings.place_rad;
+        if error.fixed_rows::<3>(0).norm() > self.settings.over_m {
+            // Still travelling: the time for the last millimetres starts once there.
+            self.phase = PickPhase::Place {
+                object,
+                since_s: now_s,
+            };
+        }
         if placed || now_s - since_s >= self.settings.place_timeout_s {
             self.release(object, tool, out);
         } else {
-            out.qdot = self.carry(&target, q, now_s, joints_stamp_s)?;
+            out.qdot = self.carry(object, &target, tool, q, times)?;
         }
         Ok(())
     }
 
+    /// The carry's joint velocities toward `target` (kept upright, and over the other objects:
+    /// [`PickPlaceRobot::over_the_others`]) by the mapping's robot side. `times` is the tick's
+    /// time and the joints' stamp (s).
     fn carry(
         &mut self,
+        object: usize,
         target: &OperatorTarget,
+        tool: &Isometry3<f64>,
         q: &[f64],
-        now_s: f64,
-        joints_stamp_s: f64,
+        times: (f64, f64),
     ) -> crate::Result<DVector<f64>> {
-        let target = &upright(target);
+        let (now_s, joints_stamp_s) = times;
+        let target = &self.over_the_others(object, &upright(target), tool);
         let side = RobotSide {
             model: &self.model,
             base: self.base,
@@ -545,6 +559,56 @@ impl PickPlaceRobot {
             &side,
         )?;
         Ok(out.qdot)
+    }
+
+    /// The carried object's target shaped by the clearance rule the tool follows between
+    /// grasps ([`clearance_twist`]): lifted straight up, across above the other objects, down
+    /// onto the goal. Below `clearance_z − over_m` (the object's bottom; every object's top is
+    /// lower) the object moves sideways only toward a target within
+    /// [`PickPlaceSettings::over_m`] across and not above it (setting down, or nudging it on
+    /// its square); a target farther across, or above, is reached straight up first. Above that
+    /// height it crosses with its bottom at `clearance_z` at least, and follows the target down
+    /// within `over_m` across. The real object lags its twin under the speed cap, and without
+    /// this it cut the corner between the lift and the traverse through the neighbouring pieces
+    /// (docs/chess.md). A shaped target's linear feed-forward is dropped (it is the twin's,
+    /// along another path).
+    fn over_the_others(
+        &self,
+        object: usize,
+        target: &OperatorTarget,
+        tool: &Isometry3<f64>,
+    ) -> OperatorTarget {
+        let s = &self.settings;
+        let half = self.objects.get(object).map_or(0.0, |o| o.height_m / 2.0);
+        let p = (tool * self.tcp_from_object).translation.vector;
+        let t = target.target.translation.vector;
+        let across = Vector3::new(t.x - p.x, t.y - p.y, 0.0).norm();
+        let cross_z = s.clearance_z + half;
+        let low = p.z - half < s.clearance_z - s.over_m;
+        let shaped = if low && (across > s.over_m || t.z > p.z + s.arrive_m) {
+            // Straight up first.
+            Vector3::new(
+                p.x,
+                p.y,
+                if across > s.over_m {
+                    t.z.max(cross_z)
+                } else {
+                    t.z
+                },
+            )
+        } else if !low && across > s.over_m && t.z < cross_z {
+            // Across above the others.
+            Vector3::new(t.x, t.y, cross_z)
+        } else {
+            return *target;
+        };
+        let mut object_twist = target.object_twist;
+        object_twist.fixed_rows_mut::<3>(0).fill(0.0);
+        OperatorTarget {
+            target: Isometry3::from_parts(Translation3::from(shaped), target.target.rotation),
+            object_twist,
+            ..*target
+        }
     }
 
     fn release(&mut self, object: usize, tool: &Isometry3<f64>, out: &mut PickTick) {

@@ -11,6 +11,7 @@ use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::{ChessCase, FINGER_HALF_WIDTH_M, carried, goal_piece};
+use avatarm_core::teleop::pick_place::PickGoal;
 
 /// One move's result.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -220,6 +221,11 @@ pub(crate) struct Meter {
     last_holding: Option<usize>,
     /// The piece the gripper let go of last: the tool rises from beside it.
     last_released: Option<usize>,
+    /// The piece the open gripper was sent around at the last tick.
+    last_around: Option<usize>,
+    /// A piece the open gripper was around and no longer is sent to, while the tool is still
+    /// within its reach: it rises from around it.
+    rising_from: Option<usize>,
     touching: bool,
     /// The robot's target at the last tick that had one.
     last_target: Option<Isometry3<f64>>,
@@ -259,6 +265,8 @@ impl Meter {
             last_held: None,
             last_holding: None,
             last_released: None,
+            last_around: None,
+            rising_from: None,
             touching: false,
             last_target: None,
         }
@@ -358,6 +366,22 @@ impl Meter {
             PickPhase::Retreat => self.last_released,
             PickPhase::Free => goal_piece(t.goal),
         });
+        // The open gripper around a piece (a pre-grasp whose estimate then changed) rises
+        // straight up from it, as from a piece it let go of: not a touch until it is clear.
+        let around = match v.tick.and_then(|t| t.goal) {
+            Some(PickGoal::Around(i)) => Some(i),
+            _ => None,
+        };
+        if let Some(i) = self.last_around
+            && around != Some(i)
+            && self.within_reach(v, i)
+        {
+            self.rising_from = Some(i);
+        }
+        if self.rising_from.is_some_and(|i| !self.within_reach(v, i)) {
+            self.rising_from = None;
+        }
+        self.last_around = around;
         let touching = self.touches(v, holding, sent_to);
         if touching && !self.touching {
             self.state[current].touches += 1;
@@ -365,25 +389,35 @@ impl Meter {
         self.touching = touching;
     }
 
+    /// The tool point within piece `j`'s reach: closer to its axis than its radius and a
+    /// finger, below its top (and 5 mm).
+    fn within_reach(&self, v: &TickView, j: usize) -> bool {
+        let Some(o) = v.arm.objects().get(j) else {
+            return false;
+        };
+        let (c, tool) = (o.pose.translation.vector, v.tool.translation.vector);
+        let (r, h) = self.sizes[j];
+        Vector3::new(tool.x - c.x, tool.y - c.y, 0.0).norm() < r + FINGER_HALF_WIDTH_M
+            && tool.z < c.z + h / 2.0 + 0.005
+    }
+
     fn touches(&self, v: &TickView, holding: Option<usize>, sent_to: Option<usize>) -> bool {
         let objects = v.arm.objects();
-        let tool = v.tool.translation.vector;
         let carried = holding.map(|h| {
             let c = objects[h].pose.translation.vector;
             (c, self.sizes[h].0, c.z - self.sizes[h].1 / 2.0)
         });
         objects.iter().enumerate().any(|(j, o)| {
-            if Some(j) == holding || Some(j) == sent_to {
+            if Some(j) == holding || Some(j) == sent_to || Some(j) == self.rising_from {
                 return false;
             }
             let c = o.pose.translation.vector;
             let (r, h) = self.sizes[j];
             let top = c.z + h / 2.0;
             let across = |p: &Vector3<f64>| Vector3::new(p.x - c.x, p.y - c.y, 0.0).norm();
-            let by_tool = across(&tool) < r + FINGER_HALF_WIDTH_M && tool.z < top + 0.005;
             let by_piece =
                 carried.is_some_and(|(p, rp, bottom)| across(&p) < r + rp && bottom < top);
-            by_tool || by_piece
+            self.within_reach(v, j) || by_piece
         })
     }
 

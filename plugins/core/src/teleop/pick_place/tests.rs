@@ -211,6 +211,64 @@ fn a_grasp_carry_and_place_moves_the_believed_piece_and_only_it() {
     assert!(!ticks.last().unwrap().gripper.closed);
 }
 
+/// A twin dragged low straight across its two neighbours (one 4 cm taller than it): the real
+/// piece is lifted straight up, carried across with its bottom above both, and set down on
+/// the target; its body never enters a neighbour's below that one's top. The place waits for
+/// it to arrive (no let-go in the air however long the crossing takes).
+#[test]
+fn a_carried_piece_goes_over_its_neighbours_not_through_them() {
+    let mut w = World::new();
+    let start = pieces()[2].pose;
+    let held = PickPlaceCommand {
+        object: Some(2),
+        target: Some(target_at(0.0, start, true)),
+        intent: None,
+        intent_near: false,
+    };
+    w.run(5.0, &held, Some(2));
+    assert!(matches!(w.robot.phase(), PickPhase::Carry { object: 2 }));
+    let goal = Isometry3::translation(0.0, -0.18, 0.0) * start;
+    let dragged = PickPlaceCommand {
+        target: Some(target_at(w.t, goal, true)),
+        ..held
+    };
+    let mut ticks = w.run(4.0, &dragged, Some(2));
+    let release = PickPlaceCommand {
+        target: Some(target_at(w.t, goal, false)),
+        ..held
+    };
+    ticks.extend(w.run(3.0, &release, Some(2)));
+    let (r, h) = (pieces()[2].radius_m, pieces()[2].height_m);
+    let mut highest_bottom = f64::MIN;
+    let mut grazed = Vec::new();
+    for t in &ticks {
+        let c = (t.tool * w.robot.tcp_from_object).translation.vector;
+        let bottom = c.z - h / 2.0;
+        highest_bottom = highest_bottom.max(bottom);
+        for (i, o) in pieces().iter().enumerate().take(2) {
+            let p = o.pose.translation.vector;
+            let across = Vector3::new(c.x - p.x, c.y - p.y, 0.0).norm();
+            if across < r + o.radius_m && bottom < o.top_z() {
+                grazed.push((i, across, bottom - o.top_z()));
+            }
+        }
+    }
+    assert!(grazed.is_empty(), "{:?}", &grazed[..grazed.len().min(5)]);
+    // Over the tallest top (0.84 m) by the clearance's margin.
+    let s = settings();
+    assert!(
+        highest_bottom >= s.clearance_z - s.over_m,
+        "{highest_bottom}"
+    );
+    let released = ticks.iter().position(|t| t.released.is_some());
+    assert!(released.is_some(), "let go");
+    let believed = w.robot.objects()[2].pose.translation.vector;
+    assert!(
+        (believed - goal.translation.vector).norm() < 0.003,
+        "{believed:?}"
+    );
+}
+
 #[test]
 fn bad_commands_and_joints_are_refused_by_name() {
     let mut w = World::new();
