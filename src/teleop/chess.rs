@@ -276,23 +276,10 @@ fn draw_chess_hand(
     mut view: Gizmos<HandViewGizmos>,
     mut interaction: Gizmos<HandInteractionGizmos>,
 ) {
-    let Some(frame) = hand
-        .latest
-        .as_ref()
-        .filter(|f| f.tracked && f.joints.len() == 26)
-    else {
+    let colour = hand_colour(held.held.is_some());
+    let Some(real) = hand_in_3d_view(&hand, &state.v2r, colour, &mut view) else {
         return;
     };
-    let colour = hand_colour(held.held.is_some());
-    let real: Vec<Vector3<f64>> = frame
-        .joints
-        .iter()
-        .map(|j| state.v2r.point(&j.pose.translation.vector))
-        .collect();
-    let v = |p: &Vector3<f64>| Vec3::new(p.x as f32, p.y as f32, p.z as f32);
-    for (a, b) in SKELETON {
-        view.line(v(&real[a]), v(&real[b]), colour);
-    }
     let palm = real[avatarm_core::teleop::hand::PALM];
     let nearest = config
         .objects

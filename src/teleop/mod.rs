@@ -468,15 +468,33 @@ fn draw_hand(
     mut view: Gizmos<HandViewGizmos>,
     mut interaction: Gizmos<HandInteractionGizmos>,
 ) {
-    let Some(frame) = hand
-        .latest
-        .as_ref()
-        .filter(|f| f.tracked && f.joints.len() == 26)
-    else {
+    let colour = hand_colour(held.held.is_some());
+    let Some(real) = hand_in_3d_view(&hand, teleop.v2r(), colour, &mut view) else {
         return;
     };
-    let colour = hand_colour(held.held.is_some());
-    let v2r = teleop.v2r();
+    let Some(i) = live.object_twin else { return };
+    let real = match anchor.now {
+        Some((twin, object)) => avatarm_core::teleop::hand::carried_with(&real, &twin, &object),
+        None => real,
+    };
+    for (a, b) in hand_in_interaction_view(&real, &config, i) {
+        interaction.line(a, b, colour);
+    }
+}
+
+/// The tracked hand's 26 joints mapped into the real world by `v2r` (m, world), drawn as a
+/// skeleton in the preview's 3-D view; `None` (nothing drawn) while the hand is not tracked
+/// with 26 joints.
+pub(crate) fn hand_in_3d_view(
+    hand: &ActiveHand,
+    v2r: &avatarm_core::teleop::mapping::VirtualToReal,
+    colour: Color,
+    view: &mut Gizmos<HandViewGizmos>,
+) -> Option<Vec<Vector3<f64>>> {
+    let frame = hand
+        .latest
+        .as_ref()
+        .filter(|f| f.tracked && f.joints.len() == 26)?;
     let real: Vec<Vector3<f64>> = frame
         .joints
         .iter()
@@ -486,14 +504,7 @@ fn draw_hand(
     for (a, b) in SKELETON {
         view.line(v(&real[a]), v(&real[b]), colour);
     }
-    let Some(i) = live.object_twin else { return };
-    let real = match anchor.now {
-        Some((twin, object)) => avatarm_core::teleop::hand::carried_with(&real, &twin, &object),
-        None => real,
-    };
-    for (a, b) in hand_in_interaction_view(&real, &config, i) {
-        interaction.line(a, b, colour);
-    }
+    Some(real)
 }
 
 /// The real object as the frame on the panel shows it: where the tool held it at the frame's
