@@ -51,6 +51,8 @@ pub struct ChessState {
     ),
     v2r: avatarm_core::teleop::mapping::VirtualToReal,
     pieces: Vec<PieceLink>,
+    /// The piece of each of the room's props that is one (prop index -> piece index).
+    piece_of_prop: std::collections::HashMap<usize, usize>,
     names: Vec<String>,
     /// Control ticks run.
     pub ticks: u64,
@@ -75,12 +77,22 @@ impl LiveChess {
                 format!("the scene '{}' has no [chess]", scene.file.name),
             ));
         };
-        if !matches!(link, TrialLink::Simulated) {
-            return Err(AppError::flag(
-                "--robot",
-                "the chess scene runs on the simulated arm only (its pick and place knows every \
-                 real piece from the simulation); a real arm plays the pouring task",
-            ));
+        let why = "the chess scene's pick and place runs on the simulated arm only (it knows \
+                   every real piece from the simulation)";
+        match link {
+            TrialLink::Simulated => {}
+            TrialLink::Ros => {
+                return Err(AppError::flag(
+                    "--robot",
+                    format!("{why}; a real arm plays the pouring task"),
+                ));
+            }
+            TrialLink::Given(_) => {
+                return Err(AppError::flag(
+                    "--camera-recording",
+                    format!("{why}; add --hand none to watch the recording without it"),
+                ));
+            }
         }
         let v2r = chess_v2r(task);
         let plan = chess_script(task, setup, &v2r, 0)?;
@@ -126,6 +138,11 @@ impl LiveChess {
                 source: hand.as_ref().map_or("OpenXR hand", |h| h.name()).to_owned(),
                 game_setup: (task.clone(), setup.clone()),
                 v2r,
+                piece_of_prop: pieces
+                    .iter()
+                    .enumerate()
+                    .map(|(i, l)| (l.prop, i))
+                    .collect(),
                 pieces,
                 names: setup.pieces.iter().map(|p| p.name.clone()).collect(),
                 ticks: 0,
@@ -201,8 +218,10 @@ impl LiveChess {
     }
 }
 
-/// The game's control tick, after the hand's contacts in each fixed step. An error (the arm
-/// refused a command) is kept for the status line; the limiter's watchdog stops the arm.
+/// The game's control tick, after the hand's contacts in each fixed step. An error is kept
+/// for the status line and said once: a command the arm refused (the limiter stops it on the
+/// next ticks), or a hand world missing its parts (the game does not tick: the simulated arm
+/// stands where it is).
 fn chess_tick(world: &mut World) {
     world.resource_scope(|world, mut game: Mut<LiveGame>| {
         let result = game.0.step(world);
@@ -237,8 +256,20 @@ fn mirror_game(
     if let Some(twin) = twin {
         twin.send(&mut states, &room.model, game.0.received(), 0.0);
     }
-    for (piece, link) in arm.objects().iter().zip(&state.pieces) {
-        place_prop(&mut parts, link.prop, &(piece.pose * link.centre_to_base));
+    let pieces = arm.objects();
+    for (part, mut t) in &mut parts {
+        let Some((piece, link)) = state
+            .piece_of_prop
+            .get(&part.prop)
+            .and_then(|&i| Some((pieces.get(i)?, state.pieces.get(i)?)))
+        else {
+            continue;
+        };
+        let base = piece.pose * link.centre_to_base;
+        let next = iso_to_transform(&base) * part.local;
+        if *t != next {
+            *t = next;
+        }
     }
 }
 
@@ -266,8 +297,8 @@ fn follow_twins(
 }
 
 /// The hand as a skeleton: in the 3-D view where the mapping puts it in the real world, and in
-/// the interaction view around the twin it holds (else the one the robot was sent toward, else
-/// the nearest), as drawn there.
+/// the interaction view around the twin it holds (else the piece the robot is reaching,
+/// carrying or placing, else the intent's piece, else the nearest twin), as drawn there.
 fn draw_chess_hand(
     hand: Res<ActiveHand>,
     held: Res<HeldObject>,
@@ -292,7 +323,16 @@ fn draw_chess_hand(
             d(a).total_cmp(&d(b))
         })
         .map(|(i, _)| i);
-    let piece = game.0.held().or_else(|| game.0.intent());
+    let piece = game
+        .0
+        .held()
+        .or(match game.0.phase() {
+            PickPhase::Reach { object }
+            | PickPhase::Carry { object }
+            | PickPhase::Place { object, .. } => Some(object),
+            PickPhase::Free | PickPhase::Retreat => None,
+        })
+        .or_else(|| game.0.intent());
     let Some(i) = piece
         .and_then(|p| state.pieces.get(p))
         .and_then(|l| l.object_twin)

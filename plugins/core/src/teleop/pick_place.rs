@@ -83,7 +83,10 @@ pub struct PickPlaceSettings {
     /// ... and this angle (rad) of the twin's last pose ...
     pub place_rad: f64,
     /// ... or after this long (s) within [`PickPlaceSettings::over_m`] of it (the last
-    /// millimetres; an object still travelling to its place is not let go of in the air).
+    /// millimetres; an object still travelling to its place is not let go of in the air). One
+    /// that does not get there within [`PLACE_GIVE_UP`] times this after the hand let go (out
+    /// of the arm's reach, the arm stopped) is set down straight below where it is instead, and
+    /// let go of at twice that whatever happens, so that the game goes on.
     pub place_timeout_s: f64,
     /// The mapping while the object is carried.
     pub mapping: MappingSettings,
@@ -159,8 +162,7 @@ pub enum PickPhase {
     Place {
         /// The object.
         object: usize,
-        /// When the hand let go, or later when the object came within
-        /// [`PickPlaceSettings::over_m`] of its place (s).
+        /// When the hand let go (s).
         since_s: f64,
     },
     /// Up to the clearance height.
@@ -273,7 +275,14 @@ pub struct PickPlaceRobot {
     closed: bool,
     /// The twin's last target while carried (what a release places the object at).
     last_target: Option<OperatorTarget>,
+    /// In Place: since when the object has been within `over_m` of its place (s).
+    near_since_s: Option<f64>,
 }
+
+/// In Place, an object that has not come within [`PickPlaceSettings::over_m`] of its place this
+/// many [`PickPlaceSettings::place_timeout_s`] after the hand let go is set down straight below
+/// where it is; at twice this it is let go of wherever it is.
+pub const PLACE_GIVE_UP: f64 = 5.0;
 
 impl PickPlaceRobot {
     /// The robot side for `objects` (their believed real poses), gripper open, phase Free.
@@ -305,6 +314,7 @@ impl PickPlaceRobot {
             tcp_from_object: Isometry3::identity(),
             closed: false,
             last_target: None,
+            near_since_s: None,
         })
     }
 
@@ -470,6 +480,7 @@ impl PickPlaceRobot {
                             object,
                             since_s: now_s,
                         };
+                        self.near_since_s = None;
                         return self.tick(command, q, now_s, joints_stamp_s);
                     }
                 };
@@ -486,8 +497,9 @@ impl PickPlaceRobot {
     }
 
     /// The Place phase's tick: the real object held at the twin's last pose (upright, still)
-    /// until it is there or the time is up, then let go. `times` is the tick's time and the
-    /// joints' stamp (s).
+    /// until it is there, or the time for the last millimetres is up, then let go; one that
+    /// cannot get there is set down below where it is ([`PLACE_GIVE_UP`]). `since_s` is when
+    /// the hand let go, `times` the tick's time and the joints' stamp (s).
     fn place(
         &mut self,
         object: usize,
@@ -498,10 +510,23 @@ impl PickPlaceRobot {
         out: &mut PickTick,
     ) -> crate::Result<()> {
         let (now_s, joints_stamp_s) = times;
-        let Some(last) = self.last_target else {
+        let Some(mut last) = self.last_target else {
             self.release(object, tool, out);
             return Ok(());
         };
+        let measured = tool * self.tcp_from_object;
+        let s = self.settings;
+        let give_up_s = PLACE_GIVE_UP * s.place_timeout_s;
+        let distance = |target: &Isometry3<f64>| {
+            (target.translation.vector - measured.translation.vector).norm()
+        };
+        if now_s - since_s >= give_up_s && distance(&last.target) > s.over_m {
+            // It cannot get there: down where it is, onto its rest height.
+            let p = measured.translation.vector;
+            let rest_z = self.objects[object].pose.translation.z;
+            last.target.translation = Translation3::new(p.x, p.y, rest_z);
+            self.last_target = Some(last);
+        }
         let target = upright(&OperatorTarget {
             held: true,
             object_twist: Vector6::zeros(),
@@ -510,18 +535,19 @@ impl PickPlaceRobot {
             ..last
         });
         out.target = Some(target.target);
-        let measured = tool * self.tcp_from_object;
         let error = pose_difference(&measured, &target.target);
-        let placed = error.fixed_rows::<3>(0).norm() <= self.settings.place_m
-            && error.fixed_rows::<3>(3).norm() <= self.settings.place_rad;
-        if error.fixed_rows::<3>(0).norm() > self.settings.over_m {
+        let placed = error.fixed_rows::<3>(0).norm() <= s.place_m
+            && error.fixed_rows::<3>(3).norm() <= s.place_rad;
+        if error.fixed_rows::<3>(0).norm() > s.over_m {
             // Still travelling: the time for the last millimetres starts once there.
-            self.phase = PickPhase::Place {
-                object,
-                since_s: now_s,
-            };
+            self.near_since_s = None;
+        } else if self.near_since_s.is_none() {
+            self.near_since_s = Some(now_s);
         }
-        if placed || now_s - since_s >= self.settings.place_timeout_s {
+        let last_mm_over = self
+            .near_since_s
+            .is_some_and(|t| now_s - t >= s.place_timeout_s);
+        if placed || last_mm_over || now_s - since_s >= 2.0 * give_up_s {
             self.release(object, tool, out);
         } else {
             out.qdot = self.carry(object, &target, tool, q, times)?;
@@ -567,8 +593,8 @@ impl PickPlaceRobot {
     /// lower) the object moves sideways only toward a target within
     /// [`PickPlaceSettings::over_m`] across and not above it (setting down, or nudging it on
     /// its square); a target farther across, or above, is reached straight up first. Above that
-    /// height it crosses with its bottom at `clearance_z` at least, and follows the target down
-    /// within `over_m` across. The real object lags its twin under the speed cap, and without
+    /// height it crosses toward its bottom at `clearance_z` (rising on the way, never below
+    /// `clearance_z − over_m`), and follows the target down within `over_m` across. The real object lags its twin under the speed cap, and without
     /// this it cut the corner between the lift and the traverse through the neighbouring pieces
     /// (docs/chess.md). A shaped target's linear feed-forward is dropped (it is the twin's,
     /// along another path).
@@ -622,6 +648,7 @@ impl PickPlaceRobot {
             UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
         );
         self.last_target = None;
+        self.near_since_s = None;
         self.phase = PickPhase::Retreat;
         out.released = Some(object);
         out.phase = self.phase;

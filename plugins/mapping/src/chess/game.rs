@@ -316,6 +316,7 @@ impl ChessGame {
     /// it ticked (`false` when the world's fixed clock has not advanced since the last call).
     /// Errors when the world lacks the chess hand world's parts or the arm refuses a command.
     pub fn step(&mut self, world: &mut World) -> Result<bool, MappingError> {
+        self.received.clear();
         let view = read_operator(
             world,
             &mut self.operator.contacts,

@@ -223,9 +223,9 @@ pub(crate) struct Meter {
     last_released: Option<usize>,
     /// The piece the open gripper was sent around at the last tick.
     last_around: Option<usize>,
-    /// A piece the open gripper was around and no longer is sent to, while the tool is still
-    /// within its reach: it rises from around it.
-    rising_from: Option<usize>,
+    /// A piece the open gripper was around and no longer is sent to, and where the tool was
+    /// then, while the tool rises straight up within its reach.
+    rising_from: Option<(usize, Vector3<f64>)>,
     touching: bool,
     /// The robot's target at the last tick that had one.
     last_target: Option<Isometry3<f64>>,
@@ -372,13 +372,18 @@ impl Meter {
             Some(PickGoal::Around(i)) => Some(i),
             _ => None,
         };
+        let tool = v.tool.translation.vector;
         if let Some(i) = self.last_around
             && around != Some(i)
             && self.within_reach(v, i)
         {
-            self.rising_from = Some(i);
+            self.rising_from = Some((i, tool));
         }
-        if self.rising_from.is_some_and(|i| !self.within_reach(v, i)) {
+        // Only straight up: out of reach, or moved 5 mm across, it is no longer exempt.
+        if self.rising_from.is_some_and(|(i, from)| {
+            !self.within_reach(v, i)
+                || Vector3::new(tool.x - from.x, tool.y - from.y, 0.0).norm() > 0.005
+        }) {
             self.rising_from = None;
         }
         self.last_around = around;
@@ -408,7 +413,8 @@ impl Meter {
             (c, self.sizes[h].0, c.z - self.sizes[h].1 / 2.0)
         });
         objects.iter().enumerate().any(|(j, o)| {
-            if Some(j) == holding || Some(j) == sent_to || Some(j) == self.rising_from {
+            if Some(j) == holding || Some(j) == sent_to || Some(j) == self.rising_from.map(|r| r.0)
+            {
                 return false;
             }
             let c = o.pose.translation.vector;
