@@ -33,6 +33,8 @@ struct PieceLink {
 /// set-up can fail fails there, so that `avatarm run` refuses it with a non-zero exit.
 pub struct LiveChess {
     scene_name: String,
+    task: avatarm_scene::chess::ChessTask,
+    setup: avatarm_scene::chess::ChessSetup,
     game: ChessGame,
     hand: Option<ActiveHand>,
     desktop: Option<DesktopHand>,
@@ -45,10 +47,6 @@ pub struct LiveChess {
 pub struct ChessState {
     /// The hand source's name.
     pub source: String,
-    game_setup: (
-        avatarm_scene::chess::ChessTask,
-        avatarm_scene::chess::ChessSetup,
-    ),
     v2r: avatarm_core::teleop::mapping::VirtualToReal,
     pieces: Vec<PieceLink>,
     /// The piece of each of the room's props that is one (prop index -> piece index).
@@ -132,11 +130,12 @@ impl LiveChess {
             .collect::<Result<Vec<_>, AppError>>()?;
         Ok(Self {
             scene_name: scene.file.name.clone(),
+            task: task.clone(),
+            setup: setup.clone(),
             game,
             start: plan.script.wrist_at(0.0).0,
             state: ChessState {
                 source: hand.as_ref().map_or("OpenXR hand", |h| h.name()).to_owned(),
-                game_setup: (task.clone(), setup.clone()),
                 v2r,
                 piece_of_prop: pieces
                     .iter()
@@ -161,7 +160,7 @@ impl LiveChess {
             Some(hand) => hand,
             None => ActiveHand::new(xr_inbox(app, &self.start)?),
         };
-        let (task, setup) = &self.state.game_setup;
+        let (task, setup) = (&self.task, &self.setup);
         info!(
             "live teleoperation: '{}' (chess, {} moves) with the {} on the simulated arm, the \
              robot anticipating the piece the hand reaches for",

@@ -273,7 +273,7 @@ impl Default for ChessTask {
             via_jitter_m: 0.04,
             time_jitter: 0.15,
             place_jitter_m: 0.003,
-            gain: 12.0,
+            gain: 8.0,
             max_tcp_speed: SafetySettings::default().max_tcp_speed,
             intent: IntentSettings::default(),
             delays_ms: vec![0.0, 100.0],

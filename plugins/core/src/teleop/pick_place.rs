@@ -16,11 +16,12 @@
 //!   upright ([`upright`]).
 //! - **Place**: the hand let go: the arm brings the real object to the twin's last pose, then
 //!   opens, and the object's believed pose becomes where the tool left it.
-//! - **Retreat**: the tool rises to the clearance height before anything else.
+//! - **Retreat**: the tool rises above the objects around it before anything else.
 //!
-//! Between grasps the tool travels on a clearance path ([`clearance_twist`]): up to
-//! [`PickPlaceSettings::clearance_z`] first, across at that height, down onto the goal, so
-//! that it never crosses the other objects. Every twist is capped at
+//! Between grasps the tool travels on a clearance path ([`clearance_twist`]): up to its
+//! crossing height first ([`PickPlaceRobot::crossing_z`]: [`PickPlaceSettings::clear_m`] above
+//! the tallest object beside its way, at most [`PickPlaceSettings::clearance_z`]), across at
+//! that height, down onto the goal, so that it never crosses the other objects. Every twist is capped at
 //! [`PickPlaceSettings::max_speed`] (below the safety limiter's cap) and goes to the joints by
 //! damped least squares, as the mapping's does.
 
@@ -56,9 +57,14 @@ impl PickObject {
 /// Settings of [`PickPlaceRobot`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PickPlaceSettings {
-    /// The height the tool point travels at between grasps (world z, m): above every object's
+    /// The highest the tool point travels at between grasps (world z, m): above every object's
     /// top by a margin larger than `over_m` (the tool moves sideways from `over_m` below it).
+    /// The carried object crosses with its bottom at this height.
     pub clearance_z: f64,
+    /// Between grasps the tool crosses this far (m) above the top of every object beside its
+    /// way ([`PickPlaceRobot::crossing_z`]), up to `clearance_z`: over a row of pawns it need
+    /// not climb to the king's height. Larger than `over_m`.
+    pub clear_m: f64,
     /// The pre-grasp pose: this far above the grasp pose (m).
     pub hover_m: f64,
     /// The grasp pose: the tool point this far below the object's top (m).
@@ -96,6 +102,7 @@ impl PickPlaceSettings {
     /// Checks the numbers; errors name the field.
     pub fn validate(&self) -> crate::Result<()> {
         for (name, v) in [
+            ("clear_m", self.clear_m),
             ("hover_m", self.hover_m),
             ("arrive_m", self.arrive_m),
             ("arrive_rad", self.arrive_rad),
@@ -203,27 +210,29 @@ pub struct PickTick {
     pub released: Option<usize>,
 }
 
-/// The linear and angular velocity of a move between grasps: up to `clearance_z`, across,
-/// and down onto `goal` (module docs), at `gain_per_s` × the distance left, capped at
-/// `max_speed` and `max_turn`. Returns the twist (world, at the tool point) and whether the
-/// tool has arrived (within `arrive_m` and `arrive_rad`).
+/// The linear and angular velocity of a move between grasps: up to `cross_z` (world z, m:
+/// [`PickPlaceRobot::crossing_z`], or [`PickPlaceSettings::clearance_z`]), across, and down
+/// onto `goal` (module docs), at `gain_per_s` × the distance left, capped at `max_speed` and
+/// `max_turn`. Returns the twist (world, at the tool point) and whether the tool has arrived
+/// (within `arrive_m` and `arrive_rad`).
 pub fn clearance_twist(
     tool: &Isometry3<f64>,
     goal: &Isometry3<f64>,
+    cross_z: f64,
     s: &PickPlaceSettings,
 ) -> (Vector6<f64>, bool) {
     let p = tool.translation.vector;
     let e = goal.translation.vector - p;
     let across = Vector3::new(e.x, e.y, 0.0).norm();
-    // Sideways only within a band below the clearance height (the margin above the tallest
-    // object covers it), so that a tool that sagged a few millimetres does not crawl up first.
+    // Sideways only within a band below the crossing height (the margin above the objects
+    // covers it), so that a tool that sagged a few millimetres does not crawl up first.
     let band = s.over_m;
     let mut v = if across > s.over_m {
-        if p.z < s.clearance_z - band {
-            // Straight up first: nothing below the clearance height moves sideways.
-            Vector3::new(0.0, 0.0, s.clearance_z + band - p.z)
+        if p.z < cross_z - band {
+            // Straight up first: nothing below the crossing height moves sideways.
+            Vector3::new(0.0, 0.0, cross_z + band - p.z)
         } else {
-            Vector3::new(e.x, e.y, s.clearance_z - p.z)
+            Vector3::new(e.x, e.y, cross_z - p.z)
         }
     } else {
         e
@@ -353,6 +362,35 @@ impl PickPlaceRobot {
         }
     }
 
+    /// The height (world z, m) the tool point crosses at from `from` to `to` (world; their
+    /// horizontal way): [`PickPlaceSettings::clear_m`] above the top of every object whose side
+    /// comes within [`PickPlaceSettings::over_m`] of the way (`goal`, the object the tool goes
+    /// down onto, left out), and not below `to`; at most
+    /// [`PickPlaceSettings::clearance_z`]. Within `over_m` across of its goal the tool goes
+    /// straight down ([`clearance_twist`]), so the goal's neighbours are not crossed.
+    pub fn crossing_z(&self, from: &Vector3<f64>, to: &Vector3<f64>, goal: Option<usize>) -> f64 {
+        let s = &self.settings;
+        let (a, b) = (from.xy(), to.xy());
+        let ab = b - a;
+        let len2 = ab.norm_squared();
+        let beside = |o: &PickObject| {
+            let c = o.pose.translation.vector.xy();
+            let t = if len2 > 0.0 {
+                ((c - a).dot(&ab) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            (a + ab * t - c).norm() <= o.radius_m + s.over_m
+        };
+        self.objects
+            .iter()
+            .enumerate()
+            .filter(|&(i, o)| Some(i) != goal && beside(o))
+            .map(|(_, o)| o.top_z() + s.clear_m)
+            .fold(to.z, f64::max)
+            .min(s.clearance_z)
+    }
+
     /// One tick at `now_s` with the measured joints `q` (all joints, stamped `joints_stamp_s`)
     /// and the newest operator command (`None`: none yet). Errors name the bad input; the
     /// caller stops the robot on an error.
@@ -417,16 +455,11 @@ impl PickPlaceRobot {
                     return self.tick(command, q, now_s, joints_stamp_s);
                 }
                 if self.phase == PickPhase::Retreat {
-                    let up = Isometry3::from_parts(
-                        Translation3::new(
-                            tool.translation.x,
-                            tool.translation.y,
-                            self.settings.clearance_z,
-                        ),
-                        tool.rotation,
-                    );
-                    let (twist, arrived) = clearance_twist(&tool, &up, &self.settings);
-                    if arrived || tool.translation.z >= self.settings.clearance_z {
+                    let p = tool.translation.vector;
+                    let z = self.crossing_z(&p, &p, None);
+                    let up = Isometry3::from_parts(Translation3::new(p.x, p.y, z), tool.rotation);
+                    let (twist, arrived) = clearance_twist(&tool, &up, z, &self.settings);
+                    if arrived || p.z >= z {
                         self.phase = PickPhase::Free;
                     } else {
                         out.qdot = self.joint_velocity(&jacobian, &twist, q)?;
@@ -441,7 +474,12 @@ impl PickPlaceRobot {
                     };
                     out.goal = Some(goal);
                     if let Some(g) = self.goal_pose(goal) {
-                        let (twist, arrived) = clearance_twist(&tool, &g, &self.settings);
+                        let z = self.crossing_z(
+                            &tool.translation.vector,
+                            &g.translation.vector,
+                            Some(i),
+                        );
+                        let (twist, arrived) = clearance_twist(&tool, &g, z, &self.settings);
                         if !arrived {
                             out.qdot = self.joint_velocity(&jacobian, &twist, q)?;
                         }
@@ -456,7 +494,12 @@ impl PickPlaceRobot {
                 }
                 out.goal = Some(PickGoal::Grasp(object));
                 if let Some(g) = self.goal_pose(PickGoal::Grasp(object)) {
-                    let (twist, arrived) = clearance_twist(&tool, &g, &self.settings);
+                    let z = self.crossing_z(
+                        &tool.translation.vector,
+                        &g.translation.vector,
+                        Some(object),
+                    );
+                    let (twist, arrived) = clearance_twist(&tool, &g, z, &self.settings);
                     if arrived {
                         self.closed = true;
                         self.tcp_from_object = tool.inverse() * self.objects[object].pose;

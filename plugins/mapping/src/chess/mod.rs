@@ -56,7 +56,7 @@ pub struct ChessTwins(pub Vec<Entity>);
 
 /// The robot's settings for `task` on `setup`: a top grasp (the tool's approach axis down,
 /// its x away from the robot's base toward the board), the clearance 3 cm above the tallest
-/// piece, the pre-grasp 3 cm above the grasp, 1.5 cm below a piece's top; moves between grasps
+/// piece (between grasps, 3 cm above the tallest piece beside the way), the pre-grasp 3 cm above the grasp, 1.5 cm below a piece's top; moves between grasps
 /// capped at 96 % of the TCP cap; the carry's closed loop at the task's gain.
 pub fn robot_settings(task: &ChessTask, setup: &ChessSetup) -> PickPlaceSettings {
     let board = task.board_pose().translation.vector;
@@ -72,6 +72,7 @@ pub fn robot_settings(task: &ChessTask, setup: &ChessSetup) -> PickPlaceSettings
     let dt = 1.0 / setup.control_rate_hz;
     PickPlaceSettings {
         clearance_z: task.board_top() + setup.tallest_m() + 0.03,
+        clear_m: 0.03,
         hover_m: 0.03,
         grasp_depth_m: 0.015,
         tool_down: UnitQuaternion::from_matrix(&Matrix3::from_columns(&[radial, y, down])),

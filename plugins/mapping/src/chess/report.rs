@@ -11,7 +11,6 @@ use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::{ChessCase, FINGER_HALF_WIDTH_M, carried, goal_piece};
-use avatarm_core::teleop::pick_place::PickGoal;
 
 /// One move's result.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -366,12 +365,10 @@ impl Meter {
             PickPhase::Retreat => self.last_released,
             PickPhase::Free => goal_piece(t.goal),
         });
-        // The open gripper around a piece (a pre-grasp whose estimate then changed) rises
+        // The open gripper at or around a piece it was sent to (a pre-grasp whose estimate then
+        // changed; coming down onto the pre-grasp it may dip below the piece's top) rises
         // straight up from it, as from a piece it let go of: not a touch until it is clear.
-        let around = match v.tick.and_then(|t| t.goal) {
-            Some(PickGoal::Around(i)) => Some(i),
-            _ => None,
-        };
+        let around = v.tick.and_then(|t| goal_piece(t.goal));
         let tool = v.tool.translation.vector;
         if let Some(i) = self.last_around
             && around != Some(i)

@@ -54,7 +54,11 @@ fn with_intent_the_real_grasp_follows_the_virtual_one_sooner_and_every_move_land
             );
             assert!(m.correct, "intent {intent}: {m:?}");
             assert_eq!(m.grasped.as_deref(), Some(m.piece.as_str()));
-            assert!(m.place_error_mm.is_some_and(|e| e < 5.0), "{m:?}");
+            // The robot sets the real piece where the operator set the twin down (within 2 mm);
+            // that is on its square, a fifth of the square from its centre at most (the twin's
+            // own set-down is the operator's: seeded ±1.5 mm, and the scripted hand's grip).
+            assert!(m.follow_error_mm.is_some_and(|e| e < 2.0), "{m:?}");
+            assert!(m.place_error_mm.is_some_and(|e| e < 10.0), "{m:?}");
             if !intent {
                 assert_eq!(m.wrong_pregrasps, 0, "no pre-grasp without intent: {m:?}");
             }

@@ -17,6 +17,7 @@ fn down() -> UnitQuaternion<f64> {
 fn settings() -> PickPlaceSettings {
     PickPlaceSettings {
         clearance_z: 0.75 + 0.10 + 0.08,
+        clear_m: 0.05,
         hover_m: 0.04,
         grasp_depth_m: 0.015,
         tool_down: down(),
@@ -351,4 +352,33 @@ fn bad_commands_and_joints_are_refused_by_name() {
             .to_string()
             .contains("pick_place.max_speed")
     );
+}
+
+#[test]
+fn between_grasps_the_tool_crosses_above_the_pieces_beside_its_way_not_the_tallest() {
+    let w = World::new();
+    let s = settings();
+    let o = pieces();
+    let above = |i: usize| o[i].pose.translation.vector + Vector3::new(0.0, 0.0, 0.1);
+    let (short, tall) = (o[0].top_z() + s.clear_m, o[1].top_z() + s.clear_m);
+    // From above the first short piece to 4 cm beyond it, away from the others: over it only.
+    let beyond = above(0) + Vector3::new(0.0, -0.04, -0.1);
+    assert!((w.robot.crossing_z(&above(0), &beyond, None) - short).abs() < 1e-12);
+    // The piece the tool goes down onto is left out: nothing else beside the way, so it
+    // crosses no higher than where it goes.
+    let low = above(0) - Vector3::new(0.0, 0.0, 0.08);
+    let z = w
+        .robot
+        .crossing_z(&(low + Vector3::new(0.05, 0.0, 0.0)), &low, Some(0));
+    assert!((z - low.z).abs() < 1e-12, "{z}");
+    // From one short piece to the other, past the tall one in between: over the tall one,
+    // capped at the clearance height.
+    let z = w.robot.crossing_z(&above(0), &above(2), Some(2));
+    assert!((z - tall.min(s.clearance_z)).abs() < 1e-12, "{z}");
+    assert!(tall > short);
+    // A way 5 cm beside every piece (farther than a radius and over_m) stays low, below
+    // their tops.
+    let aside = |i: usize| o[i].pose.translation.vector + Vector3::new(-0.05, 0.0, 0.0);
+    let z = w.robot.crossing_z(&aside(0), &aside(2), None);
+    assert!((z - aside(2).z).abs() < 1e-12 && z < o[0].top_z(), "{z}");
 }
