@@ -46,7 +46,7 @@ fn the_chess_replay_plays_the_first_move_with_the_robot_erased() {
     assert_eq!(first.notation, "e2e4");
     assert!(first.correct, "{first:?}");
     assert_eq!(first.grasped.as_deref(), Some("white_pawn_e2"));
-    // Measured: 1.45 mm from e4's centre.
+    // Measured: 2.4 mm from e4's centre.
     assert!(first.place_error_mm.is_some_and(|e| e < 5.0), "{first:?}");
     // The later moves start after the 7 s the video shows.
     assert!(
@@ -67,15 +67,19 @@ fn the_chess_replay_plays_the_first_move_with_the_robot_erased() {
         bench.place_error_mm.expect("placed"),
     );
     assert!((a - b).abs() < 1.0, "video {a} mm, bench {b} mm");
-    // The erase with the arm moving over the board. Measured: IoU 0.9998 (min 0.995), leak
-    // 0.0005 % (max 0.010 %), PSNR 47.6 dB (min 43.4).
+    // The erase with the arm moving over the board, one pixel of margin (chess.toml).
+    // Measured: leak 0 in every frame, overmask 5.0 % (the ring: IoU 0.952, min 0.946), PSNR
+    // over the robot's pixels 47.8 dB (min 47.8). With no margin one frame (1.46 s, the arm
+    // starting toward the pawn) missed a single pixel row, 42 px along the gripper's bottom
+    // edge (0.22 %, PSNR 39.7 dB in that frame): the edge runs along the pixel rows and the
+    // latency compensation's joint velocities lag the arm's first acceleration.
     let m = &report.mask;
     assert!(m.frames_with_robot > 200, "{m:?}");
+    assert!(m.leak_pct_max.is_some_and(|l| l < 0.1), "{m:?}");
     assert!(
-        m.iou_mean.is_some_and(|i| i > 0.99) && m.iou_min.is_some_and(|i| i > 0.98),
+        m.overmask_pct_mean.is_some_and(|o| o < 8.0) && m.iou_min.is_some_and(|i| i > 0.92),
         "{m:?}"
     );
-    assert!(m.leak_pct_max.is_some_and(|l| l < 0.1), "{m:?}");
     assert!(
         report.dr.psnr_robot_db_min.is_some_and(|p| p > 40.0),
         "{:?}",

@@ -61,8 +61,8 @@ pub struct IntentSettings {
 impl Default for IntentSettings {
     fn default() -> Self {
         Self {
-            beta_per_m: 1000.0,
-            window_s: 1.0,
+            beta_per_m: 500.0,
+            window_s: 0.6,
             min_speed_m_s: 0.03,
             closed_aperture_m: 0.0,
             commit_probability: 0.6,
