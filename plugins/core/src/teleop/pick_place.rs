@@ -65,6 +65,10 @@ pub struct PickPlaceSettings {
     /// way ([`PickPlaceRobot::crossing_z`]), up to `clearance_z`: over a row of pawns it need
     /// not climb to the king's height. Larger than `over_m`.
     pub clear_m: f64,
+    /// How far the open gripper reaches across from the tool point (m): half its opening and a
+    /// finger's thickness. An object whose side comes within this and `over_m` of the tool's
+    /// way is crossed above.
+    pub tool_radius_m: f64,
     /// The pre-grasp pose: this far above the grasp pose (m).
     pub hover_m: f64,
     /// The grasp pose: the tool point this far below the object's top (m).
@@ -75,8 +79,8 @@ pub struct PickPlaceSettings {
     pub arrive_m: f64,
     /// ... and this angle (rad).
     pub arrive_rad: f64,
-    /// Horizontally over the goal within this distance (m): the tool may leave the clearance
-    /// height; and the band below the clearance height in which it may move sideways.
+    /// Horizontally over the goal within this distance (m): the tool may leave its crossing
+    /// height; and the band below the crossing height in which it may move sideways.
     pub over_m: f64,
     /// Gain of the moves between grasps (1/s).
     pub gain_per_s: f64,
@@ -101,8 +105,19 @@ pub struct PickPlaceSettings {
 impl PickPlaceSettings {
     /// Checks the numbers; errors name the field.
     pub fn validate(&self) -> crate::Result<()> {
+        if self.clear_m <= self.over_m {
+            return Err(crate::Error::BadSetting {
+                what: "pick_place.clear_m".into(),
+                message: format!(
+                    "{} must be larger than over_m ({}): the tool moves sideways from over_m \
+                     below its crossing height",
+                    self.clear_m, self.over_m
+                ),
+            });
+        }
         for (name, v) in [
             ("clear_m", self.clear_m),
+            ("tool_radius_m", self.tool_radius_m),
             ("hover_m", self.hover_m),
             ("arrive_m", self.arrive_m),
             ("arrive_rad", self.arrive_rad),
@@ -172,7 +187,7 @@ pub enum PickPhase {
         /// When the hand let go (s).
         since_s: f64,
     },
-    /// Up to the clearance height.
+    /// Up above the objects around the tool ([`PickPlaceRobot::crossing_z`]).
     Retreat,
 }
 
@@ -305,6 +320,19 @@ impl PickPlaceRobot {
         objects: Vec<PickObject>,
     ) -> crate::Result<Self> {
         settings.validate()?;
+        if let Some(i) = objects.iter().position(|o| {
+            !(o.pose.translation.vector.iter().all(|v| v.is_finite())
+                && o.pose.rotation.coords.iter().all(|v| v.is_finite())
+                && o.radius_m.is_finite()
+                && o.radius_m > 0.0
+                && o.height_m.is_finite()
+                && o.height_m > 0.0)
+        }) {
+            return Err(crate::Error::BadSetting {
+                what: format!("pick_place.objects[{i}]"),
+                message: "pose, radius and height must be finite, radius and height > 0".into(),
+            });
+        }
         if let Some(&bad) = arm.iter().find(|&&i| i >= model.dof()) {
             return Err(crate::Error::BadSetting {
                 what: "pick_place.arm".into(),
@@ -364,14 +392,21 @@ impl PickPlaceRobot {
 
     /// The height (world z, m) the tool point crosses at from `from` to `to` (world; their
     /// horizontal way): [`PickPlaceSettings::clear_m`] above the top of every object whose side
-    /// comes within [`PickPlaceSettings::over_m`] of the way (`goal`, the object the tool goes
-    /// down onto, left out), and not below `to`; at most
-    /// [`PickPlaceSettings::clearance_z`]. Within `over_m` across of its goal the tool goes
-    /// straight down ([`clearance_twist`]), so the goal's neighbours are not crossed.
-    pub fn crossing_z(&self, from: &Vector3<f64>, to: &Vector3<f64>, goal: Option<usize>) -> f64 {
+    /// comes within [`PickPlaceSettings::over_m`] and [`PickPlaceSettings::tool_radius_m`] of
+    /// the way, the object the tool goes to included; not below `to`; at most
+    /// [`PickPlaceSettings::clearance_z`]. The way ends `over_m` short of `to`: from there the
+    /// tool goes down onto it ([`clearance_twist`]), so `to`'s neighbours are not crossed, and
+    /// an object at `to` is come down onto from above its top.
+    pub fn crossing_z(&self, from: &Vector3<f64>, to: &Vector3<f64>) -> f64 {
         let s = &self.settings;
-        let (a, b) = (from.xy(), to.xy());
-        let ab = b - a;
+        let a = from.xy();
+        let ab = to.xy() - a;
+        let len = ab.norm();
+        let ab = if len > s.over_m {
+            ab * ((len - s.over_m) / len)
+        } else {
+            ab * 0.0
+        };
         let len2 = ab.norm_squared();
         let beside = |o: &PickObject| {
             let c = o.pose.translation.vector.xy();
@@ -380,13 +415,12 @@ impl PickPlaceRobot {
             } else {
                 0.0
             };
-            (a + ab * t - c).norm() <= o.radius_m + s.over_m
+            (a + ab * t - c).norm() <= o.radius_m + s.over_m + s.tool_radius_m
         };
         self.objects
             .iter()
-            .enumerate()
-            .filter(|&(i, o)| Some(i) != goal && beside(o))
-            .map(|(_, o)| o.top_z() + s.clear_m)
+            .filter(|o| beside(o))
+            .map(|o| o.top_z() + s.clear_m)
             .fold(to.z, f64::max)
             .min(s.clearance_z)
     }
@@ -456,7 +490,7 @@ impl PickPlaceRobot {
                 }
                 if self.phase == PickPhase::Retreat {
                     let p = tool.translation.vector;
-                    let z = self.crossing_z(&p, &p, None);
+                    let z = self.crossing_z(&p, &p);
                     let up = Isometry3::from_parts(Translation3::new(p.x, p.y, z), tool.rotation);
                     let (twist, arrived) = clearance_twist(&tool, &up, z, &self.settings);
                     if arrived || p.z >= z {
@@ -474,11 +508,7 @@ impl PickPlaceRobot {
                     };
                     out.goal = Some(goal);
                     if let Some(g) = self.goal_pose(goal) {
-                        let z = self.crossing_z(
-                            &tool.translation.vector,
-                            &g.translation.vector,
-                            Some(i),
-                        );
+                        let z = self.crossing_z(&tool.translation.vector, &g.translation.vector);
                         let (twist, arrived) = clearance_twist(&tool, &g, z, &self.settings);
                         if !arrived {
                             out.qdot = self.joint_velocity(&jacobian, &twist, q)?;
@@ -494,11 +524,7 @@ impl PickPlaceRobot {
                 }
                 out.goal = Some(PickGoal::Grasp(object));
                 if let Some(g) = self.goal_pose(PickGoal::Grasp(object)) {
-                    let z = self.crossing_z(
-                        &tool.translation.vector,
-                        &g.translation.vector,
-                        Some(object),
-                    );
+                    let z = self.crossing_z(&tool.translation.vector, &g.translation.vector);
                     let (twist, arrived) = clearance_twist(&tool, &g, z, &self.settings);
                     if arrived {
                         self.closed = true;

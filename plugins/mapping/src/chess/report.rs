@@ -376,10 +376,12 @@ impl Meter {
         {
             self.rising_from = Some((i, tool));
         }
-        // Only straight up: out of reach, or moved 5 mm across, it is no longer exempt.
+        // Only straight up: out of reach, moved 5 mm across, or 2 mm down, it is no longer
+        // exempt.
         if self.rising_from.is_some_and(|(i, from)| {
             !self.within_reach(v, i)
                 || Vector3::new(tool.x - from.x, tool.y - from.y, 0.0).norm() > 0.005
+                || tool.z < from.z - 0.002
         }) {
             self.rising_from = None;
         }

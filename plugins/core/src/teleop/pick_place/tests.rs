@@ -18,6 +18,7 @@ fn settings() -> PickPlaceSettings {
     PickPlaceSettings {
         clearance_z: 0.75 + 0.10 + 0.08,
         clear_m: 0.05,
+        tool_radius_m: 0.02,
         hover_m: 0.04,
         grasp_depth_m: 0.015,
         tool_down: down(),
@@ -359,26 +360,60 @@ fn between_grasps_the_tool_crosses_above_the_pieces_beside_its_way_not_the_talle
     let w = World::new();
     let s = settings();
     let o = pieces();
-    let above = |i: usize| o[i].pose.translation.vector + Vector3::new(0.0, 0.0, 0.1);
+    let centre = |i: usize| o[i].pose.translation.vector;
+    let above = |i: usize| centre(i) + Vector3::new(0.0, 0.0, 0.1);
     let (short, tall) = (o[0].top_z() + s.clear_m, o[1].top_z() + s.clear_m);
     // From above the first short piece to 4 cm beyond it, away from the others: over it only.
-    let beyond = above(0) + Vector3::new(0.0, -0.04, -0.1);
-    assert!((w.robot.crossing_z(&above(0), &beyond, None) - short).abs() < 1e-12);
-    // The piece the tool goes down onto is left out: nothing else beside the way, so it
-    // crosses no higher than where it goes.
-    let low = above(0) - Vector3::new(0.0, 0.0, 0.08);
+    let beyond = centre(0) + Vector3::new(0.0, -0.04, 0.0);
+    assert!((w.robot.crossing_z(&above(0), &beyond) - short).abs() < 1e-12);
+    // Coming to a piece's grasp from the side, the tool crosses above that piece's own top and
+    // comes down onto it from there (not sideways at the grasp's height, into its side).
+    let grasp = w.robot.grasp_pose(0).unwrap().translation.vector;
     let z = w
         .robot
-        .crossing_z(&(low + Vector3::new(0.05, 0.0, 0.0)), &low, Some(0));
-    assert!((z - low.z).abs() < 1e-12, "{z}");
-    // From one short piece to the other, past the tall one in between: over the tall one,
-    // capped at the clearance height.
-    let z = w.robot.crossing_z(&above(0), &above(2), Some(2));
-    assert!((z - tall.min(s.clearance_z)).abs() < 1e-12, "{z}");
-    assert!(tall > short);
-    // A way 5 cm beside every piece (farther than a radius and over_m) stays low, below
-    // their tops.
-    let aside = |i: usize| o[i].pose.translation.vector + Vector3::new(-0.05, 0.0, 0.0);
-    let z = w.robot.crossing_z(&aside(0), &aside(2), None);
+        .crossing_z(&(grasp + Vector3::new(0.05, 0.0, 0.0)), &grasp);
+    assert!((z - short).abs() < 1e-12 && z > o[0].top_z(), "{z}");
+    // From one short piece to the other, past the tall one in between: over the tall one ...
+    let z = w.robot.crossing_z(&above(0), &above(2));
+    assert!((z - tall).abs() < 1e-12 && tall > short, "{z}");
+    // ... capped at the clearance height.
+    let capped = PickPlaceRobot::new(
+        PickPlaceSettings {
+            clearance_z: tall - 0.01,
+            ..s
+        },
+        Arc::new(sawyer()),
+        Isometry3::translation(0.0, 0.0, 0.75),
+        w.robot.tcp,
+        ARM.to_vec(),
+        pieces(),
+    )
+    .unwrap();
+    assert!((capped.crossing_z(&above(0), &above(2)) - (tall - 0.01)).abs() < 1e-12);
+    // A way farther from every piece's side than the gripper's reach and over_m stays low,
+    // below their tops.
+    let aside = |i: usize| centre(i) + Vector3::new(-0.05, 0.0, 0.0);
+    let z = w.robot.crossing_z(&aside(0), &aside(2));
     assert!((z - aside(2).z).abs() < 1e-12 && z < o[0].top_z(), "{z}");
+    // Rising from a piece (a retreat): above it and the pieces within reach around it.
+    let z = w.robot.crossing_z(&centre(2), &centre(2));
+    assert!((z - short).abs() < 1e-12, "{z}");
+    // The crossing margin must exceed the band the tool moves sideways in.
+    let bad = PickPlaceSettings {
+        clear_m: s.over_m,
+        ..s
+    };
+    assert!(bad.validate().unwrap_err().to_string().contains("clear_m"));
+    let mut nan = pieces();
+    nan[1].radius_m = f64::NAN;
+    let e = PickPlaceRobot::new(
+        s,
+        Arc::new(sawyer()),
+        Isometry3::identity(),
+        w.robot.tcp,
+        ARM.to_vec(),
+        nan,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("objects[1]"), "{e}");
 }
