@@ -227,13 +227,15 @@ pub struct PickTick {
 
 /// The linear and angular velocity of a move between grasps: up to `cross_z` (world z, m:
 /// [`PickPlaceRobot::crossing_z`], or [`PickPlaceSettings::clearance_z`]), across, and down
-/// onto `goal` (module docs), at `gain_per_s` × the distance left, capped at `max_speed` and
-/// `max_turn`. Returns the twist (world, at the tool point) and whether the tool has arrived
-/// (within `arrive_m` and `arrive_rad`).
+/// onto `goal` (module docs), no lower than `floor_z` (world z, m:
+/// [`PickPlaceRobot::descent_floor`]) in the last `over_m` across, at `gain_per_s` × the
+/// distance left, capped at `max_speed` and `max_turn`. Returns the twist (world, at the tool
+/// point) and whether the tool has arrived (within `arrive_m` and `arrive_rad`).
 pub fn clearance_twist(
     tool: &Isometry3<f64>,
     goal: &Isometry3<f64>,
     cross_z: f64,
+    floor_z: f64,
     s: &PickPlaceSettings,
 ) -> (Vector6<f64>, bool) {
     let p = tool.translation.vector;
@@ -250,7 +252,8 @@ pub fn clearance_twist(
             Vector3::new(e.x, e.y, cross_z - p.z)
         }
     } else {
-        e
+        // The last stretch: toward the goal, above the pieces the open gripper is over.
+        Vector3::new(e.x, e.y, goal.translation.z.max(floor_z) - p.z)
     } * s.gain_per_s;
     if v.norm() > s.max_speed {
         v *= s.max_speed / v.norm();
@@ -425,6 +428,28 @@ impl PickPlaceRobot {
             .min(s.clearance_z)
     }
 
+    /// The lowest the tool point may go at `at` (world) in its last
+    /// [`PickPlaceSettings::over_m`] across onto its goal (world z, m; `-inf` where nothing is
+    /// below it): [`PickPlaceSettings::over_m`] / 2 above the top of every object whose side
+    /// lies within [`PickPlaceSettings::tool_radius_m`] of `at` (the open gripper over it);
+    /// the object `goal` left out once the tool is within the gripper's opening
+    /// (`tool_radius_m` less a 5 mm finger) less its radius of its axis, at least
+    /// `arrive_m`: the fingers then pass either side of it.
+    pub fn descent_floor(&self, at: &Vector3<f64>, goal: Option<usize>) -> f64 {
+        let s = &self.settings;
+        self.objects
+            .iter()
+            .enumerate()
+            .filter(|&(i, o)| {
+                let off = (o.pose.translation.vector.xy() - at.xy()).norm();
+                let straddled = Some(i) == goal
+                    && off <= (s.tool_radius_m - 0.005 - o.radius_m).max(s.arrive_m);
+                off <= o.radius_m + s.tool_radius_m && !straddled
+            })
+            .map(|(_, o)| o.top_z() + s.over_m / 2.0)
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+
     /// One tick at `now_s` with the measured joints `q` (all joints, stamped `joints_stamp_s`)
     /// and the newest operator command (`None`: none yet). Errors name the bad input; the
     /// caller stops the robot on an error.
@@ -492,7 +517,8 @@ impl PickPlaceRobot {
                     let p = tool.translation.vector;
                     let z = self.crossing_z(&p, &p);
                     let up = Isometry3::from_parts(Translation3::new(p.x, p.y, z), tool.rotation);
-                    let (twist, arrived) = clearance_twist(&tool, &up, z, &self.settings);
+                    let floor = self.descent_floor(&p, None);
+                    let (twist, arrived) = clearance_twist(&tool, &up, z, floor, &self.settings);
                     if arrived || p.z >= z {
                         self.phase = PickPhase::Free;
                     } else {
@@ -508,8 +534,10 @@ impl PickPlaceRobot {
                     };
                     out.goal = Some(goal);
                     if let Some(g) = self.goal_pose(goal) {
-                        let z = self.crossing_z(&tool.translation.vector, &g.translation.vector);
-                        let (twist, arrived) = clearance_twist(&tool, &g, z, &self.settings);
+                        let p = tool.translation.vector;
+                        let z = self.crossing_z(&p, &g.translation.vector);
+                        let floor = self.descent_floor(&p, Some(i));
+                        let (twist, arrived) = clearance_twist(&tool, &g, z, floor, &self.settings);
                         if !arrived {
                             out.qdot = self.joint_velocity(&jacobian, &twist, q)?;
                         }
@@ -524,8 +552,10 @@ impl PickPlaceRobot {
                 }
                 out.goal = Some(PickGoal::Grasp(object));
                 if let Some(g) = self.goal_pose(PickGoal::Grasp(object)) {
-                    let z = self.crossing_z(&tool.translation.vector, &g.translation.vector);
-                    let (twist, arrived) = clearance_twist(&tool, &g, z, &self.settings);
+                    let p = tool.translation.vector;
+                    let z = self.crossing_z(&p, &g.translation.vector);
+                    let floor = self.descent_floor(&p, Some(object));
+                    let (twist, arrived) = clearance_twist(&tool, &g, z, floor, &self.settings);
                     if arrived {
                         self.closed = true;
                         self.tcp_from_object = tool.inverse() * self.objects[object].pose;

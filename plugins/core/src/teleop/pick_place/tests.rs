@@ -417,3 +417,49 @@ fn between_grasps_the_tool_crosses_above_the_pieces_beside_its_way_not_the_talle
     .unwrap_err();
     assert!(e.to_string().contains("objects[1]"), "{e}");
 }
+
+#[test]
+fn in_its_last_stretch_the_tool_keeps_above_the_pieces_the_open_gripper_is_over() {
+    let w = World::new();
+    let s = settings();
+    let o = pieces();
+    let centre = |i: usize| o[i].pose.translation.vector;
+    // 3 cm from the tall piece's axis (its side 1.5 cm away, inside the gripper's 2 cm reach):
+    // above its top.
+    let beside_tall = centre(1) + Vector3::new(0.0, -0.03, 0.0);
+    let floor = w.robot.descent_floor(&beside_tall, Some(0));
+    assert!(
+        (floor - (o[1].top_z() + s.over_m / 2.0)).abs() < 1e-12,
+        "{floor}"
+    );
+    // On the goal's axis, the others out of reach: nothing holds it up.
+    assert_eq!(
+        w.robot.descent_floor(&centre(0), Some(0)),
+        f64::NEG_INFINITY
+    );
+    // 1.5 cm off the goal's axis the fingers would land on its top: above it until centred.
+    let off = centre(0) + Vector3::new(0.015, 0.0, 0.0);
+    let floor = w.robot.descent_floor(&off, Some(0));
+    assert!(
+        (floor - (o[0].top_z() + s.over_m / 2.0)).abs() < 1e-12,
+        "{floor}"
+    );
+    // The last stretch's twist does not go down while the floor is above the tool.
+    let tool = Isometry3::from_parts(
+        Translation3::from(beside_tall + Vector3::new(0.0, 0.0, 0.06)),
+        down(),
+    );
+    let goal = Isometry3::from_parts(
+        Translation3::from(beside_tall + Vector3::new(0.0, -0.005, -0.03)),
+        down(),
+    );
+    let floor = w.robot.descent_floor(&tool.translation.vector, Some(0));
+    assert!(tool.translation.z < floor + 0.03);
+    let (twist, _) = clearance_twist(&tool, &goal, f64::NEG_INFINITY, floor, &s);
+    let (free, _) = clearance_twist(&tool, &goal, f64::NEG_INFINITY, f64::NEG_INFINITY, &s);
+    assert!(free[2] < 0.0, "{free}");
+    assert!(
+        twist[2] > free[2] && (tool.translation.z + twist[2] / s.gain_per_s - floor).abs() < 1e-9,
+        "{twist}"
+    );
+}
