@@ -355,12 +355,15 @@ fn bad_commands_and_joints_are_refused_by_name() {
     );
 }
 
+/// Piece `i`'s body centre (world).
+fn centre_of(o: &[PickObject], i: usize) -> Vector3<f64> {
+    o[i].pose.translation.vector
+}
+
 #[test]
 fn between_grasps_the_tool_crosses_above_the_pieces_beside_its_way_not_the_tallest() {
-    let w = World::new();
-    let s = settings();
-    let o = pieces();
-    let centre = |i: usize| o[i].pose.translation.vector;
+    let (w, s, o) = (World::new(), settings(), pieces());
+    let centre = |i: usize| centre_of(&o, i);
     let above = |i: usize| centre(i) + Vector3::new(0.0, 0.0, 0.1);
     let (short, tall) = (o[0].top_z() + s.clear_m, o[1].top_z() + s.clear_m);
     // From above the first short piece to 4 cm beyond it, away from the others: over it only.
@@ -420,10 +423,8 @@ fn between_grasps_the_tool_crosses_above_the_pieces_beside_its_way_not_the_talle
 
 #[test]
 fn in_its_last_stretch_the_tool_keeps_above_the_pieces_the_open_gripper_is_over() {
-    let w = World::new();
-    let s = settings();
-    let o = pieces();
-    let centre = |i: usize| o[i].pose.translation.vector;
+    let (w, s, o) = (World::new(), settings(), pieces());
+    let centre = |i: usize| centre_of(&o, i);
     // 3 cm from the tall piece's axis (its side 1.5 cm away, inside the gripper's 2 cm reach):
     // above its top.
     let beside_tall = centre(1) + Vector3::new(0.0, -0.03, 0.0);
