@@ -336,6 +336,20 @@ impl PickPlaceRobot {
                 message: "pose, radius and height must be finite, radius and height > 0".into(),
             });
         }
+        if let Some(i) = objects
+            .iter()
+            .position(|o| o.top_z() + settings.over_m >= settings.clearance_z)
+        {
+            return Err(crate::Error::BadSetting {
+                what: "pick_place.clearance_z".into(),
+                message: format!(
+                    "{} m is not above object {i}'s top ({} m) by more than over_m ({} m)",
+                    settings.clearance_z,
+                    objects[i].top_z(),
+                    settings.over_m
+                ),
+            });
+        }
         if let Some(&bad) = arm.iter().find(|&&i| i >= model.dof()) {
             return Err(crate::Error::BadSetting {
                 what: "pick_place.arm".into(),

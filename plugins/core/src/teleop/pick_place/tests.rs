@@ -398,6 +398,18 @@ fn between_grasps_the_tool_crosses_above_the_pieces_beside_its_way_not_the_talle
     let aside = |i: usize| centre(i) + Vector3::new(-0.05, 0.0, 0.0);
     let z = w.robot.crossing_z(&aside(0), &aside(2));
     assert!((z - aside(2).z).abs() < 1e-12 && z < o[0].top_z(), "{z}");
+    // A way 3.5 cm from the tall piece's axis: its side is 2 cm away, out of over_m but within
+    // the open gripper's reach: crossed above.
+    let near = |i: usize| centre(i) + Vector3::new(-0.035, 0.0, 0.0);
+    let z = w.robot.crossing_z(&near(0), &near(2));
+    assert!((z - tall).abs() < 1e-12, "{z}");
+    // The way ends over_m short of its goal: coming along x to 4 cm from the tall piece's axis,
+    // it is not crossed (the tool goes down beside it, 5 cm from its axis at the least).
+    let z = w.robot.crossing_z(
+        &(centre(1) + Vector3::new(0.10, 0.0, 0.0)),
+        &(centre(1) + Vector3::new(0.04, 0.0, 0.0)),
+    );
+    assert!((z - centre(1).z).abs() < 1e-12, "{z}");
     // Rising from a piece (a retreat): above it and the pieces within reach around it.
     let z = w.robot.crossing_z(&centre(2), &centre(2));
     assert!((z - short).abs() < 1e-12, "{z}");
@@ -419,6 +431,20 @@ fn between_grasps_the_tool_crosses_above_the_pieces_beside_its_way_not_the_talle
     )
     .unwrap_err();
     assert!(e.to_string().contains("objects[1]"), "{e}");
+    // The clearance height must clear every top by more than over_m.
+    let e = PickPlaceRobot::new(
+        PickPlaceSettings {
+            clearance_z: o[1].top_z(),
+            ..s
+        },
+        Arc::new(sawyer()),
+        Isometry3::identity(),
+        w.robot.tcp,
+        ARM.to_vec(),
+        pieces(),
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("clearance_z"), "{e}");
 }
 
 #[test]
