@@ -231,6 +231,11 @@ pub struct ChessTask {
     pub place_jitter_m: f64,
     /// Closed-loop gain of the carry (1/s).
     pub gain: f64,
+    /// How far the robot's open gripper reaches across from its tool point (m): half its
+    /// opening and a finger's thickness. Between grasps the tool keeps this clear of the
+    /// pieces it passes, and comes down onto a piece only once centred on it within the
+    /// half-opening less the piece's radius (`PickPlaceSettings::tool_radius_m`).
+    pub gripper_reach_m: f64,
     /// TCP speed cap (m/s).
     pub max_tcp_speed: f64,
     /// The intent estimate's settings.
@@ -274,6 +279,7 @@ impl Default for ChessTask {
             time_jitter: 0.15,
             place_jitter_m: 0.003,
             gain: 8.0,
+            gripper_reach_m: 0.025,
             max_tcp_speed: SafetySettings::default().max_tcp_speed,
             intent: IntentSettings::default(),
             delays_ms: vec![0.0, 100.0],
@@ -377,6 +383,7 @@ impl ChessTask {
             ("mass_kg", self.mass_kg),
             ("hand_rate_hz", self.hand_rate_hz),
             ("max_tcp_speed", self.max_tcp_speed),
+            ("gripper_reach_m", self.gripper_reach_m),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(SceneError::field(
@@ -650,26 +657,23 @@ mod tests {
         assert!(e.contains("white_pawn_d2 stands on d2"), "{e}");
         let e = opening(&["e2e9"]).validate().unwrap_err().to_string();
         assert!(e.contains("not a move"), "{e}");
-        let bad = ChessTask {
+        let refused = |bad: ChessTask| bad.validate().unwrap_err().to_string();
+        let base = || opening(&["e2e4"]);
+        let e = refused(ChessTask {
             position: "8/8/8".into(),
-            ..opening(&["e2e4"])
-        };
-        assert!(
-            bad.validate()
-                .unwrap_err()
-                .to_string()
-                .contains("chess.position")
-        );
-        let bad = ChessTask {
+            ..base()
+        });
+        assert!(e.contains("chess.position"), "{e}");
+        let e = refused(ChessTask {
             square_m: f64::NAN,
-            ..opening(&["e2e4"])
-        };
-        assert!(
-            bad.validate()
-                .unwrap_err()
-                .to_string()
-                .contains("chess.square_m")
-        );
+            ..base()
+        });
+        assert!(e.contains("chess.square_m"), "{e}");
+        let e = refused(ChessTask {
+            gripper_reach_m: 0.0,
+            ..base()
+        });
+        assert!(e.contains("chess.gripper_reach_m"), "{e}");
     }
 
     #[test]

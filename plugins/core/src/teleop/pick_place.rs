@@ -306,6 +306,10 @@ pub struct PickPlaceRobot {
     near_since_s: Option<f64>,
 }
 
+/// A gripper finger's thickness (m): [`PickPlaceSettings::tool_radius_m`] less this is the open
+/// gripper's half-opening ([`PickPlaceRobot::descent_floor`]).
+pub const FINGER_M: f64 = 0.005;
+
 /// In Place, an object that has not come within [`PickPlaceSettings::over_m`] of its place this
 /// many [`PickPlaceSettings::place_timeout_s`] after the hand let go is set down straight below
 /// where it is; at twice this it is let go of wherever it is.
@@ -446,8 +450,8 @@ impl PickPlaceRobot {
     /// [`PickPlaceSettings::over_m`] across onto its goal (world z, m; `-inf` where nothing is
     /// below it): [`PickPlaceSettings::over_m`] / 2 above the top of every object whose side
     /// lies within [`PickPlaceSettings::tool_radius_m`] of `at` (the open gripper over it);
-    /// the object `goal` left out once the tool is within the gripper's opening
-    /// (`tool_radius_m` less a 5 mm finger) less its radius of its axis, at least
+    /// the object `goal` left out once the tool is within the gripper's half-opening
+    /// (`tool_radius_m` less [`FINGER_M`]) less its radius of its axis, at least
     /// `arrive_m`: the fingers then pass either side of it.
     pub fn descent_floor(&self, at: &Vector3<f64>, goal: Option<usize>) -> f64 {
         let s = &self.settings;
@@ -457,11 +461,26 @@ impl PickPlaceRobot {
             .filter(|&(i, o)| {
                 let off = (o.pose.translation.vector.xy() - at.xy()).norm();
                 let straddled = Some(i) == goal
-                    && off <= (s.tool_radius_m - 0.005 - o.radius_m).max(s.arrive_m);
+                    && off <= (s.tool_radius_m - FINGER_M - o.radius_m).max(s.arrive_m);
                 off <= o.radius_m + s.tool_radius_m && !straddled
             })
             .map(|(_, o)| o.top_z() + s.over_m / 2.0)
             .fold(f64::NEG_INFINITY, f64::max)
+    }
+
+    /// The twist of a move between grasps from `tool` to `goal` (world), the object `piece`
+    /// the tool goes to if any: [`clearance_twist`] at [`PickPlaceRobot::crossing_z`] and
+    /// above [`PickPlaceRobot::descent_floor`]. Returns it and whether the tool has arrived.
+    fn move_between_grasps(
+        &self,
+        tool: &Isometry3<f64>,
+        goal: &Isometry3<f64>,
+        piece: Option<usize>,
+    ) -> (Vector6<f64>, bool) {
+        let p = tool.translation.vector;
+        let cross_z = self.crossing_z(&p, &goal.translation.vector);
+        let floor_z = self.descent_floor(&p, piece);
+        clearance_twist(tool, goal, cross_z, floor_z, &self.settings)
     }
 
     /// One tick at `now_s` with the measured joints `q` (all joints, stamped `joints_stamp_s`)
@@ -531,8 +550,7 @@ impl PickPlaceRobot {
                     let p = tool.translation.vector;
                     let z = self.crossing_z(&p, &p);
                     let up = Isometry3::from_parts(Translation3::new(p.x, p.y, z), tool.rotation);
-                    let floor = self.descent_floor(&p, None);
-                    let (twist, arrived) = clearance_twist(&tool, &up, z, floor, &self.settings);
+                    let (twist, arrived) = self.move_between_grasps(&tool, &up, None);
                     if arrived || p.z >= z {
                         self.phase = PickPhase::Free;
                     } else {
@@ -548,10 +566,7 @@ impl PickPlaceRobot {
                     };
                     out.goal = Some(goal);
                     if let Some(g) = self.goal_pose(goal) {
-                        let p = tool.translation.vector;
-                        let z = self.crossing_z(&p, &g.translation.vector);
-                        let floor = self.descent_floor(&p, Some(i));
-                        let (twist, arrived) = clearance_twist(&tool, &g, z, floor, &self.settings);
+                        let (twist, arrived) = self.move_between_grasps(&tool, &g, Some(i));
                         if !arrived {
                             out.qdot = self.joint_velocity(&jacobian, &twist, q)?;
                         }
@@ -566,10 +581,7 @@ impl PickPlaceRobot {
                 }
                 out.goal = Some(PickGoal::Grasp(object));
                 if let Some(g) = self.goal_pose(PickGoal::Grasp(object)) {
-                    let p = tool.translation.vector;
-                    let z = self.crossing_z(&p, &g.translation.vector);
-                    let floor = self.descent_floor(&p, Some(object));
-                    let (twist, arrived) = clearance_twist(&tool, &g, z, floor, &self.settings);
+                    let (twist, arrived) = self.move_between_grasps(&tool, &g, Some(object));
                     if arrived {
                         self.closed = true;
                         self.tcp_from_object = tool.inverse() * self.objects[object].pose;

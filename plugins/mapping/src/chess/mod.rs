@@ -73,7 +73,7 @@ pub fn robot_settings(task: &ChessTask, setup: &ChessSetup) -> PickPlaceSettings
     PickPlaceSettings {
         clearance_z: task.board_top() + setup.tallest_m() + 0.03,
         clear_m: 0.03,
-        tool_radius_m: 0.025,
+        tool_radius_m: task.gripper_reach_m,
         hover_m: 0.03,
         grasp_depth_m: 0.015,
         tool_down: UnitQuaternion::from_matrix(&Matrix3::from_columns(&[radial, y, down])),
