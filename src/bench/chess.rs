@@ -202,14 +202,14 @@ impl ChessChart<'_> {
         let (x0, x1) = padded(self.conditions.iter().map(|c| c.delay_ms));
         let mut chart = axes(
             area,
-            (x0.min(-10.0), x1.max(110.0)),
+            (x0.min(-10.0), x1.max(130.0)),
             (0.0, y1),
             "one-way delay between operator and robot, ms",
             y_desc,
         )?;
         chart
             .draw_series(DashedLineSeries::new(
-                [(x0.min(-10.0), goal), (x1.max(110.0), goal)],
+                [(x0.min(-10.0), goal), (x1.max(130.0), goal)],
                 6,
                 4,
                 BLACK.stroke_width(1),

@@ -28,8 +28,8 @@ pub use error::HandError;
 /// What most users of the hand need.
 pub mod prelude {
     pub use crate::{
-        ActiveHand, GraspTarget, HandContact, HandError, HandPlugin, HandSource, HandSystems,
-        HeldObject, ObjectContacts, RecordedHand, ScriptedHand,
+        ActiveHand, FixedUntilGrasped, GraspTarget, HandContact, HandError, HandPlugin, HandSource,
+        HandSystems, HeldObject, ObjectContacts, RecordedHand, ScriptedHand,
     };
 }
 
@@ -233,6 +233,24 @@ pub struct HandPart {
 #[derive(Component, Debug, Clone, Copy, Default)]
 pub struct GraspTarget;
 
+/// Marks a grasp target that holds still where it rests until the hand takes it: a piece among
+/// many on a board. Until grasped the body is fixed ([`RigidBody::Fixed`]): the hand's bodies
+/// meet it (their contacts are read and can grasp it) but cannot push it, so a hand reaching
+/// past it does not knock it over and its twin stays where the real piece is (the robot cannot
+/// follow a push that was never a grasp). The grasp makes it dynamic; after the release it
+/// settles under gravity, clear of the opening hand (which touches it without pushing it), and
+/// is fixed again once it has been at rest for [`GraspAssist::rest_s`] with no hand body on it,
+/// or [`GraspAssist::settle_max_s`] after the release whatever it does. The same policy as the "kinematic until grabbed" objects of VR
+/// toolkits (Unity XR Interaction Toolkit's grab interactables). Spawn the body
+/// [`RigidBody::Fixed`] with a [`Velocity`].
+#[derive(Component, Debug, Clone, Copy, Default, PartialEq)]
+pub struct FixedUntilGrasped {
+    /// How long the released body has been at rest (s).
+    pub at_rest_s: f32,
+    /// How long since it was released (s).
+    pub released_s: f32,
+}
+
 /// One contact of a hand body on a grasp target, after a physics step (world frame).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HandContact {
@@ -268,12 +286,13 @@ pub struct ObjectContacts {
 /// is nothing to stop them, and the scripted or tracked skeleton rarely wraps an object so that
 /// friction alone carries its weight). Like most physics hands in VR, the hand therefore takes
 /// the object when two of its bodies touch it from opposing sides (contact normals more than
-/// `opposition` apart), by a fixed joint between the palm and the object at their pose of that
-/// moment, and lets go when the tracked hand opens by `release_opening_m` from its tightest
+/// `opposition` apart), one of them the palm or the thumb, while the hand closes
+/// (`closing_m`), by a fixed joint between the palm and the object at their pose of that
+/// moment; it lets go when the tracked hand opens by `release_opening_m` from its tightest
 /// closure since the grasp (a real hand, measured on the Leap `grab` recording, takes the
 /// object as its fingers first meet it and goes on closing: released against its closure at
-/// the grasp, it never let go). The contacts, their forces and velocities are read as before, so the grasp
-/// matrix and the mapping see the hand, not the joint.
+/// the grasp, it never let go). The contacts, their forces and velocities are read as before,
+/// so the grasp matrix and the mapping see the hand, not the joint.
 #[derive(Resource, Debug, Clone, Copy, PartialEq)]
 pub struct GraspAssist {
     /// On (default) or off (contacts and friction only).
@@ -283,6 +302,21 @@ pub struct GraspAssist {
     /// The hand lets go when its closure opens by this much (m, mean fingertip distance to
     /// the palm).
     pub release_opening_m: f64,
+    /// The hand takes an object only once it has closed: its closure this much below the most
+    /// open it has been since it last held one, or since tracking last found it (m). An open
+    /// hand tracked through an object, or jammed against it, touches it from several sides
+    /// without grasping it; a hand found already closed (a fist) opens and closes again first.
+    /// A hand that closed earlier and then meets an object (the pouring task's hands 4 and 5,
+    /// which brush the bottle on the way in and take it mid-pour) still takes it.
+    pub closing_m: f64,
+    /// A released [`FixedUntilGrasped`] body is at rest below this speed (m/s, its centre's,
+    /// and the same figure in rad/s for its spin).
+    pub rest_speed: f32,
+    /// ... and is fixed again after this long at rest, clear of the hand (s).
+    pub rest_s: f32,
+    /// ... or this long after the release whatever it does (s): a piece knocked off the desk
+    /// or rolling on its side does not drift on for ever.
+    pub settle_max_s: f32,
 }
 
 impl Default for GraspAssist {
@@ -291,6 +325,10 @@ impl Default for GraspAssist {
             enabled: true,
             opposition: 0.0,
             release_opening_m: 0.015,
+            closing_m: 0.005,
+            rest_speed: 0.01,
+            rest_s: 0.2,
+            settle_max_s: 2.0,
         }
     }
 }
@@ -310,6 +348,9 @@ pub struct HeldObject {
     /// has closed by `release_opening_m` from there (an opening hand whose fingers still rest
     /// on the object, or meet it again as it drops, does not take it back).
     pub released_at: Option<f64>,
+    /// The most open closure since the hand last held an object or tracking last found it
+    /// (m), for [`GraspAssist::closing_m`].
+    pub most_open: Option<f64>,
 }
 
 /// The most closed frame of `frames` ([`closure`]): where a recorded fist is tightest.
@@ -366,6 +407,9 @@ pub const BONES: [(usize, usize); 14] = [
     (24, 25),
 ];
 
+/// The thumb's joints (metacarpal to tip): its bodies start at these.
+const THUMB: [usize; 4] = [2, 3, 4, 5];
+
 /// Contact points farther apart than this (m) without an impulse are predictions, not contacts.
 const CONTACT_SLOP: f32 = 0.001;
 
@@ -398,7 +442,7 @@ impl Plugin for HandPlugin {
             )
             .add_systems(
                 FixedUpdate,
-                (read_contacts, assist_grasp)
+                (read_contacts, assist_grasp, settle_released)
                     .chain()
                     .in_set(HandSystems::Contacts),
             );
@@ -483,6 +527,9 @@ fn spawn_hand(mut commands: Commands, drive: Res<HandDrive>) {
         ColliderMassProperties::Density(drive.density),
         Friction::coefficient(drive.friction),
         groups,
+        // In the hand's own solver group, so that a released object can leave it
+        // ([`FixedUntilGrasped`]).
+        SolverGroups::new(HAND_GROUP, Group::ALL),
         // Parked far away until the first tracked frame.
         Transform::from_xyz(0.0, 0.0, -100.0),
     );
@@ -698,8 +745,12 @@ fn assist_grasp(
         return;
     }
     let Some(closure_now) = now_closure else {
+        // Untracked: what the hand did before it was lost says nothing of it now.
+        held.most_open = None;
         return;
     };
+    let most_open = held.most_open.map_or(closure_now, |m| m.max(closure_now));
+    held.most_open = Some(most_open);
     if let Some(at) = held.released_at {
         // The bar rises as the hand opens further: a hand takes an object again only by
         // closing again, whether or not its fingers lost the released one for a moment (a
@@ -712,10 +763,19 @@ fn assist_grasp(
             return;
         }
     }
-    if !assist.enabled || contacts.contacts.is_empty() {
+    if !assist.enabled || contacts.contacts.is_empty() || closure_now > most_open - assist.closing_m
+    {
         return;
     }
-    // An object touched by two hand bodies from opposing sides.
+    // An object touched by two hand bodies from opposing sides, one of them the palm or the
+    // thumb: the oppositions of a grasp (Iberall's pad, palm and side opposition). Two fingers
+    // alone on opposite sides of an object are not holding it: closing round one chess piece,
+    // a hand's fingertips reach past it to the next and straddle it.
+    let opposer = |e: Entity| {
+        parts
+            .get(e)
+            .is_ok_and(|(_, p, _)| p.from == WRIST || THUMB.contains(&p.from))
+    };
     let c = &contacts.contacts;
     let opposed = c.iter().enumerate().find_map(|(i, a)| {
         c[i + 1..]
@@ -723,6 +783,7 @@ fn assist_grasp(
             .any(|b| {
                 a.object == b.object
                     && a.part != b.part
+                    && (opposer(a.part) || opposer(b.part))
                     && a.contact.normal.dot(&b.contact.normal) < f64::from(assist.opposition)
             })
             .then_some(a.object)
@@ -745,7 +806,73 @@ fn assist_grasp(
         .entity(target)
         .insert(ImpulseJoint::new(palm, joint));
     held.held = Some((target, closure_now));
+    held.most_open = None;
     held.grasps += 1;
+}
+
+/// The solver groups of a released [`FixedUntilGrasped`] body while it settles: the hand's
+/// bodies still touch it (their contacts are read) but no longer push it.
+const SETTLING: SolverGroups = SolverGroups {
+    memberships: Group::ALL,
+    filters: Group::ALL.difference(HAND_GROUP),
+};
+
+/// Makes a [`FixedUntilGrasped`] body dynamic while the hand holds it; after the release it
+/// settles clear of the opening hand (which would otherwise push or topple it) and is fixed
+/// again once it has rested [`GraspAssist::rest_s`].
+fn settle_released(
+    time: Res<Time<Fixed>>,
+    assist: Res<GraspAssist>,
+    held: Res<HeldObject>,
+    contacts: Res<ObjectContacts>,
+    mut bodies: Query<(
+        Entity,
+        &mut FixedUntilGrasped,
+        &mut RigidBody,
+        &mut Velocity,
+        Option<&mut SolverGroups>,
+    )>,
+    mut commands: Commands,
+) {
+    let dt = time.timestep().as_secs_f32();
+    for (entity, mut still, mut body, mut velocity, solver) in &mut bodies {
+        if held.held.is_some_and(|(e, _)| e == entity) {
+            if *body != RigidBody::Dynamic {
+                *body = RigidBody::Dynamic;
+            }
+            if let Some(mut s) = solver.filter(|s| **s != SolverGroups::default()) {
+                *s = SolverGroups::default();
+            }
+            still.at_rest_s = 0.0;
+            still.released_s = 0.0;
+        } else if *body == RigidBody::Dynamic {
+            let resting = velocity.linear.length() < assist.rest_speed
+                && velocity.angular.length() < assist.rest_speed;
+            still.at_rest_s = if resting { still.at_rest_s + dt } else { 0.0 };
+            still.released_s += dt;
+            // Fixed with a hand body inside it, the restored groups would throw the hand out.
+            let touched = contacts.contacts.iter().any(|c| c.object == entity);
+            let settled = (still.at_rest_s >= assist.rest_s && !touched)
+                || still.released_s >= assist.settle_max_s;
+            if settled {
+                *body = RigidBody::Fixed;
+                *velocity = Velocity::zero();
+            }
+            // Fixed again, the hand meets it as before.
+            let groups = if settled {
+                SolverGroups::default()
+            } else {
+                SETTLING
+            };
+            match solver {
+                Some(mut s) if *s != groups => *s = groups,
+                Some(_) => {}
+                None => {
+                    commands.entity(entity).insert(groups);
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use crate::{ActiveHand, GraspTarget, ObjectContacts, ScriptedHand};
+use crate::{ActiveHand, FixedUntilGrasped, GraspTarget, HeldObject, ObjectContacts, ScriptedHand};
 use avatarm_core::teleop::grasp::{ContactModel, analyse};
 use avatarm_core::teleop::hand::{HandKeyframe, HandNoise, HandScript, Handedness};
 use bevy::prelude::*;
@@ -303,4 +303,123 @@ fn a_scripted_hand_gives_each_tracker_frame_once() {
         .collect();
     assert!((89..=91).contains(&frames.len()), "{}", frames.len());
     assert!(frames.windows(2).all(|w| w[1] > w[0]));
+}
+
+/// Three pieces on the table (upright cylinders 2.4 cm in radius, 9 cm tall, 200 g), fixed
+/// until grasped: `A` to be taken, `B` on the next square diagonally (10 cm each way) beyond
+/// the fingers, `C` in the open hand's way.
+const PIECE_R: f32 = 0.024;
+const PIECE_HALF: f32 = 0.045;
+const A: Vec3 = Vec3::new(0.6, 0.0, 0.75 + PIECE_HALF);
+const B: Vec3 = Vec3::new(0.5, 0.1, 0.75 + PIECE_HALF);
+const C: Vec3 = Vec3::new(0.6, -0.3, 0.75 + PIECE_HALF);
+
+#[test]
+fn pieces_fixed_until_grasped_are_not_pushed_and_the_taken_one_comes_to_rest_again() {
+    // Wrist 5 cm behind the piece along the fingers, palm against its side (chess's grasp).
+    let beside = |p: Vec3, dz: f64| {
+        [
+            f64::from(p.x) - 0.05,
+            f64::from(p.y) - f64::from(PIECE_R) - 0.01,
+            f64::from(p.z) + dz,
+        ]
+    };
+    let grasp = beside(A, 0.01);
+    let back = [grasp[0], grasp[1] - 0.04, grasp[2]];
+    let high = |mut p: [f64; 3], dz: f64| {
+        p[2] += dz;
+        p
+    };
+    let c = beside(C, 0.0);
+    let keys = vec![
+        // The open hand tracked straight through C's place, the back of the hand first.
+        key(0.0, [c[0], c[1] + 0.10, c[2]], 0.0),
+        key(1.0, [c[0], c[1] - 0.15, c[2]], 0.0),
+        key(1.4, high([c[0], c[1] - 0.15, c[2]], 0.15), 0.0),
+        // Down beside A, 4 cm back, then in against its side.
+        key(2.2, high(back, 0.15), 0.0),
+        key(2.6, back, 0.0),
+        key(2.8, grasp, 0.0),
+        // Closed on A, lifted 5 cm, set down, let go, drawn back and up.
+        key(3.2, grasp, 0.7),
+        key(3.4, grasp, 0.7),
+        key(4.0, high(grasp, 0.05), 0.7),
+        key(4.6, high(grasp, 0.002), 0.7),
+        key(5.0, high(grasp, 0.002), 0.0),
+        key(5.4, [grasp[0], grasp[1] - 0.05, grasp[2]], 0.0),
+        key(5.8, high([grasp[0], grasp[1] - 0.05, grasp[2]], 0.15), 0.0),
+    ];
+    let script = HandScript::new(Handedness::Right, keys, HandNoise::default()).expect("script");
+    let mut app = crate::headless_app(Duration::from_millis(10));
+    app.insert_resource(ActiveHand::new(ScriptedHand::new(script, 90.0)));
+    app.add_systems(Startup, move |mut commands: Commands| {
+        commands.spawn((
+            RigidBody::Fixed,
+            Collider::cuboid(0.65, 0.8, 0.375),
+            Transform::from_xyz(0.45, 0.0, 0.375),
+        ));
+        for (name, at) in [("A", A), ("B", B), ("C", C)] {
+            commands.spawn((
+                Name::new(name),
+                GraspTarget,
+                FixedUntilGrasped::default(),
+                RigidBody::Fixed,
+                Collider::cylinder(PIECE_HALF, PIECE_R),
+                ColliderMassProperties::Mass(0.2),
+                Friction::coefficient(1.0),
+                Velocity::zero(),
+                Transform::from_translation(at)
+                    .with_rotation(Quat::from_rotation_x(std::f32::consts::FRAC_PI_2)),
+            ));
+        }
+    });
+    let piece = |app: &mut App, name: &str| {
+        let mut q = app
+            .world_mut()
+            .query::<(Entity, &Name, &Transform, &RigidBody)>();
+        q.iter(app.world())
+            .find(|(_, n, _, _)| n.as_str() == name)
+            .map(|(e, _, t, b)| (e, *t, *b))
+            .expect("piece")
+    };
+    let mut taken = None;
+    let mut dynamic_while_held = true;
+    let mut highest = 0.0_f32;
+    for step in 0..800 {
+        app.update();
+        let held = app.world().resource::<HeldObject>().held.map(|(e, _)| e);
+        let (a, ta, body) = piece(&mut app, "A");
+        highest = highest.max(ta.translation.z);
+        if held.is_some() {
+            taken = taken.or(held);
+            dynamic_while_held &= held == Some(a) && body == RigidBody::Dynamic;
+        }
+        for (name, at) in [("B", B), ("C", C)] {
+            let (_, t, body) = piece(&mut app, name);
+            assert!(
+                t.translation.distance(at) < 1e-5 && body == RigidBody::Fixed,
+                "{name} moved to {} at step {step}",
+                t.translation
+            );
+        }
+    }
+    let (a, t, body) = piece(&mut app, "A");
+    assert_eq!(taken, Some(a), "the hand took A");
+    // Lifted with the hand (5 cm).
+    assert!(highest > A.z + 0.04, "A rose to {highest}");
+    assert!(
+        dynamic_while_held,
+        "A was dynamic while held, and only A was held"
+    );
+    let held = *app.world().resource::<HeldObject>();
+    assert_eq!((held.held, held.grasps, held.releases), (None, 1, 1));
+    // Let go 2 mm above the table, it stands on it again, fixed, where it was set down.
+    assert_eq!(body, RigidBody::Fixed);
+    assert!((t.translation.z - A.z).abs() < 0.002, "{}", t.translation);
+    assert!(
+        t.translation.xy().distance(A.xy()) < 0.02,
+        "{}",
+        t.translation
+    );
+    assert!((t.rotation * Vec3::Y).z > 0.99, "upright: {:?}", t.rotation);
 }

@@ -267,6 +267,29 @@ pub fn clearance_twist(
     (Vector6::new(v.x, v.y, v.z, w.x, w.y, w.z), arrived)
 }
 
+/// The turn about the vertical (rad, world z, within ±π/2) from `tool_down`'s heading to the
+/// top grasp's heading nearest the tool's `current` one (the twist about z of `current ·
+/// tool_down⁻¹`). An upright round object is grasped the same from any heading, so the tool
+/// keeps its heading where it is within a quarter turn of `tool_down`'s (a heading that has
+/// drifted there is not corrected), and turns only to the nearest edge of that band otherwise: between grasps the wrist never turns more than it must,
+/// and never winds further than a quarter turn from `tool_down`. (While the carry still
+/// followed the twin's turn, going back to `tool_down` itself after a piece turned half round
+/// drove the wrist into its limit, and the rotation error, near π, flipped sign tick by tick.)
+pub fn grasp_heading(tool_down: &UnitQuaternion<f64>, current: &UnitQuaternion<f64>) -> f64 {
+    let half = std::f64::consts::FRAC_PI_2;
+    heading_from(tool_down, current).clamp(-half, half)
+}
+
+/// The turn about the vertical (rad, world z, in (−π, π]) from `tool_down` to `current`: the
+/// twist about z of the rotation `current · tool_down⁻¹` (its swing-twist decomposition,
+/// `2 atan2(q_z, q_w)`), whatever the tool's tilt; 0 where not finite.
+fn heading_from(tool_down: &UnitQuaternion<f64>, current: &UnitQuaternion<f64>) -> f64 {
+    let q = (current * tool_down.inverse()).into_inner();
+    let pi = std::f64::consts::PI;
+    let d = (2.0 * q.k.atan2(q.w) + pi).rem_euclid(2.0 * pi) - pi;
+    if d.is_finite() { d } else { 0.0 }
+}
+
 /// The target kept upright: its position and its turn about the vertical, its tilt left out
 /// (and the twist's turn about horizontal axes). A piece is carried and set down upright: a
 /// twin tilted a few degrees in the virtual hand, followed by a top grasp, swings the wrist at
@@ -402,13 +425,20 @@ impl PickPlaceRobot {
         ))
     }
 
-    fn goal_pose(&self, goal: PickGoal) -> Option<Isometry3<f64>> {
-        match goal {
+    /// The pose the tool goes to for `goal`, turned about the vertical to the top grasp's
+    /// heading nearest the tool's ([`grasp_heading`]).
+    fn goal_pose(&self, goal: PickGoal, tool: &Isometry3<f64>) -> Option<Isometry3<f64>> {
+        let g = match goal {
             PickGoal::Hover(i) => self
                 .grasp_pose(i)
                 .map(|g| Translation3::new(0.0, 0.0, self.settings.hover_m) * g),
             PickGoal::Around(i) | PickGoal::Grasp(i) => self.grasp_pose(i),
-        }
+        }?;
+        let turn = UnitQuaternion::from_axis_angle(
+            &Vector3::z_axis(),
+            grasp_heading(&self.settings.tool_down, &tool.rotation),
+        );
+        Some(Isometry3::from_parts(g.translation, turn * g.rotation))
     }
 
     /// The height (world z, m) the tool point crosses at from `from` to `to` (world; their
@@ -565,7 +595,7 @@ impl PickPlaceRobot {
                         PickGoal::Hover(i)
                     };
                     out.goal = Some(goal);
-                    if let Some(g) = self.goal_pose(goal) {
+                    if let Some(g) = self.goal_pose(goal, &tool) {
                         let (twist, arrived) = self.move_between_grasps(&tool, &g, Some(i));
                         if !arrived {
                             out.qdot = self.joint_velocity(&jacobian, &twist, q)?;
@@ -580,7 +610,7 @@ impl PickPlaceRobot {
                     return self.tick(command, q, now_s, joints_stamp_s);
                 }
                 out.goal = Some(PickGoal::Grasp(object));
-                if let Some(g) = self.goal_pose(PickGoal::Grasp(object)) {
+                if let Some(g) = self.goal_pose(PickGoal::Grasp(object), &tool) {
                     let (twist, arrived) = self.move_between_grasps(&tool, &g, Some(object));
                     if arrived {
                         self.closed = true;
@@ -652,13 +682,16 @@ impl PickPlaceRobot {
             last.target.translation = Translation3::new(p.x, p.y, rest_z);
             self.last_target = Some(last);
         }
-        let target = upright(&OperatorTarget {
-            held: true,
-            object_twist: Vector6::zeros(),
-            twin_twist: Vector6::zeros(),
-            stamp_s: joints_stamp_s,
-            ..last
-        });
+        let target = self.carried_upright(
+            &OperatorTarget {
+                held: true,
+                object_twist: Vector6::zeros(),
+                twin_twist: Vector6::zeros(),
+                stamp_s: joints_stamp_s,
+                ..last
+            },
+            object,
+        );
         out.target = Some(target.target);
         let error = pose_difference(&measured, &target.target);
         let placed = error.fixed_rows::<3>(0).norm() <= s.place_m
@@ -692,7 +725,7 @@ impl PickPlaceRobot {
         times: (f64, f64),
     ) -> crate::Result<DVector<f64>> {
         let (now_s, joints_stamp_s) = times;
-        let target = &self.over_the_others(object, &upright(target), tool);
+        let target = &self.over_the_others(object, &self.carried_upright(target, object), tool);
         let side = RobotSide {
             model: &self.model,
             base: self.base,
@@ -710,6 +743,21 @@ impl PickPlaceRobot {
             &side,
         )?;
         Ok(out.qdot)
+    }
+
+    /// The carried object's target kept upright ([`upright`]) and facing as the object did
+    /// when it was grasped (its believed pose's heading about the vertical; the turn rate
+    /// dropped): the tool keeps the heading it grasped with. An upright round object is the
+    /// same whichever way it faces, and following the twin's turn in the hand wound the wrist:
+    /// a scripted hand that sets a piece down from the other side turns its twin half round,
+    /// and the Sawyer's last joint ran into its limit (the piece set down up to 75 cm off, 9 of
+    /// 20 moves wrong; docs/chess.md).
+    fn carried_upright(&self, target: &OperatorTarget, object: usize) -> OperatorTarget {
+        let mut t = upright(target);
+        let (_, _, yaw) = self.objects[object].pose.rotation.euler_angles();
+        t.target.rotation = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
+        t.object_twist[5] = 0.0;
+        t
     }
 
     /// The carried object's target shaped by the clearance rule the tool follows between

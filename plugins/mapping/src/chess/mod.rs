@@ -23,7 +23,7 @@ use std::time::Duration;
 
 use avatarm_core::teleop::mapping::{MappingSettings, VirtualToReal};
 use avatarm_core::teleop::pick_place::{PickGoal, PickPhase, PickPlaceSettings};
-use avatarm_hand::{ActiveHand, GraspTarget, HandDrive, ScriptedHand};
+use avatarm_hand::{ActiveHand, FixedUntilGrasped, GraspTarget, HandDrive, ScriptedHand};
 use avatarm_scene::chess::{ChessSetup, ChessTask};
 use bevy::prelude::*;
 use bevy_rapier3d::prelude::*;
@@ -46,9 +46,6 @@ pub struct ChessCase {
 
 /// Seconds run after the last move (the last placement and retreat).
 pub const TAIL_S: f64 = 2.0;
-/// The finger's half-width around the tool point (m): a tool point closer than this to another
-/// piece's side (below its top) touches it.
-pub const FINGER_HALF_WIDTH_M: f64 = 0.01;
 
 /// The twins of the pieces in the hand's world, in the set-up's order.
 #[derive(Resource, Debug, Clone, Default)]
@@ -168,7 +165,8 @@ pub fn spawn_chess_twins(
                     .spawn((
                         Name::new("piece twin"),
                         GraspTarget,
-                        RigidBody::Dynamic,
+                        FixedUntilGrasped::default(),
+                        RigidBody::Fixed,
                         Collider::compound(vec![(Vec3::ZERO, up, Collider::cylinder(h / 2.0, r))]),
                         ColliderMassProperties::Mass(mass),
                         Friction::coefficient(friction),

@@ -10,7 +10,7 @@ use avatarm_scene::chess::{ChessSetup, ChessTask};
 use nalgebra::{Isometry3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::{ChessCase, FINGER_HALF_WIDTH_M, carried, goal_piece};
+use super::{ChessCase, carried, goal_piece};
 
 /// One move's result.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -212,6 +212,8 @@ pub(crate) struct Meter {
     starts: Option<Vec<f64>>,
     names: Vec<String>,
     sizes: Vec<(f64, f64)>,
+    /// The open gripper's reach about the tool point (m, `[chess] gripper_reach_m`).
+    reach_m: f64,
     square_m: f64,
     files: Vector3<f64>,
     ranks: Vector3<f64>,
@@ -258,6 +260,7 @@ impl Meter {
             starts,
             names: setup.pieces.iter().map(|p| p.name.clone()).collect(),
             sizes: setup.sizes.clone(),
+            reach_m: task.gripper_reach_m,
             square_m: task.square_m,
             files: r * Vector3::x(),
             ranks: r * Vector3::y(),
@@ -393,15 +396,15 @@ impl Meter {
         self.touching = touching;
     }
 
-    /// The tool point within piece `j`'s reach: closer to its axis than its radius and a
-    /// finger, below its top (and 5 mm).
+    /// The tool point within piece `j`'s reach: closer to its axis than its radius and the open
+    /// gripper's reach, below its top (and 5 mm).
     fn within_reach(&self, v: &TickView, j: usize) -> bool {
         let Some(o) = v.arm.objects().get(j) else {
             return false;
         };
         let (c, tool) = (o.pose.translation.vector, v.tool.translation.vector);
         let (r, h) = self.sizes[j];
-        Vector3::new(tool.x - c.x, tool.y - c.y, 0.0).norm() < r + FINGER_HALF_WIDTH_M
+        Vector3::new(tool.x - c.x, tool.y - c.y, 0.0).norm() < r + self.reach_m
             && tool.z < c.z + h / 2.0 + 0.005
     }
 

@@ -3,16 +3,19 @@
 //!
 //! Each move: from a rest pose above the operator's edge of the board, a reach (bent through a
 //! seeded via point) to above the piece's approach side, down beside it, in to a side grasp
-//! (palm on the side whose neighbouring square is empty, the pouring task's grasp scaled to the
-//! piece), a close, a lift above the tallest piece, a carry to the target square, a set-down,
-//! a release, a step back, straight up, and on to the next rest. Seeded per move: the rest (±`start_jitter_m`), the
-//! via point (±`via_jitter_m`), each stretch's duration (±`time_jitter`), the grasp height
+//! (the pouring task's grasp scaled to the piece, from the first side, straight or diagonal,
+//! where the hand's bones keep 1 cm from every other piece: [`choose_side`]), a close, a lift
+//! above the tallest piece, a carry to the target square (the hand turning about the piece to
+//! the side it sets it down from), a set-down, a release, a step back, straight up, and on to
+//! the next rest. Seeded per move: the rest (±`start_jitter_m`), the via point (±`via_jitter_m`), each stretch's duration (±`time_jitter`), the grasp height
 //! (1 ± 1 cm above the piece's centre) and the set-down point (±`place_jitter_m`).
 
 use std::f64::consts::FRAC_PI_2;
 
 use avatarm_core::rng::Rng;
-use avatarm_core::teleop::hand::{HandKeyframe, HandNoise, HandScript, Handedness};
+use avatarm_core::teleop::hand::{
+    HandKeyframe, HandNoise, HandScript, Handedness, SKELETON, skeleton,
+};
 use avatarm_core::teleop::mapping::VirtualToReal;
 use avatarm_scene::chess::{ChessSetup, ChessTask, Square};
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
@@ -42,8 +45,9 @@ pub struct ChessScript {
     pub script: HandScript,
     /// Per move.
     pub moves: Vec<MoveTimes>,
-    /// The approach direction of each move (unit, virtual, from the palm toward the piece).
-    pub approach: Vec<Vector3<f64>>,
+    /// The approach direction of each move's grasp and set-down (unit, virtual, from the palm
+    /// toward the piece).
+    pub approach: Vec<(Vector3<f64>, Vector3<f64>)>,
 }
 
 /// The board's axes in the world: files, ranks (unit, horizontal).
@@ -52,37 +56,128 @@ fn board_axes(task: &ChessTask) -> (Vector3<f64>, Vector3<f64>) {
     (r * Vector3::x(), r * Vector3::y())
 }
 
-/// The square next to `square` one step along `step` (file, rank), if on the board.
-fn neighbour(square: Square, step: (i8, i8)) -> Option<Square> {
-    let f = square.file as i8 + step.0;
-    let r = square.rank as i8 + step.1;
-    ((0..8).contains(&f) && (0..8).contains(&r)).then_some(Square {
-        file: f as u8,
-        rank: r as u8,
-    })
+/// The sides a hand may take a piece from, in the operator's order of preference, as board
+/// steps (file, rank) from the palm toward the piece: toward higher ranks (palm on the
+/// operator's side), along the files either way, toward lower ranks, then the diagonals.
+const SIDES: [(i8, i8); 8] = [
+    (0, 1),
+    (1, 0),
+    (-1, 0),
+    (0, -1),
+    (1, 1),
+    (-1, 1),
+    (1, -1),
+    (-1, -1),
+];
+
+/// The room a hand wants between its bones and the other pieces (m, virtual).
+const ROOM_M: f64 = 0.01;
+
+/// The other pieces as the hand meets them (virtual): axis position, radius, top.
+type Obstacle = (Vector3<f64>, f64, f64);
+
+/// The least distance (m) between the hand's bone capsules (`skeleton` at `wrist` and `grip`,
+/// sampled along each bone) and the side of any `others` piece below its top; negative where
+/// they overlap.
+fn hand_room(wrist: &Isometry3<f64>, grip: f64, others: &[Obstacle]) -> f64 {
+    let joints = skeleton(wrist, grip, Handedness::Right);
+    let mut room = f64::INFINITY;
+    for &(a, b) in SKELETON.iter() {
+        let (ja, jb) = (&joints[a], &joints[b]);
+        for i in 0..=4 {
+            let s = f64::from(i) / 4.0;
+            let p = ja
+                .pose
+                .translation
+                .vector
+                .lerp(&jb.pose.translation.vector, s);
+            let radius = ja.radius + (jb.radius - ja.radius) * s;
+            for (c, r, top) in others {
+                if p.z - radius > *top {
+                    continue;
+                }
+                let across = ((p.x - c.x).powi(2) + (p.y - c.y).powi(2)).sqrt();
+                room = room.min(across - r - radius);
+            }
+        }
+    }
+    room
 }
 
-/// The approach direction for a piece on `from` going to `to` with the board's squares
-/// `occupied`: the first of toward higher ranks (palm on the lower-rank side), along the files
-/// either way, toward lower ranks, then the diagonals, whose palm-side square is free at both
-/// ends of the move (or off the board). Returned as a board step (file, rank).
-fn approach_step(from: Square, to: Square, occupied: &[Square]) -> (i8, i8) {
-    let free = |s: Square, step: (i8, i8)| {
-        neighbour(s, (-step.0, -step.1)).is_none_or(|n| n == from || !occupied.contains(&n))
-    };
-    [
-        (0, 1),
-        (1, 0),
-        (-1, 0),
-        (0, -1),
-        (1, 1),
-        (-1, 1),
-        (1, -1),
-        (-1, -1),
-    ]
-    .into_iter()
-    .find(|&step| free(from, step) && free(to, step))
-    .unwrap_or((0, 1))
+/// A grasp (or set-down) of one piece from one side: the hand's wrist poses on the way in and
+/// out (virtual), from the scripted hand's key poses.
+struct Side {
+    /// Unit, from the palm toward the piece (virtual, horizontal).
+    d: Vector3<f64>,
+    /// The hand's heading about the vertical (rad).
+    yaw: f64,
+}
+
+impl Side {
+    fn of(step: (i8, i8), files: &Vector3<f64>, ranks: &Vector3<f64>) -> Self {
+        let d = (files * f64::from(step.0) + ranks * f64::from(step.1)).normalize();
+        Self {
+            d,
+            yaw: (-d.x).atan2(d.y),
+        }
+    }
+
+    /// The wrist's offset from the piece's centre: the pouring grasp scaled to a piece of
+    /// radius `r` (m, virtual), wrist 5 cm behind the piece along the fingers, palm against its
+    /// side, `dz` above its centre.
+    fn offset(&self, r: f64, dz: f64) -> Vector3<f64> {
+        UnitQuaternion::from_euler_angles(0.0, 0.0, self.yaw) * Vector3::new(-0.05, -(r + 0.01), dz)
+    }
+
+    fn wrist(&self, at: Vector3<f64>) -> Isometry3<f64> {
+        Isometry3::from_parts(
+            at.into(),
+            UnitQuaternion::from_euler_angles(FRAC_PI_2, 0.0, self.yaw),
+        )
+    }
+
+    /// The least room (m) the hand has around the other pieces taking a piece centred at `c`
+    /// of radius `r` from this side: the open hand coming down beside it, in to the grasp,
+    /// closed on it, and stepping back open.
+    fn room(&self, c: Vector3<f64>, r: f64, dz: f64, others: &[Obstacle]) -> f64 {
+        let grasp = c + self.offset(r, dz);
+        [
+            (grasp - self.d * 0.04 + Vector3::new(0.0, 0.0, 0.03), 0.0),
+            (grasp - self.d * 0.04, 0.0),
+            (grasp, 0.0),
+            (grasp, GRIP),
+            (grasp - self.d * 0.06, 0.0),
+        ]
+        .iter()
+        .map(|&(w, grip)| hand_room(&self.wrist(w), grip, others))
+        .fold(f64::INFINITY, f64::min)
+    }
+}
+
+/// The side a hand takes a piece of radius `r` centred at `c` from (virtual): the first of
+/// [`SIDES`] that leaves the hand [`ROOM_M`] around the `others`, else the one with the most
+/// room. The grasp and the set-down each take their own side: the hand turns about the piece
+/// while carrying it.
+fn choose_side(
+    c: Vector3<f64>,
+    r: f64,
+    dz: f64,
+    others: &[Obstacle],
+    files: &Vector3<f64>,
+    ranks: &Vector3<f64>,
+) -> Side {
+    let mut best: Option<(f64, Side)> = None;
+    for step in SIDES {
+        let side = Side::of(step, files, ranks);
+        let room = side.room(c, r, dz, others);
+        if room >= ROOM_M {
+            return side;
+        }
+        if best.as_ref().is_none_or(|(b, _)| room > *b) {
+            best = Some((room, side));
+        }
+    }
+    best.map_or_else(|| Side::of(SIDES[0], files, ranks), |(_, s)| s)
 }
 
 /// The hand script of trial `trial` (its seed `task.seed + trial`) for the set-up's moves, in
@@ -121,15 +216,6 @@ pub fn chess_script(
     };
     for &(m, piece) in &setup.moves {
         let (r, _) = setup.sizes[piece];
-        let step = approach_step(m.from, m.to, &at);
-        let d = (files * f64::from(step.0) + ranks * f64::from(step.1)).normalize();
-        let yaw = (-d.x).atan2(d.y);
-        // The hand's lower fingers clear the board.
-        let grasp_dz = 0.01 + sym(0.01);
-        // The pouring grasp scaled to the piece: wrist 5 cm behind the piece along the
-        // fingers, palm against its side.
-        let offset = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw)
-            * Vector3::new(-0.05, -(r * k + 0.01), grasp_dz);
         let from_c = v2r
             .virtual_pose(&setup.centre_on(task, piece, m.from))
             .translation
@@ -139,6 +225,26 @@ pub fn chess_script(
             .translation
             .vector
             + Vector3::new(sym(task.place_jitter_m), sym(task.place_jitter_m), 0.0) * k;
+        // The other pieces where they stand now (virtual).
+        let others: Vec<Obstacle> = at
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| i != piece)
+            .map(|(i, &sq)| {
+                let c = v2r
+                    .virtual_pose(&setup.centre_on(task, i, sq))
+                    .translation
+                    .vector;
+                let (ri, hi) = setup.sizes[i];
+                (c, ri * k, c.z + hi * k / 2.0)
+            })
+            .collect();
+        // The hand's lower fingers clear the board.
+        let grasp_dz = 0.01 + sym(0.01);
+        let take = choose_side(from_c, r * k, grasp_dz, &others, &files, &ranks);
+        let set = choose_side(to_c, r * k, grasp_dz, &others, &files, &ranks);
+        let (d, yaw) = (take.d, take.yaw);
+        let offset = take.offset(r * k, grasp_dz);
         let high = top_v.z + tallest_v + 0.08;
         let lift = tallest_v + 0.03;
         let grasp = from_c + offset;
@@ -172,7 +278,8 @@ pub fn chess_script(
             yaw,
             GRIP,
         );
-        let put = to_c + offset;
+        let put = to_c + set.offset(r * k, grasp_dz);
+        let (d, yaw) = (set.d, set.yaw);
         t += 1.0 * (1.0 + sym(tj));
         push(&mut keys, t, put + Vector3::new(0.0, 0.0, lift), yaw, GRIP);
         t += 0.7 * (1.0 + sym(tj));
@@ -220,7 +327,7 @@ pub fn chess_script(
             release_s: release,
             end_s: t,
         });
-        approach.push(d);
+        approach.push((take.d, set.d));
         at[piece] = m.to;
     }
     let script = HandScript::new(Handedness::Right, keys, HandNoise { seed, ..task.noise })?;

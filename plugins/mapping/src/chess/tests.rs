@@ -34,7 +34,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 #[test]
 fn with_intent_the_real_grasp_follows_the_virtual_one_sooner_and_every_move_lands() {
     let scene = scene();
-    let (task, setup) = opening(&scene, 3);
+    let (task, setup) = opening(&scene, 5);
     let mut delays = Vec::new();
     for intent in [false, true] {
         let r = run_chess_trial(
@@ -59,6 +59,9 @@ fn with_intent_the_real_grasp_follows_the_virtual_one_sooner_and_every_move_land
             // own set-down is the operator's: seeded ±1.5 mm, and the scripted hand's grip).
             assert!(m.follow_error_mm.is_some_and(|e| e < 2.0), "{m:?}");
             assert!(m.place_error_mm.is_some_and(|e| e < 10.0), "{m:?}");
+            // The tool and the carried piece keep clear of every other piece (the open
+            // gripper's reach about the tool point).
+            assert_eq!(m.touches, 0, "{m:?}");
             if !intent {
                 assert_eq!(m.wrong_pregrasps, 0, "no pre-grasp without intent: {m:?}");
             }
@@ -72,9 +75,10 @@ fn with_intent_the_real_grasp_follows_the_virtual_one_sooner_and_every_move_land
             r.moves.iter().filter_map(|m| m.grasp_delay_ms).collect(),
         ));
     }
-    // Anticipating the piece halves the wait for the real grasp at least.
+    // Anticipating the piece cuts the wait for the real grasp to under the 150 ms (the
+    // arm already at the piece), from over a second.
     assert!(
-        delays[1] < delays[0] / 2.0,
+        delays[1] < 150.0 && delays[0] > 1000.0,
         "intent {} ms, none {} ms",
         delays[1],
         delays[0]

@@ -1,6 +1,7 @@
 use super::*;
 use crate::robot::kinematics::tests::sawyer;
 use nalgebra::Matrix3;
+use std::f64::consts::FRAC_PI_2;
 
 const ARM: [usize; 7] = [0, 1, 2, 3, 4, 5, 6];
 const DT: f64 = 0.01;
@@ -488,5 +489,70 @@ fn in_its_last_stretch_the_tool_keeps_above_the_pieces_the_open_gripper_is_over(
     assert!(
         twist[2] > free[2] && (tool.translation.z + twist[2] / s.gain_per_s - floor).abs() < 1e-9,
         "{twist}"
+    );
+}
+
+/// The tool's heading about the vertical (rad, its x axis).
+fn heading(tool: &Isometry3<f64>) -> f64 {
+    let x = tool.rotation * Vector3::x();
+    x.y.atan2(x.x)
+}
+
+#[test]
+fn a_top_grasp_keeps_the_tools_heading_within_a_quarter_turn_and_the_carry_does_not_turn_it() {
+    let d = down();
+    let turned = |a: f64| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a) * d;
+    // Within a quarter turn of tool_down's heading the tool keeps its own; beyond, it turns to
+    // the nearer edge of that band, not back to tool_down and not through half a turn.
+    for (a, want) in [
+        (0.3, 0.3),
+        (-1.2, -1.2),
+        (2.0, FRAC_PI_2),
+        (-2.9, -FRAC_PI_2),
+    ] {
+        let h = grasp_heading(&d, &turned(a));
+        assert!((h - want).abs() < 1e-9, "{a}: {h}");
+    }
+    // Tilted half a radian about x, the tool's heading is still its turn about the vertical.
+    let tilted = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.4)
+        * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.5)
+        * d;
+    assert!((grasp_heading(&d, &tilted) - 0.4).abs() < 1e-9);
+    let nan = UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(f64::NAN, 0.0, 0.0, 0.0));
+    assert_eq!(grasp_heading(&d, &nan), 0.0);
+
+    // The hand turns the twin half round about the vertical while carrying it 5 cm up (a
+    // scripted hand setting it down from the other side): the tool keeps the heading it
+    // grasped with, and the piece still follows the twin's position.
+    let mut w = World::new();
+    let held = grasped(&mut w, 1);
+    let at_grasp = heading(&w.run(0.01, &held, Some(1)).pop().unwrap().tool);
+    let start = pieces()[1].pose;
+    let mut last = None;
+    for k in 0..=100 {
+        let s = f64::from(k) / 100.0;
+        let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI * s);
+        let pose = Isometry3::from_parts(
+            Translation3::from(start.translation.vector + Vector3::new(0.0, 0.0, 0.05 * s)),
+            turn * start.rotation,
+        );
+        let c = PickPlaceCommand {
+            target: Some(target_at(w.t, pose, true)),
+            ..held
+        };
+        for t in w.run(0.02, &c, Some(1)) {
+            let off = (heading(&t.tool) - at_grasp + std::f64::consts::PI)
+                .rem_euclid(2.0 * std::f64::consts::PI)
+                - std::f64::consts::PI;
+            assert!(off.abs() < 0.05, "the tool turned {off} rad");
+            last = Some(t);
+        }
+    }
+    let piece = last.unwrap().tool * w.robot.tcp_from_object;
+    let want = start.translation.vector + Vector3::new(0.0, 0.0, 0.05);
+    assert!(
+        (piece.translation.vector - want).norm() < 0.01,
+        "{:?}",
+        piece.translation.vector
     );
 }
