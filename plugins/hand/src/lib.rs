@@ -344,13 +344,14 @@ pub struct HeldObject {
     pub grasps: u32,
     /// Releases so far.
     pub releases: u32,
-    /// The most open closure since the last release: a hand takes an object again only once it
-    /// has closed by `release_opening_m` from there (an opening hand whose fingers still rest
-    /// on the object, or meet it again as it drops, does not take it back).
-    pub released_at: Option<f64>,
-    /// The most open closure since the hand last held an object or tracking last found it
-    /// (m), for [`GraspAssist::closing_m`].
+    /// The most open closure since the hand last let go or held an object, or tracking last
+    /// found it (m): a hand takes an object only once it has closed from there, by
+    /// [`GraspAssist::closing_m`], or by `release_opening_m` after a release (an opening hand
+    /// whose fingers still rest on the object, or meet it again as it drops, does not take it
+    /// back).
     pub most_open: Option<f64>,
+    /// The hand let go and has not closed by `release_opening_m` since.
+    pub released: bool,
 }
 
 /// The most closed frame of `frames` ([`closure`]): where a recorded fist is tightest.
@@ -740,7 +741,8 @@ fn assist_grasp(
             }
             held.held = None;
             held.releases += 1;
-            held.released_at = now_closure;
+            held.released = true;
+            held.most_open = now_closure;
         }
         return;
     }
@@ -749,22 +751,21 @@ fn assist_grasp(
         held.most_open = None;
         return;
     };
+    // The bar rises as the hand opens further: a hand takes an object only by closing,
+    // whether or not its fingers lost one it released for a moment (a piece set down drops
+    // the last millimetres out of the fingers).
     let most_open = held.most_open.map_or(closure_now, |m| m.max(closure_now));
     held.most_open = Some(most_open);
-    if let Some(at) = held.released_at {
-        // The bar rises as the hand opens further: a hand takes an object again only by
-        // closing again, whether or not its fingers lost the released one for a moment (a
-        // piece set down drops the last millimetres out of the fingers).
-        let at = at.max(closure_now);
-        if closure_now < at - assist.release_opening_m {
-            held.released_at = None;
-        } else {
-            held.released_at = Some(at);
-            return;
-        }
+    let bar = if held.released {
+        assist.release_opening_m
+    } else {
+        assist.closing_m
+    };
+    if closure_now > most_open - bar {
+        return;
     }
-    if !assist.enabled || contacts.contacts.is_empty() || closure_now > most_open - assist.closing_m
-    {
+    held.released = false;
+    if !assist.enabled || contacts.contacts.is_empty() {
         return;
     }
     // An object touched by two hand bodies from opposing sides, one of them the palm or the

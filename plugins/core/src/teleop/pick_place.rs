@@ -13,7 +13,7 @@
 //!   [`PickPlaceSettings::grasp_depth_m`] below the object's top) and closes there: the real
 //!   grasp.
 //! - **Carry**: the mapping ([`Mapper::robot_side`]) moves the real object with the twin, kept
-//!   upright ([`upright`]).
+//!   upright and facing as it was grasped ([`upright`]).
 //! - **Place**: the hand let go: the arm brings the real object to the twin's last pose, then
 //!   opens, and the object's believed pose becomes where the tool left it.
 //! - **Retreat**: the tool rises above the objects around it before anything else.
@@ -290,20 +290,22 @@ fn heading_from(tool_down: &UnitQuaternion<f64>, current: &UnitQuaternion<f64>) 
     if d.is_finite() { d } else { 0.0 }
 }
 
-/// The target kept upright: its position and its turn about the vertical, its tilt left out
-/// (and the twist's turn about horizontal axes). A piece is carried and set down upright: a
-/// twin tilted a few degrees in the virtual hand, followed by a top grasp, swings the wrist at
-/// rad/s and the piece by centimetres (measured: 30-70 mm carry RMSE when the full orientation
-/// was followed, docs/chess.md).
-pub fn upright(target: &OperatorTarget) -> OperatorTarget {
-    let (_, _, yaw) = target.target.rotation.euler_angles();
+/// The carried object's target kept upright and facing `heading` (rad, about the world
+/// vertical): the twin's position, neither its tilt nor its turn, and none of its twist's
+/// turning. A piece is carried and set down upright: a twin tilted a few degrees in the virtual
+/// hand, followed by a top grasp, swings the wrist at rad/s and the piece by centimetres
+/// (measured: 30-70 mm carry RMSE when the full orientation was followed, docs/chess.md). And
+/// an upright round object is the same whichever way it faces, while following the twin's turn
+/// in the hand wound the wrist: a scripted hand that sets a piece down from the other side
+/// turns its twin half round, and the Sawyer's last joint ran into its limit (the piece set
+/// down up to 75 cm off, 9 of 20 moves wrong; docs/chess.md).
+pub fn upright(target: &OperatorTarget, heading: f64) -> OperatorTarget {
     let mut object_twist = target.object_twist;
-    object_twist[3] = 0.0;
-    object_twist[4] = 0.0;
+    object_twist.fixed_rows_mut::<3>(3).fill(0.0);
     OperatorTarget {
         target: Isometry3::from_parts(
             target.target.translation,
-            UnitQuaternion::from_euler_angles(0.0, 0.0, yaw),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, heading),
         ),
         object_twist,
         ..*target
@@ -745,19 +747,11 @@ impl PickPlaceRobot {
         Ok(out.qdot)
     }
 
-    /// The carried object's target kept upright ([`upright`]) and facing as the object did
-    /// when it was grasped (its believed pose's heading about the vertical; the turn rate
-    /// dropped): the tool keeps the heading it grasped with. An upright round object is the
-    /// same whichever way it faces, and following the twin's turn in the hand wound the wrist:
-    /// a scripted hand that sets a piece down from the other side turns its twin half round,
-    /// and the Sawyer's last joint ran into its limit (the piece set down up to 75 cm off, 9 of
-    /// 20 moves wrong; docs/chess.md).
+    /// The carried object's target kept upright ([`upright`]), facing as the object did when
+    /// it was grasped (its believed pose's heading): the tool keeps the heading it grasped with.
     fn carried_upright(&self, target: &OperatorTarget, object: usize) -> OperatorTarget {
-        let mut t = upright(target);
-        let (_, _, yaw) = self.objects[object].pose.rotation.euler_angles();
-        t.target.rotation = UnitQuaternion::from_euler_angles(0.0, 0.0, yaw);
-        t.object_twist[5] = 0.0;
-        t
+        let (_, _, heading) = self.objects[object].pose.rotation.euler_angles();
+        upright(target, heading)
     }
 
     /// The carried object's target shaped by the clearance rule the tool follows between

@@ -45,9 +45,6 @@ pub struct ChessScript {
     pub script: HandScript,
     /// Per move.
     pub moves: Vec<MoveTimes>,
-    /// The approach direction of each move's grasp and set-down (unit, virtual, from the palm
-    /// toward the piece).
-    pub approach: Vec<(Vector3<f64>, Vector3<f64>)>,
 }
 
 /// The board's axes in the world: files, ranks (unit, horizontal).
@@ -201,7 +198,6 @@ pub fn chess_script(
     let mut at: Vec<Square> = setup.pieces.iter().map(|p| p.square).collect();
     let mut keys = Vec::new();
     let mut times = Vec::new();
-    let mut approach = Vec::new();
     let mut t = 0.0;
     let mut here = rest(Vector3::zeros());
     let tj = task.time_jitter;
@@ -327,14 +323,12 @@ pub fn chess_script(
             release_s: release,
             end_s: t,
         });
-        approach.push((take.d, set.d));
         at[piece] = m.to;
     }
     let script = HandScript::new(Handedness::Right, keys, HandNoise { seed, ..task.noise })?;
     Ok(ChessScript {
         script,
         moves: times,
-        approach,
     })
 }
 
