@@ -171,18 +171,10 @@ struct Written {
 
 fn encode(stream: Stream, width: u32, height: u32, data: &[u8]) -> Result<CompressedFrame, String> {
     let (format, data) = if stream == Stream::Mask {
-        let grey: Vec<u8> = data.iter().map(|&v| if v > 0 { 255 } else { 0 }).collect();
-        let image = image::GrayImage::from_raw(width, height, grey).ok_or_else(|| {
-            format!(
-                "{stream:?} image: {} bytes for {width}x{height}",
-                data.len()
-            )
-        })?;
-        let mut out = std::io::Cursor::new(Vec::new());
-        image
-            .write_to(&mut out, image::ImageFormat::Png)
-            .map_err(|e| e.to_string())?;
-        (ImageFormat::Png, out.into_inner())
+        (
+            ImageFormat::Png,
+            mask_png(width, height, data).map_err(|e| format!("{stream:?} image: {e}"))?,
+        )
     } else {
         let jpeg = jpeg(width, height, data).map_err(|e| format!("{stream:?} image: {e}"))?;
         (ImageFormat::Jpeg, jpeg)
@@ -192,6 +184,19 @@ fn encode(stream: Stream, width: u32, height: u32, data: &[u8]) -> Result<Compre
         format,
         data,
     })
+}
+
+/// A mask (`width × height` bytes, one per pixel, non-zero = robot) as a PNG of 0 and 255;
+/// errors when the buffer does not match the size, or the encoder fails.
+pub(crate) fn mask_png(width: u32, height: u32, mask: &[u8]) -> Result<Vec<u8>, String> {
+    let grey: Vec<u8> = mask.iter().map(|&v| if v > 0 { 255 } else { 0 }).collect();
+    let image = image::GrayImage::from_raw(width, height, grey)
+        .ok_or_else(|| format!("{} bytes for {width}x{height}", mask.len()))?;
+    let mut out = std::io::Cursor::new(Vec::new());
+    image
+        .write_to(&mut out, image::ImageFormat::Png)
+        .map_err(|e| e.to_string())?;
+    Ok(out.into_inner())
 }
 
 /// An RGBA8 image (`width × height`) as a JPEG of the recorded frames' quality

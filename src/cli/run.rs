@@ -155,7 +155,12 @@ impl RunArgs {
         ride(&mut scene);
         // A webcam or a recording as the camera (a recording's robot as the robot).
         let opened = crate::net::site_camera::open(
-            &crate::net::site_camera::SiteCamera::of(webcam, camera_recording, ros2_camera),
+            &crate::net::site_camera::SiteCamera::of(
+                webcam,
+                camera_recording,
+                ros2_camera,
+                overrides.believed_pose.is_some(),
+            ),
             &mut scene,
             1,
         )?;

@@ -128,7 +128,12 @@ impl ServeArgs {
                 "with --camera-recording the robot is the recording's; leave --robot out",
             ));
         }
-        let camera = crate::net::site_camera::SiteCamera::of(webcam, camera_recording, ros2_camera);
+        let camera = crate::net::site_camera::SiteCamera::of(
+            webcam,
+            camera_recording,
+            ros2_camera,
+            overrides.believed_pose.is_some(),
+        );
         crate::net::init_log();
         let path = scene.unwrap_or_else(pouring_scene);
         let packages = packages(package_path);

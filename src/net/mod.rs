@@ -6,9 +6,12 @@
 //! - [`join`]: the operator's hand, physics twin and targets; the observer.
 //! - [`video`]: the robot site's erased video, coded and published.
 //! - [`site_camera`]: where the robot site's camera comes from (simulated, a webcam, a
-//!   recording played live).
+//!   recording played live, a ROS 2 driver's topic); [`driver_calibration`]: a ROS 2
+//!   camera's size, K, lens and pose from its driver (`CameraInfo`, `/tf`).
 //! - [`window`]: the operator's or observer's window (`join --window`).
 
+#[cfg(feature = "ros")]
+pub mod driver_calibration;
 pub mod join;
 pub mod ros2_out;
 pub mod serve;

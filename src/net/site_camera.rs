@@ -28,17 +28,33 @@ pub enum SiteCamera {
     Recording(PathBuf),
     /// A ROS 2 camera topic (`Image`, or `CompressedImage` on a `/compressed` topic) over DDS
     /// (feature `ros`; the domain of the scene's `ros2_control` link, else `ROS_DOMAIN_ID`,
-    /// else 0).
-    Ros2(String),
+    /// else 0), its size, K and lens from the driver's `CameraInfo` and, where
+    /// `pose_from_tf`, its pose from `/tf` ([`super::driver_calibration`]).
+    Ros2 {
+        /// The image topic.
+        topic: String,
+        /// Whether the believed pose is chained from `/tf` (not where `--believed-pose`
+        /// gave one).
+        pose_from_tf: bool,
+    },
 }
 
 impl SiteCamera {
-    /// The camera the command line names (clap keeps the flags apart).
-    pub fn of(webcam: Option<u32>, recording: Option<PathBuf>, ros2: Option<String>) -> Self {
+    /// The camera the command line names (clap keeps the flags apart); `pose_given`: the
+    /// command line gave the believed pose (`--believed-pose`).
+    pub fn of(
+        webcam: Option<u32>,
+        recording: Option<PathBuf>,
+        ros2: Option<String>,
+        pose_given: bool,
+    ) -> Self {
         match (webcam, recording, ros2) {
             (Some(index), _, _) => Self::Webcam(index),
             (None, Some(path), _) => Self::Recording(path),
-            (None, None, Some(topic)) => Self::Ros2(topic),
+            (None, None, Some(topic)) => Self::Ros2 {
+                topic,
+                pose_from_tf: !pose_given,
+            },
             (None, None, None) => Self::Simulated,
         }
     }
@@ -104,7 +120,7 @@ pub fn open(
         }
         SiteCamera::Webcam(_) => "--webcam",
         SiteCamera::Recording(_) => "--camera-recording",
-        SiteCamera::Ros2(_) => "--ros2-camera",
+        SiteCamera::Ros2 { .. } => "--ros2-camera",
     };
     if views > 1 {
         return Err(AppError::flag(
@@ -147,19 +163,23 @@ pub fn open(
             (CameraSource::Recording(camera), Some(arm))
         }
         #[cfg(feature = "ros")]
-        SiteCamera::Ros2(topic) => (
-            CameraSource::Ros2(avatarm_ros::ros2::camera::CameraTopic {
+        SiteCamera::Ros2 {
+            topic,
+            pose_from_tf,
+        } => {
+            let topic = avatarm_ros::ros2::camera::CameraTopic {
                 transport: avatarm_ros::Ros2Transport {
                     domain_id: ros2_domain(scene)?,
                     namespace: "/".into(),
                 },
                 topic: topic.clone(),
                 node_name: "avatarm_camera".into(),
-            }),
-            None,
-        ),
+            };
+            super::driver_calibration::from_driver(&topic, scene, *pose_from_tf, &mut notes)?;
+            (CameraSource::Ros2(topic), None)
+        }
         #[cfg(not(feature = "ros"))]
-        SiteCamera::Ros2(_) => {
+        SiteCamera::Ros2 { .. } => {
             return Err(AppError::flag(
                 "--ros2-camera",
                 "this avatarm was built without the ros feature; rebuild with `cargo build --features ros`",

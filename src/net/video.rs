@@ -98,7 +98,8 @@ pub struct ServeVideoOptions {
     /// Where the camera's frames come from.
     pub source: crate::app::CameraSource,
     /// `--ros2-publish`: each erased frame also on ROS 2 (`/avatarm/erased/compressed`; the
-    /// JPEG the network gets, so with `--codec jpeg` only).
+    /// JPEG the network gets, so with `--codec jpeg` only), and its mask
+    /// (`/avatarm/mask/compressed`, PNG, read back and coded only then).
     pub ros2: Option<crate::net::ros2_out::Ros2Sink>,
 }
 
@@ -157,6 +158,15 @@ struct ServeVideo {
     update_started: Option<std::time::Instant>,
     /// The site's clock minus the app's (s), this update's ([`note_site_clock`]).
     site_minus_app: f64,
+    /// `--ros2-publish`: the masks read back, to the thread that codes and publishes them.
+    masks: Option<Sender<MaskRead>>,
+}
+
+/// A mask read back (`bytes_per_pixel` bytes a pixel, the first the mask), captured at
+/// `capture_s` (the site's clock).
+struct MaskRead {
+    capture_s: f64,
+    image: avatarm_twin::readback::direct::ImageBytes,
 }
 
 /// A frame read back, to be coded.
@@ -188,6 +198,15 @@ impl Plugin for ServeVideoPlugin {
                     ros2.as_ref(),
                 );
             });
+        let masks = options.ros2.clone().and_then(|sink| {
+            let (tx, rx) = channel::<MaskRead>();
+            std::thread::Builder::new()
+                .name("ros2 masks".into())
+                .spawn(move || publish_masks(&rx, &sink, clock))
+                .map_err(|e| warn!("robot site: no mask on ROS 2: cannot start its thread: {e}"))
+                .ok()
+                .map(|_| tx)
+        });
         let carried = app
             .world()
             .get_resource::<crate::SceneResource>()
@@ -222,6 +241,7 @@ impl Plugin for ServeVideoPlugin {
             update: Arc::default(),
             update_started: None,
             site_minus_app: 0.0,
+            masks,
         })
         .add_plugins(DirectReadbackPlugin)
         .add_systems(First, count_update)
@@ -414,6 +434,19 @@ fn publish_erased(
         return;
     }
     let render_frame = RenderSettled::this_update_frame(&frames);
+    if let Some(masks) = video.masks.clone() {
+        let settled = settled.clone();
+        let capture_s = t_s + video.site_minus_app;
+        reads.0.push(DirectRead {
+            image: targets.mask.clone(),
+            frame: render_frame,
+            deliver: Box::new(move |read| {
+                if let (true, Ok(image)) = (settled.completed(render_frame), read) {
+                    let _ = masks.send(MaskRead { capture_s, image });
+                }
+            }),
+        });
+    }
     let settled = settled.clone();
     let clock = video.options.clock;
     let site_minus_app = video.site_minus_app;
@@ -484,6 +517,39 @@ fn publish_erased(
         frame: render_frame,
         deliver: Box::new(deliver),
     });
+}
+
+/// The masks' thread (`--ros2-publish`): each mask read back (the newest where several
+/// waited) coded as a PNG of 0 and 255 and published, stamped with its frame's capture on the
+/// system clock, until the app is gone.
+fn publish_masks(rx: &Receiver<MaskRead>, sink: &crate::net::ros2_out::Ros2Sink, clock: SiteClock) {
+    let mut said = false;
+    while let Ok(mut read) = rx.recv() {
+        while let Ok(newer) = rx.try_recv() {
+            read = newer;
+        }
+        let MaskRead { capture_s, image } = read;
+        let mask: Vec<u8> = image
+            .data
+            .iter()
+            .step_by(image.bytes_per_pixel.max(1))
+            .copied()
+            .collect();
+        match crate::session::mask_png(image.width, image.height, &mask) {
+            Ok(png) => {
+                let age_ns = ((clock.now_s() - capture_s).max(0.0) * 1e9) as u64;
+                let stamp_ns = crate::net::ros2_out::unix_now_ns().saturating_sub(age_ns);
+                crate::net::ros2_out::publish_mask(sink, stamp_ns, png);
+            }
+            Err(e) if !said => {
+                said = true;
+                warn!(
+                    "robot site: a mask for ROS 2 does not code: {e} (further ones are not said)"
+                );
+            }
+            Err(_) => {}
+        }
+    }
 }
 
 /// The main world's update number (its frame count) for the render thread's stamps, and when

@@ -85,11 +85,7 @@ pub fn link_settings(
                 "a ros_control or ros2_control link needs its controller's command topic",
             )
         })?;
-    // ros2_control's joint_state_broadcaster publishes /joint_states.
-    let joint_states_topic = match &ros2 {
-        Some(_) if spec.joint_states_topic == sawyer.joint_states_topic => "/joint_states".into(),
-        _ => spec.joint_states_topic.clone(),
-    };
+    let joint_states_topic = joint_states_topic(spec, &sawyer.joint_states_topic);
     Ok(LinkSettings {
         master_uri,
         node_name: spec.node_name.clone(),
@@ -105,6 +101,10 @@ pub fn link_settings(
                 (true, _) => CommandKind::InteraVelocity,
                 (false, RosControlController::Velocity) => CommandKind::GroupVelocity { joints },
                 (false, RosControlController::Position) => CommandKind::GroupPosition { joints },
+                (false, RosControlController::Trajectory) => CommandKind::JointTrajectory {
+                    joints,
+                    horizon_s: spec.command_timeout_s,
+                },
             }
         },
         arm_joints,
@@ -134,6 +134,17 @@ pub fn link_settings(
         stale_after_s: spec.stale_after_s,
         ros2,
     })
+}
+
+/// The link's joint-state topic: the one given, else ROS 1's `ros1_default` (Intera's
+/// `/robot/joint_states`), or `/joint_states` for `ros2_control` (its joint_state_broadcaster's).
+#[cfg(feature = "ros")]
+fn joint_states_topic(spec: &avatarm_scene::spec::RobotLinkSpec, ros1_default: &str) -> String {
+    match (&spec.joint_states_topic, spec.kind) {
+        (Some(given), _) => given.clone(),
+        (None, avatarm_scene::spec::RobotLinkKind::Ros2Control) => "/joint_states".into(),
+        (None, _) => ros1_default.into(),
+    }
 }
 
 #[cfg(feature = "ros")]
@@ -182,4 +193,36 @@ pub(super) fn prepared_q0(teleop: &Teleop) -> Option<nalgebra::DVector<f64>> {
         .robot()
         .simulated()
         .map(|r| r.true_positions().clone())
+}
+
+#[cfg(all(test, feature = "ros"))]
+mod tests {
+    use avatarm_scene::spec::{RobotLinkKind, RobotLinkSpec};
+
+    use super::joint_states_topic;
+
+    #[test]
+    fn a_given_joint_state_topic_is_kept_whatever_the_links_kind() {
+        let of = |kind, given: Option<&str>| {
+            let spec = RobotLinkSpec {
+                kind,
+                joint_states_topic: given.map(str::to_owned),
+                ..RobotLinkSpec::default()
+            };
+            joint_states_topic(&spec, "/robot/joint_states")
+        };
+        assert_eq!(of(RobotLinkKind::Intera, None), "/robot/joint_states");
+        assert_eq!(of(RobotLinkKind::RosControl, None), "/robot/joint_states");
+        assert_eq!(of(RobotLinkKind::Ros2Control, None), "/joint_states");
+        // Given as ROS 1's default, on a ROS 2 link: what was given (it was read as the
+        // default and replaced by /joint_states).
+        assert_eq!(
+            of(RobotLinkKind::Ros2Control, Some("/robot/joint_states")),
+            "/robot/joint_states"
+        );
+        assert_eq!(
+            of(RobotLinkKind::Intera, Some("/joint_states")),
+            "/joint_states"
+        );
+    }
 }

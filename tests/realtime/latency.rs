@@ -245,6 +245,12 @@ fn the_preview_plays_a_recording_as_its_camera_and_erases_its_robot() {
     // takes is stamped again when the window's frame showing it is presented: glass to glass
     // (but the display's scan-out), said at the exit.
     let log = preview_on_recording(&dir, &recording, &background, &["--press", "45:Esc"]);
+    for said in [
+        "the camera's calibration from /camera/camera_info: 640x480, fx fy cx cy [470.0, 471.0, 321.0, 238.0] px, lens none",
+        "the camera's pose from /tf: base -> camera_optical_frame, at [1.850, 0.000, 0.550] m in base",
+    ] {
+        assert!(log.contains(said), "{said}\n{log}");
+    }
     let line = log
         .lines()
         .find(|l| l.contains("glass to glass (capture -> presented) median"))
@@ -267,6 +273,8 @@ fn the_preview_plays_a_recording_as_its_camera_and_erases_its_robot() {
 /// over DDS (the fake driver of `avatarm_ros::testing`, on Cyclone DDS, publishing a 640x480
 /// PNG as `sensor_msgs/msg/CompressedImage` at 15 fps), decodes each frame, erases the robot
 /// from it and presents it; the glass to glass line counts the frames from the driver's stamp.
+/// The driver's `CameraInfo` and its latched static transform (the camera's mount) become
+/// the scene's camera, said on stderr.
 #[cfg(feature = "ros")]
 #[test]
 fn the_preview_takes_its_camera_from_a_ros2_driver() {
@@ -283,7 +291,36 @@ fn the_preview_takes_its_camera_from_a_ros2_driver() {
     let _camera = avatarm_ros::testing::FakeRos2Camera::start(
         domain,
         topic,
-        &["--file", picture.to_str().expect("utf-8"), "--fps", "15"],
+        &[
+            "--file",
+            picture.to_str().expect("utf-8"),
+            "--fps",
+            "15",
+            // Its calibration and its mount, as a calibrated driver publishes them: the
+            // scene's camera replaced by them (the camera level, 1.85 m out, looking back).
+            "--width",
+            "640",
+            "--height",
+            "480",
+            "--fx",
+            "470",
+            "--fy",
+            "471",
+            "--cx",
+            "321",
+            "--cy",
+            "238",
+            "--tf-static",
+            "base",
+            "camera_optical_frame",
+            "1.85",
+            "0",
+            "0.55",
+            "-0.5",
+            "-0.5",
+            "0.5",
+            "0.5",
+        ],
     );
     let run = Command::new("xvfb-run")
         .args(["-a", "-s", "-screen 0 1280x720x24"])
@@ -303,6 +340,12 @@ fn the_preview_takes_its_camera_from_a_ros2_driver() {
         )),
         "{log}"
     );
+    for said in [
+        "the camera's calibration from /camera/camera_info: 640x480, fx fy cx cy [470.0, 471.0, 321.0, 238.0] px, lens none",
+        "the camera's pose from /tf: base -> camera_optical_frame, at [1.850, 0.000, 0.550] m in base",
+    ] {
+        assert!(log.contains(said), "{said}\n{log}");
+    }
     let line = log
         .lines()
         .find(|l| l.contains("glass to glass (capture -> presented) median"))

@@ -752,7 +752,7 @@ fn alice_watching_sees_the_operator_s_hand_on_the_bottle_the_arm_carries() {
 }
 
 /// `avatarm serve --ros2-publish`: while an operator pours, the robot site publishes its erased
-/// frames (the network's JPEG), the commands and the safety events on ROS 2; a listener written
+/// frames (the network's JPEG), their masks (PNG), the commands and the safety events on ROS 2; a listener written
 /// with Cyclone DDS (`avatarm_ros::testing::Ros2Listener`, as rviz2 subscribes) receives and
 /// decodes them.
 #[cfg(feature = "ros")]
@@ -781,8 +781,9 @@ fn the_robot_site_publishes_on_ros2() {
     let s: ServeReport = finish(robot, &dir, "serve");
     let r = listener.report();
     eprintln!(
-        "the ROS 2 listener after serve: erased {}, commands {}, safety {} (the last: {}); serve published {} frames",
+        "the ROS 2 listener after serve: erased {}, masks {}, commands {}, safety {} (the last: {}); serve published {} frames",
         r["erased/compressed"]["count"],
+        r["mask/compressed"]["count"],
         r["joint_commands"]["count"],
         r["safety"]["count"],
         r["safety"]["data"],
@@ -791,6 +792,10 @@ fn the_robot_site_publishes_on_ros2() {
     let count = |topic: &str| r[topic]["count"].as_u64().unwrap_or(0);
     assert!(count("erased/compressed") > 0, "{r}");
     assert_eq!(r["erased/compressed"]["magic"], true, "{r}");
+    // The erased frames' masks, as PNG, stamped as their frames.
+    assert!(count("mask/compressed") > 0, "{r}");
+    assert_eq!(r["mask/compressed"]["format"], "png", "{r}");
+    assert_eq!(r["mask/compressed"]["magic"], true, "{r}");
     assert!(count("joint_commands") > 100, "{r}");
     assert!(
         r["joint_commands"]["name"]

@@ -10,6 +10,7 @@
 //!   safety limiter.
 //! - [`sim`]: the simulated robot (command latency, first-order response, limits, delayed joint
 //!   states) that stands in for the real arm.
+//! - [`tf`]: a transform tree as ROS's tf2 keeps one, and poses chained through it.
 //! - [`stats`]: quantiles and [`stats::Spread`] (median, p95, largest) of measured series.
 //! - [`rng`]: a small seeded generator so that every replay is reproducible.
 //! - [`shared_data`]: where the real robot descriptions and footage beside the checkout are.
@@ -25,6 +26,7 @@ pub mod shared_data;
 pub mod sim;
 pub mod stats;
 pub mod teleop;
+pub mod tf;
 pub mod vision;
 
 pub use error::{Error, Result};

@@ -109,6 +109,37 @@ impl CameraCalibration {
         }
     }
 
+    /// The calibration a `sensor_msgs/CameraInfo` carries: its size, K (row-major, px), its
+    /// `distortion_model` by ROS's name and D (none: a pinhole's zeros), checked
+    /// ([`Self::validate`]). Errors: a model not read (`plumb_bob`, `rational_polynomial`,
+    /// `equidistant`), or numbers [`Self::validate`] refuses; the message names the field.
+    pub fn from_camera_info(
+        width: u32,
+        height: u32,
+        k: [f64; 9],
+        distortion_model: &str,
+        d: Vec<f64>,
+    ) -> Result<Self, InvalidCalibration> {
+        let model = DistortionModel::from_ros_name(distortion_model).ok_or_else(|| {
+            InvalidCalibration(format!(
+                "distortion model '{distortion_model}' is not read (plumb_bob, rational_polynomial, equidistant)"
+            ))
+        })?;
+        let c = Self {
+            width,
+            height,
+            k,
+            distortion_model: model,
+            d: if d.is_empty() {
+                vec![0.0; model.coefficients()]
+            } else {
+                d
+            },
+        };
+        c.validate()?;
+        Ok(c)
+    }
+
     /// Checks the numbers: a size, finite values, fx and fy > 0, the last row of K `0 0 1`,
     /// as many coefficients as the model takes. The message names the field.
     pub fn validate(&self) -> Result<(), InvalidCalibration> {

@@ -113,7 +113,10 @@ impl RosArm {
         let command_index = match &settings.command {
             CommandKind::InteraVelocity => arm.clone(),
             CommandKind::GroupVelocity { joints: controller }
-            | CommandKind::GroupPosition { joints: controller } => indices(controller)?,
+            | CommandKind::GroupPosition { joints: controller }
+            | CommandKind::JointTrajectory {
+                joints: controller, ..
+            } => indices(controller)?,
         };
         let shared = Arc::new(Mutex::new(Shared {
             status: LinkStatus::default(),
@@ -235,11 +238,14 @@ impl RosArm {
     fn stop(&mut self) {
         if self.moving {
             self.moving = false;
-            // A velocity controller: zeros. A position controller: the last target, held.
-            let hold = match (&self.settings.command, self.position_target.take()) {
-                (CommandKind::GroupPosition { .. }, Some((target, _))) => target,
-                (CommandKind::GroupPosition { .. }, None) => self.measured_command(),
-                _ => vec![0.0; self.command_index.len()],
+            // A velocity controller: zeros. A position or trajectory controller: the last
+            // target, held.
+            let hold = match self.position_target.take() {
+                _ if !self.settings.command.takes_positions() => {
+                    vec![0.0; self.command_index.len()]
+                }
+                Some((target, _)) => target,
+                None => self.measured_command(),
             };
             self.hand_over(Outbound::Stop(hold));
         }
@@ -345,7 +351,7 @@ impl RobotInterface for RosArm {
         }
         self.may_command()?;
         let mut values: Vec<f64> = self.command_index.iter().map(|&i| qdot[i]).collect();
-        if let CommandKind::GroupPosition { .. } = self.settings.command {
+        if self.settings.command.takes_positions() {
             // Velocities into position targets, from the measured positions after a stop.
             let now = Instant::now();
             let (mut target, dt) = match self.position_target.take() {
@@ -362,7 +368,15 @@ impl RobotInterface for RosArm {
             }
             self.position_target = Some((target.clone(), now));
             self.moving = true;
-            values = target;
+            values = match self.settings.command {
+                // The point the arm is to reach a horizon ahead.
+                CommandKind::JointTrajectory { horizon_s, .. } => target
+                    .iter()
+                    .zip(&values)
+                    .map(|(t, v)| t + v * horizon_s)
+                    .collect(),
+                _ => target,
+            };
         } else {
             self.moving = values.iter().any(|v| *v != 0.0);
         }

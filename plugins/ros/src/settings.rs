@@ -20,14 +20,38 @@ pub enum CommandKind {
         /// The controller's joints, in its order.
         joints: Vec<String>,
     },
+    /// ros2_control's `joint_trajectory_controller` (ROS 2 only), streamed: each command a
+    /// `trajectory_msgs/msg/JointTrajectory` of one point for `joints` (named, in this order),
+    /// header stamp zero (start on receipt), positions only (the controller interpolates
+    /// from its state): where the arm is to be `horizon_s` from now, the target integrated as
+    /// for [`Self::GroupPosition`] plus `q̇ · horizon_s`. The controller holds a point once it
+    /// is reached, so an Avatarm that falls silent (a crash, a kill) leaves the arm stopped
+    /// within `horizon_s`; a stop sends the target reached so far.
+    JointTrajectory {
+        /// The controller's joints (its `joints` parameter).
+        joints: Vec<String>,
+        /// How far ahead each point lies (s, within 0.01..5): the point's `time_from_start`.
+        horizon_s: f64,
+    },
 }
 
 impl CommandKind {
+    /// Whether the controller takes positions (a group position or trajectory controller):
+    /// the velocities are integrated into targets and a stop holds the last one.
+    pub fn takes_positions(&self) -> bool {
+        matches!(
+            self,
+            Self::GroupPosition { .. } | Self::JointTrajectory { .. }
+        )
+    }
+
     /// The controller's joints (ros_control), `None` for Intera's.
     pub fn controller_joints(&self) -> Option<&[String]> {
         match self {
             Self::InteraVelocity => None,
-            Self::GroupVelocity { joints } | Self::GroupPosition { joints } => Some(joints),
+            Self::GroupVelocity { joints }
+            | Self::GroupPosition { joints }
+            | Self::JointTrajectory { joints, .. } => Some(joints),
         }
     }
 }
@@ -166,7 +190,7 @@ impl LinkSettings {
             }
             if self.command.controller_joints().is_none() {
                 return Err(
-                    "a ROS 2 link commands a ros2_control forward_command_controller, not Intera's JointCommand".into(),
+                    "a ROS 2 link commands a ros2_control forward_command_controller or joint_trajectory_controller, not Intera's JointCommand".into(),
                 );
             }
             let ros1_only = [
@@ -179,6 +203,18 @@ impl LinkSettings {
             if let Some((what, _)) = ros1_only.iter().find(|(_, set)| *set) {
                 return Err(format!(
                     "a ROS 2 link has no {what} topic (Intera's, ROS 1): leave it out"
+                ));
+            }
+        }
+        if let CommandKind::JointTrajectory { horizon_s, .. } = self.command {
+            if self.ros2.is_none() {
+                return Err(
+                    "a joint_trajectory_controller is commanded over ROS 2 only (kind = \"ros2_control\")".into(),
+                );
+            }
+            if !(0.01..=5.0).contains(&horizon_s) {
+                return Err(format!(
+                    "trajectory horizon {horizon_s} s: must be within 0.01..5"
                 ));
             }
         }

@@ -7,6 +7,8 @@ use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
 use avatarm_core::sim::arm::RobotInterface;
+use avatarm_core::tf::chain;
+use avatarm_ros::ros2::calibration::gather;
 use avatarm_ros::ros2::camera::{CameraEvent, CameraTopic, RosImage, spawn_camera};
 use avatarm_ros::ros2::publish::{Outgoing, Ros2Publisher};
 use avatarm_ros::testing::{
@@ -175,6 +177,32 @@ fn a_vanished_arm_stops_the_commands_and_a_nan_is_refused_by_name() {
     assert_eq!(status.losses, 1, "{status:?}");
 }
 
+/// The fake arm started with `arm_args`, the link with `settings` alive to it, and `qdot`
+/// (model order) sent every 10 ms for a second.
+fn drive_for_a_second(
+    domain: u16,
+    settings: LinkSettings,
+    arm_args: &[&str],
+    qdot: [f64; 3],
+) -> (FakeRos2Arm, RosArm) {
+    let node = FakeRos2Arm::start(domain, &CONTROLLER, arm_args);
+    let mut arm = RosArm::start(
+        settings,
+        MODEL.iter().map(|s| (*s).to_owned()).collect(),
+        DVector::zeros(3),
+    )
+    .expect("link");
+    wait_alive(&mut arm);
+    let end = Instant::now() + Duration::from_secs(1);
+    while Instant::now() < end {
+        arm.advance(wall_s());
+        arm.receive();
+        arm.send(&DVector::from_row_slice(&qdot)).expect("sent");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    (node, arm)
+}
+
 /// A `JointGroupPositionController` (`--mode position` on the fake arm): the velocities reach
 /// it integrated into targets, and the targets hold after the link's end.
 #[test]
@@ -193,31 +221,17 @@ fn a_ros2_position_controller_gets_integrated_targets_and_holds_them() {
         settings.command_topic,
         "/forward_position_controller/commands"
     );
-    let node = FakeRos2Arm::start(
+    let (node, arm) = drive_for_a_second(
         domain,
-        &CONTROLLER,
+        settings,
         &[
             "--mode",
             "position",
             "--controller",
             "forward_position_controller",
         ],
+        [0.2, 0.0, 0.0],
     );
-    let mut arm = RosArm::start(
-        settings,
-        MODEL.iter().map(|s| (*s).to_owned()).collect(),
-        DVector::zeros(3),
-    )
-    .expect("link");
-    wait_alive(&mut arm);
-    let end = Instant::now() + Duration::from_secs(1);
-    while Instant::now() < end {
-        arm.advance(wall_s());
-        arm.receive();
-        arm.send(&DVector::from_vec(vec![0.2, 0.0, 0.0]))
-            .expect("sent");
-        std::thread::sleep(Duration::from_millis(10));
-    }
     drop(arm);
     std::thread::sleep(Duration::from_millis(300));
     let before = node.report();
@@ -228,6 +242,58 @@ fn a_ros2_position_controller_gets_integrated_targets_and_holds_them() {
     assert!((0.14..=0.26).contains(&j1), "j1 {j1}: {before}");
     assert_eq!(before["q"], after["q"], "the target holds");
     assert_eq!(after["bad"].as_u64(), Some(0), "{after}");
+}
+
+/// A `joint_trajectory_controller` (`--mode trajectory` on the fake arm): each command a
+/// one-point `JointTrajectory` a horizon ahead, by joint name; when the commands stop (a hung
+/// or killed Avatarm sends nothing, not even a stop), the arm holds the last point within the
+/// horizon.
+#[test]
+fn a_ros2_trajectory_controller_gets_streamed_points_and_holds_when_they_stop() {
+    let _serial = support::serial();
+    let domain = domain(12);
+    let joints: Vec<String> = CONTROLLER.iter().map(|s| (*s).to_owned()).collect();
+    let mut settings =
+        LinkSettings::ros2_control("joint_trajectory_controller", joints.clone(), domain);
+    settings.command_topic = "/joint_trajectory_controller/joint_trajectory".into();
+    settings.command = CommandKind::JointTrajectory {
+        joints,
+        horizon_s: 0.2,
+    };
+    let (node, arm) = drive_for_a_second(
+        domain,
+        settings,
+        &[
+            "--mode",
+            "trajectory",
+            "--controller",
+            "joint_trajectory_controller",
+        ],
+        [0.2, 0.0, -0.1],
+    );
+    // Silent from here (the link still up): the arm reaches the last point and holds it.
+    let silent = Instant::now();
+    std::thread::sleep(Duration::from_millis(400));
+    let before = node.report();
+    std::thread::sleep(Duration::from_millis(300));
+    let after = node.report();
+    // In the controller's order [j3, j1, j2]: j1 about 0.2 rad/s for 1 s plus the horizon.
+    let q = |i: usize| before["q"][i].as_f64().expect("q");
+    assert!((0.16..=0.28).contains(&q(1)), "j1 {}: {before}", q(1));
+    assert!((-0.14..=-0.08).contains(&q(0)), "j3 {}: {before}", q(0));
+    assert_eq!(q(2), 0.0, "{before}");
+    assert_eq!(
+        before["q"],
+        after["q"],
+        "held {:?} after the last point",
+        silent.elapsed()
+    );
+    assert_eq!(after["bad"].as_u64(), Some(0), "{after}");
+    assert!(
+        after["commands"].as_u64().is_some_and(|n| n >= 50),
+        "{after}"
+    );
+    drop(arm);
 }
 
 #[test]
@@ -246,8 +312,20 @@ fn settings_a_ros2_link_cannot_use_are_refused() {
     let mut s = LinkSettings::ros2_control("c", joints.clone(), 0);
     s.gripper = Some(avatarm_ros::GripperLink::default());
     assert!(start(s).contains("no gripper topic"));
-    let s = LinkSettings::ros2_control("c", joints, 300);
+    let s = LinkSettings::ros2_control("c", joints.clone(), 300);
     assert!(start(s).contains("DDS domain 300"));
+    let mut s = LinkSettings::ros2_control("c", joints.clone(), 0);
+    s.command = CommandKind::JointTrajectory {
+        joints: joints.clone(),
+        horizon_s: 0.0,
+    };
+    assert!(start(s).contains("trajectory horizon 0 s"));
+    let mut s = LinkSettings::sawyer("http://localhost:11311");
+    s.command = CommandKind::JointTrajectory {
+        joints,
+        horizon_s: 0.2,
+    };
+    assert!(start(s).contains("over ROS 2 only"));
 }
 
 /// `n` frames of the ROS 2 camera on `topic` (DDS domain `domain`), within 20 s.
@@ -323,6 +401,106 @@ fn a_ros2_camera_s_raw_and_compressed_frames_arrive_as_published() {
         assert!(f.compressed && f.encoding == "png", "{}", f.encoding);
         assert!(f.data == bytes, "the PNG as published");
     }
+    drop(camera);
+}
+
+/// A camera driver's `CameraInfo` (beside its image topic) and its latched static transforms
+/// (published before Avatarm subscribed: transient local) are gathered as published, and the
+/// optical frame's pose chains through them.
+#[test]
+fn a_ros2_camera_drivers_camera_info_and_static_transforms_are_gathered() {
+    let _serial = support::serial();
+    let domain = domain(11);
+    let camera = FakeRos2Camera::start(
+        domain,
+        "/cam/color/image_raw/compressed",
+        &[
+            "--file",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/latency_stages.png"),
+            "--fps",
+            "15",
+            "--width",
+            "1280",
+            "--height",
+            "720",
+            "--fx",
+            "910.5",
+            "--fy",
+            "911",
+            "--cx",
+            "640",
+            "--cy",
+            "359.5",
+            "--d",
+            "0.1",
+            "-0.2",
+            "0.001",
+            "0",
+            "0.05",
+            "--tf-static",
+            "base",
+            "cam_link",
+            "1",
+            "-0.5",
+            "0.75",
+            "0",
+            "0",
+            "0",
+            "1",
+            "--tf-static",
+            "cam_link",
+            "cam_optical",
+            "0",
+            "0",
+            "0",
+            "-0.5",
+            "0.5",
+            "-0.5",
+            "0.5",
+        ],
+    );
+    // The static transforms were latched before this subscription.
+    std::thread::sleep(Duration::from_millis(500));
+    let topic = CameraTopic {
+        transport: Ros2Transport {
+            domain_id: domain,
+            namespace: "/".into(),
+        },
+        topic: "/cam/color/image_raw/compressed".into(),
+        node_name: "avatarm_camera".into(),
+    };
+    let g = gather(&topic, Duration::from_secs(20), |g| {
+        g.info.is_some() && g.links.len() >= 2
+    })
+    .expect("DDS");
+    assert_eq!(g.info_topic, "/cam/color/camera_info");
+    let info = g.info.as_ref().expect("a CameraInfo within 20 s");
+    assert_eq!((info.width, info.height), (1280, 720));
+    assert_eq!(
+        info.k,
+        [910.5, 0.0, 640.0, 0.0, 911.0, 359.5, 0.0, 0.0, 1.0]
+    );
+    assert_eq!(info.distortion_model, "plumb_bob");
+    assert_eq!(info.d, [0.1, -0.2, 0.001, 0.0, 0.05]);
+    assert_eq!(info.header.frame_id, "camera_optical_frame");
+    let pose = chain(&g.links, "base", "cam_optical", 0).expect("base -> cam_optical");
+    // REP 103/104: the optical frame looks along the link's x, its x along the link's -y.
+    let (origin, z, x) = (
+        pose * nalgebra::Point3::origin(),
+        pose * nalgebra::Vector3::z(),
+        pose * nalgebra::Vector3::x(),
+    );
+    assert!(
+        (origin - nalgebra::Point3::new(1.0, -0.5, 0.75)).norm() < 1e-9,
+        "{origin}"
+    );
+    assert!((z - nalgebra::Vector3::x()).norm() < 1e-9, "{z}");
+    assert!((x + nalgebra::Vector3::y()).norm() < 1e-9, "{x}");
+    eprintln!(
+        "ROS 2 camera calibration over DDS: CameraInfo and {} transforms in {:.0} ms",
+        g.links.len(),
+        g.waited.as_secs_f64() * 1e3
+    );
     drop(camera);
 }
 

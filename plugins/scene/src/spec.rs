@@ -95,6 +95,10 @@ pub enum RosControlController {
     Velocity,
     /// `JointGroupPositionController`: position targets (the velocities integrated).
     Position,
+    /// ros2_control's `joint_trajectory_controller` (`ros2_control` only): a one-point
+    /// `JointTrajectory` streamed each tick, the point `command_timeout_s` ahead (the arm holds
+    /// it once reached: a silent Avatarm stops the arm within that time).
+    Trajectory,
 }
 
 /// `[robot.link]`: the real robot over ROS 1 (docs/robot-ros.md). Topic defaults are
@@ -111,9 +115,9 @@ pub struct RobotLinkSpec {
     pub master_uri: Option<String>,
     /// This node's name.
     pub node_name: String,
-    /// `sensor_msgs/JointState` in; default `/robot/joint_states` (Intera), `/joint_states`
-    /// for `ros2_control`.
-    pub joint_states_topic: String,
+    /// `sensor_msgs/JointState` in; default `/robot/joint_states` (ROS 1: Intera's, and a
+    /// `ros_control` arm's), `/joint_states` for `ros2_control` (its joint_state_broadcaster's).
+    pub joint_states_topic: Option<String>,
     /// Commands out; default `/robot/limb/right/joint_command` (Intera).
     pub command_topic: Option<String>,
     /// The joints commanded; default: the task's arm joints (else every movable joint without
@@ -121,14 +125,16 @@ pub struct RobotLinkSpec {
     pub arm_joints: Vec<String>,
     /// `ros_control`: the controller's joints, in its order (default: `arm_joints`).
     pub controller_joints: Vec<String>,
-    /// `ros_control`: a `velocity` (default) or `position` joint group controller.
+    /// `ros_control`/`ros2_control`: a `velocity` (default) or `position` joint group
+    /// controller, or (`ros2_control`) a `trajectory` controller.
     pub controller: RosControlController,
     /// Intera's robot state (`/robot/state`); `""` for none.
     pub robot_state_topic: Option<String>,
     /// Latched command timeout topic (Intera's `/robot/limb/right/joint_command_timeout`);
     /// `""` for none.
     pub command_timeout_topic: Option<String>,
-    /// The robot's command timeout (s, 0.01..5).
+    /// The robot's command timeout (s, 0.01..5); for a `trajectory` controller, how far ahead
+    /// each streamed point lies.
     pub command_timeout_s: f64,
     /// Latched speed ratio topic (Intera's `/robot/limb/right/set_speed_ratio`); `""` for
     /// none.
@@ -153,7 +159,7 @@ impl Default for RobotLinkSpec {
             domain_id: None,
             master_uri: None,
             node_name: "avatarm".into(),
-            joint_states_topic: "/robot/joint_states".into(),
+            joint_states_topic: None,
             command_topic: None,
             arm_joints: Vec::new(),
             controller_joints: Vec::new(),
@@ -235,6 +241,14 @@ impl RobotLinkSpec {
                 format!("'{d}': a device name (as /io/end_effector/config gives it), not a topic"),
             );
         }
+        if self.controller == RosControlController::Trajectory
+            && self.kind != RobotLinkKind::Ros2Control
+        {
+            return bad(
+                "controller",
+                "a joint_trajectory_controller is commanded over ROS 2 only (kind = \"ros2_control\")".into(),
+            );
+        }
         if self.kind == RobotLinkKind::Intera && self.controller != RosControlController::Velocity {
             return bad(
                 "controller",
@@ -242,10 +256,14 @@ impl RobotLinkSpec {
                     .into(),
             );
         }
-        if self.node_name.is_empty() || self.joint_states_topic.is_empty() {
+        if self.node_name.is_empty() {
+            return bad("node_name", "must not be empty".into());
+        }
+        if self.joint_states_topic.as_deref() == Some("") {
             return bad(
-                "node_name",
-                "node name and joint_states_topic must not be empty".into(),
+                "joint_states_topic",
+                "must not be empty: the link needs the robot's joint states (leave it out for the default)"
+                    .into(),
             );
         }
         Ok(())

@@ -4,15 +4,16 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-use avatarm_record::camera::{CameraCalibration, DistortionModel, read_calibration, read_pose};
+use avatarm_core::tf::{FrameLink, chain};
+use avatarm_record::camera::{CameraCalibration, read_calibration, read_pose};
 use avatarm_record::{CompressedFrame, JointStates, RecordingWriter};
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use nalgebra::Isometry3;
 
 use super::messages::{
     CameraInfo, CompressedImage, Image, JointState, Stamped, TfMessage, as_silhouette,
     compressed_frame, raw_frame, size_of,
 };
-use super::{BagOptions, BagSummary, Dialect, Link, bag_error, chain, pick};
+use super::{BagOptions, BagSummary, Dialect, bag_error, pick};
 use crate::FootageError;
 
 /// The topics picked and what their messages gave so far.
@@ -33,7 +34,7 @@ pub(super) struct Importer<'a, D: Dialect> {
     skipped_states: usize,
     bad_links: Vec<String>,
     states: Vec<JointStates>,
-    links: Vec<Link>,
+    links: Vec<FrameLink>,
 }
 
 impl<'a, D: Dialect> Importer<'a, D> {
@@ -174,30 +175,22 @@ impl<'a, D: Dialect> Importer<'a, D> {
             let is_static = topic == "/tf_static";
             for t in tf.transforms {
                 let (p, q) = (&t.transform.translation, &t.transform.rotation);
-                let values = [p.x, p.y, p.z, q.x, q.y, q.z, q.w];
-                // A bad transform is left out, and said if the pose needed its link.
-                let norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
-                if values.iter().any(|v| !v.is_finite()) || (norm - 1.0).abs() > 1e-3 {
-                    self.bad_links.push(format!(
-                        "{at}: {} -> {} (translation {:?}, quaternion norm {norm})",
-                        t.header.frame_id(),
-                        t.child_frame_id,
-                        [p.x, p.y, p.z]
-                    ));
-                    continue;
-                }
-                let rotation = UnitQuaternion::from_quaternion(Quaternion::new(q.w, q.x, q.y, q.z));
                 let stamp = if is_static {
                     0
                 } else {
                     t.header.stamp_ns(received_ns)
                 };
-                self.links.push((
-                    t.header.frame_id().trim_start_matches('/').to_owned(),
-                    t.child_frame_id.trim_start_matches('/').to_owned(),
+                // A bad transform is left out, and said if the pose needed its link.
+                match FrameLink::new(
+                    t.header.frame_id(),
+                    &t.child_frame_id,
                     stamp,
-                    Isometry3::from_parts(Translation3::new(p.x, p.y, p.z), rotation),
-                ));
+                    [p.x, p.y, p.z],
+                    [q.x, q.y, q.z, q.w],
+                ) {
+                    Ok(link) => self.links.push(link),
+                    Err(what) => self.bad_links.push(format!("{at}: {what}")),
+                }
             }
         }
         Ok(())
@@ -343,28 +336,14 @@ impl<'a, D: Dialect> Importer<'a, D> {
             (Some(file), _) => read_calibration(file, Some(size))?,
             (None, Some(i)) => {
                 i.header.frame_id().clone_into(&mut camera_frame);
-                let model = DistortionModel::from_ros_name(&i.distortion_model).ok_or_else(|| {
-                    bag_error(
-                        self.path(),
-                        format!(
-                            "{info_topic}: distortion model '{}' is not read (plumb_bob, rational_polynomial, equidistant)",
-                            i.distortion_model
-                        ),
-                    )
-                })?;
-                let c = CameraCalibration {
-                    width: i.width,
-                    height: i.height,
-                    k: i.k,
-                    distortion_model: model,
-                    d: if i.d.is_empty() {
-                        vec![0.0; model.coefficients()]
-                    } else {
-                        i.d
-                    },
-                };
-                c.validate()
-                    .map_err(|m| bag_error(self.path(), format!("{info_topic}: {m}")))?;
+                let c = CameraCalibration::from_camera_info(
+                    i.width,
+                    i.height,
+                    i.k,
+                    &i.distortion_model,
+                    i.d,
+                )
+                .map_err(|m| bag_error(self.path(), format!("{info_topic}: {}", m.0)))?;
                 if (c.width, c.height) != size {
                     return Err(bag_error(
                         self.path(),
@@ -410,7 +389,7 @@ impl<'a, D: Dialect> Importer<'a, D> {
                     let frames: BTreeSet<&str> = self
                         .links
                         .iter()
-                        .flat_map(|l| [l.0.as_str(), l.1.as_str()])
+                        .flat_map(|l| [l.parent.as_str(), l.child.as_str()])
                         .collect();
                     let left_out = if self.bad_links.is_empty() {
                         String::new()

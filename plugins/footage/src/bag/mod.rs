@@ -29,10 +29,9 @@ mod messages;
 mod ros1;
 mod ros2;
 
-use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use nalgebra::Isometry3;
 use serde::de::DeserializeOwned;
 
 use crate::FootageError;
@@ -126,48 +125,8 @@ pub fn import_bag(o: &BagOptions) -> Result<BagSummary, FootageError> {
     }
 }
 
-/// A transform on `/tf` or `/tf_static`: parent, child, stamp, `parent_from_child`.
-type Link = (String, String, u64, Isometry3<f64>);
-
 fn bag_error(bag: &Path, message: impl Into<String>) -> FootageError {
     FootageError::input(bag.display().to_string(), message)
-}
-
-/// `base_from_target` through the transforms (an undirected tree search from `base`).
-fn chain(links: &[Link], base: &str, target: &str, near_ns: u64) -> Option<Isometry3<f64>> {
-    // Per edge, the transform nearest `near_ns` (a static one has stamp 0 or any).
-    let mut edges: HashMap<(&str, &str), (u64, Isometry3<f64>)> = HashMap::new();
-    for (parent, child, stamp, t) in links {
-        let d = stamp.abs_diff(near_ns);
-        let e = edges
-            .entry((parent.as_str(), child.as_str()))
-            .or_insert((d, *t));
-        if d < e.0 {
-            *e = (d, *t);
-        }
-    }
-    let mut from: HashMap<&str, Isometry3<f64>> = HashMap::from([(base, Isometry3::identity())]);
-    let mut queue = VecDeque::from([base]);
-    while let Some(frame) = queue.pop_front() {
-        let here = from[frame];
-        if frame == target {
-            return Some(here);
-        }
-        for ((parent, child), (_, t)) in &edges {
-            let (next, step) = if *parent == frame {
-                (*child, *t)
-            } else if *child == frame {
-                (*parent, t.inverse())
-            } else {
-                continue;
-            };
-            if !from.contains_key(next) {
-                from.insert(next, here * step);
-                queue.push_back(next);
-            }
-        }
-    }
-    None
 }
 
 /// The only topic of one of `kinds`, or the one asked for (checked to be of those kinds).

@@ -7,7 +7,9 @@
 //!   publisher such as ros2_control's `joint_state_broadcaster`).
 //! - Out: `std_msgs/msg/Float64MultiArray` to a `forward_command_controller` (a
 //!   `JointGroupVelocityController` or `JointGroupPositionController`: one value per joint in
-//!   the controller's order), reliable, on `/<controller>/commands`.
+//!   the controller's order), reliable, on `/<controller>/commands`; or
+//!   `trajectory_msgs/msg/JointTrajectory` streamed to a `joint_trajectory_controller` on
+//!   `/<controller>/joint_trajectory` ([`crate::CommandKind::JointTrajectory`]).
 //!
 //! DDS has no master: the link is up once the participant and node exist, and alive while
 //! joint states arrive (a vanished robot node is a stale link, which stops the arm). Names
@@ -15,8 +17,10 @@
 //! `<pkg>::msg::dds_::<Type>_`), which `ros2-client` applies.
 //!
 //! [`camera`]: a camera from ROS 2 (`Image` or `CompressedImage`) as a live camera source;
+//! [`calibration`]: its `CameraInfo` and the transform tree, gathered before it is used;
 //! [`publish`]: the erased video, the mask, the commands and the safety events published.
 
+pub mod calibration;
 pub mod camera;
 pub mod publish;
 
@@ -96,6 +100,96 @@ pub struct Float64MultiArray {
     pub data: Vec<f64>,
 }
 impl Message for Float64MultiArray {}
+
+/// `builtin_interfaces/msg/Duration`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct RosDuration {
+    /// Seconds.
+    pub sec: i32,
+    /// Nanoseconds within the second.
+    pub nanosec: u32,
+}
+
+impl RosDuration {
+    /// `s` seconds (finite, >= 0; rounded to the nanosecond).
+    pub fn from_secs(s: f64) -> Self {
+        let ns = (s.max(0.0) * 1e9).round() as u64;
+        Self {
+            sec: i32::try_from(ns / 1_000_000_000).unwrap_or(i32::MAX),
+            nanosec: (ns % 1_000_000_000) as u32,
+        }
+    }
+}
+
+/// `trajectory_msgs/msg/JointTrajectoryPoint`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct JointTrajectoryPoint {
+    /// Positions (rad or m), one per joint of the trajectory.
+    pub positions: Vec<f64>,
+    /// Velocities; empty: the controller interpolates positions.
+    pub velocities: Vec<f64>,
+    /// Accelerations; empty.
+    pub accelerations: Vec<f64>,
+    /// Efforts; empty.
+    pub effort: Vec<f64>,
+    /// When the point is to be reached, from the trajectory's start.
+    pub time_from_start: RosDuration,
+}
+
+/// `trajectory_msgs/msg/JointTrajectory`.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct JointTrajectory {
+    /// Stamp (zero: start on receipt).
+    pub header: Header,
+    /// The joints, in the order of each point's values.
+    pub joint_names: Vec<String>,
+    /// The points.
+    pub points: Vec<JointTrajectoryPoint>,
+}
+impl Message for JointTrajectory {}
+
+/// The command publisher of the link's controller.
+enum Commands {
+    /// A forward_command_controller's `Float64MultiArray`.
+    Group(ros2_client::Publisher<Float64MultiArray>),
+    /// A joint_trajectory_controller's one-point `JointTrajectory`.
+    Trajectory {
+        publisher: ros2_client::Publisher<JointTrajectory>,
+        joints: Vec<String>,
+        horizon_s: f64,
+    },
+}
+
+impl Commands {
+    /// Publishes `values` (one per controller joint, in its order).
+    async fn publish(&self, data: Vec<f64>) -> Result<(), String> {
+        match self {
+            Self::Group(p) => p
+                .async_publish(Float64MultiArray {
+                    layout: MultiArrayLayout::default(),
+                    data,
+                })
+                .await
+                .map_err(|e| format!("{e:?}")),
+            Self::Trajectory {
+                publisher,
+                joints,
+                horizon_s,
+            } => publisher
+                .async_publish(JointTrajectory {
+                    header: Header::default(),
+                    joint_names: joints.clone(),
+                    points: vec![JointTrajectoryPoint {
+                        positions: data,
+                        time_from_start: RosDuration::from_secs(*horizon_s),
+                        ..JointTrajectoryPoint::default()
+                    }],
+                })
+                .await
+                .map_err(|e| format!("{e:?}")),
+        }
+    }
+}
 
 /// A ROS 2 topic name (`/ns/base`, or relative to the node's namespace) for ros2-client.
 fn topic_name(topic: &str) -> Result<Name, String> {
@@ -202,16 +296,33 @@ async fn session(
             ),
         )
         .map_err(|e| format!("{}: {e:?}", settings.joint_states_topic))?;
+    let command_type = match &settings.command {
+        crate::CommandKind::JointTrajectory { .. } => {
+            MessageTypeName::new("trajectory_msgs", "JointTrajectory")
+        }
+        _ => MessageTypeName::new("std_msgs", "Float64MultiArray"),
+    };
     let command_topic = node
         .create_topic(
             &topic_name(&settings.command_topic)?,
-            MessageTypeName::new("std_msgs", "Float64MultiArray"),
+            command_type,
             &QosProfile::publisher_default(),
         )
         .map_err(|e| format!("{}: {e:?}", settings.command_topic))?;
-    let commands = node
-        .create_publisher::<Float64MultiArray>(&command_topic, None)
-        .map_err(|e| format!("{}: {e:?}", settings.command_topic))?;
+    let bad_topic = |e| format!("{}: {e:?}", settings.command_topic);
+    let commands = match &settings.command {
+        crate::CommandKind::JointTrajectory { joints, horizon_s } => Commands::Trajectory {
+            publisher: node
+                .create_publisher::<JointTrajectory>(&command_topic, None)
+                .map_err(bad_topic)?,
+            joints: joints.clone(),
+            horizon_s: *horizon_s,
+        },
+        _ => Commands::Group(
+            node.create_publisher::<Float64MultiArray>(&command_topic, None)
+                .map_err(bad_topic)?,
+        ),
+    };
     if let Ok(mut s) = shared.lock() {
         s.status.connected = true;
         s.status.connects += 1;
@@ -279,7 +390,7 @@ async fn session(
 async fn send_outbound(
     settings: &LinkSettings,
     shared: &Arc<Mutex<Shared>>,
-    commands: &ros2_client::Publisher<Float64MultiArray>,
+    commands: &Commands,
     max_age: Duration,
 ) -> Result<bool, String> {
     let (out, stop) = match shared.lock() {
@@ -298,12 +409,9 @@ async fn send_outbound(
     };
     if let Some(data) = values {
         commands
-            .async_publish(Float64MultiArray {
-                layout: MultiArrayLayout::default(),
-                data,
-            })
+            .publish(data)
             .await
-            .map_err(|e| format!("{}: {e:?}", settings.command_topic))?;
+            .map_err(|e| format!("{}: {e}", settings.command_topic))?;
     }
     if stop {
         // A reliable writer resends what was lost; give the stop time to arrive.

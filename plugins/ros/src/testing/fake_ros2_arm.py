@@ -12,6 +12,12 @@ reliable, volatile, keep last 10) as rmw does.
   --max-velocity (NaN velocities published with --no-velocity, as joint_state_broadcaster
   does for hardware without a velocity interface). A command of the wrong length is counted as bad and ignored. With no
   command for --timeout s, velocities go to zero.
+- --mode trajectory: subscribes to trajectory_msgs/msg/JointTrajectory on
+  /<controller>/joint_trajectory instead, as joint_trajectory_controller does: each message
+  replaces the trajectory (header stamp zero: from now); its joint_names may come in any order
+  (mapped by name; unknown or missing names, no point or a point of the wrong length count as
+  bad); the arm moves linearly from where it is to the last point's positions over its
+  time_from_start (at most --max-velocity) and holds them once reached, commands or not.
 - Prints a JSON report every 50 ms: t (wall clock), q, velocity, commands, bad, and the
   receipts of the last 300 commands as [wall time, first value].
 
@@ -28,7 +34,7 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 
-from ros2_types import Header, JointState, Float64MultiArray, default_qos, stamp_of
+from ros2_types import Header, JointState, JointTrajectory, Float64MultiArray, default_qos, stamp_of
 
 
 
@@ -42,7 +48,7 @@ def main():
     p.add_argument("--domain", type=int, default=0)
     p.add_argument("--joints", required=True)
     p.add_argument("--controller", default="forward_velocity_controller")
-    p.add_argument("--mode", choices=["velocity", "position"], default="velocity")
+    p.add_argument("--mode", choices=["velocity", "position", "trajectory"], default="velocity")
     p.add_argument("--rate", type=float, default=100.0)
     p.add_argument("--offset", type=float, default=0.0)
     p.add_argument("--max-velocity", type=float, default=1.0)
@@ -59,9 +65,16 @@ def main():
     qos = default_qos()
     dp = DomainParticipant(a.domain)
     states = DataWriter(dp, Topic(dp, "rt/joint_states", JointState, qos=qos), qos=qos)
-    commands = DataReader(
-        dp, Topic(dp, "rt/%s/commands" % a.controller, Float64MultiArray, qos=qos), qos=qos
-    )
+    if a.mode == "trajectory":
+        commands = DataReader(
+            dp, Topic(dp, "rt/%s/joint_trajectory" % a.controller, JointTrajectory, qos=qos), qos=qos
+        )
+    else:
+        commands = DataReader(
+            dp, Topic(dp, "rt/%s/commands" % a.controller, Float64MultiArray, qos=qos), qos=qos
+        )
+    # The trajectory followed (--mode trajectory): from, to, its start and its duration.
+    segment = None
     q = [float(x) for x in a.start.split(",")] if a.start else [0.0] * n
     v = [0.0] * n
     target = None
@@ -75,6 +88,23 @@ def main():
     while True:
         now = time.time()
         for m in commands.take(N=100):
+            if isinstance(m, JointTrajectory):
+                point = m.points[-1] if m.points else None
+                if (
+                    point is None
+                    or sorted(m.joint_names) != sorted(joints)
+                    or len(point.positions) != len(m.joint_names)
+                ):
+                    bad += 1
+                    continue
+                count += 1
+                last_command = now
+                goal = dict(zip(m.joint_names, point.positions))
+                receipts.append([now, goal[joints[0]]])
+                del receipts[:-300]
+                duration = point.time_from_start.sec + point.time_from_start.nanosec * 1e-9
+                segment = (list(q), [goal[j] for j in joints], now, duration)
+                continue
             if not isinstance(m, Float64MultiArray):
                 # A writer gone (the link's end): an instance-state sample without data.
                 continue
@@ -95,6 +125,15 @@ def main():
             if last_command is None or now - last_command > a.timeout:
                 v = [0.0] * n
             q = [qi + vi * dt for qi, vi in zip(q, v)]
+        elif a.mode == "trajectory":
+            if segment is not None:
+                start, goal, t0, duration = segment
+                f = 1.0 if duration <= 0 else min(1.0, (now - t0) / duration)
+                want = [s0 + (g - s0) * f for s0, g in zip(start, goal)]
+                step = a.max_velocity * dt
+                new_q = [qi + max(-step, min(step, w - qi)) for w, qi in zip(want, q)]
+                v = [(nq - qi) / max(dt, 1e-6) for nq, qi in zip(new_q, q)]
+                q = new_q
         elif target is not None:
             step = a.max_velocity * dt
             v = [max(-a.max_velocity, min(a.max_velocity, (t - qi) / max(dt, 1e-6))) for t, qi in zip(target, q)]
