@@ -26,14 +26,22 @@ pub const MATCH_PX: f32 = 8.0;
 /// margin is reported (capped) but not written beside the pose, and a note says to fit again.
 pub const MAX_MARGIN_PX: u32 = avatarm_record::camera::MAX_ERASE_MARGIN_PX as u32;
 
+/// The largest spread over starts (px, [`EraseMargin::spread_px`]) of a fit that found the
+/// pose: beyond it, answers as good as the fit's put the robot that far apart in the image, so
+/// the fit has not told them apart (a wrong basin: the real Panda fitted on frames three of
+/// which carry another frame's joints, 24 px) and no margin is written, as past
+/// [`MAX_MARGIN_PX`]. A flat valley along the view is well within it (the simulated room
+/// 0.5 deg off, fitted from edges: 2.6 px).
+pub const MAX_SPREAD_PX: f64 = 16.0;
+
 /// The margin the fit calls for, and what it is made of.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EraseMargin {
     /// The mask's dilation to erase with (px): `ceil(outline_p95_px + spread_px + 1)`, at
     /// most [`MAX_MARGIN_PX`].
     pub dilate_px: u32,
-    /// The fit called for more than [`MAX_MARGIN_PX`]: too uncertain to erase with (not
-    /// written beside the pose).
+    /// The fit called for more than [`MAX_MARGIN_PX`], or its spread is past
+    /// [`MAX_SPREAD_PX`]: too uncertain to erase with (not written beside the pose).
     pub capped: bool,
     /// Frames measured (the used frames not mispaired, with an observed outline).
     pub frames_measured: usize,
@@ -96,12 +104,12 @@ pub(super) fn erase_margin(
     distances.sort_by(f64::total_cmp);
     let p95 = quantile(&distances, 0.95)?;
     let median = quantile(&distances, 0.5)?;
-    let spread_px = spread_px(result);
+    let spread_px = spread_px(result, frames, mispaired);
     let total = distances.len() + unmatched;
     let wanted = (p95 + spread_px + 1.0).ceil();
     Some(EraseMargin {
         dilate_px: wanted.min(f64::from(MAX_MARGIN_PX)) as u32,
-        capped: wanted > f64::from(MAX_MARGIN_PX),
+        capped: wanted > f64::from(MAX_MARGIN_PX) || spread_px > MAX_SPREAD_PX,
         frames_measured: measured,
         outline_median_px: median,
         outline_p95_px: p95,
@@ -109,7 +117,7 @@ pub(super) fn erase_margin(
         outline_pixels: distances.len(),
         unmatched_pct: 100.0 * unmatched as f64 / total.max(1) as f64,
         note: format!(
-            "dilate_px = ceil(outline_p95_px + spread_px + 1): the 95th percentile of the distance from the fitted model's outline to the nearest observed {} pixel (those within {MATCH_PX} px), the fit's spread over its starts at the robot's distance, and 1 px for the edge's own width",
+            "dilate_px = ceil(outline_p95_px + spread_px + 1): the 95th percentile of the distance from the fitted model's outline to the nearest observed {} pixel (those within {MATCH_PX} px), the fit's spread over its starts in the image (the 95th percentile of how far the robot's vertices move between the answer and another start that ended within 10 % of its cost), and 1 px for the edge's own width",
             if edges {
                 "image edge"
             } else {
@@ -119,18 +127,53 @@ pub(super) fn erase_margin(
     })
 }
 
-/// The fit's spread over its starts in pixels: the rotation's (focal length × angle) plus the
-/// translation's (focal length × distance / depth, at the robot base's depth).
-fn spread_px(result: &CalibrationResult) -> f64 {
-    let (deg, mm) = result.spread_deg_mm;
-    let f = result.intrinsics.fx.max(result.intrinsics.fy);
-    let depth = result.camera_from_base.translation.vector.norm().max(0.1);
-    f * (deg.to_radians() + mm / 1e3 / depth)
+/// The fit's spread over its starts in pixels, where the mask is drawn: for each other start
+/// that ended within 10 % of the answer's cost ([`CalibrationResult::spread_deg_mm`]'s), the
+/// 95th percentile over the robot's vertices in the measured frames of how far each moves in
+/// the image between that start's pose and the answer's (pinhole, the fitted K); the largest
+/// over those starts, 0 with none. Equally good answers apart along the view's depth, or by a
+/// turn a shift undoes, move the outline little, and so add little: summing the angle's and
+/// the distance's pixels (as before) counted such a pair at 20 px where its outlines were
+/// within about 2, and a 1e-16 change of the fit's path moved the margin from 8 to 23 px.
+fn spread_px(result: &CalibrationResult, frames: &[UsedFrame], mispaired: &[usize]) -> f64 {
+    let Some(best) = result.starts.first() else {
+        return 0.0;
+    };
+    let k = &result.intrinsics;
+    let pixel = |camera_from_base: &nalgebra::Isometry3<f64>, p: &nalgebra::Point3<f64>| {
+        let c = camera_from_base * p;
+        (c.z > 1e-3).then(|| (k.fx * c.x / c.z + k.cx, k.fy * c.y / c.z + k.cy))
+    };
+    let vertices: Vec<&nalgebra::Point3<f64>> = frames
+        .iter()
+        .filter(|f| !mispaired.contains(&f.index))
+        .flat_map(|f| f.silhouette.triangles.iter().flatten())
+        .collect();
+    result
+        .starts
+        .iter()
+        .skip(1)
+        .filter(|s| s.cost_px <= best.cost_px * 1.1 + 1e-9)
+        .filter_map(|s| {
+            let mut moved: Vec<f64> = vertices
+                .iter()
+                .filter_map(|p| {
+                    let (a, b) = (
+                        pixel(&best.camera_from_base, p)?,
+                        pixel(&s.camera_from_base, p)?,
+                    );
+                    Some((a.0 - b.0).hypot(a.1 - b.1))
+                })
+                .collect();
+            moved.sort_by(f64::total_cmp);
+            quantile(&moved, 0.95)
+        })
+        .fold(0.0, f64::max)
 }
 
 #[cfg(test)]
 mod tests {
-    use avatarm_core::vision::calibrate::SilhouetteFrame;
+    use avatarm_core::vision::calibrate::{SilhouetteFrame, StartResult};
     use avatarm_core::vision::camera::Intrinsics;
     use nalgebra::Isometry3;
 
@@ -142,9 +185,18 @@ mod tests {
             .collect()
     }
 
-    fn result(spread_deg_mm: (f64, f64)) -> CalibrationResult {
+    /// The answer 1 m in front of the base, and another start turned `turn_deg` about the
+    /// camera's y axis that ended at the same cost.
+    fn result(turn_deg: f64) -> CalibrationResult {
+        let best = Isometry3::translation(0.0, 0.0, 1.0);
+        let other = Isometry3::rotation(nalgebra::Vector3::y() * turn_deg.to_radians()) * best;
+        let start = |camera_from_base| StartResult {
+            start: ([0.0; 3], [0.0; 3]),
+            camera_from_base,
+            cost_px: 1.0,
+        };
         CalibrationResult {
-            camera_from_base: Isometry3::translation(0.0, 0.0, 1.0),
+            camera_from_base: best,
             intrinsics: Intrinsics {
                 width: 40,
                 height: 40,
@@ -155,20 +207,21 @@ mod tests {
             },
             cost_px: 0.0,
             rough_cost_px: 0.0,
-            starts: Vec::new(),
-            spread_deg_mm,
+            starts: vec![start(best), start(other)],
+            spread_deg_mm: (turn_deg, 0.0),
             evaluations: 0,
             stage_seconds: [0.0; 3],
             stage_evaluations: [0; 3],
         }
     }
 
-    /// Frame `index` seeing the robot as `observed` (0/1, 40x40).
+    /// Frame `index` seeing the robot as `observed` (0/1, 40x40); the robot a triangle at the
+    /// base's origin.
     fn frame(index: usize, observed: Vec<u8>) -> UsedFrame {
         UsedFrame {
             index,
             silhouette: SilhouetteFrame {
-                triangles: Vec::new(),
+                triangles: vec![[nalgebra::Point3::origin(); 3]],
                 observed,
             },
             scored: None,
@@ -188,15 +241,40 @@ mod tests {
                 mispaired,
                 (w, h),
                 false,
-                &result((spread_deg, 0.0)),
+                &result(spread_deg),
             )
             .expect("measured")
         };
         let m = margin(&[robot()], &[], 0.0);
         assert!((m.outline_p95_px - 2.0).abs() < 1e-6, "{m:?}");
         assert_eq!((m.dilate_px, m.unmatched_pct), (3, 0.0));
-        // A spread of 0.5 deg at f = 100 px is 0.87 px more.
-        assert_eq!(margin(&[robot()], &[], 0.5).dilate_px, 4);
+        // Another answer as good, turned 0.5 deg: the robot 0.87 px away in the image (f =
+        // 100 px, 1 m away), so 0.87 px more.
+        let m = margin(&[robot()], &[], 0.5);
+        assert!(
+            (m.spread_px - 100.0 * 0.5f64.to_radians().tan()).abs() < 1e-9,
+            "{m:?}"
+        );
+        assert_eq!(m.dilate_px, 4);
+        // The same turn about the robot itself (a turn and the shift that undoes it, as
+        // equally good answers along a flat valley are): the robot stays where it is in the
+        // image, so nothing more (summing the angle's and the shift's pixels gave 2 px more).
+        let mut pivoted = result(0.5);
+        let pivot = nalgebra::Translation3::new(0.0, 0.0, 1.0);
+        pivoted.starts[1].camera_from_base = pivot
+            * Isometry3::rotation(nalgebra::Vector3::y() * 0.5f64.to_radians())
+            * pivot.inverse()
+            * pivoted.camera_from_base;
+        let m =
+            erase_margin(&[robot()], &drawn[..1], &[], (w, h), false, &pivoted).expect("measured");
+        assert!(m.spread_px < 1e-9 && m.dilate_px == 3, "{m:?}");
+        // Equally good answers 20 px apart (a wrong basin): not written, whatever the sum.
+        let m = margin(&[robot()], &[], 11.3);
+        assert!(
+            m.spread_px > MAX_SPREAD_PX && m.dilate_px < MAX_MARGIN_PX,
+            "{m:?}"
+        );
+        assert!(m.capped, "{m:?}");
         // A frame recorded with another frame's joints (drawn 6 px inside) is left out.
         let m = margin(&[robot(), frame(1, square(w, h, 10, 30))], &[1], 0.0);
         assert_eq!((m.dilate_px, m.frames_measured), (3, 1));
@@ -205,8 +283,6 @@ mod tests {
         assert_eq!((m.dilate_px, m.capped), (MAX_MARGIN_PX, true));
         // Nothing observed: nothing to measure.
         let empty = [frame(0, vec![0; w * h])];
-        assert!(
-            erase_margin(&empty, &drawn[..1], &[], (w, h), true, &result((0.0, 0.0))).is_none()
-        );
+        assert!(erase_margin(&empty, &drawn[..1], &[], (w, h), true, &result(0.0)).is_none());
     }
 }

@@ -349,8 +349,8 @@ pub fn run(
     match &margin {
         None => notes.push("no outline could be measured: no erase margin is written beside the pose (replay then dilates by --dilate, 0 by default)".into()),
         Some(m) if m.capped => notes.push(format!(
-            "the fit calls for an erase margin beyond {} px (its outline p95 {:.1} px, its spread over starts {:.1} px): too uncertain to erase with, so none is written beside the pose; check the overlays and fit again (a closer rough pose, frames that carry their own joints)",
-            margin::MAX_MARGIN_PX, m.outline_p95_px, m.spread_px
+            "the fit calls for an erase margin beyond {} px, or its starts' answers lie more than {} px apart (its outline p95 {:.1} px, its spread over starts {:.1} px): too uncertain to erase with, so none is written beside the pose; check the overlays and fit again (a closer rough pose, frames that carry their own joints)",
+            margin::MAX_MARGIN_PX, margin::MAX_SPREAD_PX, m.outline_p95_px, m.spread_px
         )),
         Some(_) => {}
     }
