@@ -12,7 +12,7 @@ use avatarm_core::tf::chain;
 use avatarm_core::vision::camera::Intrinsics;
 use avatarm_core::vision::distortion::Distortion;
 use avatarm_record::camera::CameraCalibration;
-use avatarm_ros::ros2::calibration::{CameraInfo, DriverCalibration, gather};
+use avatarm_ros::ros2::calibration::{CameraInfo, DriverCalibration, gather, is_rectified};
 use avatarm_ros::ros2::camera::CameraTopic;
 use avatarm_scene::Scene;
 
@@ -47,8 +47,10 @@ pub fn from_driver(
     Ok(())
 }
 
-/// Applies what the driver gave to `scene`: CameraInfo's size, K and lens to the true and
-/// believed cameras (unless it is missing, uncalibrated (K zero), binned, cropped or refused),
+/// Applies what the driver gave to `scene`: CameraInfo's size, K and lens (P and no lens for a
+/// rectified `image_rect*` topic) to the true and believed cameras (unless it is missing,
+/// uncalibrated (K zero), binned, cropped, a lens that does not invert over the image, or
+/// refused),
 /// and, where `pose_from_tf`, the believed camera's pose `world_from_camera = robot_base *
 /// base_from_optical` chained from the description's root link at the newest transforms.
 /// Each outcome is said in `notes`.
@@ -60,14 +62,19 @@ pub fn apply(
 ) {
     let topic = &driver.info_topic;
     let Some(info) = &driver.info else {
+        let undecoded = driver
+            .bad_info
+            .as_ref()
+            .map(|e| format!(" (one came that does not decode as CameraInfo: {e})"))
+            .unwrap_or_default();
         notes.push(format!(
-            "--ros2-camera: no CameraInfo on {topic} within {:.1} s: the scene's camera '{}' is used (its size, K and pose); a driver publishes it once calibrated (ROS's camera_calibration), or calibrate with avatarm calibrate",
+            "--ros2-camera: no CameraInfo on {topic} within {:.1} s{undecoded}: the scene's camera '{}' is used (its size, K and pose); a driver publishes it once calibrated (ROS's camera_calibration), or calibrate with avatarm calibrate",
             driver.waited.as_secs_f64(),
             scene.camera_name()
         ));
         return;
     };
-    match intrinsics_of(info) {
+    match intrinsics_of(info, is_rectified(&driver.image_topic)) {
         Ok((k, lens)) => {
             let before = scene.believed_camera.intrinsics;
             scene.true_camera.intrinsics = k;
@@ -119,13 +126,7 @@ pub fn apply(
             ));
         }
         None => {
-            let mut frames: Vec<&str> = driver
-                .links
-                .iter()
-                .flat_map(|l| [l.parent.as_str(), l.child.as_str()])
-                .collect();
-            frames.sort_unstable();
-            frames.dedup();
+            let frames = avatarm_core::tf::frames(&driver.links);
             let left_out = if driver.bad_links.is_empty() {
                 String::new()
             } else {
@@ -149,7 +150,7 @@ pub fn apply(
 /// CameraInfo as the virtual camera's intrinsics and lens. Errors: K zero (uncalibrated),
 /// binning or a region of interest (not applied), or what [`CameraCalibration`] and
 /// [`Distortion`] refuse.
-fn intrinsics_of(info: &CameraInfo) -> Result<(Intrinsics, Distortion), String> {
+fn intrinsics_of(info: &CameraInfo, rectified: bool) -> Result<(Intrinsics, Distortion), String> {
     if info.k.iter().all(|&v| v == 0.0) {
         return Err("K is zero: the camera is not calibrated".into());
     }
@@ -174,19 +175,39 @@ fn intrinsics_of(info: &CameraInfo) -> Result<(Intrinsics, Distortion), String> 
         info.d.clone(),
     )
     .map_err(|e| e.0)?;
-    let lens =
-        Distortion::from_ros(c.distortion_model.ros_name(), &c.d).map_err(|e| e.to_string())?;
-    Ok((
-        Intrinsics {
-            fx: c.k[0],
-            fy: c.k[4],
-            cx: c.k[2],
-            cy: c.k[5],
+    if rectified {
+        // image_proc's rectified image: P's pinhole, no distortion left (REP 104's
+        // CameraInfo: K and D are the raw image's).
+        let p = &info.p;
+        if !(p[0] > 0.0 && p[5] > 0.0 && p.iter().all(|v| v.is_finite())) {
+            return Err(format!(
+                "a rectified topic, but P has no focal length ({}, {})",
+                p[0], p[5]
+            ));
+        }
+        let k = Intrinsics {
+            fx: p[0],
+            fy: p[5],
+            cx: p[2],
+            cy: p[6],
             width: c.width,
             height: c.height,
-        },
-        lens,
-    ))
+        };
+        return Ok((k, Distortion::None));
+    }
+    let k = Intrinsics {
+        fx: c.k[0],
+        fy: c.k[4],
+        cx: c.k[2],
+        cy: c.k[5],
+        width: c.width,
+        height: c.height,
+    };
+    let lens =
+        Distortion::from_ros(c.distortion_model.ros_name(), &c.d).map_err(|e| e.to_string())?;
+    // The mask is drawn through the lens: it must invert over the image.
+    lens.check_over(&k).map_err(|e| e.to_string())?;
+    Ok((k, lens))
 }
 
 #[cfg(test)]
@@ -320,5 +341,41 @@ mod tests {
         );
         assert_eq!(s.believed_camera.intrinsics.width, 1280);
         assert_eq!(notes.len(), 1, "{notes:?}");
+    }
+
+    /// A rectified topic is seen through P without a lens; a lens that folds over the image
+    /// is refused as the scene's own would be.
+    #[test]
+    fn a_rectified_topic_takes_p_and_a_folding_lens_is_refused() {
+        let mut rect = info("camera_optical");
+        rect.p = [
+            880.0, 0.0, 630.0, 0.0, 0.0, 882.0, 350.0, 0.0, 0.0, 0.0, 1.0, 0.0,
+        ];
+        let driver = DriverCalibration {
+            image_topic: "/camera/image_rect_color/compressed".into(),
+            info: Some(rect),
+            ..DriverCalibration::default()
+        };
+        let (mut s, mut notes) = (scene(), Vec::new());
+        apply(&driver, &mut s, false, &mut notes);
+        let k = s.believed_camera.intrinsics;
+        assert_eq!((k.fx, k.fy, k.cx, k.cy), (880.0, 882.0, 630.0, 350.0));
+        assert_eq!(s.lens, Distortion::None, "{notes:?}");
+
+        let mut folding = info("camera_optical");
+        folding.d = vec![-2.0, 0.0, 0.0, 0.0, 0.0];
+        let driver = DriverCalibration {
+            image_topic: "/camera/image_raw".into(),
+            info: Some(folding),
+            ..DriverCalibration::default()
+        };
+        let before = scene();
+        let (mut s, mut notes) = (scene(), Vec::new());
+        apply(&driver, &mut s, false, &mut notes);
+        assert_eq!(
+            s.believed_camera.intrinsics,
+            before.believed_camera.intrinsics
+        );
+        assert!(notes[0].contains("does not invert"), "{notes:?}");
     }
 }

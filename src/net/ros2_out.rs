@@ -53,6 +53,35 @@ pub fn unix_now_ns() -> u64 {
         .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
 }
 
+/// The robot site's clock mapped onto the system clock (ns since the Unix epoch) by one offset
+/// taken once, so that every message of a frame (its erased image, its mask) carries the same
+/// stamp, as ROS's exact-time synchronisers need.
+#[derive(Debug, Clone, Copy)]
+pub struct SiteToUnix {
+    /// The system clock minus the site's (s).
+    unix_minus_site_s: f64,
+}
+
+impl SiteToUnix {
+    /// The offset now.
+    pub fn now(clock: &avatarm_net::SiteClock) -> Self {
+        Self {
+            unix_minus_site_s: unix_now_ns() as f64 * 1e-9 - clock.now_s(),
+        }
+    }
+
+    /// `site_s` (the site's clock, s) on the system clock (ns; 0 where it would be before the
+    /// epoch or is not finite).
+    pub fn stamp_ns(&self, site_s: f64) -> u64 {
+        let unix_s = site_s + self.unix_minus_site_s;
+        if unix_s.is_finite() && unix_s > 0.0 {
+            (unix_s * 1e9) as u64
+        } else {
+            0
+        }
+    }
+}
+
 /// `LEVEL source: message`, a safety event's line on `/avatarm/safety`.
 pub fn safety_line(level: LogLevel, source: &str, message: &str) -> String {
     let level = match level {

@@ -185,6 +185,8 @@ impl Plugin for ServeVideoPlugin {
         let settings = options.encoder;
         let camera = options.camera.clone();
         let ros2 = options.ros2.clone();
+        // One mapping of the site's clock for the frames and masks on ROS 2.
+        let to_unix = crate::net::ros2_out::SiteToUnix::now(&clock);
         let _ = std::thread::Builder::new()
             .name("video encoder".into())
             .spawn(move || {
@@ -195,14 +197,14 @@ impl Plugin for ServeVideoPlugin {
                     settings,
                     &camera,
                     &counters,
-                    ros2.as_ref(),
+                    ros2.as_ref().map(|sink| (sink, to_unix)),
                 );
             });
         let masks = options.ros2.clone().and_then(|sink| {
             let (tx, rx) = channel::<MaskRead>();
             std::thread::Builder::new()
                 .name("ros2 masks".into())
-                .spawn(move || publish_masks(&rx, &sink, clock))
+                .spawn(move || publish_masks(&rx, &sink, to_unix))
                 .map_err(|e| warn!("robot site: no mask on ROS 2: cannot start its thread: {e}"))
                 .ok()
                 .map(|_| tx)
@@ -522,7 +524,11 @@ fn publish_erased(
 /// The masks' thread (`--ros2-publish`): each mask read back (the newest where several
 /// waited) coded as a PNG of 0 and 255 and published, stamped with its frame's capture on the
 /// system clock, until the app is gone.
-fn publish_masks(rx: &Receiver<MaskRead>, sink: &crate::net::ros2_out::Ros2Sink, clock: SiteClock) {
+fn publish_masks(
+    rx: &Receiver<MaskRead>,
+    sink: &crate::net::ros2_out::Ros2Sink,
+    to_unix: crate::net::ros2_out::SiteToUnix,
+) {
     let mut said = false;
     while let Ok(mut read) = rx.recv() {
         while let Ok(newer) = rx.try_recv() {
@@ -537,9 +543,7 @@ fn publish_masks(rx: &Receiver<MaskRead>, sink: &crate::net::ros2_out::Ros2Sink,
             .collect();
         match crate::session::mask_png(image.width, image.height, &mask) {
             Ok(png) => {
-                let age_ns = ((clock.now_s() - capture_s).max(0.0) * 1e9) as u64;
-                let stamp_ns = crate::net::ros2_out::unix_now_ns().saturating_sub(age_ns);
-                crate::net::ros2_out::publish_mask(sink, stamp_ns, png);
+                crate::net::ros2_out::publish_mask(sink, to_unix.stamp_ns(capture_s), png);
             }
             Err(e) if !said => {
                 said = true;
@@ -590,7 +594,10 @@ fn encode_and_send(
     settings: avatarm_net::codec::EncoderSettings,
     camera: &str,
     counters: &VideoCounters,
-    ros2: Option<&crate::net::ros2_out::Ros2Sink>,
+    ros2: Option<(
+        &crate::net::ros2_out::Ros2Sink,
+        crate::net::ros2_out::SiteToUnix,
+    )>,
 ) {
     let jpeg = settings.codec == avatarm_net::msg::Codec::Jpeg;
     if ros2.is_some() && !jpeg {
@@ -641,11 +648,13 @@ fn encode_and_send(
         header.stream = coded.stream;
         header.keyframe = coded.keyframe;
         header.sent_s = clock.now_s();
-        if let Some(sink) = ros2.filter(|_| jpeg) {
-            // The capture on the system clock: the site clock's age of the frame back from now.
-            let age_ns = ((header.sent_s - header.capture_s).max(0.0) * 1e9) as u64;
-            let stamp_ns = crate::net::ros2_out::unix_now_ns().saturating_sub(age_ns);
-            crate::net::ros2_out::publish_erased(sink, stamp_ns, coded.bytes.clone());
+        if let Some((sink, to_unix)) = ros2.filter(|_| jpeg) {
+            // The capture on the system clock, as its mask's.
+            crate::net::ros2_out::publish_erased(
+                sink,
+                to_unix.stamp_ns(header.capture_s),
+                coded.bytes.clone(),
+            );
         }
         match sender.send(&header, coded.bytes) {
             Ok(()) => {

@@ -102,6 +102,7 @@ pub fn link_settings(
                 (false, RosControlController::Velocity) => CommandKind::GroupVelocity { joints },
                 (false, RosControlController::Position) => CommandKind::GroupPosition { joints },
                 (false, RosControlController::Trajectory) => CommandKind::JointTrajectory {
+                    limits: position_limits(&setup.model, &joints),
                     joints,
                     horizon_s: spec.command_timeout_s,
                 },
@@ -134,6 +135,23 @@ pub fn link_settings(
         stale_after_s: spec.stale_after_s,
         ros2,
     })
+}
+
+/// The position limits `(lower, upper)` of `joints` in `model` (unlimited where the model has
+/// no such joint: the link refuses it when it starts).
+#[cfg(feature = "ros")]
+fn position_limits(model: &avatarm_core::robot::RobotModel, joints: &[String]) -> Vec<(f64, f64)> {
+    let limits = model.dof_limits();
+    joints
+        .iter()
+        .map(|j| {
+            model
+                .dof_index(j)
+                .ok()
+                .and_then(|i| limits.get(i))
+                .map_or((f64::NEG_INFINITY, f64::INFINITY), |l| (l.lower, l.upper))
+        })
+        .collect()
 }
 
 /// The link's joint-state topic: the one given, else ROS 1's `ros1_default` (Intera's

@@ -245,12 +245,6 @@ fn the_preview_plays_a_recording_as_its_camera_and_erases_its_robot() {
     // takes is stamped again when the window's frame showing it is presented: glass to glass
     // (but the display's scan-out), said at the exit.
     let log = preview_on_recording(&dir, &recording, &background, &["--press", "45:Esc"]);
-    for said in [
-        "the camera's calibration from /camera/camera_info: 640x480, fx fy cx cy [470.0, 471.0, 321.0, 238.0] px, lens none",
-        "the camera's pose from /tf: base -> camera_optical_frame, at [1.850, 0.000, 0.550] m in base",
-    ] {
-        assert!(log.contains(said), "{said}\n{log}");
-    }
     let line = log
         .lines()
         .find(|l| l.contains("glass to glass (capture -> presented) median"))

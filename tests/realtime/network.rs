@@ -792,10 +792,22 @@ fn the_robot_site_publishes_on_ros2() {
     let count = |topic: &str| r[topic]["count"].as_u64().unwrap_or(0);
     assert!(count("erased/compressed") > 0, "{r}");
     assert_eq!(r["erased/compressed"]["magic"], true, "{r}");
-    // The erased frames' masks, as PNG, stamped as their frames.
+    // The erased frames' masks, as PNG, stamped as their frames (to the nanosecond: an exact
+    // time synchroniser pairs them). A mask or a frame may be dropped (newest first), never
+    // most of them.
     assert!(count("mask/compressed") > 0, "{r}");
     assert_eq!(r["mask/compressed"]["format"], "png", "{r}");
     assert_eq!(r["mask/compressed"]["magic"], true, "{r}");
+    let stamps = |topic: &str| -> Vec<serde_json::Value> {
+        r[topic]["stamps"].as_array().cloned().unwrap_or_default()
+    };
+    let (erased, masks) = (stamps("erased/compressed"), stamps("mask/compressed"));
+    let paired = masks.iter().filter(|m| erased.contains(m)).count();
+    eprintln!(
+        "masks stamped as an erased frame: {paired} of {}",
+        masks.len()
+    );
+    assert!(2 * paired > masks.len(), "{paired} of {}: {r}", masks.len());
     assert!(count("joint_commands") > 100, "{r}");
     assert!(
         r["joint_commands"]["name"]

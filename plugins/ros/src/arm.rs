@@ -238,14 +238,14 @@ impl RosArm {
     fn stop(&mut self) {
         if self.moving {
             self.moving = false;
-            // A velocity controller: zeros. A position or trajectory controller: the last
-            // target, held.
-            let hold = match self.position_target.take() {
-                _ if !self.settings.command.takes_positions() => {
-                    vec![0.0; self.command_index.len()]
+            // A velocity controller: zeros. A position controller: the last target, held. A
+            // trajectory controller: where the arm is (its points are anchored there).
+            let hold = match (&self.settings.command, self.position_target.take()) {
+                (CommandKind::GroupPosition { .. }, Some((target, _))) => target,
+                (CommandKind::GroupPosition { .. } | CommandKind::JointTrajectory { .. }, _) => {
+                    self.measured_command()
                 }
-                Some((target, _)) => target,
-                None => self.measured_command(),
+                _ => vec![0.0; self.command_index.len()],
             };
             self.hand_over(Outbound::Stop(hold));
         }
@@ -351,7 +351,23 @@ impl RobotInterface for RosArm {
         }
         self.may_command()?;
         let mut values: Vec<f64> = self.command_index.iter().map(|&i| qdot[i]).collect();
-        if self.settings.command.takes_positions() {
+        if let CommandKind::JointTrajectory {
+            horizon_s, limits, ..
+        } = &self.settings.command
+        {
+            // The point a horizon ahead of where the arm is, not of an integrated target: an
+            // arm slowed (a scaled controller, a pendant's speed slider) or blocked is never
+            // sent further than the horizon's motion, and the point stays within the joints'
+            // limits.
+            let measured = self.measured_command();
+            for (k, (v, q)) in values.iter_mut().zip(measured).enumerate() {
+                let point = q + *v * horizon_s;
+                *v = limits
+                    .get(k)
+                    .map_or(point, |&(lower, upper)| point.clamp(lower, upper));
+            }
+            self.moving = true;
+        } else if self.settings.command.takes_positions() {
             // Velocities into position targets, from the measured positions after a stop.
             let now = Instant::now();
             let (mut target, dt) = match self.position_target.take() {
@@ -368,15 +384,7 @@ impl RobotInterface for RosArm {
             }
             self.position_target = Some((target.clone(), now));
             self.moving = true;
-            values = match self.settings.command {
-                // The point the arm is to reach a horizon ahead.
-                CommandKind::JointTrajectory { horizon_s, .. } => target
-                    .iter()
-                    .zip(&values)
-                    .map(|(t, v)| t + v * horizon_s)
-                    .collect(),
-                _ => target,
-            };
+            values = target;
         } else {
             self.moving = values.iter().any(|v| *v != 0.0);
         }

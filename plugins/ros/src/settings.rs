@@ -23,15 +23,19 @@ pub enum CommandKind {
     /// ros2_control's `joint_trajectory_controller` (ROS 2 only), streamed: each command a
     /// `trajectory_msgs/msg/JointTrajectory` of one point for `joints` (named, in this order),
     /// header stamp zero (start on receipt), positions only (the controller interpolates
-    /// from its state): where the arm is to be `horizon_s` from now, the target integrated as
-    /// for [`Self::GroupPosition`] plus `q̇ · horizon_s`. The controller holds a point once it
-    /// is reached, so an Avatarm that falls silent (a crash, a kill) leaves the arm stopped
-    /// within `horizon_s`; a stop sends the target reached so far.
+    /// from its state): where the arm is to be `horizon_s` from now, `q_measured + q̇ ·
+    /// horizon_s` (anchored to the newest joint state, so a slowed or blocked arm is never
+    /// sent further than that), clamped into `limits`. The controller holds a point once it is
+    /// reached, so an Avatarm that falls silent (a crash, a kill) leaves the arm stopped within
+    /// `horizon_s`; a stop sends the measured positions.
     JointTrajectory {
         /// The controller's joints (its `joints` parameter).
         joints: Vec<String>,
         /// How far ahead each point lies (s, within 0.01..5): the point's `time_from_start`.
         horizon_s: f64,
+        /// Each joint's position limits `(lower, upper)` (rad or m; the description's), in the
+        /// order of `joints`; empty: none.
+        limits: Vec<(f64, f64)>,
     },
 }
 
@@ -206,7 +210,29 @@ impl LinkSettings {
                 ));
             }
         }
-        if let CommandKind::JointTrajectory { horizon_s, .. } = self.command {
+        if let CommandKind::JointTrajectory {
+            horizon_s,
+            limits,
+            joints,
+        } = &self.command
+        {
+            let horizon_s = *horizon_s;
+            if !limits.is_empty() && limits.len() != joints.len() {
+                return Err(format!(
+                    "{} position limits for {} trajectory joints",
+                    limits.len(),
+                    joints.len()
+                ));
+            }
+            if let Some((j, (lower, upper))) = joints
+                .iter()
+                .zip(limits)
+                .find(|(_, (l, u))| l.is_nan() || u.is_nan() || l > u)
+            {
+                return Err(format!(
+                    "joint {j}: position limits [{lower}, {upper}] are not a range"
+                ));
+            }
             if self.ros2.is_none() {
                 return Err(
                     "a joint_trajectory_controller is commanded over ROS 2 only (kind = \"ros2_control\")".into(),

@@ -245,20 +245,23 @@ fn a_ros2_position_controller_gets_integrated_targets_and_holds_them() {
 }
 
 /// A `joint_trajectory_controller` (`--mode trajectory` on the fake arm): each command a
-/// one-point `JointTrajectory` a horizon ahead, by joint name; when the commands stop (a hung
-/// or killed Avatarm sends nothing, not even a stop), the arm holds the last point within the
-/// horizon.
+/// one-point `JointTrajectory` by joint name, the point the horizon's motion ahead of where the
+/// arm is (so without the horizon the arm would not move at all) and within the joints'
+/// limits; when the commands stop (a hung or killed Avatarm sends nothing, not even a stop),
+/// the arm holds the last point within the horizon.
 #[test]
-fn a_ros2_trajectory_controller_gets_streamed_points_and_holds_when_they_stop() {
+fn a_ros2_trajectory_controller_gets_points_ahead_of_the_arm_and_holds_when_they_stop() {
     let _serial = support::serial();
     let domain = domain(12);
     let joints: Vec<String> = CONTROLLER.iter().map(|s| (*s).to_owned()).collect();
     let mut settings =
         LinkSettings::ros2_control("joint_trajectory_controller", joints.clone(), domain);
     settings.command_topic = "/joint_trajectory_controller/joint_trajectory".into();
+    // In the controller's order [j3, j1, j2]: j1 stops at 0.15 rad.
     settings.command = CommandKind::JointTrajectory {
         joints,
         horizon_s: 0.2,
+        limits: vec![(-1.0, 1.0), (-1.0, 0.15), (-1.0, 1.0)],
     };
     let (node, arm) = drive_for_a_second(
         domain,
@@ -277,11 +280,17 @@ fn a_ros2_trajectory_controller_gets_streamed_points_and_holds_when_they_stop() 
     let before = node.report();
     std::thread::sleep(Duration::from_millis(300));
     let after = node.report();
-    // In the controller's order [j3, j1, j2]: j1 about 0.2 rad/s for 1 s plus the horizon.
     let q = |i: usize| before["q"][i].as_f64().expect("q");
-    assert!((0.16..=0.28).contains(&q(1)), "j1 {}: {before}", q(1));
-    assert!((-0.14..=-0.08).contains(&q(0)), "j3 {}: {before}", q(0));
+    // j3 at about -0.1 rad/s for 1 s, and the last point the horizon's 0.02 rad ahead.
+    assert!((-0.14..=-0.09).contains(&q(0)), "j3 {}: {before}", q(0));
+    // j1 at its limit, not past it.
+    assert!(
+        (0.14..=0.15 + 1e-9).contains(&q(1)),
+        "j1 {}: {before}",
+        q(1)
+    );
     assert_eq!(q(2), 0.0, "{before}");
+    assert_eq!(after["horizon"].as_f64(), Some(0.2), "{after}");
     assert_eq!(
         before["q"],
         after["q"],
@@ -314,17 +323,22 @@ fn settings_a_ros2_link_cannot_use_are_refused() {
     assert!(start(s).contains("no gripper topic"));
     let s = LinkSettings::ros2_control("c", joints.clone(), 300);
     assert!(start(s).contains("DDS domain 300"));
-    let mut s = LinkSettings::ros2_control("c", joints.clone(), 0);
-    s.command = CommandKind::JointTrajectory {
+    let trajectory = |horizon_s: f64, limits: Vec<(f64, f64)>| CommandKind::JointTrajectory {
         joints: joints.clone(),
-        horizon_s: 0.0,
+        horizon_s,
+        limits,
     };
+    let mut s = LinkSettings::ros2_control("c", joints.clone(), 0);
+    s.command = trajectory(0.0, Vec::new());
     assert!(start(s).contains("trajectory horizon 0 s"));
+    let mut s = LinkSettings::ros2_control("c", joints.clone(), 0);
+    s.command = trajectory(0.2, vec![(0.0, 1.0)]);
+    assert!(start(s).contains("1 position limits for 3 trajectory joints"));
+    let mut s = LinkSettings::ros2_control("c", joints.clone(), 0);
+    s.command = trajectory(0.2, vec![(0.0, 1.0), (1.0, -1.0), (0.0, f64::NAN)]);
+    assert!(start(s).contains("joint j1: position limits [1, -1]"));
     let mut s = LinkSettings::sawyer("http://localhost:11311");
-    s.command = CommandKind::JointTrajectory {
-        joints,
-        horizon_s: 0.2,
-    };
+    s.command = trajectory(0.2, Vec::new());
     assert!(start(s).contains("over ROS 2 only"));
 }
 
@@ -449,7 +463,7 @@ fn a_ros2_camera_drivers_camera_info_and_static_transforms_are_gathered() {
             "1",
             "--tf-static",
             "cam_link",
-            "cam_optical",
+            "camera_optical_frame",
             "0",
             "0",
             "0",
@@ -483,7 +497,9 @@ fn a_ros2_camera_drivers_camera_info_and_static_transforms_are_gathered() {
     assert_eq!(info.distortion_model, "plumb_bob");
     assert_eq!(info.d, [0.1, -0.2, 0.001, 0.0, 0.05]);
     assert_eq!(info.header.frame_id, "camera_optical_frame");
-    let pose = chain(&g.links, "base", "cam_optical", 0).expect("base -> cam_optical");
+    // Chained to the frame CameraInfo names, as the app does.
+    let pose = chain(&g.links, "base", &info.header.frame_id, u64::MAX)
+        .expect("base -> CameraInfo's frame");
     // REP 103/104: the optical frame looks along the link's x, its x along the link's -y.
     let (origin, z, x) = (
         pose * nalgebra::Point3::origin(),

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use avatarm_core::robot::trajectory::{JointTrajectory, Keyframe};
 use avatarm_core::robot::{PackagePath, RobotModel};
 use avatarm_core::vision::camera::{CameraPose, Intrinsics, PinholeCamera};
-use avatarm_core::vision::distortion::{Distortion, DistortionMap};
+use avatarm_core::vision::distortion::Distortion;
 use avatarm_core::vision::head::{HeadMotion, TrackingModel, perturbed_mount};
 use nalgebra::{DVector, Isometry3, Vector3};
 
@@ -764,20 +764,8 @@ fn resolve_camera(c: &CameraSpec, path: &Path) -> Result<CameraParts, SceneError
             let lens = Distortion::from_ros(&l.model, &l.coefficients)
                 .map_err(|e| SceneError::value("camera.distortion", e).in_file(path))?;
             // The lens must invert over the image (a render can be drawn through it).
-            if !lens.is_none() {
-                let map = DistortionMap::new(&intrinsics, &lens, 1.0)
-                    .map_err(|e| SceneError::value("camera.distortion", e).in_file(path))?;
-                if map.unmapped > 0 {
-                    let e = avatarm_core::Error::BadSetting {
-                        what: "lens distortion".into(),
-                        message: format!(
-                            "does not invert at {} of the image's pixels (past a barrel's fold): not a lens over this image",
-                            map.unmapped
-                        ),
-                    };
-                    return Err(SceneError::value("camera.distortion", e).in_file(path));
-                }
-            }
+            lens.check_over(&intrinsics)
+                .map_err(|e| SceneError::value("camera.distortion", e).in_file(path))?;
             lens
         }
         None => Distortion::None,

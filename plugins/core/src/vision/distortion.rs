@@ -107,6 +107,27 @@ impl Distortion {
         matches!(self, Self::None)
     }
 
+    /// Checks that the lens inverts over the whole image of `image` (each pixel has an
+    /// undistorted ray, so a render can be drawn through it; [`DistortionMap`]). Errors: a
+    /// lens past a barrel's fold within the image (naming how many pixels), or one
+    /// [`DistortionMap::new`] refuses.
+    pub fn check_over(&self, image: &Intrinsics) -> Result<()> {
+        if self.is_none() {
+            return Ok(());
+        }
+        let map = DistortionMap::new(image, self, 1.0)?;
+        if map.unmapped > 0 {
+            return Err(Error::BadSetting {
+                what: "lens distortion".into(),
+                message: format!(
+                    "does not invert at {} of the image's pixels (past a barrel's fold): not a lens over this image",
+                    map.unmapped
+                ),
+            });
+        }
+        Ok(())
+    }
+
     /// The distorted normalised coordinates of the undistorted `(x, y)`.
     pub fn distort(&self, x: f64, y: f64) -> (f64, f64) {
         let r2 = x * x + y * y;

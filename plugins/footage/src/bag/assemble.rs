@@ -1,7 +1,7 @@
 //! One pass over a bag's messages, whatever its container, into the recording: the topics
 //! picked, each message decoded by its [`Dialect`] and kept, then the recording written.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use avatarm_core::tf::{FrameLink, chain};
@@ -386,11 +386,7 @@ impl<'a, D: Dialect> Importer<'a, D> {
                 }
                 let base = base.trim_start_matches('/');
                 let pose = chain(&self.links, base, &camera_frame, t0).ok_or_else(|| {
-                    let frames: BTreeSet<&str> = self
-                        .links
-                        .iter()
-                        .flat_map(|l| [l.parent.as_str(), l.child.as_str()])
-                        .collect();
+                    let frames = avatarm_core::tf::frames(&self.links);
                     let left_out = if self.bad_links.is_empty() {
                         String::new()
                     } else {
@@ -403,7 +399,7 @@ impl<'a, D: Dialect> Importer<'a, D> {
                         "--base-frame",
                         format!(
                             "/tf does not connect {base} to the camera's frame {camera_frame} (frames in /tf and /tf_static: {}){left_out}",
-                            frames.into_iter().collect::<Vec<_>>().join(", ")
+                            frames.join(", ")
                         ),
                     )
                 })?;

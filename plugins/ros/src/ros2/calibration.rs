@@ -122,11 +122,25 @@ pub fn info_topic(image_topic: &str) -> String {
     }
 }
 
+/// Whether `image_topic` carries image_proc's rectified images (`image_rect`, `image_rect_color`,
+/// and their `/compressed`): undistorted, to be seen through CameraInfo's P, not K and D.
+pub fn is_rectified(image_topic: &str) -> bool {
+    let base = image_topic.trim_end_matches('/');
+    let base = base.strip_suffix("/compressed").unwrap_or(base);
+    base.rsplit('/')
+        .next()
+        .is_some_and(|n| n.starts_with("image_rect"))
+}
+
 /// What the driver gave within the wait.
 #[derive(Debug, Clone, Default)]
 pub struct DriverCalibration {
+    /// The image topic whose calibration it is.
+    pub image_topic: String,
     /// The `camera_info` topic listened to.
     pub info_topic: String,
+    /// Why a CameraInfo that came did not decode (the newest such).
+    pub bad_info: Option<String>,
     /// The newest `CameraInfo`, if one came.
     pub info: Option<CameraInfo>,
     /// Every good transform received (static ones at stamp 0).
@@ -168,6 +182,7 @@ async fn gather_async(
     let node_name = format!("{}_calibration", topic.node_name);
     let (_context, mut node, spin) = super::join(&topic.transport, &node_name)?;
     let mut out = DriverCalibration {
+        image_topic: topic.topic.clone(),
         info_topic: info_topic(&topic.topic),
         ..DriverCalibration::default()
     };
@@ -206,23 +221,25 @@ async fn gather_async(
     let mut spin = std::pin::pin!(spin);
     let deadline = tokio::time::sleep(wait);
     tokio::pin!(deadline);
+    // A stream that ended is polled no more (it would answer at once, for ever).
+    let mut open = [true; 3];
     loop {
         tokio::select! {
-            m = infos.next() => {
-                if let Some(Ok((m, _))) = m {
-                    out.info = Some(m);
-                }
-            }
-            m = statics.next() => {
-                if let Some(Ok((m, _))) = m {
-                    add_links(&mut out, m, true);
-                }
-            }
-            m = dynamics.next() => {
-                if let Some(Ok((m, _))) = m {
-                    add_links(&mut out, m, false);
-                }
-            }
+            m = infos.next(), if open[0] => match m {
+                Some(Ok((m, _))) => out.info = Some(m),
+                Some(Err(e)) => out.bad_info = Some(format!("{e:?}")),
+                None => open[0] = false,
+            },
+            m = statics.next(), if open[1] => match m {
+                Some(Ok((m, _))) => add_links(&mut out, m, true),
+                Some(Err(e)) => out.bad_links.push(format!("/tf_static: does not decode: {e:?}")),
+                None => open[1] = false,
+            },
+            m = dynamics.next(), if open[2] => match m {
+                Some(Ok((m, _))) => add_links(&mut out, m, false),
+                Some(Err(e)) => out.bad_links.push(format!("/tf: does not decode: {e:?}")),
+                None => open[2] = false,
+            },
             r = &mut spin => return Err(format!("the node's spinner stopped: {r:?}")),
             () = &mut deadline => break,
         }
@@ -240,11 +257,10 @@ fn add_links(out: &mut DriverCalibration, m: TfMessage, is_static: bool) {
     let topic = if is_static { "/tf_static" } else { "/tf" };
     for t in m.transforms {
         let (p, q) = (&t.transform.translation, &t.transform.rotation);
-        let stamp_ns = if is_static {
-            0
-        } else {
-            u64::try_from(t.header.stamp.sec).unwrap_or(0) * 1_000_000_000
-                + u64::from(t.header.stamp.nanosec)
+        let stamp = &t.header.stamp;
+        let stamp_ns = match u64::try_from(stamp.sec) {
+            Ok(sec) if !is_static => sec * 1_000_000_000 + u64::from(stamp.nanosec),
+            _ => 0,
         };
         match FrameLink::new(
             &t.header.frame_id,
@@ -272,5 +288,15 @@ mod tests {
         );
         assert_eq!(info_topic("/image_raw/"), "/camera_info");
         assert_eq!(info_topic("image"), "camera_info");
+    }
+
+    #[test]
+    fn image_procs_rectified_topics_are_told_apart() {
+        assert!(super::is_rectified("/camera/image_rect"));
+        assert!(super::is_rectified(
+            "/cam/color/image_rect_color/compressed"
+        ));
+        assert!(!super::is_rectified("/camera/image_raw"));
+        assert!(!super::is_rectified("/image_rect/foo"));
     }
 }

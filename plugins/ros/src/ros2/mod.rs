@@ -311,7 +311,9 @@ async fn session(
         .map_err(|e| format!("{}: {e:?}", settings.command_topic))?;
     let bad_topic = |e| format!("{}: {e:?}", settings.command_topic);
     let commands = match &settings.command {
-        crate::CommandKind::JointTrajectory { joints, horizon_s } => Commands::Trajectory {
+        crate::CommandKind::JointTrajectory {
+            joints, horizon_s, ..
+        } => Commands::Trajectory {
             publisher: node
                 .create_publisher::<JointTrajectory>(&command_topic, None)
                 .map_err(bad_topic)?,

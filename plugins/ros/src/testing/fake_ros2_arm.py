@@ -17,7 +17,8 @@ reliable, volatile, keep last 10) as rmw does.
   replaces the trajectory (header stamp zero: from now); its joint_names may come in any order
   (mapped by name; unknown or missing names, no point or a point of the wrong length count as
   bad); the arm moves linearly from where it is to the last point's positions over its
-  time_from_start (at most --max-velocity) and holds them once reached, commands or not.
+  time_from_start (at most --max-velocity) and holds them once reached, commands or not. Its
+  report adds "horizon": the last point's time_from_start (s).
 - Prints a JSON report every 50 ms: t (wall clock), q, velocity, commands, bad, and the
   receipts of the last 300 commands as [wall time, first value].
 
@@ -75,6 +76,7 @@ def main():
         )
     # The trajectory followed (--mode trajectory): from, to, its start and its duration.
     segment = None
+    horizon = None
     q = [float(x) for x in a.start.split(",")] if a.start else [0.0] * n
     v = [0.0] * n
     target = None
@@ -104,6 +106,7 @@ def main():
                 del receipts[:-300]
                 duration = point.time_from_start.sec + point.time_from_start.nanosec * 1e-9
                 segment = (list(q), [goal[j] for j in joints], now, duration)
+                horizon = duration
                 continue
             if not isinstance(m, Float64MultiArray):
                 # A writer gone (the link's end): an instance-state sample without data.
@@ -153,7 +156,17 @@ def main():
                 next_state = now + period
         if now >= next_report:
             print(
-                json.dumps({"t": now, "q": q, "velocity": v, "commands": count, "bad": bad, "receipts": receipts}),
+                json.dumps(
+                    {
+                        "t": now,
+                        "q": q,
+                        "velocity": v,
+                        "commands": count,
+                        "bad": bad,
+                        "receipts": receipts,
+                        "horizon": horizon,
+                    }
+                ),
                 flush=True,
             )
             next_report = now + 0.05

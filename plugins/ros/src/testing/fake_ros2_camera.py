@@ -43,7 +43,7 @@ def info_topic(image_topic):
     base = image_topic.rstrip("/")
     if base.endswith("/compressed"):
         base = base[: -len("/compressed")]
-    return base.rsplit("/", 1)[0] + "/camera_info"
+    return base.rsplit("/", 1)[0] + "/camera_info" if "/" in base else "camera_info"
 
 
 

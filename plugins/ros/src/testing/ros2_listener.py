@@ -63,6 +63,10 @@ def main():
                         stamp=m.header.stamp.sec + m.header.stamp.nanosec * 1e-9,
                         frame_id=m.header.frame_id,
                     )
+                    # The last 200 stamps as [sec, nanosec], to pair a frame's messages.
+                    stamps = r.setdefault("stamps", [])
+                    stamps.append([m.header.stamp.sec, m.header.stamp.nanosec])
+                    del stamps[:-200]
                 elif isinstance(m, JointState):
                     r.update(name=list(m.name), velocity=list(m.velocity))
                 elif isinstance(m, String):
