@@ -367,7 +367,7 @@ impl RobotInterface for RosArm {
                     .map_or(point, |&(lower, upper)| point.clamp(lower, upper));
             }
             self.moving = true;
-        } else if self.settings.command.takes_positions() {
+        } else if let CommandKind::GroupPosition { .. } = self.settings.command {
             // Velocities into position targets, from the measured positions after a stop.
             let now = Instant::now();
             let (mut target, dt) = match self.position_target.take() {

@@ -40,15 +40,6 @@ pub enum CommandKind {
 }
 
 impl CommandKind {
-    /// Whether the controller takes positions (a group position or trajectory controller):
-    /// the velocities are integrated into targets and a stop holds the last one.
-    pub fn takes_positions(&self) -> bool {
-        matches!(
-            self,
-            Self::GroupPosition { .. } | Self::JointTrajectory { .. }
-        )
-    }
-
     /// The controller's joints (ros_control), `None` for Intera's.
     pub fn controller_joints(&self) -> Option<&[String]> {
         match self {

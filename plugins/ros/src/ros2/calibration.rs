@@ -257,10 +257,11 @@ fn add_links(out: &mut DriverCalibration, m: TfMessage, is_static: bool) {
     let topic = if is_static { "/tf_static" } else { "/tf" };
     for t in m.transforms {
         let (p, q) = (&t.transform.translation, &t.transform.rotation);
-        let stamp = &t.header.stamp;
-        let stamp_ns = match u64::try_from(stamp.sec) {
-            Ok(sec) if !is_static => sec * 1_000_000_000 + u64::from(stamp.nanosec),
-            _ => 0,
+        // A static transform (or one stamped before the epoch) holds at any time.
+        let stamp_ns = if is_static {
+            0
+        } else {
+            t.header.stamp.as_nanos().unwrap_or(0)
         };
         match FrameLink::new(
             &t.header.frame_id,

@@ -164,7 +164,7 @@ async fn subscribe(topic: &CameraTopic, events: &Sender<CameraEvent>) -> Result<
             .map_err(|e| format!("{}: {e:?}", topic.topic))?;
         return forward(&topic.topic, &sub, spin, events, |m: CompressedImage| {
             RosImage {
-                stamp_unix_s: stamp_s(&m.header),
+                stamp_unix_s: m.header.stamp.as_secs_f64(),
                 arrival: Instant::now(),
                 arrival_unix_s: unix_now_s(),
                 width: 0,
@@ -182,7 +182,7 @@ async fn subscribe(topic: &CameraTopic, events: &Sender<CameraEvent>) -> Result<
         .create_subscription::<Image>(&dds_topic, Some(qos))
         .map_err(|e| format!("{}: {e:?}", topic.topic))?;
     forward(&topic.topic, &sub, spin, events, |m: Image| RosImage {
-        stamp_unix_s: stamp_s(&m.header),
+        stamp_unix_s: m.header.stamp.as_secs_f64(),
         arrival: Instant::now(),
         arrival_unix_s: unix_now_s(),
         width: m.width,
@@ -194,11 +194,6 @@ async fn subscribe(topic: &CameraTopic, events: &Sender<CameraEvent>) -> Result<
         compressed: false,
     })
     .await
-}
-
-/// A header's stamp (s since the Unix epoch).
-fn stamp_s(h: &Header) -> f64 {
-    f64::from(h.stamp.sec) + f64::from(h.stamp.nanosec) * 1e-9
 }
 
 /// Each message of `sub` as a frame (`frame` makes it) to `events`, until the receiver is gone

@@ -46,6 +46,20 @@ pub struct Time {
     pub nanosec: u32,
 }
 
+impl Time {
+    /// Seconds since the epoch.
+    pub fn as_secs_f64(&self) -> f64 {
+        f64::from(self.sec) + f64::from(self.nanosec) * 1e-9
+    }
+
+    /// Nanoseconds since the epoch; `None` before it (a negative `sec`).
+    pub fn as_nanos(&self) -> Option<u64> {
+        u64::try_from(self.sec)
+            .ok()
+            .map(|s| s * 1_000_000_000 + u64::from(self.nanosec))
+    }
+}
+
 /// `std_msgs/msg/Header`.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Header {
@@ -340,8 +354,7 @@ async fn session(
                 Some(Ok((m, _))) => {
                     let sample = Sample {
                         arrival: Instant::now(),
-                        stamp_s: f64::from(m.header.stamp.sec)
-                            + f64::from(m.header.stamp.nanosec) * 1e-9,
+                        stamp_s: m.header.stamp.as_secs_f64(),
                         names: m.name,
                         position: m.position,
                         velocity: m.velocity,
