@@ -38,9 +38,11 @@ command -v cargo >/dev/null || {
 # independent reader); PyPI's rosbags: the rosbag2 import's tests convert their ROS 1 bags
 # with it (rosbag2 written by an implementation Avatarm did not write); PyPI's cyclonedds
 # (Eclipse Cyclone DDS, a ROS 2 RMW's DDS, wheels with the C library): the ROS 2 link's fake
-# ros2_control arm. Installed into Avatarm's cache folder, not the system's Python.
+# ros2_control arm; PyPI's eclipse-zenoh (with rosbags' CDR and REP-2016 hashes): the same
+# arm, and a Zenoh router, on rmw_zenoh. Installed into Avatarm's cache folder, not the
+# system's Python.
 python_dir="$HOME/.cache/avatarm/python"
-if ! PYTHONPATH="$python_dir" python3 -c "import mcap.reader, rosbags.convert, cyclonedds.domain" 2>/dev/null; then
-  echo "installing PyPI's mcap, rosbags and cyclonedds into $python_dir"
-  PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet --upgrade --target "$python_dir" "mcap>=1.1" "rosbags==0.11.*" "cyclonedds==11.*"
+if ! PYTHONPATH="$python_dir" python3 -c "import mcap.reader, rosbags.convert, cyclonedds.domain, zenoh" 2>/dev/null; then
+  echo "installing PyPI's mcap, rosbags, cyclonedds and eclipse-zenoh into $python_dir"
+  PIP_BREAK_SYSTEM_PACKAGES=1 python3 -m pip install --quiet --upgrade --target "$python_dir" "mcap>=1.1" "rosbags==0.11.*" "cyclonedds==11.*" "eclipse-zenoh==1.10.*"
 fi

@@ -65,7 +65,7 @@ pub enum CameraSource {
     Webcam(u32),
     /// A recording played as a live camera, frames released at their capture times.
     Recording(avatarm_video::recorded::RecordedCameraConfig),
-    /// A ROS 2 camera topic over DDS (feature `ros`).
+    /// A ROS 2 camera topic over DDS or rmw_zenoh (feature `ros`).
     #[cfg(feature = "ros")]
     Ros2(avatarm_ros::ros2::camera::CameraTopic),
 }

@@ -1,9 +1,9 @@
-//! A camera from ROS 2 (`--ros2-camera TOPIC`, feature `ros`): the frames `avatarm_ros`'s
-//! camera thread receives over DDS, decoded to RGBA on a thread of their own and pushed into
-//! the video's inbox as any threaded source's ([`avatarm_video::threaded`]), each stamped
-//! with its capture time: the header's stamp mapped onto this machine's clock (the driver's
-//! clock taken as this machine's, as on one host or under NTP/PTP; a stamp in the future or
-//! more than 2 s old is taken as the arrival, and said once).
+//! A camera from ROS 2 (`--ros2-camera TOPIC`, feature `ros`): the frames `avatarm_ros`'s camera
+//! thread receives over DDS or rmw_zenoh, decoded to RGBA on a thread of their own and pushed into
+//! the video's inbox as any threaded source's ([`avatarm_video::threaded`]), each stamped with its
+//! capture time: the header's stamp mapped onto this machine's clock (the driver's clock taken as
+//! this machine's, as on one host or under NTP/PTP; a stamp in the future or more than 2 s old is
+//! taken as the arrival, and said once).
 
 use std::sync::mpsc::{Sender, channel};
 use std::time::Duration;

@@ -52,9 +52,9 @@ pub struct RunArgs {
         conflicts_with = "ros2_camera"
     )]
     camera_recording: Option<PathBuf>,
-    /// Take the camera feed from a ROS 2 topic over DDS (sensor_msgs/msg/Image, or
-    /// CompressedImage on a topic ending in /compressed; the scene's ros2_control link's
-    /// domain, else ROS_DOMAIN_ID; docs/robot-ros2.md).
+    /// Take the camera feed from a ROS 2 topic over DDS or rmw_zenoh (sensor_msgs/msg/Image, or
+    /// CompressedImage on a topic ending in /compressed; the scene's ros2_control link's domain and
+    /// middleware, else ROS_DOMAIN_ID and RMW_IMPLEMENTATION; docs/robot-ros2.md).
     #[arg(long = "ros2-camera", value_name = "TOPIC")]
     ros2_camera: Option<String>,
     /// With a scene that has a [task] or [chess]: teleoperate it live with this hand: scripted
@@ -76,11 +76,11 @@ pub struct RunArgs {
     /// safety events (docs/real-footage.md).
     #[arg(long, value_name = "FILE.mcap")]
     record: Option<PathBuf>,
-    /// Publish the session on ROS 2 over DDS (feature `ros`), under /avatarm: the erased
-    /// frames and the masks (CompressedImage on /avatarm/erased/compressed and
-    /// /avatarm/mask/compressed), the commands (JointState on /avatarm/joint_commands) and
-    /// the safety events (String on /avatarm/safety), on the scene's ros2_control link's
-    /// domain, else ROS_DOMAIN_ID (docs/robot-ros2.md).
+    /// Publish the session on ROS 2 over DDS or rmw_zenoh (feature `ros`), under /avatarm: the
+    /// erased frames and the masks (CompressedImage on /avatarm/erased/compressed and
+    /// /avatarm/mask/compressed), the commands (JointState on /avatarm/joint_commands) and the
+    /// safety events (String on /avatarm/safety), on the scene's ros2_control link's domain and
+    /// middleware, else ROS_DOMAIN_ID and RMW_IMPLEMENTATION (docs/robot-ros2.md).
     #[arg(long = "ros2-publish")]
     ros2_publish: bool,
     /// Sleep MS at the end of every app update: a renderer slowed on purpose, to check that the

@@ -38,16 +38,17 @@ pub struct ServeArgs {
         conflicts_with = "ros2_camera"
     )]
     camera_recording: Option<PathBuf>,
-    /// Take the camera from a ROS 2 topic over DDS (sensor_msgs/msg/Image, or
-    /// CompressedImage on a topic ending in /compressed, e.g. /camera/image_raw/compressed;
-    /// the scene's ros2_control link's domain, else ROS_DOMAIN_ID; one camera: one --view;
-    /// docs/robot-ros2.md).
+    /// Take the camera from a ROS 2 topic over DDS or rmw_zenoh (sensor_msgs/msg/Image, or
+    /// CompressedImage on a topic ending in /compressed, e.g. /camera/image_raw/compressed; the
+    /// scene's ros2_control link's domain and middleware, else ROS_DOMAIN_ID and
+    /// RMW_IMPLEMENTATION; one camera: one --view; docs/robot-ros2.md).
     #[arg(long = "ros2-camera", value_name = "TOPIC")]
     ros2_camera: Option<String>,
-    /// Publish on ROS 2 over DDS (feature `ros`), under /avatarm: the erased frames (with
-    /// --codec jpeg: CompressedImage on /avatarm/erased/compressed), the commands (JointState
+    /// Publish on ROS 2 over DDS or rmw_zenoh (feature `ros`), under /avatarm: the erased frames
+    /// (with --codec jpeg: CompressedImage on /avatarm/erased/compressed), the commands (JointState
     /// on /avatarm/joint_commands) and the safety events (String on /avatarm/safety), on the
-    /// scene's ros2_control link's domain, else ROS_DOMAIN_ID (docs/robot-ros2.md).
+    /// scene's ros2_control link's domain and middleware, else ROS_DOMAIN_ID and RMW_IMPLEMENTATION
+    /// (docs/robot-ros2.md).
     #[arg(long = "ros2-publish")]
     ros2_publish: bool,
     /// Where to listen (tcp/HOST:PORT, udp/HOST:PORT or quic/HOST:PORT; quic/ between real

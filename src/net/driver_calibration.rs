@@ -24,7 +24,7 @@ use crate::AppError;
 pub const CALIBRATION_WAIT: Duration = Duration::from_secs(3);
 
 /// Gathers the driver's calibration for `topic` and applies it to `scene` ([`apply`]); the
-/// pose too where `pose_from_tf`. Errors: DDS could not be joined (named by the flag).
+/// pose too where `pose_from_tf`. Errors: the middleware could not be joined (named by the flag).
 pub fn from_driver(
     topic: &CameraTopic,
     scene: &mut Scene,

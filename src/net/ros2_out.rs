@@ -1,5 +1,5 @@
 //! What a session publishes on ROS 2 (`--ros2-publish`, feature `ros`; docs/robot-ros2.md):
-//! the publisher ([`Ros2Sink`]) on the scene's DDS domain, and the messages the robot site
+//! the publisher ([`Ros2Sink`]) on the scene's ROS 2 domain, and the messages the robot site
 //! and the session recorder hand it. Without the feature no sink can be made (the flag says
 //! so), and these functions cannot be called.
 
@@ -20,16 +20,13 @@ pub type Ros2Sink = NoRos2;
 #[derive(Debug, Clone)]
 pub enum NoRos2 {}
 
-/// The publisher under `/avatarm` on `scene`'s DDS domain (its `ros2_control` link's, else
-/// `ROS_DOMAIN_ID`, else 0). Errors name `--ros2-publish` (or `ROS_DOMAIN_ID`).
+/// The publisher under `/avatarm` on `scene`'s ROS 2 domain and middleware
+/// ([`crate::net::site_camera::ros2_transport`]). Errors name `--ros2-publish` (or
+/// `ROS_DOMAIN_ID`, `RMW_IMPLEMENTATION`).
 #[cfg(feature = "ros")]
 pub fn ros2_publisher(scene: &Scene) -> Result<Ros2Sink, AppError> {
-    let transport = avatarm_ros::Ros2Transport {
-        domain_id: crate::net::site_camera::ros2_domain(scene)?,
-        namespace: "/".into(),
-    };
     avatarm_ros::ros2::publish::Ros2Publisher::start(
-        transport,
+        crate::net::site_camera::ros2_transport(scene)?,
         "avatarm_out",
         "/avatarm",
         "camera_optical",

@@ -26,9 +26,9 @@ pub enum SiteCamera {
     Webcam(u32),
     /// A recording (MCAP) played as the camera, its joint states as the robot's.
     Recording(PathBuf),
-    /// A ROS 2 camera topic (`Image`, or `CompressedImage` on a `/compressed` topic) over DDS
-    /// (feature `ros`; the domain of the scene's `ros2_control` link, else `ROS_DOMAIN_ID`,
-    /// else 0), its size, K and lens from the driver's `CameraInfo` and, where
+    /// A ROS 2 camera topic (`Image`, or `CompressedImage` on a `/compressed` topic) over DDS or
+    /// rmw_zenoh (feature `ros`; the domain of the scene's `ros2_control` link, else
+    /// `ROS_DOMAIN_ID`, else 0), its size, K and lens from the driver's `CameraInfo` and, where
     /// `pose_from_tf`, its pose from `/tf` ([`super::driver_calibration`]).
     Ros2 {
         /// The image topic.
@@ -60,7 +60,7 @@ impl SiteCamera {
     }
 }
 
-/// The DDS domain of `scene`: its `ros2_control` link's (checked at load), else
+/// The ROS 2 domain of `scene`: its `ros2_control` link's (checked at load), else
 /// `ROS_DOMAIN_ID`, else 0. Errors: a `ROS_DOMAIN_ID` that is not a number within 0..232.
 pub fn ros2_domain(scene: &Scene) -> Result<u16, AppError> {
     let link = &scene.file.robot.link;
@@ -85,6 +85,49 @@ pub fn ros2_domain(scene: &Scene) -> Result<u16, AppError> {
             }),
         Err(_) => Ok(0),
     }
+}
+
+/// Where `scene`'s ROS 2 nodes are: its domain ([`ros2_domain`]), namespace (its
+/// `ros2_control` link's, else `/`) and middleware (the link's `rmw`, else
+/// `RMW_IMPLEMENTATION`, else DDS; on rmw_zenoh the link's `zenoh_router`, else rmw_zenoh's
+/// default: `ZENOH_SESSION_CONFIG_URI`, else `tcp/localhost:7447`). Errors name
+/// `ROS_DOMAIN_ID` or `RMW_IMPLEMENTATION`.
+#[cfg(feature = "ros")]
+pub fn ros2_transport(scene: &Scene) -> Result<avatarm_ros::Ros2Transport, AppError> {
+    use avatarm_ros::Rmw;
+    use avatarm_scene::spec::{RobotLinkKind, Ros2Rmw};
+    let link = &scene.file.robot.link;
+    let ros2_link = link.kind == RobotLinkKind::Ros2Control;
+    let router = link.zenoh_router.clone().filter(|_| ros2_link);
+    let rmw = match link.rmw.filter(|_| ros2_link) {
+        Some(Ros2Rmw::Dds) => Rmw::Dds,
+        Some(Ros2Rmw::Zenoh) => Rmw::Zenoh { router },
+        None => match std::env::var("RMW_IMPLEMENTATION") {
+            Ok(name) => Rmw::from_implementation(&name, router)
+                .map_err(|e| AppError::flag("RMW_IMPLEMENTATION", e))?,
+            Err(_) => Rmw::Dds,
+        },
+    };
+    // A router given to a link that ends up on DDS would be silently unused.
+    if rmw == Rmw::Dds
+        && let Some(r) = link.zenoh_router.as_ref().filter(|_| ros2_link)
+    {
+        return Err(AppError::flag(
+            "robot.link.zenoh_router",
+            format!(
+                "'{r}' is given but the link is on DDS (rmw unset and RMW_IMPLEMENTATION not rmw_zenoh_cpp); set rmw = \"zenoh\" or RMW_IMPLEMENTATION=rmw_zenoh_cpp, or leave the router out"
+            ),
+        ));
+    }
+    Ok(avatarm_ros::Ros2Transport {
+        domain_id: ros2_domain(scene)?,
+        namespace: link
+            .namespace
+            .clone()
+            .filter(|_| ros2_link)
+            .unwrap_or_else(|| "/".into()),
+        rmw,
+    })
 }
 
 /// The camera opened: its source for the video app and, for a recording, the robot it plays.
@@ -168,10 +211,7 @@ pub fn open(
             pose_from_tf,
         } => {
             let topic = avatarm_ros::ros2::camera::CameraTopic {
-                transport: avatarm_ros::Ros2Transport {
-                    domain_id: ros2_domain(scene)?,
-                    namespace: "/".into(),
-                },
+                transport: ros2_transport(scene)?,
                 topic: topic.clone(),
                 node_name: "avatarm_camera".into(),
             };

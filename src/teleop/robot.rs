@@ -52,10 +52,7 @@ pub fn link_settings(
     let spec = &scene.file.robot.link;
     let intera = spec.kind == RobotLinkKind::Intera;
     let ros2 = if spec.kind == RobotLinkKind::Ros2Control {
-        Some(avatarm_ros::Ros2Transport {
-            domain_id: crate::net::site_camera::ros2_domain(scene)?,
-            namespace: "/".into(),
-        })
+        Some(crate::net::site_camera::ros2_transport(scene)?)
     } else {
         None
     };
@@ -160,6 +157,10 @@ fn position_limits(model: &avatarm_core::robot::RobotModel, joints: &[String]) -
 fn joint_states_topic(spec: &avatarm_scene::spec::RobotLinkSpec, ros1_default: &str) -> String {
     match (&spec.joint_states_topic, spec.kind) {
         (Some(given), _) => given.clone(),
+        // joint_state_broadcaster's, in the link's namespace where it has one.
+        (None, avatarm_scene::spec::RobotLinkKind::Ros2Control) if spec.namespace.is_some() => {
+            "joint_states".into()
+        }
         (None, avatarm_scene::spec::RobotLinkKind::Ros2Control) => "/joint_states".into(),
         (None, _) => ros1_default.into(),
     }
@@ -232,6 +233,16 @@ mod tests {
         assert_eq!(of(RobotLinkKind::Intera, None), "/robot/joint_states");
         assert_eq!(of(RobotLinkKind::RosControl, None), "/robot/joint_states");
         assert_eq!(of(RobotLinkKind::Ros2Control, None), "/joint_states");
+        let namespaced = RobotLinkSpec {
+            kind: RobotLinkKind::Ros2Control,
+            namespace: Some("/robot1".into()),
+            ..RobotLinkSpec::default()
+        };
+        // Relative: resolved in the namespace (/robot1/joint_states).
+        assert_eq!(
+            joint_states_topic(&namespaced, "/robot/joint_states"),
+            "joint_states"
+        );
         // Given as ROS 1's default, on a ROS 2 link: what was given (it was read as the
         // default and replaced by /joint_states).
         assert_eq!(

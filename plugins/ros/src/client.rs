@@ -97,10 +97,29 @@ impl Drop for AbortOnDrop {
     }
 }
 
-/// The link thread's single-threaded runtime; `None` (said, naming `link`) where it cannot
-/// start.
-pub(crate) fn link_runtime(link: &str) -> Option<tokio::runtime::Runtime> {
-    tokio::runtime::Builder::new_current_thread()
+/// The threads of a link's runtime.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Threads {
+    /// The link's thread alone (ROS 1).
+    One,
+    /// The link's thread and one worker: Zenoh's blocking calls (opening a session, declaring
+    /// an entity) need a multi-threaded runtime around them (ROS 2, on either middleware).
+    #[cfg(feature = "ros2")]
+    WithWorker,
+}
+
+/// The link thread's runtime; `None` (said, naming `link`) where it cannot start.
+pub(crate) fn link_runtime(link: &str, threads: Threads) -> Option<tokio::runtime::Runtime> {
+    let mut builder = match threads {
+        Threads::One => tokio::runtime::Builder::new_current_thread(),
+        #[cfg(feature = "ros2")]
+        Threads::WithWorker => {
+            let mut b = tokio::runtime::Builder::new_multi_thread();
+            b.worker_threads(1);
+            b
+        }
+    };
+    builder
         .enable_all()
         .build()
         .map_err(|e| eprintln!("{link}: cannot start its runtime: {e}"))
@@ -114,7 +133,7 @@ pub(crate) fn client_thread(
     notify: Arc<tokio::sync::Notify>,
     tx: Sender<Sample>,
 ) {
-    let Some(runtime) = link_runtime("ROS link") else {
+    let Some(runtime) = link_runtime("ROS link", Threads::One) else {
         return;
     };
     runtime.block_on(async move {

@@ -84,8 +84,8 @@ pub struct LinkSettings {
     pub joint_state_rate: Option<(String, u16)>,
     /// The link is lost when no joint state arrived for this long (s).
     pub stale_after_s: f64,
-    /// ROS 2 (DDS) instead of ROS 1 (`master_uri` unused): a ros2_control arm (feature
-    /// `ros2`).
+    /// ROS 2 (DDS or rmw_zenoh) instead of ROS 1 (`master_uri` unused): a ros2_control arm
+    /// (feature `ros2`).
     pub ros2: Option<Ros2Transport>,
 }
 
@@ -111,9 +111,9 @@ impl LinkSettings {
         }
     }
 
-    /// A ros2_control arm over ROS 2 (DDS domain `domain_id`): joint states on
-    /// `/joint_states`, joint velocities to the `forward_command_controller` named
-    /// `controller` (`/<controller>/commands`) in the order of `joints`.
+    /// A ros2_control arm over ROS 2 (DDS, domain `domain_id`; `ros2.rmw` for rmw_zenoh):
+    /// joint states on `/joint_states`, joint velocities to the `forward_command_controller`
+    /// named `controller` (`/<controller>/commands`) in the order of `joints`.
     pub fn ros2_control(controller: &str, joints: Vec<String>, domain_id: u16) -> Self {
         Self {
             master_uri: String::new(),
@@ -133,15 +133,16 @@ impl LinkSettings {
             stale_after_s: 0.2,
             ros2: Some(Ros2Transport {
                 domain_id,
-                namespace: "/".into(),
+                ..Ros2Transport::default()
             }),
         }
     }
 
-    /// The link's name in messages: `ROS robot at MASTER` or `ROS 2 robot (DDS domain N)`.
+    /// The link's name in messages: `ROS robot at MASTER` or `ROS 2 robot (DDS domain N)`
+    /// ([`Ros2Transport::describe`]).
     pub fn link_name(&self) -> String {
         match &self.ros2 {
-            Some(t) => format!("ROS 2 robot (DDS domain {})", t.domain_id),
+            Some(t) => format!("ROS 2 robot ({})", t.describe()),
             None => format!("ROS robot at {}", self.master_uri),
         }
     }
@@ -179,7 +180,7 @@ impl LinkSettings {
         if let Some(t) = &self.ros2 {
             if t.domain_id > 232 {
                 return Err(format!(
-                    "DDS domain {}: must be within 0..232 (ROS 2's ROS_DOMAIN_ID)",
+                    "domain {}: must be within 0..232 (ROS 2's ROS_DOMAIN_ID)",
                     t.domain_id
                 ));
             }
@@ -281,13 +282,73 @@ impl Default for GripperLink {
         }
     }
 }
+/// Which ROS 2 middleware (RMW) carries the nodes, as `RMW_IMPLEMENTATION` chooses it for a
+/// ROS 2 process.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub enum Rmw {
+    /// DDS (rmw_cyclonedds_cpp, rmw_fastrtps_cpp, rmw_connextdds: one wire protocol, RTPS).
+    #[default]
+    Dds,
+    /// rmw_zenoh (rmw_zenoh_cpp): a Zenoh session in peer mode that finds the others through
+    /// a Zenoh router (`ros2 run rmw_zenoh_cpp rmw_zenohd`).
+    Zenoh {
+        /// The router's endpoint (e.g. `tcp/192.168.1.10:7447`), which must answer when the
+        /// session opens; `None`: rmw_zenoh's own default, `ZENOH_SESSION_CONFIG_URI`'s
+        /// config where it is set, else [`Rmw::DEFAULT_ZENOH_ROUTER`] (waited for).
+        router: Option<String>,
+    },
+}
+
+impl Rmw {
+    /// rmw_zenoh's default router: on this machine, port 7447.
+    pub const DEFAULT_ZENOH_ROUTER: &'static str = "tcp/localhost:7447";
+
+    /// The middleware `RMW_IMPLEMENTATION` names (`rmw_zenoh_cpp`, or one of the DDS ones),
+    /// rmw_zenoh through `router`. Errors: another name (naming the ones known).
+    pub fn from_implementation(name: &str, router: Option<String>) -> Result<Self, String> {
+        match name.trim() {
+            "rmw_zenoh_cpp" => Ok(Self::Zenoh { router }),
+            ""
+            | "rmw_cyclonedds_cpp"
+            | "rmw_fastrtps_cpp"
+            | "rmw_fastrtps_dynamic_cpp"
+            | "rmw_connextdds" => Ok(Self::Dds),
+            other => Err(format!(
+                "'{other}': rmw_zenoh_cpp, or a DDS one (rmw_cyclonedds_cpp, rmw_fastrtps_cpp, rmw_connextdds)"
+            )),
+        }
+    }
+}
+
 /// Where the robot is on ROS 2.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Ros2Transport {
-    /// The DDS domain (`ROS_DOMAIN_ID`, 0..232).
+    /// The domain (`ROS_DOMAIN_ID`, 0..232): DDS's, or the first chunk of rmw_zenoh's keys.
     pub domain_id: u16,
     /// This node's namespace (`/` for none).
     pub namespace: String,
+    /// The middleware.
+    pub rmw: Rmw,
+}
+
+impl Ros2Transport {
+    /// The transport in messages: `DDS domain 3`, `rmw_zenoh domain 3 (router tcp/...)`.
+    pub fn describe(&self) -> String {
+        match &self.rmw {
+            Rmw::Dds => format!("DDS domain {}", self.domain_id),
+            Rmw::Zenoh { router: Some(r) } => {
+                format!("rmw_zenoh domain {} (router {r})", self.domain_id)
+            }
+            Rmw::Zenoh { router: None } => match std::env::var("ZENOH_SESSION_CONFIG_URI") {
+                Ok(uri) => format!("rmw_zenoh domain {} (session config {uri})", self.domain_id),
+                Err(_) => format!(
+                    "rmw_zenoh domain {} (router {})",
+                    self.domain_id,
+                    Rmw::DEFAULT_ZENOH_ROUTER
+                ),
+            },
+        }
+    }
 }
 
 impl Default for Ros2Transport {
@@ -295,6 +356,34 @@ impl Default for Ros2Transport {
         Self {
             domain_id: 0,
             namespace: "/".into(),
+            rmw: Rmw::Dds,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Rmw;
+
+    #[test]
+    fn rmw_implementation_names_choose_the_middleware() {
+        let router = Some("tcp/10.0.0.2:7447".to_owned());
+        assert_eq!(
+            Rmw::from_implementation("rmw_zenoh_cpp", router.clone()),
+            Ok(Rmw::Zenoh { router })
+        );
+        for dds in [
+            "",
+            "rmw_cyclonedds_cpp",
+            " rmw_fastrtps_cpp\n",
+            "rmw_connextdds",
+        ] {
+            assert_eq!(Rmw::from_implementation(dds, None), Ok(Rmw::Dds), "{dds:?}");
+        }
+        let e = Rmw::from_implementation("rmw_zenoh", None).expect_err("not a name");
+        assert!(
+            e.contains("'rmw_zenoh'") && e.contains("rmw_zenoh_cpp"),
+            "{e}"
+        );
     }
 }

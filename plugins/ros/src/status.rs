@@ -57,9 +57,9 @@ pub struct RobotState {
 /// What the link has measured, for the status line and the report.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct LinkStatus {
-    /// Connected to the master (ROS 1), or the DDS participant and node up (ROS 2); topics up.
+    /// Connected to the master (ROS 1), or the node up on DDS or rmw_zenoh (ROS 2); topics up.
     pub connected: bool,
-    /// A ROS 2 link (DDS), not ROS 1's.
+    /// A ROS 2 link (DDS or rmw_zenoh), not ROS 1's.
     pub dds: bool,
     /// Joint states received.
     pub joint_states: u64,
@@ -99,7 +99,7 @@ impl LinkStatus {
         let mut parts = Vec::new();
         match (self.connected, self.joint_state_rate_hz) {
             (false, _) if self.dds => {
-                parts.push("ROS 2 link DOWN (not on DDS)".to_owned());
+                parts.push("ROS 2 link DOWN (no node on DDS or rmw_zenoh)".to_owned());
             }
             (false, _) => parts.push("ROS link DOWN (not connected to the master)".to_owned()),
             (true, None) => parts.push("ROS link DOWN (no joint states)".to_owned()),

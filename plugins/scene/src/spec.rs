@@ -101,6 +101,16 @@ pub enum RosControlController {
     Trajectory,
 }
 
+/// The middleware of a `ros2_control` link (ROS 2's `RMW_IMPLEMENTATION`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Ros2Rmw {
+    /// DDS (rmw_cyclonedds_cpp, rmw_fastrtps_cpp, rmw_connextdds).
+    Dds,
+    /// rmw_zenoh (rmw_zenoh_cpp), through the Zenoh router `zenoh_router`.
+    Zenoh,
+}
+
 /// `[robot.link]`: the real robot over ROS 1 (docs/robot-ros.md). Topic defaults are
 /// Intera's for a right-arm Sawyer; a `ros_control` link has no robot state, command timeout,
 /// speed ratio or gripper topics unless given.
@@ -109,8 +119,17 @@ pub enum RosControlController {
 pub struct RobotLinkSpec {
     /// `intera`, `ros_control` (ROS 1) or `ros2_control` (ROS 2).
     pub kind: RobotLinkKind,
-    /// `ros2_control`: the DDS domain (0..232); default: `ROS_DOMAIN_ID`, else 0.
+    /// `ros2_control`: the domain (0..232); default: `ROS_DOMAIN_ID`, else 0.
     pub domain_id: Option<u16>,
+    /// `ros2_control`: `dds` or `zenoh`; default: as `RMW_IMPLEMENTATION` says
+    /// (`rmw_zenoh_cpp`: zenoh), else dds.
+    pub rmw: Option<Ros2Rmw>,
+    /// `ros2_control` on rmw_zenoh: the Zenoh router's endpoint; default
+    /// `tcp/localhost:7447` (rmw_zenoh's).
+    pub zenoh_router: Option<String>,
+    /// `ros2_control`: the nodes' namespace (`/robot1`), against which relative topic names
+    /// resolve (the joint states then default to `joint_states` in it); default `/`.
+    pub namespace: Option<String>,
     /// The ROS master; default: `ROS_MASTER_URI`, else `http://localhost:11311`.
     pub master_uri: Option<String>,
     /// This node's name.
@@ -157,6 +176,9 @@ impl Default for RobotLinkSpec {
         Self {
             kind: RobotLinkKind::Intera,
             domain_id: None,
+            rmw: None,
+            zenoh_router: None,
+            namespace: None,
             master_uri: None,
             node_name: "avatarm".into(),
             joint_states_topic: None,
@@ -212,6 +234,58 @@ impl RobotLinkSpec {
                 );
             }
             _ => {}
+        }
+        if self.kind != RobotLinkKind::Ros2Control && self.rmw.is_some() {
+            return bad(
+                "rmw",
+                "a ROS 1 link speaks TCPROS through its master; kind = \"ros2_control\" for ROS 2"
+                    .into(),
+            );
+        }
+        if let Some(router) = &self.zenoh_router {
+            let zenoh = self.kind == RobotLinkKind::Ros2Control && self.rmw != Some(Ros2Rmw::Dds);
+            if !zenoh {
+                return bad(
+                    "zenoh_router",
+                    "only a ros2_control link on rmw_zenoh has a Zenoh router".into(),
+                );
+            }
+            if !router
+                .split_once('/')
+                .is_some_and(|(p, a)| !p.is_empty() && !a.is_empty())
+            {
+                return bad(
+                    "zenoh_router",
+                    format!(
+                        "'{router}': a Zenoh endpoint is PROTOCOL/ADDRESS, e.g. tcp/localhost:7447"
+                    ),
+                );
+            }
+        }
+        if let Some(ns) = &self.namespace {
+            if self.kind != RobotLinkKind::Ros2Control {
+                return bad(
+                    "namespace",
+                    "only a ros2_control link has a namespace here (a ROS 1 node's is ROS_NAMESPACE)".into(),
+                );
+            }
+            let chunks_ok = ns == "/"
+                || ns.strip_prefix('/').is_some_and(|rest| {
+                    rest.split('/').all(|c| {
+                        c.chars()
+                            .next()
+                            .is_some_and(|f| f.is_ascii_alphabetic() || f == '_')
+                            && c.chars().all(|x| x.is_ascii_alphanumeric() || x == '_')
+                    })
+                });
+            if !chunks_ok {
+                return bad(
+                    "namespace",
+                    format!(
+                        "'{ns}': a ROS 2 namespace is / or /name[/name...], each name letters, digits and _, not starting with a digit"
+                    ),
+                );
+            }
         }
         if self.kind == RobotLinkKind::Ros2Control && self.master_uri.is_some() {
             return bad(

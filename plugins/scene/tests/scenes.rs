@@ -107,7 +107,14 @@ fn bad_scenes_are_refused_naming_the_field() {
     .unwrap_err()
     .to_string();
     assert!(e.contains("leap.device_at"), "{e}");
+}
 
+/// `[robot.link]`: ROS 1's and ROS 2's settings, each bad one refused naming its field.
+#[test]
+fn robot_links_are_checked_at_load() {
+    let path = root().join("assets/scenes/default.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let parse = |t: &str| Scene::parse(t, &path, &PackagePath::default());
     let with_link = format!(
         "{text}\n[robot.link]\nkind = \"ros_control\"\ncommand_topic = \"/c\"\nspeed_ratio = 0.5\n"
     );
@@ -128,7 +135,58 @@ fn bad_scenes_are_refused_naming_the_field() {
         (ros2.file.robot.link.kind, ros2.file.robot.link.domain_id),
         (avatarm_scene::spec::RobotLinkKind::Ros2Control, Some(7))
     );
+    let zenoh = parse(&format!(
+        "{text}\n[robot.link]\nkind = \"ros2_control\"\nrmw = \"zenoh\"\nzenoh_router = \"tcp/10.0.0.2:7447\"\ncommand_topic = \"/c\"\n"
+    ))
+    .expect("a ros2_control link on rmw_zenoh");
+    let namespaced = parse(&format!(
+        "{text}\n[robot.link]\nkind = \"ros2_control\"\nnamespace = \"/lab/robot_1\"\ncommand_topic = \"c\"\n"
+    ))
+    .expect("a namespaced ros2_control link");
+    assert_eq!(
+        namespaced.file.robot.link.namespace.as_deref(),
+        Some("/lab/robot_1")
+    );
+    assert_eq!(
+        (
+            zenoh.file.robot.link.rmw,
+            zenoh.file.robot.link.zenoh_router.as_deref()
+        ),
+        (
+            Some(avatarm_scene::spec::Ros2Rmw::Zenoh),
+            Some("tcp/10.0.0.2:7447")
+        )
+    );
     for (link, field) in [
+        ("kind = \"intera\"\nrmw = \"zenoh\"", "robot.link.rmw"),
+        (
+            "kind = \"ros2_control\"\nrmw = \"dds\"\nzenoh_router = \"tcp/h:7447\"",
+            "robot.link.zenoh_router",
+        ),
+        (
+            "kind = \"ros2_control\"\nzenoh_router = \"localhost:7447\"",
+            "robot.link.zenoh_router",
+        ),
+        (
+            "kind = \"ros2_control\"\nzenoh_router = \"tcp/localhost\"",
+            "robot.link.zenoh_router",
+        ),
+        (
+            "kind = \"ros2_control\"\nnamespace = \"robot1\"",
+            "robot.link.namespace",
+        ),
+        (
+            "kind = \"ros2_control\"\nnamespace = \"/robot1/\"",
+            "robot.link.namespace",
+        ),
+        (
+            "kind = \"ros2_control\"\nnamespace = \"/1robot\"",
+            "robot.link.namespace",
+        ),
+        (
+            "kind = \"intera\"\nnamespace = \"/robot1\"",
+            "robot.link.namespace",
+        ),
         (
             "kind = \"ros2_control\"\ndomain_id = 300",
             "robot.link.domain_id",

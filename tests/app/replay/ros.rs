@@ -239,6 +239,34 @@ fn the_pouring_task_runs_against_a_ros_sawyer_as_in_the_simulated_room() {
 #[cfg(feature = "ros")]
 #[test]
 fn the_pouring_task_runs_against_a_ros2_control_arm_over_dds() {
+    let _serial = ros_support::serial();
+    pouring_against_a_ros2_control_arm(ros_support::test_domain(3), |_| avatarm_ros::Rmw::Dds);
+}
+
+/// The same over rmw_zenoh: the fake arm on rmw_zenoh (`rmw_zenoh_peer.py`) through a Zenoh
+/// router.
+#[cfg(feature = "ros")]
+#[test]
+fn the_pouring_task_runs_against_a_ros2_control_arm_over_rmw_zenoh() {
+    let _serial = ros_support::serial();
+    let router = avatarm_ros::testing::ZenohRouter::start();
+    pouring_against_a_ros2_control_arm(ros_support::test_domain(16), |arm_args| {
+        arm_args.extend(["--rmw".to_owned(), "zenoh".to_owned()]);
+        arm_args.extend(["--router".to_owned(), router.endpoint.clone()]);
+        avatarm_ros::Rmw::Zenoh {
+            router: Some(router.endpoint.clone()),
+        }
+    });
+}
+
+/// The pouring trial 0, closed loop, through the ROS 2 link against the fake arm on domain
+/// `domain`; `rmw` adds the arm's arguments for its middleware and says the link's. Within
+/// twice the embedded simulated arm's position RMSE, the arm lifts, the speed capped.
+#[cfg(feature = "ros")]
+fn pouring_against_a_ros2_control_arm(
+    domain: u16,
+    rmw: impl FnOnce(&mut Vec<String>) -> avatarm_ros::Rmw,
+) {
     let path = root().join("assets/scenes/pouring.toml");
     let scene = Scene::load(&path, &PackagePath::default()).expect("the pouring scene");
     let (Some(task), Some(setup)) = (scene.file.task.clone(), scene.trial.clone()) else {
@@ -246,23 +274,32 @@ fn the_pouring_task_runs_against_a_ros2_control_arm_over_dds() {
     };
     let prepared = prepare(&task, &setup).expect("the arm reaches the bottle");
     let q0 = prepared.q0().clone();
-    let _serial = ros_support::serial();
     let joints: Vec<String> = (0..7).map(|i| format!("right_j{i}")).collect();
     let start: Vec<String> = (0..7).map(|i| q0[i].to_string()).collect();
     let names: Vec<&str> = joints.iter().map(String::as_str).collect();
-    let domain = ros_support::test_domain(3);
-    let node = avatarm_ros::testing::FakeRos2Arm::start(
-        domain,
-        &names,
-        &["--start", &start.join(","), "--offset", "512.25"],
-    );
+    let mut arm_args: Vec<String> = vec![
+        "--start".into(),
+        start.join(","),
+        "--offset".into(),
+        "512.25".into(),
+    ];
+    let rmw = rmw(&mut arm_args);
+    let label = match &rmw {
+        avatarm_ros::Rmw::Dds => "DDS",
+        avatarm_ros::Rmw::Zenoh { .. } => "rmw_zenoh",
+    };
+    let arm_args: Vec<&str> = arm_args.iter().map(String::as_str).collect();
+    let node = avatarm_ros::testing::FakeRos2Arm::start(domain, &names, &arm_args);
     let model: Vec<String> = setup
         .model
         .dof_names()
         .iter()
         .map(|s| (*s).to_owned())
         .collect();
-    let settings = LinkSettings::ros2_control("forward_velocity_controller", joints, domain);
+    let mut settings = LinkSettings::ros2_control("forward_velocity_controller", joints, domain);
+    if let Some(t) = settings.ros2.as_mut() {
+        t.rmw = rmw;
+    }
     let mut arm = RosArm::start(settings, model, q0.clone()).expect("link");
     let started = std::time::Instant::now();
     while !arm.alive() {
@@ -284,7 +321,7 @@ fn the_pouring_task_runs_against_a_ros2_control_arm_over_dds() {
     let sim = run_trial(&task, &setup, MappingMode::ClosedLoop, 0).expect("simulated trial");
     let r = node.report();
     eprintln!(
-        "pouring, closed loop, trial 0: over ROS 2 (DDS) {:.2} mm / roll {:.2} / pitch {:.2} / yaw {:.2} deg (lift {:.1} cm, max TCP {:.3} m/s); simulated arm {:.2} mm / {:.2} / {:.2} / {:.2} deg; the fake arm took {} commands",
+        "pouring, closed loop, trial 0: over ROS 2 ({label}) {:.2} mm / roll {:.2} / pitch {:.2} / yaw {:.2} deg (lift {:.1} cm, max TCP {:.3} m/s); simulated arm {:.2} mm / {:.2} / {:.2} / {:.2} deg; the fake arm took {} commands",
         ros2.result.pos_rmse_m * 1e3,
         ros2.result.roll_rmse_deg,
         ros2.result.pitch_rmse_deg,
@@ -322,6 +359,49 @@ fn the_pouring_task_runs_against_a_ros2_control_arm_over_dds() {
 #[test]
 fn live_teleoperation_commands_a_ros2_control_arm_over_dds() {
     let _serial = ros_support::serial();
+    let domain = ros_support::test_domain(4);
+    live_teleoperation_over_ros2(domain, &[], "", &[], &format!("DDS domain {domain}"));
+    let run = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["run", "assets/scenes/pouring.toml", "--robot", "ros2"])
+        .current_dir(root())
+        .output()
+        .expect("avatarm runs");
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !run.status.success() && err.contains("kind = \"intera\"") && err.contains("ros2_control"),
+        "{err}"
+    );
+}
+
+/// The same over rmw_zenoh, chosen as a ROS 2 process chooses it (`RMW_IMPLEMENTATION=
+/// rmw_zenoh_cpp`), the scene's link naming the Zenoh router: the fake arm on rmw_zenoh.
+#[cfg(feature = "ros")]
+#[test]
+fn live_teleoperation_commands_a_ros2_control_arm_over_rmw_zenoh() {
+    let _serial = ros_support::serial();
+    let domain = ros_support::test_domain(21);
+    let router = avatarm_ros::testing::ZenohRouter::start();
+    live_teleoperation_over_ros2(
+        domain,
+        &["--rmw", "zenoh", "--router", &router.endpoint],
+        &format!("zenoh_router = \"{}\"\n", router.endpoint),
+        &[("RMW_IMPLEMENTATION", "rmw_zenoh_cpp")],
+        &format!("rmw_zenoh domain {domain} (router {})", router.endpoint),
+    );
+}
+
+/// `avatarm run SCENE --robot ros2 --frames 90` (with `env`) on the pouring scene with a
+/// `ros2_control` link (plus `link_extra`) on `domain`, the fake arm (with `arm_args`) where
+/// the task starts but 0.05 rad off on its first joint: the log names the link (`link`), the
+/// arm reaches the start and is teleoperated, every command good.
+#[cfg(feature = "ros")]
+fn live_teleoperation_over_ros2(
+    domain: u16,
+    arm_args: &[&str],
+    link_extra: &str,
+    env: &[(&str, &str)],
+    link: &str,
+) {
     let scene = scene("pouring");
     let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
         panic!("the pouring scene has a task");
@@ -335,10 +415,13 @@ fn live_teleoperation_commands_a_ros2_control_arm_over_dds() {
         .collect();
     let joints: Vec<String> = (0..7).map(|i| format!("right_j{i}")).collect();
     let names: Vec<&str> = joints.iter().map(String::as_str).collect();
-    let domain = ros_support::test_domain(4);
-    let node =
-        avatarm_ros::testing::FakeRos2Arm::start(domain, &names, &["--start", &start.join(",")]);
-    let out = out_dir("ros2_live");
+    let start = start.join(",");
+    let node = avatarm_ros::testing::FakeRos2Arm::start(
+        domain,
+        &names,
+        &[&["--start", start.as_str()][..], arm_args].concat(),
+    );
+    let out = out_dir(&format!("ros2_live_{domain}"));
     std::fs::create_dir_all(&out).expect("the test's folder");
     // The pouring scene with a ROS 2 link, its robot's path made absolute.
     let text = std::fs::read_to_string(root().join("assets/scenes/pouring.toml"))
@@ -351,7 +434,7 @@ fn live_teleoperation_commands_a_ros2_control_arm_over_dds() {
     std::fs::write(
         &path,
         format!(
-            "{text}\n[robot.link]\nkind = \"ros2_control\"\ndomain_id = {domain}\ncommand_topic = \"/forward_velocity_controller/commands\"\n"
+            "{text}\n[robot.link]\nkind = \"ros2_control\"\ndomain_id = {domain}\ncommand_topic = \"/forward_velocity_controller/commands\"\n{link_extra}"
         ),
     )
     .expect("write the scene");
@@ -364,10 +447,10 @@ fn live_teleoperation_commands_a_ros2_control_arm_over_dds() {
             "90",
         ],
         &out,
-        &[],
+        env,
     );
     assert!(
-        log.contains(&format!("on the ROS 2 robot (DDS domain {domain})")),
+        log.contains(&format!("on the ROS 2 robot ({link})")),
         "{log}"
     );
     assert!(
@@ -386,16 +469,6 @@ fn live_teleoperation_commands_a_ros2_control_arm_over_dds() {
     let r = node.report();
     assert!(r["commands"].as_u64().is_some_and(|n| n > 0), "{r}");
     assert_eq!(r["bad"].as_u64(), Some(0), "{r}");
-    let run = Command::new(env!("CARGO_BIN_EXE_avatarm"))
-        .args(["run", "assets/scenes/pouring.toml", "--robot", "ros2"])
-        .current_dir(root())
-        .output()
-        .expect("avatarm runs");
-    let err = String::from_utf8_lossy(&run.stderr);
-    assert!(
-        !run.status.success() && err.contains("kind = \"intera\"") && err.contains("ros2_control"),
-        "{err}"
-    );
 }
 
 /// `avatarm run --ros2-publish`: the live pouring session's erased frames, masks and commands

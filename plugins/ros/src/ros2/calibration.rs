@@ -8,13 +8,11 @@
 use std::time::{Duration, Instant};
 
 use avatarm_core::tf::FrameLink;
-use futures::StreamExt;
-use ros2_client::qos::{Durability, History, WhenFull};
-use ros2_client::{Message, MessageTypeName, QosProfile};
 use serde::{Deserialize, Serialize};
 
+use super::Header;
 use super::camera::CameraTopic;
-use super::{Header, topic_name};
+use super::node::{self, Qos, ros2_message};
 
 /// `sensor_msgs/msg/RegionOfInterest`.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -57,7 +55,12 @@ pub struct CameraInfo {
     /// The region of interest.
     pub roi: RegionOfInterest,
 }
-impl Message for CameraInfo {}
+ros2_message!(
+    CameraInfo,
+    "sensor_msgs",
+    "CameraInfo",
+    hiroz_msgs::sensor_msgs::CameraInfo
+);
 
 /// `geometry_msgs/msg/Vector3`.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -109,7 +112,12 @@ pub struct TfMessage {
     /// The transforms.
     pub transforms: Vec<TransformStamped>,
 }
-impl Message for TfMessage {}
+ros2_message!(
+    TfMessage,
+    "tf2_msgs",
+    "TFMessage",
+    hiroz_msgs::tf2_msgs::TFMessage
+);
 
 /// The `camera_info` topic beside `image_topic` (image_transport's convention): the image
 /// topic's last name (and a `/compressed` transport's) replaced by `camera_info`.
@@ -153,8 +161,8 @@ pub struct DriverCalibration {
 
 /// Subscribes to `topic`'s `camera_info`, `/tf_static` and `/tf` on its domain and gathers
 /// them until `done` says enough (checked after each message) or `wait` has passed, on a
-/// thread of its own (the caller may be inside another runtime). Errors: DDS could not be
-/// joined or a subscription made (the message says which).
+/// thread of its own (the caller may be inside another runtime). Errors: the middleware could
+/// not be joined or a subscription made (the message says which).
 pub fn gather(
     topic: &CameraTopic,
     wait: Duration,
@@ -162,10 +170,11 @@ pub fn gather(
 ) -> Result<DriverCalibration, String> {
     std::thread::scope(|s| {
         s.spawn(|| {
-            let runtime = tokio::runtime::Builder::new_current_thread()
-                .enable_all()
-                .build()
-                .map_err(|e| format!("no runtime: {e}"))?;
+            let runtime = crate::client::link_runtime(
+                "ROS 2 camera calibration",
+                crate::client::Threads::WithWorker,
+            )
+            .ok_or_else(|| "no runtime".to_owned())?;
             runtime.block_on(gather_async(topic, wait, done))
         })
         .join()
@@ -180,67 +189,35 @@ async fn gather_async(
 ) -> Result<DriverCalibration, String> {
     let started = Instant::now();
     let node_name = format!("{}_calibration", topic.node_name);
-    let (_context, mut node, spin) = super::join(&topic.transport, &node_name)?;
+    let (mut node, mut spin) = node::join(&topic.transport, &node_name)?;
     let mut out = DriverCalibration {
         image_topic: topic.topic.clone(),
         info_topic: info_topic(&topic.topic),
         ..DriverCalibration::default()
     };
     // CameraInfo rides with each frame: best effort, the newest.
-    let info_qos = QosProfile::subscription_default();
-    let info_dds = node
-        .create_topic(
-            &topic_name(&out.info_topic)?,
-            MessageTypeName::new("sensor_msgs", "CameraInfo"),
-            &info_qos,
-        )
-        .map_err(|e| format!("{}: {e:?}", out.info_topic))?;
-    let info = node
-        .create_subscription::<CameraInfo>(&info_dds, Some(info_qos))
-        .map_err(|e| format!("{}: {e:?}", out.info_topic))?;
-    // tf2's static listener: reliable, transient local, the last 100.
-    let static_qos = QosProfile::subscription_default()
-        .reliability_reliable(WhenFull::DEFAULT)
-        .durability(Durability::TransientLocal)
-        .history(History::KeepLast { depth: 100 });
-    let tf_qos = QosProfile::subscription_default().history(History::KeepLast { depth: 100 });
-    let tf_type = || MessageTypeName::new("tf2_msgs", "TFMessage");
-    let mut subscribe_tf =
-        |name: &str, qos: QosProfile| -> Result<ros2_client::Subscription<TfMessage>, String> {
-            let t = node
-                .create_topic(&topic_name(name)?, tf_type(), &qos)
-                .map_err(|e| format!("{name}: {e:?}"))?;
-            node.create_subscription::<TfMessage>(&t, Some(qos))
-                .map_err(|e| format!("{name}: {e:?}"))
-        };
-    let tf_static = subscribe_tf("/tf_static", static_qos)?;
-    let tf = subscribe_tf("/tf", tf_qos)?;
-    let mut infos = std::pin::pin!(info.async_stream());
-    let mut statics = std::pin::pin!(tf_static.async_stream());
-    let mut dynamics = std::pin::pin!(tf.async_stream());
-    let mut spin = std::pin::pin!(spin);
+    let info = node.subscribe::<CameraInfo>(&out.info_topic, Qos::best_effort(1))?;
+    // tf2's static listener: reliable, transient local, the last 100; its listener: best
+    // effort, the last 100.
+    let tf_static = node.subscribe::<TfMessage>("/tf_static", Qos::latched(100))?;
+    let tf = node.subscribe::<TfMessage>("/tf", Qos::best_effort(100))?;
     let deadline = tokio::time::sleep(wait);
     tokio::pin!(deadline);
-    // A stream that ended is polled no more (it would answer at once, for ever).
-    let mut open = [true; 3];
     loop {
         tokio::select! {
-            m = infos.next(), if open[0] => match m {
-                Some(Ok((m, _))) => out.info = Some(m),
-                Some(Err(e)) => out.bad_info = Some(format!("{e:?}")),
-                None => open[0] = false,
+            m = info.recv() => match m {
+                Ok(m) => out.info = Some(m),
+                Err(e) => out.bad_info = Some(e),
             },
-            m = statics.next(), if open[1] => match m {
-                Some(Ok((m, _))) => add_links(&mut out, m, true),
-                Some(Err(e)) => out.bad_links.push(format!("/tf_static: does not decode: {e:?}")),
-                None => open[1] = false,
+            m = tf_static.recv() => match m {
+                Ok(m) => add_links(&mut out, m, true),
+                Err(e) => out.bad_links.push(format!("/tf_static: does not decode: {e}")),
             },
-            m = dynamics.next(), if open[2] => match m {
-                Some(Ok((m, _))) => add_links(&mut out, m, false),
-                Some(Err(e)) => out.bad_links.push(format!("/tf: does not decode: {e:?}")),
-                None => open[2] = false,
+            m = tf.recv() => match m {
+                Ok(m) => add_links(&mut out, m, false),
+                Err(e) => out.bad_links.push(format!("/tf: does not decode: {e}")),
             },
-            r = &mut spin => return Err(format!("the node's spinner stopped: {r:?}")),
+            why = &mut spin => return Err(why),
             () = &mut deadline => break,
         }
         if done(&out) {

@@ -1,6 +1,6 @@
 //! A camera from ROS 2 (a lab's `usb_cam`, `realsense2_camera`, `v4l2_camera` driver): its
 //! `sensor_msgs/msg/Image` or, on a topic ending in `/compressed` (image_transport's
-//! convention), `sensor_msgs/msg/CompressedImage`, subscribed over DDS on a thread of its own
+//! convention), `sensor_msgs/msg/CompressedImage`, subscribed over DDS or rmw_zenoh on a thread of its own
 //! and handed over as they arrive, stamped, undecoded (the app decodes, off this crate: no
 //! image codecs here). Best effort, the last 2: a camera's frames are sensor data, and a late
 //! frame is worth less than the next.
@@ -8,11 +8,10 @@
 use std::sync::mpsc::Sender;
 use std::time::Instant;
 
-use futures::StreamExt;
-use ros2_client::{Message, MessageTypeName};
 use serde::{Deserialize, Serialize};
 
-use super::{Header, topic_name};
+use super::Header;
+use super::node::{self, Qos, Ros2Message, ros2_message};
 use crate::settings::Ros2Transport;
 
 /// `sensor_msgs/msg/Image`.
@@ -34,7 +33,12 @@ pub struct Image {
     #[serde(with = "serde_bytes")]
     pub data: Vec<u8>,
 }
-impl Message for Image {}
+ros2_message!(
+    Image,
+    "sensor_msgs",
+    "Image",
+    hiroz_msgs::sensor_msgs::Image
+);
 
 /// `sensor_msgs/msg/CompressedImage`.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -47,9 +51,14 @@ pub struct CompressedImage {
     #[serde(with = "serde_bytes")]
     pub data: Vec<u8>,
 }
-impl Message for CompressedImage {}
+ros2_message!(
+    CompressedImage,
+    "sensor_msgs",
+    "CompressedImage",
+    hiroz_msgs::sensor_msgs::CompressedImage
+);
 
-/// Which camera topic, on which DDS domain.
+/// Which camera topic, on which domain and middleware.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct CameraTopic {
     /// The domain and namespace.
@@ -110,20 +119,23 @@ fn unix_now_s() -> f64 {
 }
 
 /// Starts the camera's thread: it subscribes and sends each frame to `events` until the
-/// receiver is gone. Errors: the thread could not start (DDS errors arrive as
+/// receiver is gone. Errors: the thread could not start (the middleware's errors arrive as
 /// [`CameraEvent::Failed`]).
 pub fn spawn_camera(topic: CameraTopic, events: Sender<CameraEvent>) -> std::io::Result<()> {
     std::thread::Builder::new()
         .name(format!("ros2 camera {}", topic.topic))
         .spawn(move || {
-            let Some(runtime) = crate::client::link_runtime("ROS 2 camera") else {
+            let Some(runtime) =
+                crate::client::link_runtime("ROS 2 camera", crate::client::Threads::WithWorker)
+            else {
                 let _ = events.send(CameraEvent::Failed("ROS 2 camera: no runtime".to_owned()));
                 return;
             };
             if let Err(e) = runtime.block_on(subscribe(&topic, &events)) {
                 let _ = events.send(CameraEvent::Failed(format!(
-                    "ROS 2 camera {} (DDS domain {}): {e}",
-                    topic.topic, topic.transport.domain_id
+                    "ROS 2 camera {} ({}): {e}",
+                    topic.topic,
+                    topic.transport.describe()
                 )));
             }
         })
@@ -131,39 +143,37 @@ pub fn spawn_camera(topic: CameraTopic, events: Sender<CameraEvent>) -> std::io:
 }
 
 /// A message on the camera's topic that does not decode as the type: said once.
-fn bad_frame(topic: &str, e: &dyn std::fmt::Debug, said: &mut bool) {
+fn bad_frame(topic: &str, e: &str, said: &mut bool) {
     if !*said {
         *said = true;
         eprintln!(
-            "ROS 2 camera {topic}: a frame that does not decode: {e:?} (further ones are not said)"
+            "ROS 2 camera {topic}: a frame that does not decode: {e} (further ones are not said)"
         );
     }
 }
 
 async fn subscribe(topic: &CameraTopic, events: &Sender<CameraEvent>) -> Result<(), String> {
-    let (_context, mut node, spin) = super::join(&topic.transport, &topic.node_name)?;
-    let qos = ros2_client::QosProfile::subscription_default()
-        .history(ros2_client::qos::History::KeepLast { depth: 2 });
-    let name = topic_name(&topic.topic)?;
+    let (mut node, mut spin) = node::join(&topic.transport, &topic.node_name)?;
+    // A camera's frames are sensor data: best effort, the last 2.
+    let qos = Qos::best_effort(2);
     let kind = if topic.compressed() {
         "CompressedImage"
     } else {
         "Image"
     };
-    let dds_topic = node
-        .create_topic(&name, MessageTypeName::new("sensor_msgs", kind), &qos)
-        .map_err(|e| format!("{}: {e:?}", topic.topic))?;
     let _ = events.send(CameraEvent::Opened(format!(
-        "sensor_msgs/msg/{kind} on {} (DDS domain {})",
-        topic.topic, topic.transport.domain_id
+        "sensor_msgs/msg/{kind} on {} ({})",
+        topic.topic,
+        topic.transport.describe()
     )));
-    let spin = std::pin::pin!(spin);
     if topic.compressed() {
-        let sub = node
-            .create_subscription::<CompressedImage>(&dds_topic, Some(qos))
-            .map_err(|e| format!("{}: {e:?}", topic.topic))?;
-        return forward(&topic.topic, &sub, spin, events, |m: CompressedImage| {
-            RosImage {
+        let sub = node.subscribe::<CompressedImage>(&topic.topic, qos)?;
+        return forward(
+            &topic.topic,
+            &sub,
+            &mut spin,
+            events,
+            |m: CompressedImage| RosImage {
                 stamp_unix_s: m.header.stamp.as_secs_f64(),
                 arrival: Instant::now(),
                 arrival_unix_s: unix_now_s(),
@@ -174,14 +184,12 @@ async fn subscribe(topic: &CameraTopic, events: &Sender<CameraEvent>) -> Result<
                 is_bigendian: false,
                 data: m.data,
                 compressed: true,
-            }
-        })
+            },
+        )
         .await;
     }
-    let sub = node
-        .create_subscription::<Image>(&dds_topic, Some(qos))
-        .map_err(|e| format!("{}: {e:?}", topic.topic))?;
-    forward(&topic.topic, &sub, spin, events, |m: Image| RosImage {
+    let sub = node.subscribe::<Image>(&topic.topic, qos)?;
+    forward(&topic.topic, &sub, &mut spin, events, |m: Image| RosImage {
         stamp_unix_s: m.header.stamp.as_secs_f64(),
         arrival: Instant::now(),
         arrival_unix_s: unix_now_s(),
@@ -197,28 +205,26 @@ async fn subscribe(topic: &CameraTopic, events: &Sender<CameraEvent>) -> Result<
 }
 
 /// Each message of `sub` as a frame (`frame` makes it) to `events`, until the receiver is gone
-/// (Ok), or the subscription or the node's spinner ends (Err).
-async fn forward<M: Message + 'static>(
+/// (Ok), or the node stops (Err).
+async fn forward<M: Ros2Message>(
     topic: &str,
-    sub: &ros2_client::Subscription<M>,
-    mut spin: std::pin::Pin<&mut impl std::future::Future<Output = ros2_client::CreateResult<()>>>,
+    sub: &node::Subscription<M>,
+    spin: &mut node::Spin,
     events: &Sender<CameraEvent>,
     frame: impl Fn(M) -> RosImage,
 ) -> Result<(), String> {
     let mut said = false;
-    let mut stream = std::pin::pin!(sub.async_stream());
     loop {
         tokio::select! {
-            m = stream.next() => match m {
-                Some(Ok((m, _))) => {
+            m = sub.recv() => match m {
+                Ok(m) => {
                     if events.send(CameraEvent::Frame(frame(m))).is_err() {
                         return Ok(());
                     }
                 }
-                Some(Err(e)) => bad_frame(topic, &e, &mut said),
-                None => return Err("the subscription closed".into()),
+                Err(e) => bad_frame(topic, &e, &mut said),
             },
-            r = &mut spin => return Err(format!("the node's spinner stopped: {r:?}")),
+            why = &mut *spin => return Err(why),
         }
     }
 }

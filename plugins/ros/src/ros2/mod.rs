@@ -1,7 +1,7 @@
-//! The link over ROS 2 (feature `ros2`): a ros2_control arm through DDS, spoken by
-//! `ros2-client` over RustDDS (pure Rust, no ROS install to build or run), on the link's own
-//! thread and runtime, behind the same [`crate::RosArm`] (its safety checks, clock and stops)
-//! as the ROS 1 link.
+//! The link over ROS 2 (feature `ros2`): a ros2_control arm through DDS (`ros2-client` over
+//! RustDDS) or rmw_zenoh (`hiroz`), both pure Rust (no ROS install to build or run), on the
+//! link's own thread and runtime ([`node`]), behind the same [`crate::RosArm`] (its safety
+//! checks, clock and stops) as the ROS 1 link.
 //!
 //! - In: `sensor_msgs/msg/JointState` (best effort, which matches a reliable or best-effort
 //!   publisher such as ros2_control's `joint_state_broadcaster`).
@@ -11,10 +11,10 @@
 //!   `trajectory_msgs/msg/JointTrajectory` streamed to a `joint_trajectory_controller` on
 //!   `/<controller>/joint_trajectory` ([`crate::CommandKind::JointTrajectory`]).
 //!
-//! DDS has no master: the link is up once the participant and node exist, and alive while
-//! joint states arrive (a vanished robot node is a stale link, which stops the arm). Names
-//! follow ROS 2's DDS conventions (the topic `rt/<name>`, the type
-//! `<pkg>::msg::dds_::<Type>_`), which `ros2-client` applies.
+//! ROS 2 has no master: the link is up once the node exists, and alive while joint states
+//! arrive (a vanished robot node is a stale link, which stops the arm). Names follow each
+//! middleware's conventions (DDS: the topic `rt/<name>`, the type `<pkg>::msg::dds_::<Type>_`;
+//! rmw_zenoh: `<domain>/<name>/<type>/<REP-2016 hash>`), which the libraries apply.
 //!
 //! [`camera`]: a camera from ROS 2 (`Image` or `CompressedImage`) as a live camera source;
 //! [`calibration`]: its `CameraInfo` and the transform tree, gathered before it is used;
@@ -22,20 +22,18 @@
 
 pub mod calibration;
 pub mod camera;
+pub(crate) mod node;
 pub mod publish;
 
 use std::sync::mpsc::Sender;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use futures::StreamExt;
-use ros2_client::{
-    Context, ContextOptions, Message, MessageTypeName, Name, NodeName, NodeOptions, QosProfile,
-};
 use serde::{Deserialize, Serialize};
 
 use crate::client::{Outbound, Sample, Shared};
 use crate::settings::{LinkSettings, Ros2Transport};
+use node::{Qos, ros2_message};
 
 /// `builtin_interfaces/msg/Time`.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -83,7 +81,12 @@ pub struct JointState {
     /// Efforts (N m or N).
     pub effort: Vec<f64>,
 }
-impl Message for JointState {}
+ros2_message!(
+    JointState,
+    "sensor_msgs",
+    "JointState",
+    hiroz_msgs::sensor_msgs::JointState
+);
 
 /// `std_msgs/msg/MultiArrayDimension`.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -113,7 +116,12 @@ pub struct Float64MultiArray {
     /// The values.
     pub data: Vec<f64>,
 }
-impl Message for Float64MultiArray {}
+ros2_message!(
+    Float64MultiArray,
+    "std_msgs",
+    "Float64MultiArray",
+    hiroz_msgs::std_msgs::Float64MultiArray
+);
 
 /// `builtin_interfaces/msg/Duration`.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -160,15 +168,20 @@ pub struct JointTrajectory {
     /// The points.
     pub points: Vec<JointTrajectoryPoint>,
 }
-impl Message for JointTrajectory {}
+ros2_message!(
+    JointTrajectory,
+    "trajectory_msgs",
+    "JointTrajectory",
+    hiroz_msgs::trajectory_msgs::JointTrajectory
+);
 
 /// The command publisher of the link's controller.
 enum Commands {
     /// A forward_command_controller's `Float64MultiArray`.
-    Group(ros2_client::Publisher<Float64MultiArray>),
+    Group(node::Publisher<Float64MultiArray>),
     /// A joint_trajectory_controller's one-point `JointTrajectory`.
     Trajectory {
-        publisher: ros2_client::Publisher<JointTrajectory>,
+        publisher: node::Publisher<JointTrajectory>,
         joints: Vec<String>,
         horizon_s: f64,
     },
@@ -178,68 +191,36 @@ impl Commands {
     /// Publishes `values` (one per controller joint, in its order).
     async fn publish(&self, data: Vec<f64>) -> Result<(), String> {
         match self {
-            Self::Group(p) => p
-                .async_publish(Float64MultiArray {
+            Self::Group(p) => {
+                p.publish(Float64MultiArray {
                     layout: MultiArrayLayout::default(),
                     data,
                 })
                 .await
-                .map_err(|e| format!("{e:?}")),
+            }
             Self::Trajectory {
                 publisher,
                 joints,
                 horizon_s,
-            } => publisher
-                .async_publish(JointTrajectory {
-                    header: Header::default(),
-                    joint_names: joints.clone(),
-                    points: vec![JointTrajectoryPoint {
-                        positions: data,
-                        time_from_start: RosDuration::from_secs(*horizon_s),
-                        ..JointTrajectoryPoint::default()
-                    }],
-                })
-                .await
-                .map_err(|e| format!("{e:?}")),
+            } => {
+                publisher
+                    .publish(JointTrajectory {
+                        header: Header::default(),
+                        joint_names: joints.clone(),
+                        points: vec![JointTrajectoryPoint {
+                            positions: data,
+                            time_from_start: RosDuration::from_secs(*horizon_s),
+                            ..JointTrajectoryPoint::default()
+                        }],
+                    })
+                    .await
+            }
         }
     }
 }
 
-/// A ROS 2 topic name (`/ns/base`, or relative to the node's namespace) for ros2-client.
-fn topic_name(topic: &str) -> Result<Name, String> {
-    Name::parse(topic).map_err(|e| format!("topic '{topic}': not a ROS 2 name: {e:?}"))
-}
-
-/// A node `node_name` on `transport`'s DDS domain (its context, which must outlive it) and its
-/// spinner's future (ros2-client's graph and discovery events: polled beside the node's work).
-/// Errors say which step failed.
-pub(crate) fn join(
-    transport: &Ros2Transport,
-    node_name: &str,
-) -> Result<
-    (
-        Context,
-        ros2_client::Node,
-        impl std::future::Future<Output = ros2_client::CreateResult<()>>,
-    ),
-    String,
-> {
-    let context = Context::with_options(ContextOptions::new().domain_id(transport.domain_id))
-        .map_err(|e| format!("cannot join DDS: {e:?}"))?;
-    let name = NodeName::new(&transport.namespace, node_name)
-        .map_err(|e| format!("node name '{node_name}': {e:?}"))?;
-    let mut node = context
-        .new_node(name, NodeOptions::new().enable_rosout(false))
-        .map_err(|e| format!("cannot create the node: {e:?}"))?;
-    let spin = node
-        .spinner()
-        .map_err(|e| format!("cannot spin the node: {e:?}"))?
-        .spin();
-    Ok((context, node, spin))
-}
-
-/// The client thread: a single-threaded runtime holding the DDS participant, its node, the
-/// joint-state subscription and the command publisher until shutdown.
+/// The client thread: a runtime (one worker beside it, for Zenoh) holding the node, the joint-state
+/// subscription and the command publisher until shutdown.
 pub(crate) fn client_thread(
     settings: LinkSettings,
     transport: Ros2Transport,
@@ -247,7 +228,9 @@ pub(crate) fn client_thread(
     notify: Arc<tokio::sync::Notify>,
     tx: Sender<Sample>,
 ) {
-    let Some(runtime) = crate::client::link_runtime("ROS 2 link") else {
+    let Some(runtime) =
+        crate::client::link_runtime("ROS 2 link", crate::client::Threads::WithWorker)
+    else {
         return;
     };
     if let Ok(mut s) = shared.lock() {
@@ -269,8 +252,8 @@ pub(crate) fn client_thread(
                 if !said {
                     said = true;
                     eprintln!(
-                        "ROS 2 link (DDS domain {}): {e}; retrying every second",
-                        transport.domain_id
+                        "ROS 2 link ({}): {e}; retrying every second",
+                        transport.describe()
                     );
                 }
                 std::thread::sleep(Duration::from_secs(1));
@@ -283,8 +266,8 @@ pub(crate) fn client_thread(
     }
 }
 
-/// The session: runs until shutdown or the app is gone (Ok) or until DDS cannot be set up or
-/// its node stops (Err, the caller retries).
+/// The session: runs until shutdown or the app is gone (Ok) or until the node cannot be set up
+/// or stops (Err, the caller retries).
 async fn session(
     settings: &LinkSettings,
     transport: &Ros2Transport,
@@ -292,52 +275,19 @@ async fn session(
     notify: &Arc<tokio::sync::Notify>,
     tx: &Sender<Sample>,
 ) -> Result<(), String> {
-    let (_context, mut node, spin) = join(transport, &settings.node_name)?;
-    let states_topic = node
-        .create_topic(
-            &topic_name(&settings.joint_states_topic)?,
-            MessageTypeName::new("sensor_msgs", "JointState"),
-            &QosProfile::subscription_default(),
-        )
-        .map_err(|e| format!("{}: {e:?}", settings.joint_states_topic))?;
+    let (mut node, mut spin) = node::join(transport, &settings.node_name)?;
     // Best effort, the last 10: matches reliable and best-effort publishers alike.
-    let states = node
-        .create_subscription::<JointState>(
-            &states_topic,
-            Some(
-                QosProfile::subscription_default()
-                    .history(ros2_client::qos::History::KeepLast { depth: 10 }),
-            ),
-        )
-        .map_err(|e| format!("{}: {e:?}", settings.joint_states_topic))?;
-    let command_type = match &settings.command {
-        crate::CommandKind::JointTrajectory { .. } => {
-            MessageTypeName::new("trajectory_msgs", "JointTrajectory")
-        }
-        _ => MessageTypeName::new("std_msgs", "Float64MultiArray"),
-    };
-    let command_topic = node
-        .create_topic(
-            &topic_name(&settings.command_topic)?,
-            command_type,
-            &QosProfile::publisher_default(),
-        )
-        .map_err(|e| format!("{}: {e:?}", settings.command_topic))?;
-    let bad_topic = |e| format!("{}: {e:?}", settings.command_topic);
+    let states =
+        node.subscribe::<JointState>(&settings.joint_states_topic, Qos::best_effort(10))?;
     let commands = match &settings.command {
         crate::CommandKind::JointTrajectory {
             joints, horizon_s, ..
         } => Commands::Trajectory {
-            publisher: node
-                .create_publisher::<JointTrajectory>(&command_topic, None)
-                .map_err(bad_topic)?,
+            publisher: node.publisher(&settings.command_topic, Qos::reliable(1))?,
             joints: joints.clone(),
             horizon_s: *horizon_s,
         },
-        _ => Commands::Group(
-            node.create_publisher::<Float64MultiArray>(&command_topic, None)
-                .map_err(bad_topic)?,
-        ),
+        _ => Commands::Group(node.publisher(&settings.command_topic, Qos::reliable(1))?),
     };
     if let Ok(mut s) = shared.lock() {
         s.status.connected = true;
@@ -346,12 +296,10 @@ async fn session(
     }
     let max_age = Duration::from_secs_f64(settings.stale_after_s.min(settings.command_timeout_s));
     let mut publish_said = false;
-    let mut stream = std::pin::pin!(states.async_stream());
-    let mut spin = std::pin::pin!(spin);
     loop {
         tokio::select! {
-            m = stream.next() => match m {
-                Some(Ok((m, _))) => {
+            m = states.recv() => match m {
+                Ok(m) => {
                     let sample = Sample {
                         arrival: Instant::now(),
                         stamp_s: m.header.stamp.as_secs_f64(),
@@ -363,13 +311,12 @@ async fn session(
                         return Ok(());
                     }
                 }
-                Some(Err(e)) => {
+                Err(e) => {
                     if let Ok(mut s) = shared.lock() {
                         s.status.bad_joint_states += 1;
-                        s.status.last_bad = Some(format!("{e:?}"));
+                        s.status.last_bad = Some(e);
                     }
                 }
-                None => return Err("the joint-state subscription closed".into()),
             },
             () = notify.notified() => {
                 match send_outbound(settings, shared, &commands, max_age).await {
@@ -388,9 +335,7 @@ async fn session(
                     }
                 }
             },
-            r = &mut spin => {
-                return Err(format!("the node's spinner stopped: {r:?}"));
-            },
+            why = &mut spin => return Err(why),
             () = tokio::time::sleep(Duration::from_secs(1)) => {
                 if shared.lock().map_or(true, |s| s.shutdown) {
                     return Ok(());

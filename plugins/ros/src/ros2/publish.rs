@@ -1,4 +1,4 @@
-//! What Avatarm does, published on ROS 2 (DDS) so that rviz2, Foxglove and `ros2 topic echo`
+//! What Avatarm does, published on ROS 2 (DDS or rmw_zenoh) so that rviz2, Foxglove and `ros2 topic echo`
 //! show it: the erased video and the mask (`sensor_msgs/msg/CompressedImage`, image_transport's
 //! `/compressed` convention), the joint velocity commands (`sensor_msgs/msg/JointState`, names
 //! and velocities) and the safety events (`std_msgs/msg/String`), under a prefix (`/avatarm`
@@ -18,11 +18,11 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use ros2_client::{Message, MessageTypeName, QosProfile};
 use serde::{Deserialize, Serialize};
 
 use super::camera::CompressedImage;
-use super::{Header, JointState, Time, topic_name};
+use super::node::{self, Qos, ros2_message};
+use super::{Header, JointState, Time};
 use crate::settings::Ros2Transport;
 
 /// `std_msgs/msg/String`.
@@ -31,7 +31,12 @@ pub struct StringMsg {
     /// The text.
     pub data: String,
 }
-impl Message for StringMsg {}
+ros2_message!(
+    StringMsg,
+    "std_msgs",
+    "String",
+    hiroz_msgs::std_msgs::String
+);
 
 /// One message to publish; stamps are ns since the Unix epoch.
 #[derive(Debug, Clone)]
@@ -91,7 +96,8 @@ fn header(stamp_ns: u64, frame_id: &str) -> Header {
 impl Ros2Publisher {
     /// Starts the thread publishing under `prefix` (e.g. `/avatarm`) on `transport`'s domain,
     /// as the node `node_name`; `camera_frame` is the images' `frame_id`. Errors: the thread
-    /// could not start (DDS errors are said on stderr once, and the messages dropped).
+    /// could not start (the middleware's errors are said on stderr once, and the messages
+    /// dropped).
     pub fn start(
         transport: Ros2Transport,
         node_name: &str,
@@ -107,13 +113,16 @@ impl Ros2Publisher {
         std::thread::Builder::new()
             .name("ros2 publisher".into())
             .spawn(move || {
-                let Some(runtime) = crate::client::link_runtime("ROS 2 publisher") else {
+                let Some(runtime) = crate::client::link_runtime(
+                    "ROS 2 publisher",
+                    crate::client::Threads::WithWorker,
+                ) else {
                     return;
                 };
                 if let Err(e) = runtime.block_on(run(&transport, &node_name, &prefix, &frame, rx)) {
                     eprintln!(
-                        "ROS 2 publisher (DDS domain {}): {e}; nothing is published",
-                        transport.domain_id
+                        "ROS 2 publisher ({}): {e}; nothing is published",
+                        transport.describe()
                     );
                 }
             })?;
@@ -146,38 +155,13 @@ async fn run(
     frame: &str,
     mut rx: tokio::sync::mpsc::Receiver<Outgoing>,
 ) -> Result<(), String> {
-    let (_context, mut node, spin) = super::join(transport, node_name)?;
-    let qos =
-        QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast { depth: 2 });
-    let topic = |base: &str, package: &str, kind: &str| {
-        let full = format!("{prefix}/{base}");
-        node.create_topic(
-            &topic_name(&full)?,
-            MessageTypeName::new(package, kind),
-            &qos,
-        )
-        .map_err(|e| format!("{full}: {e:?}"))
-    };
-    let (erased_t, mask_t, commands_t, safety_t) = (
-        topic("erased/compressed", "sensor_msgs", "CompressedImage")?,
-        topic("mask/compressed", "sensor_msgs", "CompressedImage")?,
-        topic("joint_commands", "sensor_msgs", "JointState")?,
-        topic("safety", "std_msgs", "String")?,
-    );
-    let fail = |what: &str, e: ros2_client::CreateError| format!("{prefix}/{what}: {e:?}");
-    let erased = node
-        .create_publisher::<CompressedImage>(&erased_t, None)
-        .map_err(|e| fail("erased/compressed", e))?;
-    let mask = node
-        .create_publisher::<CompressedImage>(&mask_t, None)
-        .map_err(|e| fail("mask/compressed", e))?;
-    let commands = node
-        .create_publisher::<JointState>(&commands_t, None)
-        .map_err(|e| fail("joint_commands", e))?;
-    let safety = node
-        .create_publisher::<StringMsg>(&safety_t, None)
-        .map_err(|e| fail("safety", e))?;
-    let mut spin = std::pin::pin!(spin);
+    let (mut node, mut spin) = node::join(transport, node_name)?;
+    let qos = Qos::reliable(2);
+    let topic = |base: &str| format!("{prefix}/{base}");
+    let erased = node.publisher::<CompressedImage>(&topic("erased/compressed"), qos)?;
+    let mask = node.publisher::<CompressedImage>(&topic("mask/compressed"), qos)?;
+    let commands = node.publisher::<JointState>(&topic("joint_commands"), qos)?;
+    let safety = node.publisher::<StringMsg>(&topic("safety"), qos)?;
     let mut failed_said = false;
     loop {
         let message = tokio::select! {
@@ -185,31 +169,31 @@ async fn run(
                 Some(m) => m,
                 None => return Ok(()),
             },
-            r = &mut spin => return Err(format!("the node's spinner stopped: {r:?}")),
+            why = &mut spin => return Err(why),
         };
         let result = match message {
             Outgoing::Erased { stamp_ns, jpeg } => erased
-                .async_publish(CompressedImage {
+                .publish(CompressedImage {
                     header: header(stamp_ns, frame),
                     format: "jpeg".into(),
                     data: jpeg,
                 })
                 .await
-                .map_err(|e| format!("erased: {e:?}")),
+                .map_err(|e| format!("erased: {e}")),
             Outgoing::Mask { stamp_ns, png } => mask
-                .async_publish(CompressedImage {
+                .publish(CompressedImage {
                     header: header(stamp_ns, frame),
                     format: "png".into(),
                     data: png,
                 })
                 .await
-                .map_err(|e| format!("mask: {e:?}")),
+                .map_err(|e| format!("mask: {e}")),
             Outgoing::Command {
                 stamp_ns,
                 names,
                 velocities,
             } => commands
-                .async_publish(JointState {
+                .publish(JointState {
                     header: header(stamp_ns, ""),
                     name: names,
                     position: Vec::new(),
@@ -217,11 +201,11 @@ async fn run(
                     effort: Vec::new(),
                 })
                 .await
-                .map_err(|e| format!("joint_commands: {e:?}")),
+                .map_err(|e| format!("joint_commands: {e}")),
             Outgoing::Safety { stamp_ns: _, text } => safety
-                .async_publish(StringMsg { data: text })
+                .publish(StringMsg { data: text })
                 .await
-                .map_err(|e| format!("safety: {e:?}")),
+                .map_err(|e| format!("safety: {e}")),
         };
         if let Err(e) = result
             && !failed_said

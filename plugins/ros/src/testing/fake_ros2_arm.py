@@ -19,10 +19,18 @@ reliable, volatile, keep last 10) as rmw does.
   bad); the arm moves linearly from where it is to the last point's positions over its
   time_from_start (at most --max-velocity) and holds them once reached, commands or not. Its
   report adds "horizon": the last point's time_from_start (s).
+- --namespace /NS: its topics in that namespace (/NS/joint_states, /NS/<controller>/...).
 - Prints a JSON report every 50 ms: t (wall clock), q, velocity, commands, bad, and the
   receipts of the last 300 commands as [wall time, first value].
 
-Run it with PYTHONPATH=~/.cache/avatarm/python (scripts/setup.sh installs cyclonedds there).
+--rmw zenoh --router ENDPOINT: the same arm on rmw_zenoh instead (rmw_zenoh_peer.py: eclipse-zenoh
+and rosbags, written from rmw_zenoh's design document): the same topics keyed with their types'
+REP-2016 hashes, so a command sent under another hash never arrives. Its report adds "graph" (the
+liveliness tokens alive on the domain), "command_key" (the key it takes commands on),
+"no_attachment" (commands without rmw_zenoh's attachment) and "undecodable".
+
+Run it with PYTHONPATH=~/.cache/avatarm/python (scripts/setup.sh installs cyclonedds, rosbags and
+eclipse-zenoh there).
 """
 
 import argparse
@@ -30,23 +38,106 @@ import json
 import sys
 import time
 
-from cyclonedds.domain import DomainParticipant
-from cyclonedds.pub import DataWriter
-from cyclonedds.sub import DataReader
-from cyclonedds.topic import Topic
-
-from ros2_types import Header, JointState, JointTrajectory, Float64MultiArray, default_qos, stamp_of
 
 
+class DdsLink:
+    """The arm's topics on DDS (Cyclone DDS, ROS 2's DDS conventions)."""
+
+    def __init__(self, a):
+        from cyclonedds.domain import DomainParticipant
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.sub import DataReader
+        from cyclonedds.topic import Topic
+
+        import ros2_types as t
+
+        self.t = t
+        qos = t.default_qos()
+        dp = DomainParticipant(a.domain)
+        ns = a.namespace.rstrip("/")
+        self.states = DataWriter(
+            dp, Topic(dp, "rt%s/joint_states" % ns, t.JointState, qos=qos), qos=qos
+        )
+        if a.mode == "trajectory":
+            topic = Topic(
+                dp, "rt%s/%s/joint_trajectory" % (ns, a.controller), t.JointTrajectory, qos=qos
+            )
+        else:
+            topic = Topic(
+                dp, "rt%s/%s/commands" % (ns, a.controller), t.Float64MultiArray, qos=qos
+            )
+        self.commands = DataReader(dp, topic, qos=qos)
+
+    def take(self):
+        # A writer gone (the link's end) comes as an instance-state sample without data.
+        kinds = (self.t.JointTrajectory, self.t.Float64MultiArray)
+        return [m for m in self.commands.take(N=100) if isinstance(m, kinds)]
+
+    def publish_state(self, stamp_s, names, position, velocity):
+        t = self.t
+        self.states.write(
+            t.JointState(
+                header=t.Header(stamp=t.stamp_of(stamp_s), frame_id=""),
+                name=names,
+                position=position,
+                velocity=velocity,
+                effort=[],
+            )
+        )
+
+    def report(self):
+        return {}
 
 
+class ZenohLink:
+    """The arm's topics on rmw_zenoh (rmw_zenoh_peer.py)."""
 
+    def __init__(self, a):
+        import rmw_zenoh_peer as z
 
+        self.z = z
+        self.types = z.TYPES.types
+        self.node = z.Node(a.router, a.domain, "fake_ros2_arm", a.namespace or "/")
+        self.graph = self.node.graph()
+        # Relative names: in the node's namespace.
+        self.states = self.node.publisher("joint_states", "sensor_msgs/msg/JointState")
+        if a.mode == "trajectory":
+            topic = ("%s/joint_trajectory" % a.controller, "trajectory_msgs/msg/JointTrajectory")
+        else:
+            topic = ("%s/commands" % a.controller, "std_msgs/msg/Float64MultiArray")
+        self.commands = self.node.subscription(*topic)
+        self.command_key = self.node.key(*topic)
+
+    def take(self):
+        return self.commands.take()
+
+    def publish_state(self, stamp_s, names, position, velocity):
+        T, z = self.types, self.z
+        self.states.publish(
+            T["sensor_msgs/msg/JointState"](
+                header=T["std_msgs/msg/Header"](stamp=z.ros_time(stamp_s), frame_id=""),
+                name=list(names),
+                position=z.float64s(position),
+                velocity=z.float64s(velocity),
+                effort=z.float64s([]),
+            )
+        )
+
+    def report(self):
+        return {
+            "graph": self.graph.alive(),
+            "command_key": self.command_key,
+            "no_attachment": self.commands.no_attachment,
+            "undecodable": self.commands.undecodable,
+        }
 
 
 def main():
     p = argparse.ArgumentParser()
     p.add_argument("--domain", type=int, default=0)
+    p.add_argument("--rmw", choices=["dds", "zenoh"], default="dds")
+    p.add_argument("--namespace", default="", help="the arm's namespace (/robot1); default none")
+    p.add_argument("--router", default="tcp/127.0.0.1:7447", help="the Zenoh router (--rmw zenoh)")
     p.add_argument("--joints", required=True)
     p.add_argument("--controller", default="forward_velocity_controller")
     p.add_argument("--mode", choices=["velocity", "position", "trajectory"], default="velocity")
@@ -63,17 +154,7 @@ def main():
     a = p.parse_args()
     joints = a.joints.split(",")
     n = len(joints)
-    qos = default_qos()
-    dp = DomainParticipant(a.domain)
-    states = DataWriter(dp, Topic(dp, "rt/joint_states", JointState, qos=qos), qos=qos)
-    if a.mode == "trajectory":
-        commands = DataReader(
-            dp, Topic(dp, "rt/%s/joint_trajectory" % a.controller, JointTrajectory, qos=qos), qos=qos
-        )
-    else:
-        commands = DataReader(
-            dp, Topic(dp, "rt/%s/commands" % a.controller, Float64MultiArray, qos=qos), qos=qos
-        )
+    link = ZenohLink(a) if a.rmw == "zenoh" else DdsLink(a)
     # The trajectory followed (--mode trajectory): from, to, its start and its duration.
     segment = None
     horizon = None
@@ -89,8 +170,8 @@ def main():
     next_state = t_prev
     while True:
         now = time.time()
-        for m in commands.take(N=100):
-            if isinstance(m, JointTrajectory):
+        for m in link.take():
+            if a.mode == "trajectory":
                 point = m.points[-1] if m.points else None
                 if (
                     point is None
@@ -107,9 +188,6 @@ def main():
                 duration = point.time_from_start.sec + point.time_from_start.nanosec * 1e-9
                 segment = (list(q), [goal[j] for j in joints], now, duration)
                 horizon = duration
-                continue
-            if not isinstance(m, Float64MultiArray):
-                # A writer gone (the link's end): an instance-state sample without data.
                 continue
             if len(m.data) != n:
                 bad += 1
@@ -142,14 +220,8 @@ def main():
             v = [max(-a.max_velocity, min(a.max_velocity, (t - qi) / max(dt, 1e-6))) for t, qi in zip(target, q)]
             q = [qi + max(-step, min(step, t - qi)) for t, qi in zip(target, q)]
         if now >= next_state:
-            states.write(
-                JointState(
-                    header=Header(stamp=stamp_of(now + a.offset), frame_id=""),
-                    name=joints,
-                    position=q,
-                    velocity=[float("nan")] * n if a.no_velocity else v,
-                    effort=[],
-                )
+            link.publish_state(
+                now + a.offset, joints, q, [float("nan")] * n if a.no_velocity else v
             )
             next_state += period
             if next_state < now:
@@ -165,6 +237,7 @@ def main():
                         "bad": bad,
                         "receipts": receipts,
                         "horizon": horizon,
+                        **link.report(),
                     }
                 ),
                 flush=True,

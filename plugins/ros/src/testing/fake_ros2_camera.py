@@ -10,32 +10,93 @@ plumb_bob with --d), as camera drivers publish it. Each --tf-static PARENT CHILD
 is published once on /tf_static, latched (reliable, transient local), as tf2's static
 broadcaster does. Prints one JSON line per second: {"t": wall time, "frames": published}.
 
-Run it with PYTHONPATH=~/.cache/avatarm/python (scripts/setup.sh installs cyclonedds there).
+--rmw zenoh --router ENDPOINT: the same driver on rmw_zenoh (rmw_zenoh_peer.py: the topics keyed
+with their types' REP-2016 hashes, /tf_static from Zenoh's advanced publisher that keeps it for
+late subscribers, as rmw_zenoh's transient local does).
+
+Run it with PYTHONPATH=~/.cache/avatarm/python (scripts/setup.sh installs cyclonedds, rosbags and
+eclipse-zenoh there).
 """
 
 import argparse
 import json
 import time
 
-from cyclonedds.domain import DomainParticipant
-from cyclonedds.pub import DataWriter
-from cyclonedds.topic import Topic
 
-from ros2_types import (
-    CameraInfo,
-    CompressedImage,
-    Header,
-    Image,
-    Quaternion,
-    RegionOfInterest,
-    TFMessage,
-    Transform,
-    TransformStamped,
-    Vector3,
-    sensor_qos,
-    stamp_of,
-    static_qos,
-)
+class DdsDriver:
+    """Messages and writers on DDS (Cyclone DDS)."""
+
+    def __init__(self, a):
+        from cyclonedds.domain import DomainParticipant
+
+        import ros2_types as t
+
+        self.t = t
+        self.dp = DomainParticipant(a.domain)
+
+    def __getattr__(self, name):
+        # The message classes (Header, Image, ...).
+        return getattr(self.t, name)
+
+    def stamp(self, s):
+        return self.t.stamp_of(s)
+
+    def f64(self, values):
+        return list(values)
+
+    def u8(self, data):
+        return list(data)
+
+    def writer(self, topic, ros_type, latched=False):
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.topic import Topic
+
+        kind = getattr(self.t, ros_type.rsplit("/", 1)[1])
+        qos = self.t.static_qos() if latched else self.t.sensor_qos()
+        w = DataWriter(self.dp, Topic(self.dp, "rt" + topic, kind, qos=qos), qos=qos)
+        return w.write
+
+
+class ZenohDriver:
+    """Messages (rosbags' Jazzy types) and publishers on rmw_zenoh."""
+
+    PACKAGES = {
+        "Header": "std_msgs/msg/Header",
+        "Image": "sensor_msgs/msg/Image",
+        "CompressedImage": "sensor_msgs/msg/CompressedImage",
+        "CameraInfo": "sensor_msgs/msg/CameraInfo",
+        "RegionOfInterest": "sensor_msgs/msg/RegionOfInterest",
+        "TFMessage": "tf2_msgs/msg/TFMessage",
+        "TransformStamped": "geometry_msgs/msg/TransformStamped",
+        "Transform": "geometry_msgs/msg/Transform",
+        "Vector3": "geometry_msgs/msg/Vector3",
+        "Quaternion": "geometry_msgs/msg/Quaternion",
+    }
+
+    def __init__(self, a):
+        import numpy as np
+
+        import rmw_zenoh_peer as z
+
+        self.np = np
+        self.z = z
+        self.types = z.TYPES.types
+        self.node = z.Node(a.router, a.domain, "fake_ros2_camera")
+
+    def __getattr__(self, name):
+        return self.types[self.PACKAGES[name]]
+
+    def stamp(self, s):
+        return self.z.ros_time(s)
+
+    def f64(self, values):
+        return self.z.float64s(values)
+
+    def u8(self, data):
+        return self.np.frombuffer(bytes(data), dtype=self.np.uint8)
+
+    def writer(self, topic, ros_type, latched=False):
+        return self.node.publisher(topic, ros_type, latched=latched).publish
 
 
 def info_topic(image_topic):
@@ -65,61 +126,63 @@ def main():
     p.add_argument("--cy", type=float, default=0.0)
     p.add_argument("--d", type=float, nargs=5, default=[0.0] * 5)
     p.add_argument("--tf-static", nargs=9, action="append", default=[])
+    p.add_argument("--rmw", choices=["dds", "zenoh"], default="dds")
+    p.add_argument("--router", default="tcp/127.0.0.1:7447", help="the Zenoh router (--rmw zenoh)")
     a = p.parse_args()
-    qos = sensor_qos()
-    dp = DomainParticipant(a.domain)
-    info_writer = None
+    T = ZenohDriver(a) if a.rmw == "zenoh" else DdsDriver(a)
+    write_info = None
     if a.fx > 0:
-        info_writer = DataWriter(dp, Topic(dp, "rt" + info_topic(a.topic), CameraInfo, qos=qos), qos=qos)
+        write_info = T.writer(info_topic(a.topic), "sensor_msgs/msg/CameraInfo")
     if a.tf_static:
-        sq = static_qos()
-        tf_writer = DataWriter(dp, Topic(dp, "rt/tf_static", TFMessage, qos=sq), qos=sq)
+        write_tf = T.writer("/tf_static", "tf2_msgs/msg/TFMessage", latched=True)
         transforms = []
         for parent, child, *v in a.tf_static:
             x, y, z, qx, qy, qz, qw = map(float, v)
             transforms.append(
-                TransformStamped(
-                    header=Header(stamp=stamp_of(time.time()), frame_id=parent),
+                T.TransformStamped(
+                    header=T.Header(stamp=T.stamp(time.time()), frame_id=parent),
                     child_frame_id=child,
-                    transform=Transform(
-                        translation=Vector3(x=x, y=y, z=z), rotation=Quaternion(x=qx, y=qy, z=qz, w=qw)
+                    transform=T.Transform(
+                        translation=T.Vector3(x=x, y=y, z=z),
+                        rotation=T.Quaternion(x=qx, y=qy, z=qz, w=qw),
                     ),
                 )
             )
-        tf_writer.write(TFMessage(transforms=transforms))
-    name = "rt" + a.topic
+        write_tf(T.TFMessage(transforms=transforms))
     if a.file:
-        writer = DataWriter(dp, Topic(dp, name, CompressedImage, qos=qos), qos=qos)
+        write = T.writer(a.topic, "sensor_msgs/msg/CompressedImage")
         raw = open(a.file, "rb").read()
         fmt = "png" if raw[:4] == b"\x89PNG" else "jpeg"
-        payload = list(raw)
+        payload = T.u8(raw)
     else:
-        writer = DataWriter(dp, Topic(dp, name, Image, qos=qos), qos=qos)
+        write = T.writer(a.topic, "sensor_msgs/msg/Image")
     frames = 0
     next_frame = time.time()
     next_report = next_frame
     while True:
         now = time.time()
         if now >= next_frame:
-            header = Header(stamp=stamp_of(now + a.offset), frame_id="camera_optical_frame")
-            if info_writer is not None:
-                info_writer.write(
-                    CameraInfo(
+            header = T.Header(stamp=T.stamp(now + a.offset), frame_id="camera_optical_frame")
+            if write_info is not None:
+                write_info(
+                    T.CameraInfo(
                         header=header,
                         height=a.height,
                         width=a.width,
                         distortion_model="plumb_bob",
-                        d=list(a.d),
-                        k=[a.fx, 0.0, a.cx, 0.0, a.fy, a.cy, 0.0, 0.0, 1.0],
-                        r=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-                        p=[a.fx, 0.0, a.cx, 0.0, 0.0, a.fy, a.cy, 0.0, 0.0, 0.0, 1.0, 0.0],
+                        d=T.f64(a.d),
+                        k=T.f64([a.fx, 0.0, a.cx, 0.0, a.fy, a.cy, 0.0, 0.0, 1.0]),
+                        r=T.f64([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
+                        p=T.f64([a.fx, 0.0, a.cx, 0.0, 0.0, a.fy, a.cy, 0.0, 0.0, 0.0, 1.0, 0.0]),
                         binning_x=0,
                         binning_y=0,
-                        roi=RegionOfInterest(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),
+                        roi=T.RegionOfInterest(
+                            x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
+                        ),
                     )
                 )
             if a.file:
-                writer.write(CompressedImage(header=header, format=fmt, data=payload))
+                write(T.CompressedImage(header=header, format=fmt, data=payload))
             else:
                 w, h = a.width, a.height
                 row = bytearray()
@@ -130,8 +193,16 @@ def main():
                     r = bytearray(row)
                     r[1::3] = bytes([y % 256]) * w
                     data += r
-                writer.write(
-                    Image(header=header, height=h, width=w, encoding="bgr8", is_bigendian=0, step=3 * w, data=list(data))
+                write(
+                    T.Image(
+                        header=header,
+                        height=h,
+                        width=w,
+                        encoding="bgr8",
+                        is_bigendian=0,
+                        step=3 * w,
+                        data=T.u8(data),
+                    )
                 )
             frames += 1
             next_frame += 1.0 / a.fps

@@ -33,11 +33,7 @@ pub struct Master {
 impl Master {
     /// Starts `rosmaster --core` on a free port and waits until it listens.
     pub fn start() -> Self {
-        let port = TcpListener::bind("127.0.0.1:0")
-            .and_then(|l| l.local_addr())
-            .expect("a free port")
-            .port();
-        Self::start_on(port)
+        Self::start_on(free_port())
     }
 
     /// Starts `rosmaster --core` on `port` (a restarted master: the same URI, no memory of
@@ -54,14 +50,7 @@ impl Master {
             .expect(
                 "rosmaster (Debian's python3-rosmaster; scripts/setup.sh installs it) must be on PATH",
             );
-        let started = Instant::now();
-        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-            assert!(
-                started.elapsed() < Duration::from_secs(20),
-                "rosmaster did not listen"
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        wait_listening(port, "rosmaster did not listen");
         Self {
             child,
             uri: format!("http://127.0.0.1:{port}"),
@@ -154,7 +143,8 @@ pub struct FakeRos2Arm {
 
 impl FakeRos2Arm {
     /// The arm on DDS domain `domain` with `joints` (its controller's order) and more of the
-    /// script's arguments (`--mode position`, `--offset S`, `--controller NAME`).
+    /// script's arguments (`--mode position`, `--offset S`, `--controller NAME`; `--rmw zenoh
+    /// --router ENDPOINT` for rmw_zenoh).
     pub fn start(domain: u16, joints: &[&str], more: &[&str]) -> Self {
         let (child, report) = ros2_peer(
             "fake_ros2_arm.py",
@@ -169,7 +159,7 @@ impl FakeRos2Arm {
         newest_report(
             &self.report,
             20,
-            "the fake ROS 2 arm stopped reporting (is PyPI's cyclonedds installed? scripts/setup.sh)",
+            "the fake ROS 2 arm stopped reporting (are PyPI's cyclonedds, rosbags and eclipse-zenoh installed? scripts/setup.sh)",
         )
     }
 
@@ -186,7 +176,68 @@ impl Drop for FakeRos2Arm {
     }
 }
 
-/// The DDS domain of a ROS 2 test: `AVATARM_TEST_DDS_DOMAIN` (default 60) plus `offset`
+/// A Zenoh router on a free port of this machine (`rmw_zenoh_peer.py router`, PyPI's
+/// eclipse-zenoh: what `ros2 run rmw_zenoh_cpp rmw_zenohd` is to nodes on rmw_zenoh), stopped
+/// when dropped.
+pub struct ZenohRouter {
+    child: Child,
+    /// `tcp/127.0.0.1:PORT`.
+    pub endpoint: String,
+}
+
+impl ZenohRouter {
+    /// Starts the router and waits until it listens.
+    pub fn start() -> Self {
+        let port = free_port();
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let child = Command::new("python3")
+            .arg(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src/testing/rmw_zenoh_peer.py"))
+            .args(["router", "--listen", &endpoint])
+            .env("PYTHONPATH", python_path())
+            .stdout(Stdio::null())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("python3 runs");
+        wait_listening(
+            port,
+            "the Zenoh router did not listen (is PyPI's eclipse-zenoh installed? scripts/setup.sh)",
+        );
+        Self { child, endpoint }
+    }
+}
+
+impl Drop for ZenohRouter {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A TCP port of this machine free now.
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port()
+}
+
+/// Waits (at most 20 s, else panics with `silent`) until something listens on `port`.
+fn wait_listening(port: u16, silent: &str) {
+    let started = Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(started.elapsed() < Duration::from_secs(20), "{silent}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Where the ROS 2 test peers' PyPI packages are (`scripts/setup.sh` installs them).
+fn python_path() -> String {
+    std::env::var("HOME")
+        .map(|h| format!("{h}/.cache/avatarm/python"))
+        .unwrap_or_default()
+}
+
+/// The domain of a ROS 2 test: `AVATARM_TEST_DDS_DOMAIN` (default 60) plus `offset`
 /// (each test its own: a test binary runs its tests in one process, the DDS participants of
 /// several on one domain would see each other's robots), so that two runs on one network can
 /// keep apart.
@@ -205,14 +256,11 @@ fn ros2_peer(script: &str, args: &[&str], domain: u16) -> (Child, Arc<Mutex<Opti
     let script = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("src/testing")
         .join(script);
-    let python_path = std::env::var("HOME")
-        .map(|h| format!("{h}/.cache/avatarm/python"))
-        .unwrap_or_default();
     let mut child = Command::new("python3")
         .arg(&script)
         .args(["--domain", &domain.to_string()])
         .args(args)
-        .env("PYTHONPATH", python_path)
+        .env("PYTHONPATH", python_path())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
@@ -265,7 +313,17 @@ pub struct Ros2Listener {
 impl Ros2Listener {
     /// The listener on DDS domain `domain` of the topics under `prefix` (e.g. `/avatarm`).
     pub fn start(domain: u16, prefix: &str) -> Self {
-        let (child, report) = ros2_peer("ros2_listener.py", &["--prefix", prefix], domain);
+        Self::start_with(domain, prefix, &[])
+    }
+
+    /// [`Ros2Listener::start`] with more of the script's arguments (`--rmw zenoh --router
+    /// ENDPOINT` for rmw_zenoh).
+    pub fn start_with(domain: u16, prefix: &str, more: &[&str]) -> Self {
+        let (child, report) = ros2_peer(
+            "ros2_listener.py",
+            &[&["--prefix", prefix][..], more].concat(),
+            domain,
+        );
         Self { child, report }
     }
 
