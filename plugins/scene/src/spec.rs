@@ -250,10 +250,17 @@ impl RobotLinkSpec {
                     "only a ros2_control link on rmw_zenoh has a Zenoh router".into(),
                 );
             }
-            if !router
-                .split_once('/')
-                .is_some_and(|(p, a)| !p.is_empty() && !a.is_empty())
-            {
+            // PROTOCOL/ADDRESS; an IP protocol's address ends in its port.
+            let well_formed = router.split_once('/').is_some_and(|(p, a)| {
+                let port = || {
+                    a.rsplit_once(':')
+                        .is_some_and(|(host, port)| !host.is_empty() && port.parse::<u16>().is_ok())
+                };
+                !p.is_empty()
+                    && !a.is_empty()
+                    && (!["tcp", "udp", "tls", "quic", "ws"].contains(&p) || port())
+            });
+            if !well_formed {
                 return bad(
                     "zenoh_router",
                     format!(

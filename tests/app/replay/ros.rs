@@ -2,6 +2,7 @@
 //! (`avatarm_ros::testing`): the live preview commanding it, and the pouring trial through the link
 //! beside the embedded simulated arm.
 
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use avatarm_core::robot::PackagePath;
@@ -402,42 +403,9 @@ fn live_teleoperation_over_ros2(
     env: &[(&str, &str)],
     link: &str,
 ) {
-    let scene = scene("pouring");
-    let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
-        panic!("the pouring scene has a task");
-    };
-    let prepared = avatarm_mapping::pouring::prepare(task, setup).expect("grasp");
-    let start: Vec<String> = setup
-        .arm
-        .iter()
-        .enumerate()
-        .map(|(k, &i)| (prepared.q0()[i] + if k == 0 { 0.05 } else { 0.0 }).to_string())
-        .collect();
-    let joints: Vec<String> = (0..7).map(|i| format!("right_j{i}")).collect();
-    let names: Vec<&str> = joints.iter().map(String::as_str).collect();
-    let start = start.join(",");
-    let node = avatarm_ros::testing::FakeRos2Arm::start(
-        domain,
-        &names,
-        &[&["--start", start.as_str()][..], arm_args].concat(),
-    );
+    let node = fake_arm_off_the_start(domain, arm_args);
     let out = out_dir(&format!("ros2_live_{domain}"));
-    std::fs::create_dir_all(&out).expect("the test's folder");
-    // The pouring scene with a ROS 2 link, its robot's path made absolute.
-    let text = std::fs::read_to_string(root().join("assets/scenes/pouring.toml"))
-        .expect("the pouring scene")
-        .replace(
-            "urdf = \"../robots/",
-            &format!("urdf = \"{}/assets/robots/", root().display()),
-        );
-    let path = out.join("pouring_ros2.toml");
-    std::fs::write(
-        &path,
-        format!(
-            "{text}\n[robot.link]\nkind = \"ros2_control\"\ndomain_id = {domain}\ncommand_topic = \"/forward_velocity_controller/commands\"\n{link_extra}"
-        ),
-    )
-    .expect("write the scene");
+    let path = ros2_pouring_scene(&out, domain, link_extra);
     let log = run_preview_with(
         &[
             path.to_str().expect("utf-8"),
@@ -469,6 +437,165 @@ fn live_teleoperation_over_ros2(
     let r = node.report();
     assert!(r["commands"].as_u64().is_some_and(|n| n > 0), "{r}");
     assert_eq!(r["bad"].as_u64(), Some(0), "{r}");
+}
+
+/// The fake ros2_control arm (with `arm_args`) on `domain`, the Sawyer's seven joints where
+/// the pouring task starts but 0.05 rad off on the first.
+#[cfg(feature = "ros")]
+fn fake_arm_off_the_start(domain: u16, arm_args: &[&str]) -> avatarm_ros::testing::FakeRos2Arm {
+    let scene = scene("pouring");
+    let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
+        panic!("the pouring scene has a task");
+    };
+    let prepared = avatarm_mapping::pouring::prepare(task, setup).expect("grasp");
+    let start: Vec<String> = setup
+        .arm
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| (prepared.q0()[i] + if k == 0 { 0.05 } else { 0.0 }).to_string())
+        .collect();
+    let joints: Vec<String> = (0..7).map(|i| format!("right_j{i}")).collect();
+    let names: Vec<&str> = joints.iter().map(String::as_str).collect();
+    let start = start.join(",");
+    avatarm_ros::testing::FakeRos2Arm::start(
+        domain,
+        &names,
+        &[&["--start", start.as_str()][..], arm_args].concat(),
+    )
+}
+
+/// The pouring scene with a `ros2_control` link on `domain` (plus `link_extra`), its robot's
+/// path made absolute, written into `out` (created).
+#[cfg(feature = "ros")]
+fn ros2_pouring_scene(out: &Path, domain: u16, link_extra: &str) -> PathBuf {
+    std::fs::create_dir_all(out).expect("the test's folder");
+    let text = std::fs::read_to_string(root().join("assets/scenes/pouring.toml"))
+        .expect("the pouring scene")
+        .replace(
+            "urdf = \"../robots/",
+            &format!("urdf = \"{}/assets/robots/", root().display()),
+        );
+    let path = out.join("pouring_ros2.toml");
+    std::fs::write(
+        &path,
+        format!(
+            "{text}\n[robot.link]\nkind = \"ros2_control\"\ndomain_id = {domain}\ncommand_topic = \"/forward_velocity_controller/commands\"\n{link_extra}"
+        ),
+    )
+    .expect("write the scene");
+    path
+}
+
+/// `avatarm serve SCENE --robot ros2` (the robot site) with the scene's link on DDS, and an
+/// operator joining over Zenoh: the robot site commands the fake arm (its first commands bring
+/// it to the task's start, 0.05 rad away), every command good.
+#[cfg(feature = "ros")]
+#[test]
+fn the_robot_site_drives_a_ros2_control_arm_over_dds() {
+    let _serial = ros_support::serial();
+    let domain = ros_support::test_domain(24);
+    let node = fake_arm_off_the_start(domain, &[]);
+    robot_site_drives(&node, domain, "", "ros2_serve_dds");
+}
+
+/// The same with the link on rmw_zenoh (`rmw = "zenoh"`, its router): the fake arm on
+/// rmw_zenoh alone, so what moves it came over rmw_zenoh, every command with rmw_zenoh's
+/// attachment.
+#[cfg(feature = "ros")]
+#[test]
+fn the_robot_site_drives_a_ros2_control_arm_over_rmw_zenoh() {
+    let _serial = ros_support::serial();
+    let domain = ros_support::test_domain(23);
+    let router = avatarm_ros::testing::ZenohRouter::start();
+    let node = fake_arm_off_the_start(domain, &["--rmw", "zenoh", "--router", &router.endpoint]);
+    let moved = robot_site_drives(
+        &node,
+        domain,
+        &format!("rmw = \"zenoh\"\nzenoh_router = \"{}\"\n", router.endpoint),
+        "ros2_serve_zenoh",
+    );
+    assert_eq!(moved["no_attachment"].as_u64(), Some(0), "{moved}");
+}
+
+/// `avatarm serve` on the pouring scene with a `ros2_control` link on `domain` (plus
+/// `link_extra`), `--robot ros2`, and `avatarm join` as the operator, until `node` (the fake
+/// arm) moves under the site's commands; its report then (commands taken, none bad).
+#[cfg(feature = "ros")]
+fn robot_site_drives(
+    node: &avatarm_ros::testing::FakeRos2Arm,
+    domain: u16,
+    link_extra: &str,
+    dir: &str,
+) -> serde_json::Value {
+    use std::time::{Duration, Instant};
+    let out = out_dir(dir);
+    let scene = ros2_pouring_scene(&out, domain, link_extra);
+    let (mut serve, mut join) = serve_and_join(scene.to_str().expect("utf-8"), "ros2", &out, &[]);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let moved = loop {
+        let r = node.report();
+        let fastest = r["velocity"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(serde_json::Value::as_f64)
+            .fold(0.0, |m: f64, v| m.max(v.abs()));
+        if fastest > 0.02 {
+            break r;
+        }
+        let serve_log = std::fs::read_to_string(out.join("serve.log")).unwrap_or_default();
+        assert!(
+            Instant::now() < deadline,
+            "the arm never moved: {r}\n{serve_log}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let _ = join.kill();
+    let _ = join.wait();
+    let _ = serve.kill();
+    let _ = serve.wait();
+    eprintln!("moving: {moved}");
+    assert!(moved["commands"].as_u64().is_some_and(|n| n > 0), "{moved}");
+    assert_eq!(moved["bad"].as_u64(), Some(0), "{moved}");
+    moved
+}
+
+/// `avatarm serve SCENE --robot ROBOT` (TCP on a free port of this machine, no
+/// video, 120 s; `env` added) and `avatarm join` as its operator, their stderr in `out`'s
+/// `serve.log` and `join.log`.
+#[cfg(feature = "ros")]
+fn serve_and_join(
+    scene: &str,
+    robot: &str,
+    out: &Path,
+    env: &[(&str, &str)],
+) -> (std::process::Child, std::process::Child) {
+    use std::process::Stdio;
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free port");
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let log = |name: &str| std::fs::File::create(out.join(format!("{name}.log"))).expect("log");
+    let serve = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["serve", scene, "--robot", robot])
+        .args(["--insecure-lan", "--video", "off", "--duration", "120"])
+        .args(["--listen", &endpoint])
+        .envs(env.iter().copied())
+        .current_dir(root())
+        .stdout(Stdio::null())
+        .stderr(log("serve"))
+        .spawn()
+        .expect("avatarm serve");
+    let join = Command::new(env!("CARGO_BIN_EXE_avatarm"))
+        .args(["join", &endpoint, "--scene", scene])
+        .args(["--wait", "30"])
+        .current_dir(root())
+        .stdout(Stdio::null())
+        .stderr(log("join"))
+        .spawn()
+        .expect("avatarm join");
+    (serve, join)
 }
 
 /// `avatarm run --ros2-publish`: the live pouring session's erased frames, masks and commands
@@ -518,36 +645,17 @@ fn a_live_session_is_published_on_ros2() {
 #[cfg(feature = "ros")]
 #[test]
 fn a_killed_robot_site_leaves_the_sawyer_stopped_within_its_command_timeout() {
-    use std::process::Stdio;
     use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
     let _serial = ros_support::serial();
     let (master, sawyer) = sawyer_off_the_start(0.0);
     let out = out_dir("ros_serve_killed");
     std::fs::create_dir_all(&out).unwrap();
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .map(|a| a.port())
-        .unwrap();
-    let endpoint = format!("tcp/127.0.0.1:{port}");
-    let log = |name: &str| std::fs::File::create(out.join(format!("{name}.log"))).unwrap();
-    let mut serve = Command::new(env!("CARGO_BIN_EXE_avatarm"))
-        .args(["serve", "assets/scenes/pouring.toml", "--robot", "ros"])
-        .args(["--insecure-lan", "--video", "off", "--duration", "120"])
-        .args(["--listen", &endpoint])
-        .env("ROS_MASTER_URI", &master.uri)
-        .current_dir(root())
-        .stdout(Stdio::null())
-        .stderr(log("serve"))
-        .spawn()
-        .unwrap();
-    let mut join = Command::new(env!("CARGO_BIN_EXE_avatarm"))
-        .args(["join", &endpoint, "--scene", "assets/scenes/pouring.toml"])
-        .args(["--wait", "30"])
-        .current_dir(root())
-        .stdout(Stdio::null())
-        .stderr(log("join"))
-        .spawn()
-        .unwrap();
+    let (mut serve, mut join) = serve_and_join(
+        "assets/scenes/pouring.toml",
+        "ros",
+        &out,
+        &[("ROS_MASTER_URI", &master.uri)],
+    );
     // The operator joins and its hand pours: wait until the arm moves under the robot site's
     // commands from the operator's targets.
     let deadline = Instant::now() + Duration::from_secs(60);
