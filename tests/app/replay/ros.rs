@@ -18,6 +18,15 @@ use super::{out_dir, root, run_preview_with, scene};
 /// `off_rad` on its first joint.
 #[cfg(feature = "ros")]
 fn sawyer_off_the_start(off_rad: f64) -> (Master, FakeSawyer) {
+    let master = Master::start();
+    let sawyer = FakeSawyer::start_at(&master, 0.0, &pouring_start_off(off_rad));
+    (master, sawyer)
+}
+
+/// The pouring task's start (the Sawyer's seven arm joints, comma-separated, rad) but
+/// `off_rad` on the first joint.
+#[cfg(feature = "ros")]
+fn pouring_start_off(off_rad: f64) -> String {
     let scene = scene("pouring");
     let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
         panic!("the pouring scene has a task");
@@ -29,9 +38,7 @@ fn sawyer_off_the_start(off_rad: f64) -> (Master, FakeSawyer) {
         .enumerate()
         .map(|(k, &i)| (prepared.q0()[i] + if k == 0 { off_rad } else { 0.0 }).to_string())
         .collect();
-    let master = Master::start();
-    let sawyer = FakeSawyer::start_at(&master, 0.0, &start.join(","));
-    (master, sawyer)
+    start.join(",")
 }
 
 /// `avatarm run assets/scenes/pouring.toml --robot ros EXTRA` under Xvfb against `master`,
@@ -443,20 +450,9 @@ fn live_teleoperation_over_ros2(
 /// the pouring task starts but 0.05 rad off on the first.
 #[cfg(feature = "ros")]
 fn fake_arm_off_the_start(domain: u16, arm_args: &[&str]) -> avatarm_ros::testing::FakeRos2Arm {
-    let scene = scene("pouring");
-    let (Some(task), Some(setup)) = (&scene.file.task, &scene.trial) else {
-        panic!("the pouring scene has a task");
-    };
-    let prepared = avatarm_mapping::pouring::prepare(task, setup).expect("grasp");
-    let start: Vec<String> = setup
-        .arm
-        .iter()
-        .enumerate()
-        .map(|(k, &i)| (prepared.q0()[i] + if k == 0 { 0.05 } else { 0.0 }).to_string())
-        .collect();
     let joints: Vec<String> = (0..7).map(|i| format!("right_j{i}")).collect();
     let names: Vec<&str> = joints.iter().map(String::as_str).collect();
-    let start = start.join(",");
+    let start = pouring_start_off(0.05);
     avatarm_ros::testing::FakeRos2Arm::start(
         domain,
         &names,
