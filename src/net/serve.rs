@@ -128,6 +128,9 @@ pub struct ServeReport {
     pub last_error: Option<String>,
     /// Non-finite values the robot received: must be 0.
     pub nan_commands: u64,
+    /// The robot link's state at the end, its status line (ROS or ROS 2, the middleware and
+    /// where, the robot's state, rates, clocks); none in simulation.
+    pub robot_link: Option<String>,
     /// Erased frames published.
     pub video_frames: u64,
     /// The video's codec (`jpeg` or `h264`).
@@ -435,6 +438,7 @@ impl ControlLoop {
         report.target_age_ms = Spread::of(&ages);
         report.tick_period_ms = Spread::of(&periods);
         report.nan_commands = trial.nan_commands();
+        report.robot_link = self.teleop.robot().status_line();
         report.trial = trial.finish(self.teleop.status.max_tcp_speed);
         report
     }

@@ -59,8 +59,10 @@ pub struct RobotState {
 pub struct LinkStatus {
     /// Connected to the master (ROS 1), or the node up on DDS or rmw_zenoh (ROS 2); topics up.
     pub connected: bool,
-    /// A ROS 2 link (DDS or rmw_zenoh), not ROS 1's.
-    pub dds: bool,
+    /// A ROS 2 link's middleware and where it meets its peers, as
+    /// [`crate::Ros2Transport::describe`] says it (e.g. `rmw_zenoh domain 0 (router
+    /// tcp/localhost:7447)`); `None` for a ROS 1 link.
+    pub ros2: Option<String>,
     /// Joint states received.
     pub joint_states: u64,
     /// Joint states refused (a missing arm joint, a NaN, sizes that do not match).
@@ -97,13 +99,19 @@ impl LinkStatus {
     /// 0.041 m`. States that stop commands come first, in capitals.
     pub fn line(&self) -> String {
         let mut parts = Vec::new();
-        match (self.connected, self.joint_state_rate_hz) {
-            (false, _) if self.dds => {
-                parts.push("ROS 2 link DOWN (no node on DDS or rmw_zenoh)".to_owned());
+        let (ros, on) = match &self.ros2 {
+            Some(middleware) => ("ROS 2", format!(" on {middleware}")),
+            None => ("ROS", String::new()),
+        };
+        match (self.connected, self.joint_state_rate_hz, &self.ros2) {
+            (false, _, Some(middleware)) => {
+                parts.push(format!("ROS 2 link DOWN (no node on {middleware})"));
             }
-            (false, _) => parts.push("ROS link DOWN (not connected to the master)".to_owned()),
-            (true, None) => parts.push("ROS link DOWN (no joint states)".to_owned()),
-            (true, Some(_)) => parts.push("ROS link up".to_owned()),
+            (false, _, None) => {
+                parts.push("ROS link DOWN (not connected to the master)".to_owned());
+            }
+            (true, None, _) => parts.push(format!("{ros} link DOWN (no joint states{on})")),
+            (true, Some(_), _) => parts.push(format!("{ros} link up{on}")),
         }
         match self.robot {
             Some(r) if r.stopped => {

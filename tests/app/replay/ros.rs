@@ -400,8 +400,9 @@ fn live_teleoperation_commands_a_ros2_control_arm_over_rmw_zenoh() {
 
 /// `avatarm run SCENE --robot ros2 --frames 90` (with `env`) on the pouring scene with a
 /// `ros2_control` link (plus `link_extra`) on `domain`, the fake arm (with `arm_args`) where
-/// the task starts but 0.05 rad off on its first joint: the log names the link (`link`), the
-/// arm reaches the start and is teleoperated, every command good.
+/// the task starts but 0.05 rad off on its first joint: the log and the run's last line name
+/// the link's middleware (`link`), the arm reaches the start and is teleoperated, every
+/// command good.
 #[cfg(feature = "ros")]
 fn live_teleoperation_over_ros2(
     domain: u16,
@@ -438,7 +439,8 @@ fn live_teleoperation_over_ros2(
         .unwrap_or_default();
     eprintln!("{line}");
     assert!(
-        line.contains("ROS link up") && line.contains("real object not measured"),
+        line.contains(&format!("ROS 2 link up on {link}"))
+            && line.contains("real object not measured"),
         "{line}"
     );
     let r = node.report();
@@ -483,15 +485,22 @@ fn ros2_pouring_scene(out: &Path, domain: u16, link_extra: &str) -> PathBuf {
 }
 
 /// `avatarm serve SCENE --robot ros2` (the robot site) with the scene's link on DDS, and an
-/// operator joining over Zenoh: the robot site commands the fake arm (its first commands bring
-/// it to the task's start, 0.05 rad away), every command good.
+/// operator joining over Zenoh: the robot site brings the fake arm to the task's start (0.05
+/// rad away) and drives it through the operator's pour, every command good, its report naming
+/// the link's middleware.
 #[cfg(feature = "ros")]
 #[test]
 fn the_robot_site_drives_a_ros2_control_arm_over_dds() {
     let _serial = ros_support::serial();
     let domain = ros_support::test_domain(24);
     let node = fake_arm_off_the_start(domain, &[]);
-    robot_site_drives(&node, domain, "", "ros2_serve_dds");
+    robot_site_drives(
+        &node,
+        domain,
+        "",
+        &format!("DDS domain {domain}"),
+        "ros2_serve_dds",
+    );
 }
 
 /// The same with the link on rmw_zenoh (`rmw = "zenoh"`, its router): the fake arm on
@@ -508,62 +517,96 @@ fn the_robot_site_drives_a_ros2_control_arm_over_rmw_zenoh() {
         &node,
         domain,
         &format!("rmw = \"zenoh\"\nzenoh_router = \"{}\"\n", router.endpoint),
+        &format!("rmw_zenoh domain {domain} (router {})", router.endpoint),
         "ros2_serve_zenoh",
     );
     assert_eq!(moved["no_attachment"].as_u64(), Some(0), "{moved}");
 }
 
 /// `avatarm serve` on the pouring scene with a `ros2_control` link on `domain` (plus
-/// `link_extra`), `--robot ros2`, and `avatarm join` as the operator, until `node` (the fake
-/// arm) moves under the site's commands; its report then (commands taken, none bad).
+/// `link_extra`), `--robot ros2`, for 20 s, and `avatarm join` as the operator, its scripted
+/// hand pouring: the site brings `node` (the fake arm) to the task's start and drives it
+/// through the pour (the gripper closed on the operator's grasp, the arm carried far from
+/// where it started), every command good, and its report names the link and its middleware
+/// (`link`, e.g. `DDS domain 24`). The fake arm's last report.
 #[cfg(feature = "ros")]
 fn robot_site_drives(
     node: &avatarm_ros::testing::FakeRos2Arm,
     domain: u16,
     link_extra: &str,
+    link: &str,
     dir: &str,
 ) -> serde_json::Value {
-    use std::time::{Duration, Instant};
     let out = out_dir(dir);
     let scene = ros2_pouring_scene(&out, domain, link_extra);
-    let (mut serve, mut join) = serve_and_join(scene.to_str().expect("utf-8"), "ros2", &out, &[]);
-    let deadline = Instant::now() + Duration::from_secs(60);
-    let moved = loop {
-        let r = node.report();
-        let fastest = r["velocity"]
+    let joints = |r: &serde_json::Value| -> Vec<f64> {
+        r["q"]
             .as_array()
             .into_iter()
             .flatten()
             .filter_map(serde_json::Value::as_f64)
-            .fold(0.0, |m: f64, v| m.max(v.abs()));
-        if fastest > 0.02 {
-            break r;
-        }
-        let serve_log = std::fs::read_to_string(out.join("serve.log")).unwrap_or_default();
-        assert!(
-            Instant::now() < deadline,
-            "the arm never moved: {r}\n{serve_log}"
-        );
-        std::thread::sleep(Duration::from_millis(100));
+            .collect()
     };
+    let before = joints(&node.report());
+    let path = out.join("serve.json");
+    let (mut serve, mut join) = serve_and_join(
+        scene.to_str().expect("utf-8"),
+        "ros2",
+        &out,
+        &[
+            "--duration",
+            "20",
+            "--report",
+            path.to_str().expect("utf-8"),
+        ],
+        &[],
+    );
+    let status = serve.wait().expect("avatarm serve");
     let _ = join.kill();
     let _ = join.wait();
-    let _ = serve.kill();
-    let _ = serve.wait();
-    eprintln!("moving: {moved}");
-    assert!(moved["commands"].as_u64().is_some_and(|n| n > 0), "{moved}");
-    assert_eq!(moved["bad"].as_u64(), Some(0), "{moved}");
-    moved
+    let serve_log = std::fs::read_to_string(out.join("serve.log")).unwrap_or_default();
+    assert!(status.success(), "{serve_log}");
+    let after = node.report();
+    let report: avatarm::net::serve::ServeReport = {
+        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{e}\n{serve_log}"));
+        serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}\n{text}"))
+    };
+    let moved = before
+        .iter()
+        .zip(joints(&after))
+        .fold(0.0, |m: f64, (a, b)| m.max((a - b).abs()));
+    eprintln!(
+        "robot site over {link}: {} targets used, grasp at {:?} s, the arm moved {moved:.3} rad at most; the arm: {after}\nthe link: {:?}",
+        report.targets_used, report.trial.grasp_at_s, report.robot_link
+    );
+    let link_line = report.robot_link.clone().unwrap_or_default();
+    assert!(
+        link_line.contains(&format!("ROS 2 link up on {link}")),
+        "{link_line}\n{serve_log}"
+    );
+    assert!(report.targets_used > 500, "{report:?}\n{serve_log}");
+    assert_eq!(report.mapping_errors, 0, "{report:?}");
+    assert_eq!(report.nan_commands, 0, "{report:?}");
+    assert!(report.trial.grasp_at_s.is_some(), "no grasp: {report:?}");
+    // The move to the start is 0.05 rad; the pour carries a joint 0.23 rad (measured).
+    assert!(moved > 0.15, "the arm moved {moved} rad: {after}");
+    assert!(
+        after["commands"].as_u64().is_some_and(|n| n > 500),
+        "{after}"
+    );
+    assert_eq!(after["bad"].as_u64(), Some(0), "{after}");
+    after
 }
 
-/// `avatarm serve SCENE --robot ROBOT` (TCP on a free port of this machine, no
-/// video, 120 s; `env` added) and `avatarm join` as its operator, their stderr in `out`'s
-/// `serve.log` and `join.log`.
+/// `avatarm serve SCENE --robot ROBOT` (TCP on a free port of this machine, no video,
+/// `serve_args` after those, e.g. `--duration 20`; `env` added) and `avatarm join` as its
+/// operator, their stderr in `out`'s `serve.log` and `join.log`. Both run in the checkout.
 #[cfg(feature = "ros")]
 fn serve_and_join(
     scene: &str,
     robot: &str,
     out: &Path,
+    serve_args: &[&str],
     env: &[(&str, &str)],
 ) -> (std::process::Child, std::process::Child) {
     use std::process::Stdio;
@@ -575,8 +618,9 @@ fn serve_and_join(
     let log = |name: &str| std::fs::File::create(out.join(format!("{name}.log"))).expect("log");
     let serve = Command::new(env!("CARGO_BIN_EXE_avatarm"))
         .args(["serve", scene, "--robot", robot])
-        .args(["--insecure-lan", "--video", "off", "--duration", "120"])
+        .args(["--insecure-lan", "--video", "off"])
         .args(["--listen", &endpoint])
+        .args(serve_args)
         .envs(env.iter().copied())
         .current_dir(root())
         .stdout(Stdio::null())
@@ -650,6 +694,7 @@ fn a_killed_robot_site_leaves_the_sawyer_stopped_within_its_command_timeout() {
         "assets/scenes/pouring.toml",
         "ros",
         &out,
+        &["--duration", "120"],
         &[("ROS_MASTER_URI", &master.uri)],
     );
     // The operator joins and its hand pours: wait until the arm moves under the robot site's

@@ -234,7 +234,7 @@ pub(crate) fn client_thread(
         return;
     };
     if let Ok(mut s) = shared.lock() {
-        s.status.dds = true;
+        s.status.ros2 = Some(transport.describe());
     }
     // As the ROS 1 link: a session that fails is said once and tried again every second.
     let mut said = false;

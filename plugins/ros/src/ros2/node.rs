@@ -17,7 +17,8 @@ pub(crate) struct Qos {
     pub reliable: bool,
     /// Transient local (a late subscriber gets the publisher's last `depth`), else volatile.
     pub transient_local: bool,
-    /// Keep last `depth` (>= 1).
+    /// Keep last `depth`; 0 is taken as 1 on both middlewares (hiroz would read it as its
+    /// default of 10, RustDDS refuses it).
     pub depth: usize,
 }
 
@@ -77,7 +78,7 @@ impl Qos {
             } else {
                 QosDurability::Volatile
             },
-            history: QosHistory::from_depth(self.depth),
+            history: QosHistory::from_depth(self.depth.max(1)),
             ..QosProfile::default()
         }
     }
@@ -366,7 +367,26 @@ impl<M: Ros2Message> Publisher<M> {
 
 #[cfg(test)]
 mod tests {
-    use super::{Ros2Message, resolve};
+    use super::{Qos, Ros2Message, resolve};
+
+    /// A depth of 0 keeps the last sample on both middlewares (hiroz alone would keep 10).
+    #[test]
+    fn a_depth_of_zero_keeps_one_sample_on_either_middleware() {
+        use std::num::NonZeroUsize;
+        let one = NonZeroUsize::new(1).expect("1");
+        assert_eq!(
+            Qos::reliable(0).zenoh().history,
+            hiroz::qos::QosHistory::KeepLast(one)
+        );
+        assert_eq!(
+            Qos::reliable(0).dds().history,
+            ros2_client::qos::History::KeepLast { depth: 1 }
+        );
+        assert_eq!(
+            Qos::latched(5).zenoh().history,
+            hiroz::qos::QosHistory::KeepLast(NonZeroUsize::new(5).expect("5"))
+        );
+    }
 
     #[test]
     fn relative_names_resolve_in_the_namespace_and_private_ones_are_refused() {
