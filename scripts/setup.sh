@@ -19,6 +19,9 @@ packages=(
   # OpenH264's SIMD kernels (the h264 video codec builds without them, several times slower).
   nasm
 )
+# More packages a caller needs (CI: gdb and file, for a crashed process's backtraces).
+# shellcheck disable=SC2206 # one word per package
+packages+=(${AVATARM_EXTRA_PACKAGES:-})
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

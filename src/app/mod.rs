@@ -543,8 +543,23 @@ impl Plugin for AvatarmSetupPlugin {
 #[cfg(feature = "xr")]
 pub(crate) fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupBuilder, xr: bool) {
     if xr {
+        // Hand tracking (as bevy_mod_openxr's default), and the runtime's clock for the
+        // headset's display stamps (`preview::glass`); a runtime without one goes on without.
+        let mut exts = bevy_mod_openxr::exts::OxrExtensions::default();
+        exts.enable_hand_tracking();
+        #[cfg(not(windows))]
+        {
+            exts.khr_convert_timespec_time = true;
+        }
+        #[cfg(windows)]
+        {
+            exts.khr_win32_convert_performance_counter_time = true;
+        }
         // Falls back to the flat renderer, with a log line, when no OpenXR runtime is present.
-        app.add_plugins(bevy_mod_openxr::add_xr_plugins(plugins));
+        app.add_plugins(
+            bevy_mod_openxr::add_xr_plugins(plugins)
+                .set(bevy_mod_openxr::init::OxrInitPlugin { exts, ..default() }),
+        );
     } else {
         app.add_plugins(plugins);
     }

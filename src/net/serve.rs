@@ -857,11 +857,11 @@ pub fn serve(options: &ServeOptions) -> Result<ServeReport, crate::AppError> {
     Ok(report)
 }
 
-/// One line for the terminal.
+/// One line for the terminal (the robot link's state at the end after it, where there is one).
 pub fn summary(r: &ServeReport) -> String {
     format!(
         "robot site: {:.1} s, {} ticks, {} targets used ({} refused, {} stale), {} stops, \
-         position RMSE {} (as received {}), real lift {:.0} mm, {} video frames ({}, {} keyframes)",
+         position RMSE {} (as received {}), real lift {:.0} mm, {} video frames ({}, {} keyframes){}",
         r.duration_s,
         r.ticks,
         r.targets_used,
@@ -881,6 +881,9 @@ pub fn summary(r: &ServeReport) -> String {
         } else {
             &r.video_codec
         },
-        r.video_keyframes
+        r.video_keyframes,
+        r.robot_link
+            .as_ref()
+            .map_or_else(String::new, |l| format!("; {l}"))
     )
 }

@@ -5,8 +5,12 @@
 //! The capture stamp is on the app's fixed clock (`Time<Fixed>`, the video sources'
 //! convention), so a frame's age when the erase takes it can read up to one fixed step short;
 //! taken → presented is the wall clock's. Only where the app runs on the wall clock (not with
-//! `--step-ms` or `--frames`, whose simulated time is not the wall's). The display's own
-//! scan-out and response come after the present and are not measured.
+//! `--step-ms` or `--frames`, whose simulated time is not the wall's). On a window, the display's
+//! own scan-out and response come after the present and are not measured. In XR the frame is
+//! stamped when the headset shows it: the XR frame's predicted display time (OpenXR 1.0,
+//! `XrFrameState::predictedDisplayTime`, the time the frame is submitted for in `xrEndFrame`),
+//! read against the runtime's clock now through `XR_KHR_convert_timespec_time` (Windows:
+//! `XR_KHR_win32_convert_performance_counter_time`) where the runtime grants it.
 
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Instant;
@@ -29,6 +33,8 @@ pub struct GlassToGlass(Arc<Mutex<Series>>);
 struct Series {
     glass_ms: Vec<f64>,
     display_ms: Vec<f64>,
+    /// Of them, those stamped at the headset's display (XR's predicted display time).
+    on_headset: u64,
 }
 
 impl GlassToGlass {
@@ -54,12 +60,74 @@ impl GlassToGlass {
         Spread::of(&self.series().display_ms)
     }
 
+    /// Of the frames stamped, how many at the headset's display (XR) rather than at the
+    /// window's present.
+    pub fn on_headset(&self) -> u64 {
+        self.series().on_headset
+    }
+
+    /// What the newest stamp ends at: `on the headset's display` (XR) or `presented`.
+    fn end(&self) -> &'static str {
+        let s = self.series();
+        if s.on_headset > 0 && s.on_headset as usize == s.glass_ms.len() {
+            "on the headset's display"
+        } else if s.on_headset > 0 {
+            "presented or on the headset's display"
+        } else {
+            "presented"
+        }
+    }
+
     /// The status line's words, empty before the first presented frame.
     pub fn line(&self) -> String {
         self.recent().map_or_else(String::new, |(last, median)| {
-            format!("\nglass to glass (capture -> presented) {last:5.1} ms, median {median:5.1} ms")
+            format!(
+                "\nglass to glass (capture -> {}) {last:5.1} ms, median {median:5.1} ms",
+                self.end()
+            )
         })
     }
+}
+
+/// In XR, in the render world: how long after now (s) the headset shows the frame this render
+/// submits, its predicted display time less the runtime's clock now (both OpenXR `XrTime`,
+/// ns); `None` outside an XR session or where the runtime did not grant the time conversion
+/// extension. Set before [`stamp_presented`] each render.
+#[derive(Resource, Clone, Copy, Default, Debug, PartialEq)]
+pub struct XrDisplayAhead(pub Option<f64>);
+
+/// Seconds from `now_ns` to `display_ns` (the same clock, ns), 0 where the display time has
+/// passed: a frame late for its predicted display is shown at the earliest now.
+pub fn display_ahead_s(display_ns: i64, now_ns: i64) -> f64 {
+    display_ns.saturating_sub(now_ns).max(0) as f64 * 1e-9
+}
+
+/// [`XrDisplayAhead`] from the extracted XR frame state (`OxrFrameState`, the one `xrEndFrame`
+/// was given) and the runtime's clock (`Instance::now`, which needs the conversion extension:
+/// checked first, as it would panic without it).
+#[cfg(feature = "xr")]
+fn xr_display_ahead(
+    frame: Option<Res<bevy_mod_openxr::resources::OxrFrameState>>,
+    instance: Option<Res<bevy_mod_openxr::resources::OxrInstance>>,
+    mut ahead: ResMut<XrDisplayAhead>,
+) {
+    ahead.0 = frame.zip(instance).and_then(|(frame, instance)| {
+        #[cfg(not(windows))]
+        let granted = instance.exts().khr_convert_timespec_time.is_some();
+        #[cfg(windows)]
+        let granted = instance
+            .exts()
+            .khr_win32_convert_performance_counter_time
+            .is_some();
+        if !granted {
+            return None;
+        }
+        let now = instance.now().ok()?;
+        Some(display_ahead_s(
+            frame.predicted_display_time.as_nanos(),
+            now.as_nanos(),
+        ))
+    });
 }
 
 /// The frame put before the view in this update, extracted to the render world, which stamps
@@ -92,7 +160,15 @@ impl Plugin for GlassToGlassPlugin {
         if let Some(render) = app.get_sub_app_mut(RenderApp) {
             render
                 .insert_resource(record)
+                .init_resource::<XrDisplayAhead>()
                 .add_systems(Render, stamp_presented.in_set(RenderSystems::Cleanup));
+            #[cfg(feature = "xr")]
+            render.add_systems(
+                Render,
+                xr_display_ahead
+                    .in_set(RenderSystems::Cleanup)
+                    .before(stamp_presented),
+            );
         }
     }
 }
@@ -126,10 +202,12 @@ fn note_taken(
 }
 
 /// In the render world, after the present: the frame taken in the update this render belongs
-/// to is on the display's way now (each frame once).
+/// to is on the display's way now, or in XR shown by the headset [`XrDisplayAhead`] later
+/// (each frame once).
 fn stamp_presented(
     taken: Option<Res<TakenFrame>>,
     record: Res<GlassToGlass>,
+    ahead: Res<XrDisplayAhead>,
     mut last: Local<u64>,
 ) {
     let Some(t) = taken.and_then(|t| t.0) else {
@@ -139,8 +217,9 @@ fn stamp_presented(
         return;
     }
     *last = t.number;
-    let display_ms = t.at.elapsed().as_secs_f64() * 1e3;
+    let display_ms = (t.at.elapsed().as_secs_f64() + ahead.0.unwrap_or(0.0)) * 1e3;
     let mut s = record.series();
+    s.on_headset += u64::from(ahead.0.is_some());
     Spread::push(&mut s.display_ms, display_ms);
     Spread::push(&mut s.glass_ms, t.age_ms + display_ms);
 }
@@ -153,8 +232,77 @@ fn say_at_exit(mut exits: MessageReader<AppExit>, record: Res<GlassToGlass>) {
     let s = record.spread();
     if s.n > 0 {
         info!(
-            "preview: glass to glass (capture -> presented) median {:.1} ms, p95 {:.1} ms over {} frames",
-            s.median, s.p95, s.n
+            "preview: glass to glass (capture -> {}) median {:.1} ms, p95 {:.1} ms over {} frames",
+            record.end(),
+            s.median,
+            s.p95,
+            s.n
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use bevy::ecs::system::RunSystemOnce;
+
+    use super::*;
+
+    #[test]
+    fn the_display_ahead_is_the_predicted_time_less_now_and_never_negative() {
+        assert_eq!(display_ahead_s(1_011_000_000, 1_000_000_000), 0.011);
+        assert_eq!(display_ahead_s(1_000_000_000, 1_011_000_000), 0.0);
+        assert_eq!(display_ahead_s(i64::MIN, i64::MAX), 0.0);
+    }
+
+    /// A frame taken 10 ms before the present, in XR shown 11 ms after it: taken → shown is at
+    /// least 21 ms, the frame is counted at the headset, and the line says so; without XR the
+    /// same frame ends at the present.
+    #[test]
+    fn in_xr_a_frame_is_stamped_when_the_headset_shows_it() {
+        let stamp = |ahead: Option<f64>| {
+            let mut world = World::new();
+            let record = GlassToGlass::default();
+            world.insert_resource(record.clone());
+            world.insert_resource(XrDisplayAhead(ahead));
+            world.insert_resource(TakenFrame(Some(Taken {
+                number: 1,
+                at: Instant::now()
+                    .checked_sub(Duration::from_millis(10))
+                    .expect("a clock 10 ms old"),
+                age_ms: 5.0,
+            })));
+            world
+                .run_system_once(stamp_presented)
+                .expect("the system runs");
+            // Each frame once.
+            world
+                .run_system_once(stamp_presented)
+                .expect("the system runs");
+            record
+        };
+        let xr = stamp(Some(0.011));
+        assert_eq!(xr.display_spread().n, 1);
+        assert!(
+            xr.display_spread().median >= 21.0,
+            "{:?}",
+            xr.display_spread()
+        );
+        assert!(xr.spread().median >= 26.0, "{:?}", xr.spread());
+        assert_eq!(xr.on_headset(), 1);
+        assert!(
+            xr.line().contains("capture -> on the headset's display"),
+            "{}",
+            xr.line()
+        );
+        let window = stamp(None);
+        assert_eq!(window.on_headset(), 0);
+        assert!(window.display_spread().median >= 10.0);
+        assert!(
+            window.line().contains("capture -> presented)"),
+            "{}",
+            window.line()
         );
     }
 }

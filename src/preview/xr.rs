@@ -138,8 +138,9 @@ fn read_head(
     live.push_openxr_view(time.elapsed_secs_f64(), &tracking_from_view);
 }
 
-/// One line when the app exits: the sessions, the frames submitted, the hand frames taken and,
-/// for a camera on a head, how the headset drove it (the tests against a runtime read it).
+/// One line when the app exits: the sessions, the frames submitted, the hand frames taken,
+/// for a camera on a head how the headset drove it, and the video frames stamped at the
+/// headset's display (the tests against a runtime read it).
 #[allow(clippy::too_many_arguments)]
 fn report_at_exit(
     mut exits: MessageReader<AppExit>,
@@ -147,10 +148,22 @@ fn report_at_exit(
     hand: Res<XrHand>,
     scene: Res<SceneResource>,
     erase: Option<Res<avatarm_erase::EraseState>>,
+    glass: Option<Res<super::glass::GlassToGlass>>,
 ) {
     if exits.read().next().is_none() {
         return;
     }
+    let shown = match glass.map(|g| (g.on_headset(), g.spread())) {
+        Some((n, s)) if n > 0 => format!(
+            "; {n} video frames stamped at the headset's display (capture -> display median {:.1} ms, p95 {:.1} ms)",
+            s.median, s.p95
+        ),
+        Some(_) if report.frames_running > 0 => {
+            "; video frames stamped at the present only (the runtime granted no clock conversion)"
+                .to_owned()
+        }
+        _ => String::new(),
+    };
     let head = match (live_head(&scene), &scene.0.head) {
         (Some(live), Some(rig)) => {
             // The last erased frame's mask camera against the headset's head at that frame's
@@ -178,7 +191,7 @@ fn report_at_exit(
         _ => String::new(),
     };
     info!(
-        "XR summary: {} sessions, {} updates while the session ran (a frame each), {} hand frames from OpenXR hand tracking{head}",
+        "XR summary: {} sessions, {} updates while the session ran (a frame each), {} hand frames from OpenXR hand tracking{head}{shown}",
         report.sessions, report.frames_running, hand.frames
     );
 }

@@ -119,7 +119,11 @@ impl RosArm {
             } => indices(controller)?,
         };
         let shared = Arc::new(Mutex::new(Shared {
-            status: LinkStatus::default(),
+            // A ROS 2 link says so (and on what) from the start, before its thread runs.
+            status: LinkStatus {
+                ros2: settings.ros2.as_ref().map(crate::Ros2Transport::describe),
+                ..LinkStatus::default()
+            },
             outbound: None,
             gripper: None,
             shutdown: false,

@@ -96,7 +96,8 @@ pub struct LinkStatus {
 impl LinkStatus {
     /// One line for the preview's status line and the end of a run, e.g. `ROS link up, robot
     /// enabled, joint states 100 Hz, robot clock +0.4 ms (jitter 0.2 ms), gripper right_gripper
-    /// 0.041 m`. States that stop commands come first, in capitals.
+    /// 0.041 m`, or for a ROS 2 link `ROS 2 link up on DDS domain 0, joint states 100 Hz, ...`.
+    /// States that stop commands come first, in capitals.
     pub fn line(&self) -> String {
         let mut parts = Vec::new();
         let (ros, on) = match &self.ros2 {
@@ -155,5 +156,47 @@ impl LinkStatus {
             parts.push(format!("link lost {} times", self.losses));
         }
         parts.join(", ")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::LinkStatus;
+
+    /// Each link's words, down and up: a ROS 2 link names its middleware and where, ROS 1's
+    /// says the master.
+    #[test]
+    fn the_line_names_the_link_and_its_middleware() {
+        let line = |ros2: Option<&str>, connected: bool, rate: Option<f64>| {
+            LinkStatus {
+                ros2: ros2.map(str::to_owned),
+                connected,
+                joint_state_rate_hz: rate,
+                ..LinkStatus::default()
+            }
+            .line()
+        };
+        let zenoh = Some("rmw_zenoh domain 3 (router tcp/10.0.0.2:7447)");
+        assert_eq!(
+            line(zenoh, false, None),
+            "ROS 2 link DOWN (no node on rmw_zenoh domain 3 (router tcp/10.0.0.2:7447))"
+        );
+        assert_eq!(
+            line(Some("DDS domain 0"), true, None),
+            "ROS 2 link DOWN (no joint states on DDS domain 0)"
+        );
+        assert_eq!(
+            line(Some("DDS domain 0"), true, Some(100.0)),
+            "ROS 2 link up on DDS domain 0, joint states 100 Hz"
+        );
+        assert_eq!(
+            line(None, false, None),
+            "ROS link DOWN (not connected to the master)"
+        );
+        assert_eq!(line(None, true, None), "ROS link DOWN (no joint states)");
+        assert_eq!(
+            line(None, true, Some(99.6)),
+            "ROS link up, joint states 100 Hz"
+        );
     }
 }

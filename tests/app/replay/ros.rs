@@ -526,9 +526,10 @@ fn the_robot_site_drives_a_ros2_control_arm_over_rmw_zenoh() {
 /// `avatarm serve` on the pouring scene with a `ros2_control` link on `domain` (plus
 /// `link_extra`), `--robot ros2`, for 20 s, and `avatarm join` as the operator, its scripted
 /// hand pouring: the site brings `node` (the fake arm) to the task's start and drives it
-/// through the pour (the gripper closed on the operator's grasp, the arm carried far from
-/// where it started), every command good, and its report names the link and its middleware
-/// (`link`, e.g. `DDS domain 24`). The fake arm's last report.
+/// through the pour (the grasp commanded when the operator's hand closed: a ROS 2 link has no
+/// gripper yet; the arm carried far from where it started), every command good, and its
+/// report names the link and its middleware (`link`, e.g. `DDS domain 24`). The fake arm's
+/// last report.
 #[cfg(feature = "ros")]
 fn robot_site_drives(
     node: &avatarm_ros::testing::FakeRos2Arm,
@@ -561,22 +562,26 @@ fn robot_site_drives(
         ],
         &[],
     );
-    let status = serve.wait().expect("avatarm serve");
-    let _ = join.kill();
-    let _ = join.wait();
-    let serve_log = std::fs::read_to_string(out.join("serve.log")).unwrap_or_default();
-    assert!(status.success(), "{serve_log}");
+    // Both end by themselves: the operator after its pour, the site after its 20 s.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(90);
+    let joined = finish_by(&mut join, deadline, &out, "join");
+    let served = finish_by(&mut serve, deadline, &out, "serve");
+    let log = |name: &str| std::fs::read_to_string(out.join(format!("{name}.log")));
+    let serve_log = log("serve").unwrap_or_default();
+    assert!(joined.success(), "{}", log("join").unwrap_or_default());
+    assert!(served.success(), "{serve_log}");
     let after = node.report();
     let report: avatarm::net::serve::ServeReport = {
         let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{e}\n{serve_log}"));
         serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}\n{text}"))
     };
+    // The largest change of a joint from before the session to its end.
     let moved = before
         .iter()
         .zip(joints(&after))
         .fold(0.0, |m: f64, (a, b)| m.max((a - b).abs()));
     eprintln!(
-        "robot site over {link}: {} targets used, grasp at {:?} s, the arm moved {moved:.3} rad at most; the arm: {after}\nthe link: {:?}",
+        "robot site over {link}: {} targets used, grasp commanded at {:?} s, a joint {moved:.3} rad from where it was; the arm: {after}\nthe link: {:?}",
         report.targets_used, report.trial.grasp_at_s, report.robot_link
     );
     let link_line = report.robot_link.clone().unwrap_or_default();
@@ -596,6 +601,29 @@ fn robot_site_drives(
     );
     assert_eq!(after["bad"].as_u64(), Some(0), "{after}");
     after
+}
+
+/// Waits for `child` (its log `out/NAME.log`) to end until `deadline`; killed then, and the
+/// test failed with its log.
+#[cfg(feature = "ros")]
+fn finish_by(
+    child: &mut std::process::Child,
+    deadline: std::time::Instant,
+    out: &Path,
+    name: &str,
+) -> std::process::ExitStatus {
+    loop {
+        if let Some(status) = child.try_wait().expect(name) {
+            return status;
+        }
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            let log = std::fs::read_to_string(out.join(format!("{name}.log"))).unwrap_or_default();
+            panic!("avatarm {name} did not end in time:\n{log}");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
 }
 
 /// `avatarm serve SCENE --robot ROBOT` (TCP on a free port of this machine, no video,

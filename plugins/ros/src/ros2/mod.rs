@@ -233,9 +233,6 @@ pub(crate) fn client_thread(
     else {
         return;
     };
-    if let Ok(mut s) = shared.lock() {
-        s.status.ros2 = Some(transport.describe());
-    }
     // As the ROS 1 link: a session that fails is said once and tried again every second.
     let mut said = false;
     loop {

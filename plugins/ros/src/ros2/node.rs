@@ -18,7 +18,7 @@ pub(crate) struct Qos {
     /// Transient local (a late subscriber gets the publisher's last `depth`), else volatile.
     pub transient_local: bool,
     /// Keep last `depth`; 0 is taken as 1 on both middlewares (hiroz would read it as its
-    /// default of 10, RustDDS refuses it).
+    /// default of 10, RustDDS would keep none).
     pub depth: usize,
 }
 
