@@ -99,7 +99,7 @@ pub struct XrDisplayAhead(pub Option<f64>);
 /// Seconds from `now_ns` to `display_ns` (the same clock, ns), 0 where the display time has
 /// passed: a frame late for its predicted display is shown at the earliest now.
 pub fn display_ahead_s(display_ns: i64, now_ns: i64) -> f64 {
-    display_ns.saturating_sub(now_ns).max(0) as f64 * 1e-9
+    display_ns.saturating_sub(now_ns).max(0) as f64 / 1e9
 }
 
 /// [`XrDisplayAhead`] from the extracted XR frame state (`OxrFrameState`, the one `xrEndFrame`
@@ -245,8 +245,6 @@ fn say_at_exit(mut exits: MessageReader<AppExit>, record: Res<GlassToGlass>) {
 mod tests {
     use std::time::Duration;
 
-    use bevy::ecs::system::RunSystemOnce;
-
     use super::*;
 
     #[test]
@@ -273,13 +271,11 @@ mod tests {
                     .expect("a clock 10 ms old"),
                 age_ms: 5.0,
             })));
-            world
-                .run_system_once(stamp_presented)
-                .expect("the system runs");
-            // Each frame once.
-            world
-                .run_system_once(stamp_presented)
-                .expect("the system runs");
+            // One system, run for two renders of the same update: each frame once.
+            let system = world.register_system(stamp_presented);
+            for _ in 0..2 {
+                world.run_system(system).expect("the system runs");
+            }
             record
         };
         let xr = stamp(Some(0.011));
