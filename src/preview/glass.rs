@@ -7,9 +7,10 @@
 //! taken → presented is the wall clock's. Only where the app runs on the wall clock (not with
 //! `--step-ms` or `--frames`, whose simulated time is not the wall's). On a window, the display's
 //! own scan-out and response come after the present and are not measured. In XR the frame is
-//! stamped when the headset shows it: the XR frame's predicted display time (OpenXR 1.0,
-//! `XrFrameState::predictedDisplayTime`, the time the frame is submitted for in `xrEndFrame`),
-//! read against the runtime's clock now through `XR_KHR_convert_timespec_time` (Windows:
+//! stamped at the runtime's predicted display time for it (OpenXR 1.0,
+//! `XrFrameState::predictedDisplayTime`, the time the frame is submitted for in `xrEndFrame`;
+//! a frame late for it is stamped at the present), read against the runtime's clock at the
+//! present through `XR_KHR_convert_timespec_time` (Windows:
 //! `XR_KHR_win32_convert_performance_counter_time`) where the runtime grants it.
 
 use std::sync::{Arc, Mutex, PoisonError};
@@ -33,8 +34,10 @@ pub struct GlassToGlass(Arc<Mutex<Series>>);
 struct Series {
     glass_ms: Vec<f64>,
     display_ms: Vec<f64>,
-    /// Of them, those stamped at the headset's display (XR's predicted display time).
-    on_headset: u64,
+    /// Capture → on the headset's display (ms) of those stamped there (XR).
+    headset_glass_ms: Vec<f64>,
+    /// Whether the newest was stamped at the headset's display.
+    newest_on_headset: bool,
 }
 
 impl GlassToGlass {
@@ -60,19 +63,16 @@ impl GlassToGlass {
         Spread::of(&self.series().display_ms)
     }
 
-    /// Of the frames stamped, how many at the headset's display (XR) rather than at the
-    /// window's present.
-    pub fn on_headset(&self) -> u64 {
-        self.series().on_headset
+    /// Capture → on the headset's display (ms) of the frames stamped there (XR), not those
+    /// the window alone showed (before a session, after it, or while it showed nothing).
+    pub fn headset_spread(&self) -> Spread {
+        Spread::of(&self.series().headset_glass_ms)
     }
 
     /// What the newest stamp ends at: `on the headset's display` (XR) or `presented`.
     fn end(&self) -> &'static str {
-        let s = self.series();
-        if s.on_headset > 0 && s.on_headset as usize == s.glass_ms.len() {
+        if self.series().newest_on_headset {
             "on the headset's display"
-        } else if s.on_headset > 0 {
-            "presented or on the headset's display"
         } else {
             "presented"
         }
@@ -89,12 +89,13 @@ impl GlassToGlass {
     }
 }
 
-/// In XR, in the render world: how long after now (s) the headset shows the frame this render
-/// submits, its predicted display time less the runtime's clock now (both OpenXR `XrTime`,
-/// ns); `None` outside an XR session or where the runtime did not grant the time conversion
-/// extension. Set before [`stamp_presented`] each render.
+/// In XR, in the render world: how long (s) after `at` the headset shows the frame this render
+/// submitted, its predicted display time less the runtime's clock at `at` (both OpenXR
+/// `XrTime`, ns). `None` where this render submitted nothing to the headset (no session, one
+/// stopping, or the runtime said not to render) or the runtime did not grant the time
+/// conversion extension. Set before [`stamp_presented`] each render.
 #[derive(Resource, Clone, Copy, Default, Debug, PartialEq)]
-pub struct XrDisplayAhead(pub Option<f64>);
+pub struct XrDisplayAhead(pub Option<(f64, Instant)>);
 
 /// Seconds from `now_ns` to `display_ns` (the same clock, ns), 0 where the display time has
 /// passed: a frame late for its predicted display is shown at the earliest now.
@@ -103,14 +104,20 @@ pub fn display_ahead_s(display_ns: i64, now_ns: i64) -> f64 {
 }
 
 /// [`XrDisplayAhead`] from the extracted XR frame state (`OxrFrameState`, the one `xrEndFrame`
-/// was given) and the runtime's clock (`Instance::now`, which needs the conversion extension:
-/// checked first, as it would panic without it).
+/// was given when the frame loop ran and the runtime asked for a render: bevy_mod_openxr's own
+/// conditions) and the runtime's clock (`Instance::now`, which needs the conversion extension:
+/// checked first, as it would panic without it). The frame state stays after a session ends,
+/// so the conditions are read each render.
 #[cfg(feature = "xr")]
 fn xr_display_ahead(
     frame: Option<Res<bevy_mod_openxr::resources::OxrFrameState>>,
     instance: Option<Res<bevy_mod_openxr::resources::OxrInstance>>,
+    started: Option<Res<bevy_mod_openxr::resources::OxrSessionStarted>>,
+    state: Option<Res<bevy_mod_xr::session::XrState>>,
     mut ahead: ResMut<XrDisplayAhead>,
 ) {
+    let submitted = bevy_mod_openxr::init::should_run_frame_loop(started, state);
+    let frame = frame.filter(|f| submitted && f.should_render);
     ahead.0 = frame.zip(instance).and_then(|(frame, instance)| {
         #[cfg(not(windows))]
         let granted = instance.exts().khr_convert_timespec_time.is_some();
@@ -123,9 +130,10 @@ fn xr_display_ahead(
             return None;
         }
         let now = instance.now().ok()?;
-        Some(display_ahead_s(
-            frame.predicted_display_time.as_nanos(),
-            now.as_nanos(),
+        let at = Instant::now();
+        Some((
+            display_ahead_s(frame.predicted_display_time.as_nanos(), now.as_nanos()),
+            at,
         ))
     });
 }
@@ -217,9 +225,14 @@ fn stamp_presented(
         return;
     }
     *last = t.number;
-    let display_ms = (t.at.elapsed().as_secs_f64() + ahead.0.unwrap_or(0.0)) * 1e3;
+    // The headset's clock read at `at`, the window's now.
+    let (after_s, at) = ahead.0.unwrap_or_else(|| (0.0, Instant::now()));
+    let display_ms = (at.saturating_duration_since(t.at).as_secs_f64() + after_s) * 1e3;
     let mut s = record.series();
-    s.on_headset += u64::from(ahead.0.is_some());
+    s.newest_on_headset = ahead.0.is_some();
+    if ahead.0.is_some() {
+        Spread::push(&mut s.headset_glass_ms, t.age_ms + display_ms);
+    }
     Spread::push(&mut s.display_ms, display_ms);
     Spread::push(&mut s.glass_ms, t.age_ms + display_ms);
 }
@@ -254,19 +267,21 @@ mod tests {
         assert_eq!(display_ahead_s(i64::MIN, i64::MAX), 0.0);
     }
 
-    /// A frame taken 10 ms before the present, in XR shown 11 ms after it: taken → shown is at
-    /// least 21 ms, the frame is counted at the headset, and the line says so; without XR the
-    /// same frame ends at the present.
+    /// A frame taken 10 ms before the headset's clock was read, in XR shown 11 ms after that
+    /// reading: taken → shown is 21 ms (from the two instants, not timed), capture → shown 26
+    /// ms, the frame is counted at the headset, and the line says so; without XR the same frame
+    /// ends at the present, at least 10 ms after it was taken.
     #[test]
     fn in_xr_a_frame_is_stamped_when_the_headset_shows_it() {
         let stamp = |ahead: Option<f64>| {
             let mut world = World::new();
             let record = GlassToGlass::default();
+            let read_at = Instant::now();
             world.insert_resource(record.clone());
-            world.insert_resource(XrDisplayAhead(ahead));
+            world.insert_resource(XrDisplayAhead(ahead.map(|a| (a, read_at))));
             world.insert_resource(TakenFrame(Some(Taken {
                 number: 1,
-                at: Instant::now()
+                at: read_at
                     .checked_sub(Duration::from_millis(10))
                     .expect("a clock 10 ms old"),
                 age_ms: 5.0,
@@ -281,19 +296,23 @@ mod tests {
         let xr = stamp(Some(0.011));
         assert_eq!(xr.display_spread().n, 1);
         assert!(
-            xr.display_spread().median >= 21.0,
+            (xr.display_spread().median - 21.0).abs() < 1e-6,
             "{:?}",
             xr.display_spread()
         );
-        assert!(xr.spread().median >= 26.0, "{:?}", xr.spread());
-        assert_eq!(xr.on_headset(), 1);
+        assert!(
+            (xr.spread().median - 26.0).abs() < 1e-6,
+            "{:?}",
+            xr.spread()
+        );
+        assert_eq!(xr.headset_spread().n, 1);
         assert!(
             xr.line().contains("capture -> on the headset's display"),
             "{}",
             xr.line()
         );
         let window = stamp(None);
-        assert_eq!(window.on_headset(), 0);
+        assert_eq!(window.headset_spread().n, 0);
         assert!(window.display_spread().median >= 10.0);
         assert!(
             window.line().contains("capture -> presented)"),

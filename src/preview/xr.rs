@@ -149,16 +149,21 @@ fn report_at_exit(
     scene: Res<SceneResource>,
     erase: Option<Res<avatarm_erase::EraseState>>,
     glass: Option<Res<super::glass::GlassToGlass>>,
+    exts: Option<Res<bevy_mod_openxr::exts::OxrEnabledExtensions>>,
 ) {
     if exits.read().next().is_none() {
         return;
     }
-    let shown = match glass.map(|g| (g.on_headset(), g.spread())) {
-        Some((n, s)) if n > 0 => format!(
-            "; {n} video frames stamped at the headset's display (capture -> display median {:.1} ms, p95 {:.1} ms)",
-            s.median, s.p95
+    #[cfg(not(windows))]
+    let clock = exts.is_some_and(|e| e.khr_convert_timespec_time);
+    #[cfg(windows)]
+    let clock = exts.is_some_and(|e| e.khr_win32_convert_performance_counter_time);
+    let shown = match glass.map(|g| (g.headset_spread(), g.spread().n)) {
+        Some((s, _)) if s.n > 0 => format!(
+            "; {} video frames stamped at the headset's predicted display (capture -> display median {:.1} ms, p95 {:.1} ms)",
+            s.n, s.median, s.p95
         ),
-        Some(_) if report.frames_running > 0 => {
+        Some((_, n)) if n > 0 && report.frames_running > 0 && !clock => {
             "; video frames stamped at the present only (the runtime granted no clock conversion)"
                 .to_owned()
         }
