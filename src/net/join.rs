@@ -896,10 +896,19 @@ pub fn summary(r: &JoinReport) -> String {
         .as_ref()
         .filter(|w| w.glass_to_glass_ms.n > 0)
         .map_or_else(String::new, |w| {
-            format!(
-                ", capture to presented in the window {:.0} ms median (p95 {:.0})",
-                w.glass_to_glass_ms.median, w.glass_to_glass_ms.p95
-            )
+            // In XR the frames the headset showed, alone (the others ended at the window).
+            let headset = &w.headset_glass_to_glass_ms;
+            if headset.n > 0 {
+                format!(
+                    ", capture to the headset's display {:.0} ms median (p95 {:.0}) over {} of {} frames shown",
+                    headset.median, headset.p95, headset.n, w.glass_to_glass_ms.n
+                )
+            } else {
+                format!(
+                    ", capture to presented in the window {:.0} ms median (p95 {:.0})",
+                    w.glass_to_glass_ms.median, w.glass_to_glass_ms.p95
+                )
+            }
         });
     let outages = if r.robot_site_silences + r.robot_site_restarts > 0 {
         format!(
@@ -945,5 +954,43 @@ mod tests {
         assert_eq!(object_at(&objects, 0.9), None);
         assert_eq!(object_at(&objects, 1.5), None);
         assert_eq!(object_at(&Default::default(), 1.0), None);
+    }
+
+    /// The summary's glass to glass: the window's present, or in XR the headset's frames
+    /// alone (the others ended at the window), and nothing without a window.
+    #[test]
+    fn the_summary_names_where_glass_to_glass_ended() {
+        let spread = |median: f64, n: usize| Spread {
+            median,
+            p95: median + 10.0,
+            max: median + 20.0,
+            n,
+        };
+        let mut r = JoinReport::default();
+        let headless = summary(&r);
+        assert!(
+            !headless.contains("presented") && !headless.contains("headset"),
+            "{headless}"
+        );
+        r.window = Some(WindowReport {
+            glass_to_glass_ms: spread(150.0, 40),
+            ..Default::default()
+        });
+        let flat = summary(&r);
+        assert!(
+            flat.contains("capture to presented in the window 150 ms median (p95 160)"),
+            "{flat}"
+        );
+        r.window = Some(WindowReport {
+            glass_to_glass_ms: spread(150.0, 40),
+            headset_glass_to_glass_ms: spread(120.0, 30),
+            ..Default::default()
+        });
+        let xr = summary(&r);
+        assert!(
+            xr.contains("capture to the headset's display 120 ms median (p95 130) over 30 of 40 frames shown"),
+            "{xr}"
+        );
+        assert!(!xr.contains("in the window"), "{xr}");
     }
 }

@@ -69,8 +69,16 @@ pub struct WindowReport {
     pub display_ms: Spread,
     /// Capture → presented (ms): glass to glass but the display's scan-out (the frame's
     /// capture → decoded, on the robot site's clock as the session estimates it, plus
-    /// [`WindowReport::display_ms`]).
+    /// [`WindowReport::display_ms`]). In XR, a frame the headset was given ends at its
+    /// predicted display instead (`preview::glass`), so this mixes both ends where a session
+    /// ran for part of the time; [`WindowReport::headset_glass_to_glass_ms`] has those alone.
     pub glass_to_glass_ms: Spread,
+    /// Capture → on the headset's display (ms) of the frames stamped there (`--xr` with a
+    /// session running and the runtime's clock conversion granted; `n = 0` otherwise): the
+    /// frame's capture → decoded plus decoded → the runtime's predicted display time for the
+    /// XR frame that first shows it (OpenXR 1.0, `XrFrameState::predictedDisplayTime`).
+    #[serde(default)]
+    pub headset_glass_to_glass_ms: Spread,
     /// The view was asked for in XR (`--xr`); whether a headset took it is in the log.
     pub xr: bool,
 }
@@ -340,6 +348,7 @@ impl WindowHandle {
             panel_wait_ms: Spread::of(&record.panel_wait_ms),
             display_ms: self.0.1.display_spread(),
             glass_to_glass_ms: self.0.1.spread(),
+            headset_glass_to_glass_ms: self.0.1.headset_spread(),
             anchor_correction_mm: Spread::of(&record.correction_mm),
             ..record.report.clone()
         })

@@ -78,6 +78,18 @@ impl GlassToGlass {
         }
     }
 
+    /// What all stamps so far end at: `presented`, `on the headset's display`, or both where
+    /// some were stamped at the window's present (before a session, after it) and some at the
+    /// headset's display.
+    fn end_of_all(&self) -> &'static str {
+        let s = self.series();
+        match (s.headset_glass_ms.len(), s.glass_ms.len()) {
+            (0, _) => "presented",
+            (on_headset, all) if on_headset == all => "on the headset's display",
+            _ => "presented or on the headset's display",
+        }
+    }
+
     /// The status line's words, empty before the first presented frame.
     pub fn line(&self) -> String {
         self.recent().map_or_else(String::new, |(last, median)| {
@@ -107,15 +119,24 @@ pub fn display_ahead_s(display_ns: i64, now_ns: i64) -> f64 {
 /// was given when the frame loop ran and the runtime asked for a render: bevy_mod_openxr's own
 /// conditions) and the runtime's clock (`Instance::now`, which needs the conversion extension:
 /// checked first, as it would panic without it). The frame state stays after a session ends,
-/// so the conditions are read each render.
+/// so the conditions are read each render. Only in a render with a frame to stamp (a
+/// [`TakenFrame`] not seen before; [`stamp_presented`] stamps each once too): the clock is not
+/// read for renders that show no new frame.
 #[cfg(feature = "xr")]
 fn xr_display_ahead(
     frame: Option<Res<bevy_mod_openxr::resources::OxrFrameState>>,
     instance: Option<Res<bevy_mod_openxr::resources::OxrInstance>>,
     started: Option<Res<bevy_mod_openxr::resources::OxrSessionStarted>>,
     state: Option<Res<bevy_mod_xr::session::XrState>>,
+    taken: Option<Res<TakenFrame>>,
     mut ahead: ResMut<XrDisplayAhead>,
+    mut last: Local<u64>,
 ) {
+    ahead.0 = None;
+    match taken.and_then(|t| t.0) {
+        Some(t) if t.number > *last => *last = t.number,
+        _ => return,
+    }
     let submitted = bevy_mod_openxr::init::should_run_frame_loop(started, state);
     let frame = frame.filter(|f| submitted && f.should_render);
     ahead.0 = frame.zip(instance).and_then(|(frame, instance)| {
@@ -243,15 +264,26 @@ fn say_at_exit(mut exits: MessageReader<AppExit>, record: Res<GlassToGlass>) {
         return;
     }
     let s = record.spread();
-    if s.n > 0 {
-        info!(
-            "preview: glass to glass (capture -> {}) median {:.1} ms, p95 {:.1} ms over {} frames",
-            record.end(),
-            s.median,
-            s.p95,
-            s.n
-        );
+    if s.n == 0 {
+        return;
     }
+    let headset = record.headset_spread();
+    // Where the frames end at both, the headset's own figure beside all of them.
+    let on_headset = if headset.n > 0 && headset.n < s.n {
+        format!(
+            "; the {} on the headset's display median {:.1} ms, p95 {:.1} ms",
+            headset.n, headset.median, headset.p95
+        )
+    } else {
+        String::new()
+    };
+    info!(
+        "preview: glass to glass (capture -> {}) median {:.1} ms, p95 {:.1} ms over {} frames{on_headset}",
+        record.end_of_all(),
+        s.median,
+        s.p95,
+        s.n
+    );
 }
 
 #[cfg(test)]
@@ -311,13 +343,43 @@ mod tests {
             "{}",
             xr.line()
         );
+        assert_eq!(xr.end_of_all(), "on the headset's display");
         let window = stamp(None);
+        assert_eq!(window.end_of_all(), "presented");
         assert_eq!(window.headset_spread().n, 0);
         assert!(window.display_spread().median >= 10.0);
         assert!(
             window.line().contains("capture -> presented)"),
             "{}",
             window.line()
+        );
+    }
+
+    /// Frames at the headset's display, then one the window alone showed (the session ended):
+    /// the newest ends at the present, all of them at both, the headset's own spread has its 2.
+    #[test]
+    fn a_run_that_left_xr_says_both_ends() {
+        let mut world = World::new();
+        let record = GlassToGlass::default();
+        world.insert_resource(record.clone());
+        let system = world.register_system(stamp_presented);
+        for (number, ahead) in [(1, Some(0.011)), (2, Some(0.011)), (3, None)] {
+            world.insert_resource(XrDisplayAhead(ahead.map(|a| (a, Instant::now()))));
+            world.insert_resource(TakenFrame(Some(Taken {
+                number,
+                at: Instant::now(),
+                age_ms: 5.0,
+            })));
+            world.run_system(system).expect("the system runs");
+        }
+        assert_eq!(record.spread().n, 3);
+        assert_eq!(record.headset_spread().n, 2);
+        assert!(record.headset_spread().median >= 16.0);
+        assert_eq!(record.end_of_all(), "presented or on the headset's display");
+        assert!(
+            record.line().contains("capture -> presented)"),
+            "{}",
+            record.line()
         );
     }
 }

@@ -466,4 +466,22 @@ fn alice_s_headset_sends_her_head_to_the_robot_site_which_erases_her_camera_at_i
     // and the frames' cameras with it.
     assert!((2.0..=20.5).contains(&head.turned_deg), "{report:?}");
     assert!(report.video.camera_turned_deg >= 2.0, "{report:?}");
+    // Issue 44: the frames the headset showed end at the runtime's predicted display time
+    // for them (Monado grants XR_KHR_convert_timespec_time), counted apart from the window's.
+    let window = report.window.as_ref().expect("the window's report");
+    let on_headset = &window.headset_glass_to_glass_ms;
+    eprintln!(
+        "glass to glass: all {:?}, on the headset {on_headset:?}",
+        window.glass_to_glass_ms
+    );
+    assert!(
+        on_headset.n > 0 && on_headset.n <= window.glass_to_glass_ms.n,
+        "{window:?}"
+    );
+    assert!(on_headset.median > 0.0, "{window:?}");
+    let (line, _) = summary(&log);
+    assert!(
+        line.contains("video frames stamped at the headset's predicted display"),
+        "{line}"
+    );
 }
