@@ -11,7 +11,7 @@ cd "$(dirname "$0")/.."
 runs=${1:-10}
 filter=${2:-}
 [[ "$runs" =~ ^[1-9][0-9]*$ ]] || { echo "usage: $0 [RUNS] [FILTER]: RUNS a whole number from 1" >&2; exit 2; }
-[ -n "${XR_RUNTIME_JSON:-}" ] || echo "repeat: no XR_RUNTIME_JSON: the XR tests will be SKIPPED (docs/quest2.md)"
+[ -f "${XR_RUNTIME_JSON:-}" ] || echo "repeat: XR_RUNTIME_JSON names no file: the XR tests (if the filter runs any) will be SKIPPED (docs/quest2.md)"
 scripts/setup.sh
 cargo test -p avatarm_ros --test link --no-run
 cargo test -p avatarm --test realtime --no-run
@@ -26,12 +26,17 @@ for suite in "avatarm_ros link" "avatarm realtime"; do
     log="$logs/$package-$binary-$i.log"
     if cargo test -q -p "$package" --test "$binary" -- --test-threads 1 ${filter:+"$filter"} >"$log" 2>&1; then
       pass=$((pass + 1))
-      tests=$(grep -o '[0-9]* passed' "$log" | tail -1)
+      tests=$(grep -Eo '[0-9]+ passed' "$log" | tail -1 || true)
       rm -f "$log"
     else
       echo "repeat: $package --test $binary run $i failed (log: $log)"
     fi
   done
+  if [ "$pass" -eq "$runs" ] && [ "${tests:-0 passed}" = "0 passed" ]; then
+    # The filter matched none of this binary's tests: nothing was repeated.
+    echo "repeat: $package --test $binary: no test matches '$filter'"
+    continue
+  fi
   echo "repeat: $package --test $binary${filter:+ (filter $filter)}: $pass of $runs runs passed (the last passing run: ${tests:-none})"
   [ "$pass" -eq "$runs" ] || failed=1
 done

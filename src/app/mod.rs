@@ -547,7 +547,7 @@ pub(crate) fn add_window_plugins(app: &mut App, plugins: bevy::app::PluginGroupB
         // headset's display stamps (`preview::glass`); a runtime without one goes on without.
         let mut exts = bevy_mod_openxr::exts::OxrExtensions::default();
         exts.enable_hand_tracking();
-        crate::preview::xr::ClockConversion::request_clock_conversion(&mut exts);
+        crate::preview::glass::request_clock_conversion(&mut exts);
         // Falls back to the flat renderer, with a log line, when no OpenXR runtime is present.
         app.add_plugins(
             bevy_mod_openxr::add_xr_plugins(plugins)

@@ -894,22 +894,7 @@ pub fn summary(r: &JoinReport) -> String {
     let presented = r
         .window
         .as_ref()
-        .filter(|w| w.glass_to_glass_ms.n > 0)
-        .map_or_else(String::new, |w| {
-            // In XR the frames the headset showed, alone (the others ended at the window).
-            let headset = &w.headset_glass_to_glass_ms;
-            if headset.n > 0 {
-                format!(
-                    ", capture to the headset's display {:.0} ms median (p95 {:.0}) over {} of {} frames shown",
-                    headset.median, headset.p95, headset.n, w.glass_to_glass_ms.n
-                )
-            } else {
-                format!(
-                    ", capture to presented in the window {:.0} ms median (p95 {:.0})",
-                    w.glass_to_glass_ms.median, w.glass_to_glass_ms.p95
-                )
-            }
-        });
+        .map_or_else(String::new, WindowReport::glass_to_glass_words);
     let outages = if r.robot_site_silences + r.robot_site_restarts > 0 {
         format!(
             "; the robot site fell silent {} times and restarted {} times",
@@ -988,7 +973,7 @@ mod tests {
         });
         let xr = summary(&r);
         assert!(
-            xr.contains("capture to the headset's display 120 ms median (p95 130) over 30 of 40 frames shown"),
+            xr.contains("capture to the headset's predicted display 120 ms median (p95 130) over 30 of 40 frames (the other 10 at the window's present)"),
             "{xr}"
         );
         assert!(!xr.contains("in the window"), "{xr}");

@@ -65,7 +65,9 @@ pub struct WindowReport {
     pub panel_wait_ms: Spread,
     /// Decoded → presented (ms): the window's frame that first shows it handed to the display
     /// (the render world's present, after [`bevy::render::RenderSystems::Render`]). The
-    /// display's own scan-out and response come after and are not measured.
+    /// display's own scan-out and response come after and are not measured. In XR, a frame the
+    /// headset was given ends at its predicted display instead (as
+    /// [`WindowReport::glass_to_glass_ms`]).
     pub display_ms: Spread,
     /// Capture → presented (ms): glass to glass but the display's scan-out (the frame's
     /// capture → decoded, on the robot site's clock as the session estimates it, plus
@@ -81,6 +83,33 @@ pub struct WindowReport {
     pub headset_glass_to_glass_ms: Spread,
     /// The view was asked for in XR (`--xr`); whether a headset took it is in the log.
     pub xr: bool,
+}
+
+impl WindowReport {
+    /// The operator's summary's words on glass to glass (empty before a frame was presented):
+    /// capture → presented in the window, or in XR the frames the headset showed alone
+    /// (capture → its predicted display), naming the others that ended at the window.
+    pub fn glass_to_glass_words(&self) -> String {
+        let (all, headset) = (&self.glass_to_glass_ms, &self.headset_glass_to_glass_ms);
+        if all.n == 0 {
+            return String::new();
+        }
+        if headset.n == 0 {
+            return format!(
+                ", capture to presented in the window {:.0} ms median (p95 {:.0})",
+                all.median, all.p95
+            );
+        }
+        let others = if all.n > headset.n {
+            format!(" (the other {} at the window's present)", all.n - headset.n)
+        } else {
+            String::new()
+        };
+        format!(
+            ", capture to the headset's predicted display {:.0} ms median (p95 {:.0}) over {} of {} frames{others}",
+            headset.median, headset.p95, headset.n, all.n
+        )
+    }
 }
 
 /// A decoded frame: RGBA8, `width * height * 4` bytes, numbered as it arrived.

@@ -101,13 +101,75 @@ impl GlassToGlass {
     }
 }
 
-/// In XR, in the render world: how long (s) after `at` the headset shows the frame this render
-/// submitted, its predicted display time less the runtime's clock at `at` (both OpenXR
-/// `XrTime`, ns). `None` where this render submitted nothing to the headset (no session, one
-/// stopping, or the runtime said not to render) or the runtime did not grant the time
-/// conversion extension. Set before [`stamp_presented`] each render.
+/// In XR, in the render world: when the headset shows the frame this render submitted, for
+/// the video frame [`TakenFrame`] numbers `frame`. `None` where this render has no new video
+/// frame to stamp, submitted nothing to the headset (no session, one stopping, or the runtime
+/// said not to render), or the runtime did not grant the time conversion extension. Set
+/// before [`stamp_presented`] each render, which uses it only for the same frame.
 #[derive(Resource, Clone, Copy, Default, Debug, PartialEq)]
-pub struct XrDisplayAhead(pub Option<(f64, Instant)>);
+pub struct XrDisplayAhead(pub Option<HeadsetDisplay>);
+
+/// The headset's display of one video frame, read against the wall clock.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeadsetDisplay {
+    /// The video frame's number ([`Taken::number`]).
+    pub frame: u64,
+    /// Seconds after `at` that the headset shows it: the XR frame's predicted display time
+    /// less the runtime's clock read at `at` (both OpenXR `XrTime`, ns; [`display_ahead_s`]).
+    pub ahead_s: f64,
+    /// When the runtime's clock was read (wall clock).
+    pub at: Instant,
+}
+
+/// Whether the OpenXR extension that reads the runtime's clock (`XrTime`) against the
+/// system's is in an extension set: `XR_KHR_convert_timespec_time` (`CLOCK_MONOTONIC`), on
+/// Windows `XR_KHR_win32_convert_performance_counter_time` (OpenXR 1.0 extensions). The
+/// headset's display stamps (this module's) need it; a runtime without it is used without.
+#[cfg(feature = "xr")]
+pub trait ClockConversion {
+    /// Whether the set holds it (asked for, or granted: the enabled set, the instance).
+    fn has_clock_conversion(&self) -> bool;
+}
+
+#[cfg(feature = "xr")]
+impl ClockConversion for bevy_mod_openxr::exts::OxrExtensions {
+    fn has_clock_conversion(&self) -> bool {
+        #[cfg(not(windows))]
+        let has = self.khr_convert_timespec_time;
+        #[cfg(windows)]
+        let has = self.khr_win32_convert_performance_counter_time;
+        has
+    }
+}
+
+/// The instance's: what the runtime granted.
+#[cfg(feature = "xr")]
+impl ClockConversion for bevy_mod_openxr::resources::OxrInstance {
+    fn has_clock_conversion(&self) -> bool {
+        #[cfg(not(windows))]
+        let has = self.exts().khr_convert_timespec_time.is_some();
+        #[cfg(windows)]
+        let has = self
+            .exts()
+            .khr_win32_convert_performance_counter_time
+            .is_some();
+        has
+    }
+}
+
+/// Asks for the clock conversion extension ([`ClockConversion`]) in `exts`, an instance's
+/// requested set.
+#[cfg(feature = "xr")]
+pub fn request_clock_conversion(exts: &mut bevy_mod_openxr::exts::OxrExtensions) {
+    #[cfg(not(windows))]
+    {
+        exts.khr_convert_timespec_time = true;
+    }
+    #[cfg(windows)]
+    {
+        exts.khr_win32_convert_performance_counter_time = true;
+    }
+}
 
 /// Seconds from `now_ns` to `display_ns` (the same clock, ns), 0 where the display time has
 /// passed: a frame late for its predicted display is shown at the earliest now.
@@ -133,29 +195,23 @@ fn xr_display_ahead(
     mut last: Local<u64>,
 ) {
     ahead.0 = None;
-    match taken.and_then(|t| t.0) {
-        Some(t) if t.number > *last => *last = t.number,
+    let video = match taken.and_then(|t| t.0) {
+        Some(t) if t.number > *last => t.number,
         _ => return,
-    }
+    };
+    *last = video;
     let submitted = bevy_mod_openxr::init::should_run_frame_loop(started, state);
     let frame = frame.filter(|f| submitted && f.should_render);
     ahead.0 = frame.zip(instance).and_then(|(frame, instance)| {
-        #[cfg(not(windows))]
-        let granted = instance.exts().khr_convert_timespec_time.is_some();
-        #[cfg(windows)]
-        let granted = instance
-            .exts()
-            .khr_win32_convert_performance_counter_time
-            .is_some();
-        if !granted {
+        if !instance.has_clock_conversion() {
             return None;
         }
         let now = instance.now().ok()?;
-        let at = Instant::now();
-        Some((
-            display_ahead_s(frame.predicted_display_time.as_nanos(), now.as_nanos()),
-            at,
-        ))
+        Some(HeadsetDisplay {
+            frame: video,
+            ahead_s: display_ahead_s(frame.predicted_display_time.as_nanos(), now.as_nanos()),
+            at: Instant::now(),
+        })
     });
 }
 
@@ -246,12 +302,13 @@ fn stamp_presented(
         return;
     }
     *last = t.number;
-    // The headset's clock read at `at`, the window's now.
-    let (after_s, at) = ahead.0.unwrap_or_else(|| (0.0, Instant::now()));
+    // The headset's display of this frame (its clock read at `at`), or the window's now.
+    let headset = ahead.0.filter(|d| d.frame == t.number);
+    let (after_s, at) = headset.map_or_else(|| (0.0, Instant::now()), |d| (d.ahead_s, d.at));
     let display_ms = (at.saturating_duration_since(t.at).as_secs_f64() + after_s) * 1e3;
     let mut s = record.series();
-    s.newest_on_headset = ahead.0.is_some();
-    if ahead.0.is_some() {
+    s.newest_on_headset = headset.is_some();
+    if headset.is_some() {
         Spread::push(&mut s.headset_glass_ms, t.age_ms + display_ms);
     }
     Spread::push(&mut s.display_ms, display_ms);
@@ -310,7 +367,11 @@ mod tests {
             let record = GlassToGlass::default();
             let read_at = Instant::now();
             world.insert_resource(record.clone());
-            world.insert_resource(XrDisplayAhead(ahead.map(|a| (a, read_at))));
+            world.insert_resource(XrDisplayAhead(ahead.map(|ahead_s| HeadsetDisplay {
+                frame: 1,
+                ahead_s,
+                at: read_at,
+            })));
             world.insert_resource(TakenFrame(Some(Taken {
                 number: 1,
                 at: read_at
@@ -355,8 +416,9 @@ mod tests {
         );
     }
 
-    /// Frames at the headset's display, then one the window alone showed (the session ended):
-    /// the newest ends at the present, all of them at both, the headset's own spread has its 2.
+    /// Frames at the headset's display, then ones the window alone showed (the session ended,
+    /// or a headset time read for another frame): the newest ends at the present, all of them
+    /// at both, the headset's own spread has its 2.
     #[test]
     fn a_run_that_left_xr_says_both_ends() {
         let mut world = World::new();
@@ -364,7 +426,11 @@ mod tests {
         world.insert_resource(record.clone());
         let system = world.register_system(stamp_presented);
         for (number, ahead) in [(1, Some(0.011)), (2, Some(0.011)), (3, None)] {
-            world.insert_resource(XrDisplayAhead(ahead.map(|a| (a, Instant::now()))));
+            world.insert_resource(XrDisplayAhead(ahead.map(|ahead_s| HeadsetDisplay {
+                frame: number,
+                ahead_s,
+                at: Instant::now(),
+            })));
             world.insert_resource(TakenFrame(Some(Taken {
                 number,
                 at: Instant::now(),
@@ -372,7 +438,19 @@ mod tests {
             })));
             world.run_system(system).expect("the system runs");
         }
-        assert_eq!(record.spread().n, 3);
+        // The headset's time for another frame is not this one's: frame 4 ends at the present.
+        world.insert_resource(XrDisplayAhead(Some(HeadsetDisplay {
+            frame: 3,
+            ahead_s: 0.011,
+            at: Instant::now(),
+        })));
+        world.insert_resource(TakenFrame(Some(Taken {
+            number: 4,
+            at: Instant::now(),
+            age_ms: 5.0,
+        })));
+        world.run_system(system).expect("the system runs");
+        assert_eq!(record.spread().n, 4);
         assert_eq!(record.headset_spread().n, 2);
         assert!(record.headset_spread().median >= 16.0);
         assert_eq!(record.end_of_all(), "presented or on the headset's display");

@@ -34,38 +34,6 @@ use avatarm_scene::spec::XrLayout;
 /// Seconds between requests for a new session while the runtime has none.
 const RETRY_S: f64 = 5.0;
 
-/// The OpenXR extension that reads the runtime's clock (`XrTime`) against the system's:
-/// `XR_KHR_convert_timespec_time` (`CLOCK_MONOTONIC`), on Windows
-/// `XR_KHR_win32_convert_performance_counter_time` (OpenXR 1.0, chapter 12). The headset's
-/// display stamps (`preview::glass`) need it; a runtime without it is used without.
-pub trait ClockConversion {
-    /// Asks for the extension (an instance's requested set).
-    fn request_clock_conversion(&mut self);
-    /// Whether the set holds it (the runtime granted it, in the enabled set).
-    fn has_clock_conversion(&self) -> bool;
-}
-
-impl ClockConversion for bevy_mod_openxr::exts::OxrExtensions {
-    fn request_clock_conversion(&mut self) {
-        #[cfg(not(windows))]
-        {
-            self.khr_convert_timespec_time = true;
-        }
-        #[cfg(windows)]
-        {
-            self.khr_win32_convert_performance_counter_time = true;
-        }
-    }
-
-    fn has_clock_conversion(&self) -> bool {
-        #[cfg(not(windows))]
-        let has = self.khr_convert_timespec_time;
-        #[cfg(windows)]
-        let has = self.khr_win32_convert_performance_counter_time;
-        has
-    }
-}
-
 /// Adds the XR panel, the XR hand and the session reports. Needs `bevy_mod_openxr`'s plugins.
 pub struct XrViewPlugin;
 
@@ -186,7 +154,7 @@ fn report_at_exit(
     if exits.read().next().is_none() {
         return;
     }
-    let clock = exts.is_some_and(|e| e.0.has_clock_conversion());
+    let clock = exts.is_some_and(|e| super::glass::ClockConversion::has_clock_conversion(&e.0));
     let shown = match glass.map(|g| (g.headset_spread(), g.spread().n)) {
         Some((s, _)) if s.n > 0 => format!(
             "; {} video frames stamped at the headset's predicted display (capture -> display median {:.1} ms, p95 {:.1} ms)",
