@@ -164,6 +164,7 @@ pub struct SceneResource(pub Scene);
 /// window. For the replay and the benches' own apps.
 pub fn headless_plugins() -> PluginGroupBuilder {
     DefaultPlugins
+        .set(log_plugin())
         .set(WindowPlugin {
             primary_window: None,
             exit_condition: ExitCondition::DontExit,
@@ -174,6 +175,20 @@ pub fn headless_plugins() -> PluginGroupBuilder {
             ..default()
         })
         .disable::<WinitPlugin>()
+}
+
+/// The log filter of every command where `RUST_LOG` is not set: Avatarm's info, and only the
+/// warnings of the libraries that log routine events at info (Zenoh's sessions, RustDDS's
+/// discovery and its mio wake-ups: hundreds of lines a second while a DDS link runs).
+pub const LOG_FILTER: &str =
+    "info,zenoh=warn,zenoh_transport=warn,rustdds=warn,ros2_client=warn,wgpu=error,naga=warn";
+
+/// Bevy's log plugin with [`LOG_FILTER`] (`RUST_LOG` still overrides it).
+pub fn log_plugin() -> bevy::log::LogPlugin {
+    bevy::log::LogPlugin {
+        filter: LOG_FILTER.to_owned(),
+        ..default()
+    }
 }
 
 /// Builds the app's base for a scene: Bevy's window or headless renderer as `base.runner`
@@ -211,7 +226,7 @@ pub fn build_app(scene: &Scene, base: &AppBase) -> Result<App, AppError> {
                 resolution: (1280u32, 720u32).into(),
                 ..default()
             };
-            let plugins = DefaultPlugins.set(WindowPlugin {
+            let plugins = DefaultPlugins.set(log_plugin()).set(WindowPlugin {
                 primary_window: Some(window),
                 ..default()
             });

@@ -148,14 +148,13 @@ pub fn scene_fingerprint(scene: &Scene) -> Result<String, AppError> {
 }
 
 /// Logs to stderr for the network commands (their loops run before or without an app):
-/// `RUST_LOG` when set, else Avatarm's info and Zenoh's warnings. Built with the `trace`
+/// `RUST_LOG` when set, else [`crate::app::LOG_FILTER`]. Built with the `trace`
 /// feature and `AVATARM_TRACE_CHROME=FILE.json` set, Bevy's spans go to that Chrome trace too
 /// (written when the command ends: [`finish_trace`]).
 pub fn init_log() {
     use bevy::log::tracing_subscriber::{self, EnvFilter};
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| {
-        EnvFilter::new("info,zenoh=warn,zenoh_transport=warn,wgpu=error,naga=warn")
-    });
+    let filter = EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| EnvFilter::new(crate::app::LOG_FILTER));
     #[cfg(feature = "trace")]
     if let Some(path) = std::env::var_os("AVATARM_TRACE_CHROME") {
         use bevy::log::tracing_subscriber::prelude::*;

@@ -189,7 +189,7 @@ async fn gather_async(
 ) -> Result<DriverCalibration, String> {
     let started = Instant::now();
     let node_name = format!("{}_calibration", topic.node_name);
-    let (mut node, mut spin) = node::join(&topic.transport, &node_name)?;
+    let (mut spin, mut node) = node::join(&topic.transport, &node_name)?;
     let mut out = DriverCalibration {
         image_topic: topic.topic.clone(),
         info_topic: info_topic(&topic.topic),

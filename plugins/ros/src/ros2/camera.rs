@@ -153,7 +153,7 @@ fn bad_frame(topic: &str, e: &str, said: &mut bool) {
 }
 
 async fn subscribe(topic: &CameraTopic, events: &Sender<CameraEvent>) -> Result<(), String> {
-    let (mut node, mut spin) = node::join(&topic.transport, &topic.node_name)?;
+    let (mut spin, mut node) = node::join(&topic.transport, &topic.node_name)?;
     // A camera's frames are sensor data: best effort, the last 2.
     let qos = Qos::best_effort(2);
     let kind = if topic.compressed() {

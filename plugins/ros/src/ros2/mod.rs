@@ -272,7 +272,7 @@ async fn session(
     notify: &Arc<tokio::sync::Notify>,
     tx: &Sender<Sample>,
 ) -> Result<(), String> {
-    let (mut node, mut spin) = node::join(transport, &settings.node_name)?;
+    let (mut spin, mut node) = node::join(transport, &settings.node_name)?;
     // Best effort, the last 10: matches reliable and best-effort publishers alike.
     let states =
         node.subscribe::<JointState>(&settings.joint_states_topic, Qos::best_effort(10))?;

@@ -162,10 +162,15 @@ enum Inner {
 /// says so and tries again), where a router is given.
 const ZENOH_CONNECT_TIMEOUT_MS: u64 = 2_000;
 
-/// A node `node_name` in `transport`'s namespace on its middleware, and what says when it
-/// stops ([`Spin`]). Errors say which step failed; on rmw_zenoh a router given that does not
+/// What says when a node stops ([`Spin`]) and a node `node_name` in `transport`'s namespace on
+/// its middleware. Errors say which step failed; on rmw_zenoh a router given that does not
 /// answer within [`ZENOH_CONNECT_TIMEOUT_MS`] is one.
-pub(crate) fn join(transport: &Ros2Transport, node_name: &str) -> Result<(Node, Spin), String> {
+///
+/// The spinner comes first so that `let (spin, node) = join(..)?` drops the node before it
+/// (bindings drop in reverse order): a DDS node tells its spinner to stop when dropped, and
+/// ros2_client logs an ERROR ("Cannot notify spin task to stop") at every link's end when the
+/// spinner has gone first.
+pub(crate) fn join(transport: &Ros2Transport, node_name: &str) -> Result<(Spin, Node), String> {
     let namespace = transport.namespace.clone();
     match &transport.rmw {
         Rmw::Dds => {
@@ -188,7 +193,7 @@ pub(crate) fn join(transport: &Ros2Transport, node_name: &str) -> Result<(Node, 
                 node: Box::new(node),
                 _context: context,
             };
-            Ok((Node { namespace, inner }, spin))
+            Ok((spin, Node { namespace, inner }))
         }
         Rmw::Zenoh { router } => {
             use hiroz::Builder;
@@ -221,7 +226,7 @@ pub(crate) fn join(transport: &Ros2Transport, node_name: &str) -> Result<(Node, 
                 node: Box::new(node),
                 _context: context,
             };
-            Ok((Node { namespace, inner }, Box::pin(std::future::pending())))
+            Ok((Box::pin(std::future::pending()), Node { namespace, inner }))
         }
     }
 }

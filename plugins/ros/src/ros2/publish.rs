@@ -155,7 +155,7 @@ async fn run(
     frame: &str,
     mut rx: tokio::sync::mpsc::Receiver<Outgoing>,
 ) -> Result<(), String> {
-    let (mut node, mut spin) = node::join(transport, node_name)?;
+    let (mut spin, mut node) = node::join(transport, node_name)?;
     let qos = Qos::reliable(2);
     let topic = |base: &str| format!("{prefix}/{base}");
     let erased = node.publisher::<CompressedImage>(&topic("erased/compressed"), qos)?;
