@@ -3,7 +3,8 @@
 
 Reads the observer reports `scripts/latency.sh` wrote (out/latency_WxH/watch_D.json) and writes
 an SVG of each setting's median stages (capture -> arrived -> read back -> coded and sent ->
-network -> decoded, and -> presented where a window watched: out/latency_WxH_window/) and a CSV
+network -> decoded, and -> presented where a window watched: out/latency_WxH_window/; the H.264
+stream's from out/latency_WxH_h264/) and a CSV
 beside it. Usage: scripts/latency_chart.py [OUT.svg] (default
 out/latency_stages.svg). Python's standard library only.
 """
@@ -27,10 +28,10 @@ STAGES = [
 def settings():
     rows = []
     for path in sorted(glob.glob("out/latency_*/watch_*.json")):
-        m = re.match(r"out/latency_(\d+)x(\d+)(_window)?/watch_(\d+)\.json", path)
+        m = re.match(r"out/latency_(\d+)x(\d+)(_h264)?(_window)?/watch_(\d+)\.json", path)
         if not m:
             continue
-        w, h, window, delay = int(m[1]), int(m[2]), m[3], int(m[4])
+        w, h, h264, window, delay = int(m[1]), int(m[2]), bool(m[3]), m[4], int(m[5])
         with open(path) as f:
             report = json.load(f)
         video = dict(report["video"])
@@ -38,10 +39,11 @@ def settings():
             # The display stage, where a window watched (its frames shown, decoded -> presented).
             video["display_ms"] = report["window"]["display_ms"]
             video["glass_ms"] = report["window"]["glass_to_glass_ms"]
-        label = f"{w}x{h}, {delay} ms one-way" + (", window" if window else "")
-        rows.append((w * h, bool(window), delay, label, video))
-    rows.sort(key=lambda r: r[:3])
-    return [(label, video) for _, _, _, label, video in rows]
+        label = (f"{w}x{h}, " + ("H.264, " if h264 else "") + f"{delay} ms one-way"
+                 + (", window" if window else ""))
+        rows.append((w * h, bool(window), h264, delay, label, video))
+    rows.sort(key=lambda r: r[:4])
+    return [(label, video) for *_, label, video in rows]
 
 
 def med(v, key):
@@ -64,7 +66,7 @@ def main():
                             + [f"{v['total_ms']['median']:.1f}",
                                f"{med(v, 'glass_ms'):.1f}" if "glass_ms" in v else "",
                                f"{v['fps']:.1f}"])
-    left, bar, gap, width = 230, 28, 18, 560
+    left, bar, gap, width = 280, 28, 18, 560
     longest = max(sum(med(v, k) for k, _, _ in STAGES) for _, v in rows)
     scale = width / (longest * 1.08)
     height = 70 + len(rows) * (bar + gap) + 60

@@ -26,6 +26,7 @@ pub mod bench;
 pub mod cli;
 pub mod error;
 pub mod import;
+pub mod log;
 pub mod net;
 pub mod preview;
 pub mod progress;

@@ -163,8 +163,7 @@ pub struct SceneResource(pub Scene);
 /// frame that needs them (a replay's first frames are complete), the app kept alive without a
 /// window. For the replay and the benches' own apps.
 pub fn headless_plugins() -> PluginGroupBuilder {
-    DefaultPlugins
-        .set(log_plugin())
+    crate::log::with_log(DefaultPlugins)
         .set(WindowPlugin {
             primary_window: None,
             exit_condition: ExitCondition::DontExit,
@@ -175,20 +174,6 @@ pub fn headless_plugins() -> PluginGroupBuilder {
             ..default()
         })
         .disable::<WinitPlugin>()
-}
-
-/// The log filter of every command where `RUST_LOG` is not set: Avatarm's info, and only the
-/// warnings of the libraries that log routine events at info (Zenoh's sessions, RustDDS's
-/// discovery and its mio wake-ups: hundreds of lines a second while a DDS link runs).
-pub const LOG_FILTER: &str =
-    "info,zenoh=warn,zenoh_transport=warn,rustdds=warn,ros2_client=warn,wgpu=error,naga=warn";
-
-/// Bevy's log plugin with [`LOG_FILTER`] (`RUST_LOG` still overrides it).
-pub fn log_plugin() -> bevy::log::LogPlugin {
-    bevy::log::LogPlugin {
-        filter: LOG_FILTER.to_owned(),
-        ..default()
-    }
 }
 
 /// Builds the app's base for a scene: Bevy's window or headless renderer as `base.runner`
@@ -226,10 +211,10 @@ pub fn build_app(scene: &Scene, base: &AppBase) -> Result<App, AppError> {
                 resolution: (1280u32, 720u32).into(),
                 ..default()
             };
-            let plugins = DefaultPlugins.set(log_plugin()).set(WindowPlugin {
+            let plugins = crate::log::with_log(DefaultPlugins.set(WindowPlugin {
                 primary_window: Some(window),
                 ..default()
-            });
+            }));
             add_window_plugins(&mut app, plugins, xr);
             if let Some(step) = fixed_step_s {
                 app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(

@@ -99,7 +99,7 @@ impl JoinArgs {
             view,
             head,
         } = self;
-        crate::net::init_log();
+        crate::log::init_log();
         let path = scene.unwrap_or_else(pouring_scene);
         #[allow(unused_mut)] // changed with the feature `xr`
         let mut scene = Scene::load_view(&path, &packages(package_path), view.as_deref())?;

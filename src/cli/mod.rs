@@ -74,7 +74,7 @@ enum Command {
 /// Parses the command line and runs it; errors are printed and give exit code 1.
 pub fn main() -> ExitCode {
     let ran = run(Cli::parse());
-    crate::net::finish_trace();
+    crate::log::finish_trace();
     match ran {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -30,7 +30,7 @@ impl RouterArgs {
             duration,
             net,
         } = self;
-        crate::net::init_log();
+        crate::log::init_log();
         let config = net.config(avatarm_net::Role::Router, listen, connect)?;
         crate::net::router(&config, duration)
     }

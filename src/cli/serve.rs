@@ -135,7 +135,7 @@ impl ServeArgs {
             ros2_camera,
             overrides.believed_pose.is_some(),
         );
-        crate::net::init_log();
+        crate::log::init_log();
         let path = scene.unwrap_or_else(pouring_scene);
         let packages = packages(package_path);
         let load = |view: Option<&str>| -> Result<Scene, AppError> {

@@ -147,65 +147,6 @@ pub fn scene_fingerprint(scene: &Scene) -> Result<String, AppError> {
     Ok(avatarm_net::msg::fingerprint(&text))
 }
 
-/// Logs to stderr for the network commands (their loops run before or without an app):
-/// `RUST_LOG` when set, else [`crate::app::LOG_FILTER`]. Built with the `trace`
-/// feature and `AVATARM_TRACE_CHROME=FILE.json` set, Bevy's spans go to that Chrome trace too
-/// (written when the command ends: [`finish_trace`]).
-pub fn init_log() {
-    use bevy::log::tracing_subscriber::{self, EnvFilter};
-    let filter = EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| EnvFilter::new(crate::app::LOG_FILTER));
-    #[cfg(feature = "trace")]
-    if let Some(path) = std::env::var_os("AVATARM_TRACE_CHROME") {
-        use bevy::log::tracing_subscriber::prelude::*;
-        let (chrome, guard) = tracing_chrome::ChromeLayerBuilder::new()
-            .file(path)
-            .include_args(true)
-            .build();
-        let ok = tracing_subscriber::registry()
-            .with(filter)
-            .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
-            .with(chrome)
-            .try_init()
-            .is_ok();
-        if ok {
-            *TRACE
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(guard);
-        }
-        return;
-    }
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .try_init();
-}
-
-/// The Chrome trace's writer, flushed and closed by [`finish_trace`].
-#[cfg(feature = "trace")]
-static TRACE: std::sync::Mutex<Option<tracing_chrome::FlushGuard>> = std::sync::Mutex::new(None);
-
-/// Writes out the Chrome trace [`init_log`] started, if it did (feature `trace`).
-pub fn finish_trace() {
-    #[cfg(feature = "trace")]
-    drop(
-        TRACE
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .take(),
-    );
-}
-
-/// [`init_log`] with only warnings and errors (a bench's progress bar owns the terminal).
-pub fn init_log_quiet() {
-    use bevy::log::tracing_subscriber::{self, EnvFilter};
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("error"));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .try_init();
-}
-
 /// `avatarm router`: a Zenoh router until `duration_s` passes (or the process is killed).
 pub fn router(config: &NetConfig, duration_s: Option<f64>) -> Result<(), AppError> {
     let session = avatarm_net::Router::open(config)?;

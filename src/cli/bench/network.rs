@@ -49,7 +49,7 @@ impl NetworkArgs {
             target_timeout,
             package_path,
         } = self;
-        crate::net::init_log_quiet();
+        crate::log::init_log_quiet();
         let path = scene.unwrap_or_else(pouring_scene);
         let scene = Scene::load(&path, &packages(package_path))?;
         let sweep = crate::bench::network::NetworkSweep {
